@@ -1,0 +1,433 @@
+//! The `#[repr(C)]` types and `extern "C"` function tables that cross the
+//! host ↔ plugin boundary. Nothing else crosses it: no Rust type, no panic,
+//! no allocation (the side that allocates frees).
+//!
+//! Status codes: every fallible entry point returns an `i32` status
+//! ([`STATUS_OK`], [`STATUS_ERROR`], [`STATUS_PANIC`]) and, on failure,
+//! writes a UTF-8 message into the caller's [`ErrorBuf`].
+
+use std::ffi::c_void;
+
+/// The call succeeded.
+pub const STATUS_OK: i32 = 0;
+/// The call failed; the [`ErrorBuf`] holds the reason.
+pub const STATUS_ERROR: i32 = 1;
+/// The callee panicked; the panic was caught and its message is in the [`ErrorBuf`].
+pub const STATUS_PANIC: i32 = 2;
+
+/// Magic number at the start of every [`PluginHeader`] (`"VOXFLEX1"`).
+pub const PLUGIN_MAGIC: u64 = u64::from_le_bytes(*b"VOXFLEX1");
+
+/// Borrowed UTF-8 text: pointer + length in bytes (not NUL-terminated).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct StrRef {
+    /// First byte (may be dangling when `len == 0`).
+    pub ptr: *const u8,
+    /// Length in bytes.
+    pub len: usize,
+}
+
+impl StrRef {
+    /// Borrows a `&str` (the caller keeps it alive during the call).
+    pub fn new(s: &str) -> Self {
+        Self {
+            ptr: s.as_ptr(),
+            len: s.len(),
+        }
+    }
+
+    /// Borrows a `'static` string for a static declaration.
+    pub const fn from_static(s: &'static str) -> Self {
+        Self {
+            ptr: s.as_ptr(),
+            len: s.len(),
+        }
+    }
+
+    /// The text, replacing invalid UTF-8.
+    ///
+    /// # Safety
+    /// `ptr` must point to `len` readable bytes for the returned lifetime.
+    pub unsafe fn to_string_lossy(&self) -> String {
+        if self.len == 0 || self.ptr.is_null() {
+            return String::new();
+        }
+        // SAFETY: guaranteed by the caller.
+        let bytes = unsafe { std::slice::from_raw_parts(self.ptr, self.len) };
+        String::from_utf8_lossy(bytes).into_owned()
+    }
+}
+
+/// A caller-owned buffer the callee writes an error message into
+/// (truncated to `cap` bytes at a UTF-8 boundary).
+#[repr(C)]
+#[derive(Debug)]
+pub struct ErrorBuf {
+    /// Caller-allocated storage.
+    pub ptr: *mut u8,
+    /// Capacity in bytes.
+    pub cap: usize,
+    /// Bytes written by the callee.
+    pub len: usize,
+}
+
+impl ErrorBuf {
+    /// Writes `msg` (truncated to capacity at a char boundary).
+    ///
+    /// # Safety
+    /// `self.ptr` must be valid for `self.cap` bytes of writes.
+    pub unsafe fn write(&mut self, msg: &str) {
+        let mut n = msg.len().min(self.cap);
+        while n > 0 && !msg.is_char_boundary(n) {
+            n -= 1;
+        }
+        if n > 0 && !self.ptr.is_null() {
+            // SAFETY: guaranteed by the caller; n ≤ cap.
+            unsafe { std::ptr::copy_nonoverlapping(msg.as_ptr(), self.ptr, n) };
+        }
+        self.len = n;
+    }
+}
+
+/// What a plugin is.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PluginKind {
+    /// A deformation model ([`DeformationVTable`]).
+    Deformation = 0,
+    /// A renderer (vtable defined by the renderer issue; reserved).
+    Renderer = 1,
+    /// An actuator model (vtable defined by the actuator issue; reserved).
+    Actuator = 2,
+}
+
+impl PluginKind {
+    /// The kind with this code, if any.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            0 => Some(Self::Deformation),
+            1 => Some(Self::Renderer),
+            2 => Some(Self::Actuator),
+            _ => None,
+        }
+    }
+}
+
+/// Capability bit: the plugin has a rayon CPU path.
+pub const CAPABILITY_CPU: u32 = 1;
+/// Capability bit: the plugin has a WGSL GPU path (through the host's GPU service).
+pub const CAPABILITY_GPU: u32 = 2;
+
+/// The frozen first thing the host reads from a plugin. Its layout never
+/// changes across ABI versions, so the host can always read the version and
+/// layout hash and refuse a mismatch before touching anything else.
+#[repr(C)]
+#[derive(Debug)]
+pub struct PluginHeader {
+    /// Always [`PLUGIN_MAGIC`].
+    pub magic: u64,
+    /// [`crate::ABI_VERSION`] the plugin was built against.
+    pub abi_version: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// [`crate::LAYOUT_HASH`] the plugin was built against.
+    pub layout_hash: u64,
+    /// The declaration; read only when version and hash match.
+    pub declaration: *const PluginDeclaration,
+}
+
+// SAFETY: the header and the declaration it points to are immutable statics.
+unsafe impl Sync for PluginHeader {}
+
+/// The type of the one exported symbol, `voxflex_plugin_v1`.
+pub type PluginEntry = unsafe extern "C" fn() -> *const PluginHeader;
+
+/// Static description of a plugin.
+#[repr(C)]
+#[derive(Debug)]
+pub struct PluginDeclaration {
+    /// Plugin name as scenes refer to it (`plugin = "affine"`).
+    pub name: StrRef,
+    /// Plugin semver (`CARGO_PKG_VERSION` of its crate).
+    pub version: StrRef,
+    /// One-line description.
+    pub description: StrRef,
+    /// What the plugin is: a [`PluginKind`] as u32 (kept as a plain integer so
+    /// a foreign value can never be an invalid Rust enum).
+    pub kind: u32,
+    /// [`CAPABILITY_CPU`] | [`CAPABILITY_GPU`].
+    pub capabilities: u32,
+    /// The deformation vtable when `kind == Deformation`, else null.
+    pub deformation: *const DeformationVTable,
+    /// Reserved for the renderer vtable, null.
+    pub renderer: *const c_void,
+    /// Reserved for the actuator vtable, null.
+    pub actuator: *const c_void,
+}
+
+// SAFETY: immutable static data.
+unsafe impl Sync for PluginDeclaration {}
+
+/// Geometry of a voxel grid (see `voxflex_core::grid::Grid`): dims, spacing
+/// and origin in millimetres.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct GridDesc {
+    /// Voxels along x, y, z.
+    pub dims: [u64; 3],
+    /// Voxel spacing, mm.
+    pub spacing: [f64; 3],
+    /// Centre of voxel (0,0,0), world mm.
+    pub origin: [f64; 3],
+}
+
+/// A borrowed volume: grid, scalar type and values (x fastest).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct VolumeDesc {
+    /// Geometry.
+    pub grid: GridDesc,
+    /// `voxflex_core::volume::ScalarType` as u32.
+    pub scalar_type: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// First value (native endianness).
+    pub data: *const c_void,
+    /// Number of values.
+    pub len: u64,
+}
+
+/// Rest points: [`REST_POINTS_LATTICE`] (every voxel centre of `grid`) or
+/// [`REST_POINTS_LIST`] (`len` points `[x, y, z]` in world mm at `points`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct RestPointsDesc {
+    /// [`REST_POINTS_LATTICE`] or [`REST_POINTS_LIST`].
+    pub tag: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// The lattice (tag = lattice).
+    pub grid: GridDesc,
+    /// The points (tag = list).
+    pub points: *const [f32; 3],
+    /// Number of points (tag = list).
+    pub len: u64,
+}
+
+/// [`RestPointsDesc::tag`]: every voxel centre of a grid.
+pub const REST_POINTS_LATTICE: u32 = 0;
+/// [`RestPointsDesc::tag`]: an explicit point list.
+pub const REST_POINTS_LIST: u32 = 1;
+
+/// One frame's timing (see `voxflex_core::deformation::FrameInfo`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct FrameDesc {
+    /// Frame number from 0.
+    pub frame: u64,
+    /// Frames in the scene.
+    pub frames: u64,
+    /// Simulated seconds per frame.
+    pub dt_s: f64,
+}
+
+/// A dirty region: [`REGION_NONE`], [`REGION_ALL`] or [`REGION_BOX`] (world mm).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct RegionDesc {
+    /// Which region.
+    pub tag: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Box lower corner, mm.
+    pub min: [f64; 3],
+    /// Box upper corner, mm.
+    pub max: [f64; 3],
+}
+
+/// [`RegionDesc::tag`]: nothing moved.
+pub const REGION_NONE: u32 = 0;
+/// [`RegionDesc::tag`]: everything may have moved.
+pub const REGION_ALL: u32 = 1;
+/// [`RegionDesc::tag`]: only rest points in the box moved.
+pub const REGION_BOX: u32 = 2;
+
+/// Opaque plugin instance.
+pub type Instance = *mut c_void;
+
+/// The functions of a deformation plugin. Mirrors
+/// `voxflex_core::deformation::DeformationModel` one to one.
+#[repr(C)]
+#[derive(Debug)]
+pub struct DeformationVTable {
+    /// Creates an instance from the TOML text of the scene's `[model.params]`.
+    pub create: unsafe extern "C" fn(
+        params_toml: StrRef,
+        host: *const HostApi,
+        out: *mut Instance,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// Destroys an instance made by `create`.
+    pub destroy: unsafe extern "C" fn(instance: Instance),
+    /// `DeformationModel::init`; `backend` is `ExecutionBackend` as u32.
+    pub init: unsafe extern "C" fn(
+        instance: Instance,
+        volume: *const VolumeDesc,
+        backend: u32,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `DeformationModel::bind`.
+    pub bind: unsafe extern "C" fn(
+        instance: Instance,
+        rest: *const RestPointsDesc,
+        out_binding: *mut u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `DeformationModel::interact` with the interaction's TOML text.
+    pub interact: unsafe extern "C" fn(instance: Instance, toml: StrRef, err: *mut ErrorBuf) -> i32,
+    /// `DeformationModel::step`; writes 1 to `out_changed` when the field changed.
+    pub step: unsafe extern "C" fn(
+        instance: Instance,
+        frame: *const FrameDesc,
+        out_changed: *mut u32,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `DeformationModel::dirty_region`.
+    pub dirty_region:
+        unsafe extern "C" fn(instance: Instance, out: *mut RegionDesc, err: *mut ErrorBuf) -> i32,
+    /// `DeformationModel::map` into three host-owned CPU arrays of `len` f32 (mm).
+    pub map_cpu: unsafe extern "C" fn(
+        instance: Instance,
+        binding: u64,
+        x: *mut f32,
+        y: *mut f32,
+        z: *mut f32,
+        len: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `DeformationModel::map` into three GPU buffers (ids of the host's GPU service).
+    pub map_gpu: unsafe extern "C" fn(
+        instance: Instance,
+        binding: u64,
+        x: u64,
+        y: u64,
+        z: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+}
+
+/// Log levels for [`HostApi::log`].
+pub mod log_level {
+    /// Error.
+    pub const ERROR: u32 = 1;
+    /// Warning.
+    pub const WARN: u32 = 2;
+    /// Information.
+    pub const INFO: u32 = 3;
+    /// Debug.
+    pub const DEBUG: u32 = 4;
+    /// Trace.
+    pub const TRACE: u32 = 5;
+}
+
+/// Device limits as the host reports them (mirror of `voxflex_core::gpu::GpuLimits`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuLimitsDesc {
+    /// Largest storage binding, bytes.
+    pub max_storage_buffer_binding_size: u64,
+    /// Largest buffer, bytes.
+    pub max_buffer_size: u64,
+    /// Largest workgroup count per dimension.
+    pub max_compute_workgroups_per_dimension: u32,
+    /// Storage binding offset alignment, bytes.
+    pub min_storage_buffer_offset_alignment: u32,
+}
+
+/// One buffer binding of a dispatch (mirror of `voxflex_core::gpu::BufferBinding`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct BindingDesc {
+    /// `@binding(n)` in group 0.
+    pub binding: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Buffer id.
+    pub buffer: u64,
+    /// Byte offset.
+    pub offset: u64,
+    /// Bytes bound, 0 = to the end.
+    pub size: u64,
+}
+
+/// What the host offers every plugin: logging into the host's `tracing`
+/// subscriber, its thread count, and the GPU command service (the mirror of
+/// `voxflex_core::gpu::GpuService` as C functions). `ctx` is passed back to
+/// every function. Valid until the plugin instance is destroyed.
+#[repr(C)]
+#[derive(Debug)]
+pub struct HostApi {
+    /// Host context pointer, passed back to every function.
+    pub ctx: *mut c_void,
+    /// Logs one message at a [`log_level`]. Must not use `ctx` (plugins call
+    /// it with null from their process-wide log bridge, after the instance
+    /// that received this table may be gone).
+    pub log: unsafe extern "C" fn(ctx: *mut c_void, level: u32, target: StrRef, message: StrRef),
+    /// Worker threads the plugin may use (size its thread pool to this).
+    pub thread_count: unsafe extern "C" fn(ctx: *mut c_void) -> u32,
+    /// 1 when a GPU service is available (backend resolved to GPU), else 0.
+    pub gpu_available: unsafe extern "C" fn(ctx: *mut c_void) -> u32,
+    /// Writes the adapter description (truncated) into `out`.
+    pub gpu_adapter_description: unsafe extern "C" fn(ctx: *mut c_void, out: *mut ErrorBuf),
+    /// Device limits.
+    pub gpu_limits: unsafe extern "C" fn(ctx: *mut c_void, out: *mut GpuLimitsDesc) -> i32,
+    /// `GpuService::create_buffer`.
+    pub gpu_create_buffer: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        size: u64,
+        label: StrRef,
+        out: *mut u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `GpuService::destroy_buffer`.
+    pub gpu_destroy_buffer: unsafe extern "C" fn(ctx: *mut c_void, id: u64),
+    /// `GpuService::buffer_size`.
+    pub gpu_buffer_size:
+        unsafe extern "C" fn(ctx: *mut c_void, id: u64, out: *mut u64, err: *mut ErrorBuf) -> i32,
+    /// `GpuService::write_buffer`.
+    pub gpu_write_buffer: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        id: u64,
+        offset: u64,
+        data: *const u8,
+        len: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `GpuService::read_buffer`.
+    pub gpu_read_buffer: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        id: u64,
+        offset: u64,
+        out: *mut u8,
+        len: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `GpuService::compile`.
+    pub gpu_compile: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        wgsl: StrRef,
+        entry_point: StrRef,
+        out: *mut u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `GpuService::dispatch`.
+    pub gpu_dispatch: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        pipeline: u64,
+        bindings: *const BindingDesc,
+        count: u64,
+        workgroups: *const [u32; 3],
+        err: *mut ErrorBuf,
+    ) -> i32,
+}

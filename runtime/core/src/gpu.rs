@@ -1,0 +1,157 @@
+//! The GPU command service: the one GPU interface every algorithm is written
+//! against.
+//!
+//! core defines it and never implements it over a real API: the host
+//! (`voxflex-runtime`) implements it over wgpu, and inside a plugin the ABI
+//! SDK implements it over the host's C function table. Buffers are named by
+//! opaque [`BufferId`]s, so data passes between plugins and host services
+//! without a trip through the CPU.
+//!
+//! Layout rule (see DESIGN.md, "Backends"): bind only 32-bit scalar
+//! structure-of-arrays buffers and never bind more than
+//! [`GpuLimits::max_storage_buffer_binding_size`] bytes at once (128 MiB on
+//! lavapipe); larger data is split into slabs.
+
+use crate::error::GpuError;
+
+/// Opaque handle of a GPU buffer owned by the host.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BufferId(pub u64);
+
+/// Opaque handle of a compiled compute pipeline (cached by WGSL hash).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PipelineId(pub u64);
+
+/// One buffer bound to `@group(0) @binding(binding)` for a dispatch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BufferBinding {
+    /// The `@binding(n)` index in group 0.
+    pub binding: u32,
+    /// The buffer.
+    pub buffer: BufferId,
+    /// Byte offset into the buffer (a multiple of
+    /// [`GpuLimits::min_storage_buffer_offset_alignment`]).
+    pub offset: u64,
+    /// Bytes bound; `0` binds from `offset` to the end of the buffer.
+    pub size: u64,
+}
+
+impl BufferBinding {
+    /// Binds the whole of `buffer` at `@binding(binding)`.
+    pub fn whole(binding: u32, buffer: BufferId) -> Self {
+        Self {
+            binding,
+            buffer,
+            offset: 0,
+            size: 0,
+        }
+    }
+}
+
+/// The limits of the device behind a [`GpuService`] that algorithms must respect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuLimits {
+    /// Largest storage binding, bytes.
+    pub max_storage_buffer_binding_size: u64,
+    /// Largest buffer, bytes.
+    pub max_buffer_size: u64,
+    /// Largest workgroup count per dispatch dimension.
+    pub max_compute_workgroups_per_dimension: u32,
+    /// Required alignment of a storage binding's offset, bytes.
+    pub min_storage_buffer_offset_alignment: u32,
+}
+
+/// Buffers, WGSL pipelines and dispatches on the host's one GPU device.
+///
+/// Every buffer is usable as storage, uniform, copy source and copy
+/// destination. Every pipeline uses one bind group (group 0) whose layout is
+/// derived from the shader. Calls are ordered: a read-back sees every
+/// earlier write and dispatch.
+pub trait GpuService: Send + Sync {
+    /// Human-readable adapter description (name, backend, device type).
+    fn adapter_description(&self) -> String;
+    /// The device limits.
+    fn limits(&self) -> GpuLimits;
+    /// A new zero-filled buffer of `size_bytes` (multiple of 4).
+    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError>;
+    /// Frees a buffer; unknown ids are ignored.
+    fn destroy_buffer(&self, id: BufferId);
+    /// Size of a buffer in bytes.
+    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError>;
+    /// Copies `bytes` into the buffer at `offset` (both multiples of 4).
+    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError>;
+    /// Copies `out.len()` bytes from the buffer at `offset` into `out`, waiting
+    /// for all earlier work.
+    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError>;
+    /// Compiles (or returns the cached pipeline for) a WGSL compute entry point.
+    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError>;
+    /// Runs `workgroups` workgroups of a pipeline with the given bindings.
+    fn dispatch(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        workgroups: [u32; 3],
+    ) -> Result<(), GpuError>;
+}
+
+/// Helpers every GPU algorithm needs, on top of [`GpuService`].
+pub trait GpuServiceExt: GpuService {
+    /// A buffer holding `data`.
+    fn upload<T: bytemuck::Pod>(&self, data: &[T], label: &str) -> Result<BufferId, GpuError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let id = self.create_buffer((bytes.len() as u64).max(4).next_multiple_of(4), label)?;
+        if !bytes.is_empty() {
+            self.write_buffer(id, 0, bytes)?;
+        }
+        Ok(id)
+    }
+
+    /// Reads `out.len()` elements from the start of a buffer.
+    fn download<T: bytemuck::Pod>(&self, id: BufferId, out: &mut [T]) -> Result<(), GpuError> {
+        self.read_buffer(id, 0, bytemuck::cast_slice_mut(out))
+    }
+
+    /// Workgroup counts covering `n` invocations of `workgroup_size` threads,
+    /// folded into 3-D so no dimension exceeds the device limit.
+    fn workgroups_for(&self, n: u64, workgroup_size: u32) -> Result<[u32; 3], GpuError> {
+        workgroups_1d(
+            n,
+            workgroup_size,
+            self.limits().max_compute_workgroups_per_dimension,
+        )
+    }
+}
+
+impl<T: GpuService + ?Sized> GpuServiceExt for T {}
+
+/// Workgroup counts covering `n` invocations of `workgroup_size` threads,
+/// folded into `[x, y, z]` so no dimension exceeds `max_per_dim`. A kernel
+/// recovers its flat invocation index as
+/// `gid.x + gid.y * (nwg.x * size) + gid.z * (nwg.x * size * nwg.y)`.
+pub fn workgroups_1d(n: u64, workgroup_size: u32, max_per_dim: u32) -> Result<[u32; 3], GpuError> {
+    let groups = n.div_ceil(workgroup_size as u64).max(1);
+    let max = max_per_dim as u64;
+    let x = groups.min(max);
+    let rest = groups.div_ceil(x);
+    let y = rest.min(max);
+    let z = rest.div_ceil(y);
+    if z > max {
+        return Err(GpuError(format!(
+            "{n} invocations need more than {max}³ workgroups of {workgroup_size}; split the work"
+        )));
+    }
+    Ok([x as u32, y as u32, z as u32])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn workgroups_fold_into_3d() {
+        assert_eq!(workgroups_1d(10, 64, 65535).unwrap(), [1, 1, 1]);
+        let wg = workgroups_1d(256u64.pow(3), 256, 65535).unwrap();
+        assert!(wg[0] <= 65535 && wg[1] <= 65535);
+        assert!(wg[0] as u64 * wg[1] as u64 * wg[2] as u64 * 256 >= 256u64.pow(3));
+    }
+}

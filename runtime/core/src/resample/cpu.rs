@@ -1,0 +1,263 @@
+//! The rayon kernels of the resampler (the CPU twin of
+//! `shaders/resample/*.wgsl`).
+//!
+//! - block bounds: one task per block, min/max of its vertices' positions;
+//! - clear: the region's output words set to `u32::MAX` ("no owner");
+//! - pass 1: one task per cell block; per cell the eight deformed corners,
+//!   the sixteen face planes and, per candidate voxel centre of the cell's
+//!   clipped box, the smallest containing tetrahedron, `fetch_min(tet id)`
+//!   (after a relaxed load, so voxels that already hold a smaller id cost no
+//!   atomic read-modify-write);
+//! - pass 2: one task per output row; owner → barycentric weights → value.
+//!
+//! The output `Vec<f32>` is viewed as `[AtomicU32]` during a call; no other
+//! per-voxel memory is used.
+
+use super::blocks::BlockBounds;
+use super::raster::{CellCorners, CellRaster, barycentric, interpolate};
+use super::sampling_mesh::{CELL_TETS, TETS_PER_CELL, TetDecoder, cell_parity, corner_offset, deformed_coordinate};
+use super::{DisplacementsRef, Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, VoxelBox};
+use crate::volume::{Sample, VoxelSlice};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+
+/// The CPU half of a resampling call.
+pub(crate) struct CpuKernels<'a> {
+    pub source: VoxelSlice<'a>,
+    pub disp: DisplacementsRef<'a>,
+    pub mask: Option<&'a TetMask>,
+    pub out: &'a mut Vec<f32>,
+    /// Run pass 2 (false only in tests that inspect pass-1 owners).
+    pub fill: bool,
+}
+
+/// Views f32 storage as atomics for the duration of a borrow.
+fn as_atomic(v: &mut [f32]) -> &[AtomicU32] {
+    let words: &mut [u32] = bytemuck::cast_slice_mut(v);
+    // SAFETY: `AtomicU32` has the same size and bit validity as `u32`, and its
+    // alignment (4) equals `u32`'s on every target with 32-bit atomics; we
+    // hold the only (mutable) borrow, so no non-atomic access can overlap.
+    unsafe { &*(words as *mut [u32] as *const [AtomicU32]) }
+}
+
+impl Kernels for CpuKernels<'_> {
+    fn block_bounds(&mut self, c: &KernelConsts, blocks: &[u32], out: &mut [BlockBounds]) -> Result<(), ResampleError> {
+        let disp = self.disp;
+        let t0 = std::time::Instant::now();
+        let _g = Tm(t0);
+        out.par_iter_mut()
+            .zip(blocks.par_iter())
+            .for_each(|(o, &b)| *o = block_bounds(c, &disp, b as usize));
+        Ok(())
+    }
+
+    fn allocate_output(&mut self, output: &OutputGrid) -> Result<(), ResampleError> {
+        let n = output.len();
+        if self.out.len() != n {
+            *self.out = Vec::new();
+            let mut v = Vec::new();
+            v.try_reserve_exact(n).map_err(|_| ResampleError::OutOfMemory {
+                voxels: n,
+                bytes: n * 4,
+            })?;
+            v.resize(n, 0.0);
+            *self.out = v;
+        }
+        Ok(())
+    }
+
+    fn rasterise(&mut self, job: &Job<'_>) -> Result<(), ResampleError> {
+        let out = as_atomic(self.out);
+        let t0 = std::time::Instant::now();
+        clear(job, out);
+        let t1 = std::time::Instant::now();
+        let ctx = RasterCtx {
+            c: job.consts,
+            disp: self.disp,
+            mask: self.mask.filter(|m| !m.is_empty()),
+            output: *job.output,
+            clip: job.region,
+            decoder: TetDecoder::new(&job.consts.mesh),
+        };
+        job.blocks.par_iter().for_each(|&b| raster_block(&ctx, b as usize, out));
+        let t2 = std::time::Instant::now();
+        if self.fill {
+            crate::with_voxels!(self.source, |s| fill(s, &ctx, out));
+        }
+        let t3 = std::time::Instant::now();
+        if std::env::var_os("VFX_TIMING").is_some() { eprintln!("TIMING clear {:?} raster {:?} fill {:?}", t1-t0, t2-t1, t3-t2); }
+        Ok(())
+    }
+}
+
+/// Deformed bounds of one block's vertices.
+fn block_bounds(c: &KernelConsts, disp: &DisplacementsRef<'_>, b: usize) -> BlockBounds {
+    let (lo, hi) = c.layout.vertices(b);
+    let [nx, ny, _] = c.mesh.vertex_dims();
+    let inv = c.inv_spacing;
+    let mut mn = [f32::INFINITY; 3];
+    let mut mx = [f32::NEG_INFINITY; 3];
+    for k in lo[2]..=hi[2] {
+        let z0 = k as f32;
+        for j in lo[1]..=hi[1] {
+            let y0 = j as f32;
+            let row = nx * (j + ny * k);
+            let (dx, dy, dz) = (
+                &disp.x[row + lo[0]..=row + hi[0]],
+                &disp.y[row + lo[0]..=row + hi[0]],
+                &disp.z[row + lo[0]..=row + hi[0]],
+            );
+            for (n, i) in (lo[0]..=hi[0]).enumerate() {
+                let p = [
+                    deformed_coordinate(i, dx[n], inv[0]),
+                    y0 + dy[n] * inv[1],
+                    z0 + dz[n] * inv[2],
+                ];
+                for a in 0..3 {
+                    // NaN-propagating min/max: a NaN displacement must show.
+                    mn[a] = if p[a] < mn[a] || p[a].is_nan() { p[a] } else { mn[a] };
+                    mx[a] = if p[a] > mx[a] || p[a].is_nan() { p[a] } else { mx[a] };
+                }
+            }
+        }
+    }
+    BlockBounds { min: mn, max: mx }
+}
+
+fn clear(job: &Job<'_>, out: &[AtomicU32]) {
+    let r = job.region;
+    let d = r.dims();
+    (0..d[1] * d[2]).into_par_iter().for_each(|row| {
+        let y = r.lo[1] + (row % d[1]) as i32;
+        let z = r.lo[2] + (row / d[1]) as i32;
+        let base = job.output.linear([r.lo[0], y, z]);
+        for o in &out[base..base + d[0]] {
+            o.store(u32::MAX, Relaxed);
+        }
+    });
+}
+
+/// What the per-cell and per-voxel kernels read.
+struct RasterCtx<'a> {
+    c: &'a KernelConsts,
+    disp: DisplacementsRef<'a>,
+    mask: Option<&'a TetMask>,
+    output: OutputGrid,
+    /// Voxels that may be written, source index units.
+    clip: VoxelBox,
+    decoder: TetDecoder,
+}
+
+impl RasterCtx<'_> {
+    /// Deformed position of vertex `v` (source voxel indices), linear `g`.
+    #[inline(always)]
+    fn position(&self, v: [usize; 3], g: usize) -> [f32; 3] {
+        let inv = self.c.inv_spacing;
+        [
+            deformed_coordinate(v[0], self.disp.x[g], inv[0]),
+            deformed_coordinate(v[1], self.disp.y[g], inv[1]),
+            deformed_coordinate(v[2], self.disp.z[g], inv[2]),
+        ]
+    }
+}
+
+fn raster_block(ctx: &RasterCtx<'_>, b: usize, out: &[AtomicU32]) {
+    let (lo, hi) = ctx.c.layout.cells(b);
+    for k in lo[2]..hi[2] {
+        for j in lo[1]..hi[1] {
+            for i in lo[0]..hi[0] {
+                raster_cell(ctx, [i, j, k], out);
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn raster_cell(ctx: &RasterCtx<'_>, cell: [usize; 3], out: &[AtomicU32]) {
+    let [nx, ny, _] = ctx.c.mesh.vertex_dims();
+    let base = cell[0] + nx * (cell[1] + ny * cell[2]);
+    let mut c = CellCorners::default();
+    for q in 0..8u8 {
+        let o = corner_offset(q);
+        let g = base + o[0] + nx * (o[1] + ny * o[2]);
+        let p = ctx.position([cell[0] + o[0], cell[1] + o[1], cell[2] + o[2]], g);
+        c.x[q as usize] = p[0];
+        c.y[q as usize] = p[1];
+        c.z[q as usize] = p[2];
+    }
+    let cell_lin = ctx.c.mesh.cell_linear(cell);
+    let removed = ctx.mask.map_or(0, |m| m.cell_bits(cell_lin));
+    if cell_parity(cell) == 0 {
+        raster_cell_p::<0>(ctx, &c, cell_lin, removed, out);
+    } else {
+        raster_cell_p::<1>(ctx, &c, cell_lin, removed, out);
+    }
+}
+
+#[inline(always)]
+fn raster_cell_p<const P: usize>(ctx: &RasterCtx<'_>, c: &CellCorners, cell_lin: usize, removed: u8, out: &[AtomicU32]) {
+    let Some(mut r) = CellRaster::<P>::new(c, removed, ctx.c.eps, &ctx.clip) else {
+        return;
+    };
+    let base_id = (cell_lin * TETS_PER_CELL) as u32;
+    let (lo, hi) = (r.lo, r.hi);
+    for z in lo[2]..=hi[2] {
+        for y in lo[1]..=hi[1] {
+            let o_row = ctx.output.linear([lo[0], y, z]);
+            for x in lo[0]..=hi[0] {
+                if let Some(t) = r.owner([x as f32, y as f32, z as f32]) {
+                    let id = base_id + t as u32;
+                    let o = &out[o_row + (x - lo[0]) as usize];
+                    if o.load(Relaxed) > id {
+                        o.fetch_min(id, Relaxed);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Pass 2 over the region: owner id → interpolated value (f32 bits).
+fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
+    let r = ctx.clip;
+    let d = r.dims();
+    let bg = ctx.c.background.to_bits();
+    (0..d[1] * d[2]).into_par_iter().for_each(|row| {
+        let y = r.lo[1] + (row % d[1]) as i32;
+        let z = r.lo[2] + (row / d[1]) as i32;
+        let base = ctx.output.linear([r.lo[0], y, z]);
+        for (n, o) in out[base..base + d[0]].iter().enumerate() {
+            let owner = o.load(Relaxed);
+            let v = if owner == u32::MAX {
+                bg
+            } else {
+                let q = [(r.lo[0] + n as i32) as f32, y as f32, z as f32];
+                value_at(ctx, src, owner, q).to_bits()
+            };
+            o.store(v, Relaxed);
+        }
+    });
+}
+
+/// The value at voxel centre `q` (source index units) interpolated in
+/// tetrahedron `owner`.
+#[inline(always)]
+fn value_at<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, q: [f32; 3]) -> f32 {
+    let mesh = &ctx.c.mesh;
+    let (cell, t) = ctx.decoder.decode(owner);
+    let [nx, ny, _] = mesh.vertex_dims();
+    let corners = CELL_TETS[cell_parity(cell)][t];
+    let mut p = [[0f32; 3]; 4];
+    let mut v = [0f32; 4];
+    for a in 0..4 {
+        let o = corner_offset(corners[a]);
+        let vi = [cell[0] + o[0], cell[1] + o[1], cell[2] + o[2]];
+        let g = vi[0] + nx * (vi[1] + ny * vi[2]);
+        p[a] = ctx.position(vi, g);
+        v[a] = src[g].to_f32();
+    }
+    interpolate(barycentric(&p, q), v)
+}
+
+struct Tm(std::time::Instant);
+impl Drop for Tm { fn drop(&mut self) { if std::env::var_os("VFX_TIMING").is_some() { eprintln!("TIMING bounds {:?}", self.0.elapsed()); } } }

@@ -1,0 +1,227 @@
+//! Backend selection: the scene's `backend = "cpu" | "gpu" | "auto"` turned
+//! into an [`ExecutionBackend`] and, for the GPU, the host's one
+//! [`WgpuService`].
+//!
+//! - `cpu` never touches wgpu (no instance, no adapter enumeration).
+//! - `auto` takes a **hardware** GPU when one exists and the rayon path
+//!   otherwise; a software adapter such as lavapipe counts as no GPU, and
+//!   [`ResolvedBackend::reason`] says which adapters were found and why they
+//!   were passed over.
+//! - `gpu` takes any adapter, software ones included (that is how CI checks
+//!   every WGSL kernel on lavapipe), and fails with what to install when
+//!   there is none.
+
+use std::fmt;
+use std::str::FromStr;
+use std::sync::Arc;
+
+use voxflex_core::deformation::ExecutionBackend;
+use voxflex_core::gpu::GpuService;
+
+use crate::gpu_context::{AdapterPolicy, GpuContextError, WgpuService};
+
+/// The scene file's `backend` key.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendChoice {
+    /// rayon on the CPU; the GPU is never initialised.
+    Cpu,
+    /// WGSL on any GPU adapter, software (lavapipe) included.
+    Gpu,
+    /// A hardware GPU if there is one, else the CPU. The default.
+    #[default]
+    Auto,
+}
+
+impl BackendChoice {
+    /// The scene-file spelling: `"cpu"`, `"gpu"` or `"auto"`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Cpu => "cpu",
+            Self::Gpu => "gpu",
+            Self::Auto => "auto",
+        }
+    }
+}
+
+impl fmt::Display for BackendChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for BackendChoice {
+    type Err = BackendError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "cpu" => Ok(Self::Cpu),
+            "gpu" => Ok(Self::Gpu),
+            "auto" => Ok(Self::Auto),
+            _ => Err(BackendError::UnknownChoice(s.to_owned())),
+        }
+    }
+}
+
+/// Resolving a [`BackendChoice`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BackendError {
+    /// `backend = "gpu"` but no adapter exists.
+    #[error(
+        "backend = \"gpu\" but no GPU adapter was found; install mesa-vulkan-drivers for the \
+         software lavapipe adapter, or use backend = \"cpu\" ({0})"
+    )]
+    NoGpuAdapter(#[source] GpuContextError),
+    /// `backend = "gpu"`: an adapter exists but the GPU context could not be
+    /// opened on it.
+    #[error("backend = \"gpu\": {0}")]
+    Gpu(#[source] GpuContextError),
+    /// Not `cpu`, `gpu` or `auto`.
+    #[error("unknown backend {0:?}; use \"cpu\", \"gpu\" or \"auto\"")]
+    UnknownChoice(String),
+}
+
+/// The outcome of [`resolve`]: where the scene computes, and why.
+#[derive(Clone, Debug)]
+pub struct ResolvedBackend {
+    /// The path every stage runs.
+    pub backend: ExecutionBackend,
+    /// The GPU context, exactly when `backend` is [`ExecutionBackend::Gpu`].
+    pub gpu: Option<Arc<WgpuService>>,
+    /// One line for logs and reports: the choice, the adapter or why the CPU
+    /// was taken.
+    pub reason: String,
+}
+
+impl ResolvedBackend {
+    /// The GPU context as the trait object that algorithms and plugins are
+    /// written against.
+    pub fn gpu_service(&self) -> Option<Arc<dyn GpuService>> {
+        self.gpu.clone().map(|g| g as Arc<dyn GpuService>)
+    }
+}
+
+/// Resolves the scene's backend choice (see the module docs).
+pub fn resolve(choice: BackendChoice) -> Result<ResolvedBackend, BackendError> {
+    let resolved = match choice {
+        BackendChoice::Cpu => ResolvedBackend {
+            backend: ExecutionBackend::Cpu,
+            gpu: None,
+            reason: "backend = \"cpu\": rayon on the CPU; the GPU is not initialised".to_owned(),
+        },
+        BackendChoice::Gpu => match WgpuService::new(AdapterPolicy::AnyAdapter) {
+            Ok(gpu) => {
+                let info = gpu.info();
+                let note = if info.software {
+                    " (a software adapter: correct, but slower than the CPU path)"
+                } else {
+                    ""
+                };
+                ResolvedBackend {
+                    backend: ExecutionBackend::Gpu,
+                    reason: format!("backend = \"gpu\": {info}{note}"),
+                    gpu: Some(Arc::new(gpu)),
+                }
+            }
+            Err(e) if e.is_no_adapter() => return Err(BackendError::NoGpuAdapter(e)),
+            Err(e) => return Err(BackendError::Gpu(e)),
+        },
+        BackendChoice::Auto => match WgpuService::new(AdapterPolicy::HardwareOnly) {
+            Ok(gpu) => ResolvedBackend {
+                backend: ExecutionBackend::Gpu,
+                reason: format!("backend = \"auto\": hardware GPU {}", gpu.info()),
+                gpu: Some(Arc::new(gpu)),
+            },
+            Err(e) => ResolvedBackend {
+                backend: ExecutionBackend::Cpu,
+                gpu: None,
+                reason: format!(
+                    "backend = \"auto\": no hardware GPU, using rayon on the CPU \
+                     (software adapters such as lavapipe count as none; \
+                     backend = \"gpu\" would take them): {e}"
+                ),
+            },
+        },
+    };
+    tracing::info!(target: "voxflex::backend", "{}", resolved.reason);
+    Ok(resolved)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu_context::testing::test_gpu;
+
+    #[derive(serde::Deserialize)]
+    struct Scene {
+        backend: BackendChoice,
+    }
+
+    #[test]
+    fn choice_parses_from_toml_and_strings() {
+        for (text, want) in [
+            ("cpu", BackendChoice::Cpu),
+            ("gpu", BackendChoice::Gpu),
+            ("auto", BackendChoice::Auto),
+        ] {
+            let scene: Scene = toml::from_str(&format!("backend = \"{text}\"")).unwrap();
+            assert_eq!(scene.backend, want);
+            assert_eq!(text.parse::<BackendChoice>().unwrap(), want);
+            assert_eq!(want.to_string(), text);
+        }
+        assert!(toml::from_str::<Scene>("backend = \"cuda\"").is_err());
+        let err = "cuda".parse::<BackendChoice>().unwrap_err().to_string();
+        assert!(err.contains("\"cpu\", \"gpu\" or \"auto\""), "{err}");
+        assert_eq!(BackendChoice::default(), BackendChoice::Auto);
+    }
+
+    #[test]
+    fn cpu_never_opens_a_gpu() {
+        let r = resolve(BackendChoice::Cpu).unwrap();
+        assert_eq!(r.backend, ExecutionBackend::Cpu);
+        assert!(r.gpu.is_none() && r.gpu_service().is_none());
+        assert!(r.reason.contains("cpu"));
+    }
+
+    #[test]
+    fn auto_takes_only_hardware() {
+        crate::gpu_context::testing::ensure_xdg_runtime_dir();
+        let r = resolve(BackendChoice::Auto).unwrap();
+        eprintln!("{}", r.reason);
+        match (&r.backend, &r.gpu) {
+            (ExecutionBackend::Gpu, Some(gpu)) => assert!(!gpu.info().software),
+            (ExecutionBackend::Cpu, None) => assert!(r.reason.contains("no hardware GPU")),
+            other => panic!("inconsistent resolution {other:?}"),
+        }
+    }
+
+    #[test]
+    fn gpu_takes_any_adapter() {
+        // Same CI policy as every GPU test: a missing adapter fails under CI.
+        if test_gpu().is_none() {
+            let err = resolve(BackendChoice::Gpu).unwrap_err().to_string();
+            assert!(err.starts_with("backend = \"gpu\""), "{err}");
+            return;
+        }
+        let r = resolve(BackendChoice::Gpu).unwrap();
+        eprintln!("{}", r.reason);
+        assert_eq!(r.backend, ExecutionBackend::Gpu);
+        let gpu = r.gpu_service().unwrap();
+        assert!(r.reason.contains(&r.gpu.as_ref().unwrap().info().name));
+        assert!(gpu.limits().max_buffer_size > 0);
+    }
+
+    #[test]
+    fn no_adapter_message_says_what_to_do() {
+        let e = BackendError::NoGpuAdapter(GpuContextError::NoAdapter {
+            backends: "VULKAN".into(),
+        });
+        let msg = e.to_string();
+        assert!(msg.starts_with(
+            "backend = \"gpu\" but no GPU adapter was found; install mesa-vulkan-drivers for the \
+             software lavapipe adapter, or use backend = \"cpu\""
+        ));
+    }
+}

@@ -1,0 +1,15 @@
+//! # voxflex-runtime — the host
+//!
+//! Plugin discovery and checked loading ([`plugin_loader`]), scene files
+//! ([`scene`]), backend selection ([`backend`]) and the wgpu GPU context
+//! ([`gpu_context`], the only place voxflex links wgpu), the scene pipeline
+//! with versioned, dirty-region stages ([`pipeline`]), run reports
+//! ([`metrics`]) and the `voxflex bench` measurements ([`bench`]).
+
+pub mod backend;
+pub mod bench;
+pub mod gpu_context;
+pub mod metrics;
+pub mod pipeline;
+pub mod plugin_loader;
+pub mod scene;

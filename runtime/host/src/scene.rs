@@ -1,0 +1,570 @@
+//! Scene files: what to load, which model deforms it, on which backend, for
+//! how many frames, and what to write.
+//!
+//! Every table rejects unknown keys with `file:line:column`, the key, and the
+//! closest valid key. Plugin parameters (`[model.params]`) and interactions
+//! (`[[interaction]]`) are passed through as TOML text: the plugin validates
+//! them itself and names its own keys.
+//!
+//! ```toml
+//! [scene]
+//! name = "demo"
+//! backend = "auto"          # "cpu" | "gpu" | "auto"
+//! frames = 12
+//!
+//! [volume]
+//! source = "phantom:head"   # or a .nii/.nii.gz/.mhd/.nrrd path (relative to this file)
+//! dims = [128, 128, 128]    # phantoms only
+//!
+//! [model]
+//! plugin = "affine"
+//! [model.params]
+//! field = "twist"
+//! angle_deg = 40
+//!
+//! [output]
+//! dir = "out/demo"
+//! slices = ["axial", "coronal", "sagittal"]
+//! window = { level = 40, width = 400 }
+//! nifti = "deformed.nii.gz"
+//! ```
+
+use crate::backend::BackendChoice;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A scene file could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Read {
+        /// Scene file.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// Syntax error, unknown key, wrong type or invalid value.
+    #[error("{location}: {message}")]
+    Invalid {
+        /// `file:line:column` (or just the file).
+        location: String,
+        /// What is wrong and what to do.
+        message: String,
+    },
+}
+
+/// `[scene]`: run-wide settings.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSettings {
+    /// Name used in reports.
+    #[serde(default = "default_name")]
+    pub name: String,
+    /// Where algorithms run.
+    #[serde(default)]
+    pub backend: BackendChoice,
+    /// Frames to simulate (≥ 1).
+    #[serde(default = "default_frames")]
+    pub frames: u64,
+    /// Simulated seconds per frame (> 0).
+    #[serde(default = "default_dt")]
+    pub dt_s: f64,
+    /// Worker threads; 0 = one per core.
+    #[serde(default)]
+    pub threads: usize,
+    /// Directories searched first for plugins (relative to the scene file).
+    #[serde(default)]
+    pub plugin_dirs: Vec<PathBuf>,
+}
+
+fn default_name() -> String {
+    "scene".into()
+}
+fn default_frames() -> u64 {
+    1
+}
+fn default_dt() -> f64 {
+    1.0 / 30.0
+}
+
+impl Default for SceneSettings {
+    fn default() -> Self {
+        Self {
+            name: default_name(),
+            backend: BackendChoice::default(),
+            frames: default_frames(),
+            dt_s: default_dt(),
+            threads: 0,
+            plugin_dirs: vec![],
+        }
+    }
+}
+
+/// `[volume]`: the source volume.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct VolumeSettings {
+    /// `phantom:<name>` or a file path (relative to the scene file).
+    pub source: String,
+    /// Phantom resolution in voxels (x, y, z); phantoms only.
+    #[serde(default)]
+    pub dims: Option<[usize; 3]>,
+    /// Refuse volumes with more voxels than this.
+    #[serde(default = "default_max_voxels")]
+    pub max_voxels: usize,
+}
+
+fn default_max_voxels() -> usize {
+    1 << 30
+}
+
+/// `[model]`: the deformation plugin and its parameters.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSettings {
+    /// Plugin name (`affine`, `chainmail`, …).
+    pub plugin: String,
+    /// The plugin's own table, passed to it as TOML text.
+    #[serde(default)]
+    pub params: toml::Table,
+}
+
+/// `[[interaction]]`: a scripted interaction applied at the start of `frame`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Interaction {
+    /// Frame (from 0) at which the model receives it.
+    pub frame: u64,
+    /// The rest of the table, as the model receives it (TOML text).
+    pub toml: String,
+}
+
+/// `[resample]`: the resampling stage.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ResampleSettings {
+    /// Value of output voxels outside the deformed volume (default: the
+    /// source volume's minimum).
+    #[serde(default)]
+    pub background: Option<f32>,
+}
+
+/// Slice orientation names for `[output] slices`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum SliceName {
+    /// Normal z.
+    Axial,
+    /// Normal y.
+    Coronal,
+    /// Normal x.
+    Sagittal,
+}
+
+/// Window/level for PNG slices, in data units (e.g. HU).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WindowSettings {
+    /// Centre of the window.
+    pub level: f32,
+    /// Width of the window (> 0).
+    pub width: f32,
+}
+
+/// `[output]`: what to write.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSettings {
+    /// Output directory (relative to the working directory).
+    #[serde(default = "default_out")]
+    pub dir: PathBuf,
+    /// Mid-slice PNGs to write.
+    #[serde(default = "default_slices")]
+    pub slices: Vec<SliceName>,
+    /// Window/level of the PNGs (default: the data range).
+    #[serde(default)]
+    pub window: Option<WindowSettings>,
+    /// File name of the deformed volume (`.nii` or `.nii.gz`); none = not written.
+    #[serde(default)]
+    pub nifti: Option<String>,
+    /// Write slices after every frame that changed, not only the last.
+    #[serde(default)]
+    pub every_frame: bool,
+}
+
+fn default_out() -> PathBuf {
+    PathBuf::from("out")
+}
+fn default_slices() -> Vec<SliceName> {
+    vec![SliceName::Axial, SliceName::Coronal, SliceName::Sagittal]
+}
+
+impl Default for OutputSettings {
+    fn default() -> Self {
+        Self {
+            dir: default_out(),
+            slices: default_slices(),
+            window: None,
+            nifti: None,
+            every_frame: false,
+        }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    #[serde(default)]
+    scene: SceneSettings,
+    volume: VolumeSettings,
+    #[serde(default)]
+    model: Option<ModelSettings>,
+    #[serde(default)]
+    interaction: Vec<toml::Table>,
+    #[serde(default)]
+    resample: Option<ResampleSettings>,
+    #[serde(default)]
+    output: Option<OutputSettings>,
+}
+
+/// A parsed, validated scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    /// Scene file (for messages and relative paths).
+    pub path: PathBuf,
+    /// The file's text (fingerprinted to skip up-to-date runs).
+    pub text: String,
+    /// `[scene]`.
+    pub settings: SceneSettings,
+    /// `[volume]`.
+    pub volume: VolumeSettings,
+    /// `[model]`; none = the identity (no deformation stage).
+    pub model: Option<ModelSettings>,
+    /// `[[interaction]]`, sorted by frame.
+    pub interactions: Vec<Interaction>,
+    /// `[resample]`; present whenever there is a model.
+    pub resample: Option<ResampleSettings>,
+    /// `[output]`; none = write only metrics.
+    pub output: Option<OutputSettings>,
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates scene text; `path` is used in messages and to
+    /// resolve relative paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        let file: SceneFile =
+            toml::from_str(text).map_err(|e| describe_toml_error(&e, text, path))?;
+        let invalid = |key: &str, message: String| SceneError::Invalid {
+            location: locate_key(text, path, key),
+            message: format!("`{key}`: {message}"),
+        };
+        let s = &file.scene;
+        if s.frames == 0 || s.frames > 10_000_000 {
+            return Err(invalid(
+                "frames",
+                format!("{} is out of range; use 1 to 10000000", s.frames),
+            ));
+        }
+        if !(s.dt_s.is_finite() && s.dt_s > 0.0) {
+            return Err(invalid(
+                "dt_s",
+                format!("{} must be a positive number of seconds", s.dt_s),
+            ));
+        }
+        if s.threads > 4096 {
+            return Err(invalid(
+                "threads",
+                format!("{} threads is absurd; use 0 for one per core", s.threads),
+            ));
+        }
+        if let Some(d) = file.volume.dims {
+            let total = d.iter().try_fold(1usize, |a, &b| a.checked_mul(b));
+            if d.contains(&0) || total.is_none_or(|t| t > file.volume.max_voxels) {
+                return Err(invalid(
+                    "dims",
+                    format!(
+                        "{d:?} must be positive and hold at most max_voxels = {} voxels",
+                        file.volume.max_voxels
+                    ),
+                ));
+            }
+        }
+        if let Some(b) = file.resample.as_ref().and_then(|r| r.background)
+            && !b.is_finite()
+        {
+            return Err(invalid("background", "must be a finite number".into()));
+        }
+        if let Some(o) = &file.output {
+            if let Some(w) = o.window
+                && !(w.width.is_finite() && w.width > 0.0 && w.level.is_finite())
+            {
+                return Err(invalid(
+                    "window",
+                    "needs a finite `level` and a `width` > 0".into(),
+                ));
+            }
+            if let Some(n) = &o.nifti
+                && !(n.ends_with(".nii") || n.ends_with(".nii.gz"))
+            {
+                return Err(invalid(
+                    "nifti",
+                    format!("`{n}` must end in .nii or .nii.gz"),
+                ));
+            }
+        }
+        let mut interactions = vec![];
+        for mut table in file.interaction {
+            let frame = match table.remove("frame") {
+                Some(toml::Value::Integer(f)) if f >= 0 => f as u64,
+                Some(v) => {
+                    return Err(invalid("frame", format!("{v} must be a frame number ≥ 0")));
+                }
+                None => {
+                    return Err(SceneError::Invalid {
+                        location: locate_key(text, path, "[[interaction]]"),
+                        message: "every [[interaction]] needs `frame = <number>`".into(),
+                    });
+                }
+            };
+            if frame >= s.frames {
+                return Err(invalid(
+                    "frame",
+                    format!(
+                        "interaction at frame {frame} never happens: the scene has {} frames",
+                        s.frames
+                    ),
+                ));
+            }
+            let toml =
+                toml::to_string(&table).map_err(|e| invalid("interaction", e.to_string()))?;
+            interactions.push(Interaction { frame, toml });
+        }
+        interactions.sort_by_key(|i| i.frame);
+        let resample = match (&file.model, file.resample) {
+            (Some(_), None) => Some(ResampleSettings::default()),
+            (_, r) => r,
+        };
+        Ok(Scene {
+            path: path.to_path_buf(),
+            text: text.to_owned(),
+            settings: file.scene,
+            volume: file.volume,
+            model: file.model,
+            interactions,
+            resample,
+            output: file.output,
+        })
+    }
+
+    /// Directory of the scene file (base of relative paths).
+    pub fn base_dir(&self) -> PathBuf {
+        self.path
+            .parent()
+            .map(Path::to_path_buf)
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or_else(|| PathBuf::from("."))
+    }
+
+    /// `plugin_dirs` resolved against the scene file's directory.
+    pub fn plugin_dirs(&self) -> Vec<PathBuf> {
+        let base = self.base_dir();
+        self.settings
+            .plugin_dirs
+            .iter()
+            .map(|d| {
+                if d.is_absolute() {
+                    d.clone()
+                } else {
+                    base.join(d)
+                }
+            })
+            .collect()
+    }
+
+    /// The model's parameters as TOML text.
+    pub fn model_params_toml(&self) -> String {
+        self.model
+            .as_ref()
+            .map(|m| toml::to_string(&m.params).unwrap_or_default())
+            .unwrap_or_default()
+    }
+}
+
+/// `file:line:column` of the first line that assigns `key` (or holds it).
+fn locate_key(text: &str, path: &Path, key: &str) -> String {
+    let needle = key.trim_start_matches('[').trim_end_matches(']');
+    for (n, line) in text.lines().enumerate() {
+        let t = line.trim_start();
+        let hit = t.starts_with(needle)
+            && t[needle.len()..].trim_start().starts_with(['=', ']', '.'])
+            || (key.starts_with('[') && t.starts_with(key));
+        if hit {
+            return format!("{}:{}:{}", path.display(), n + 1, line.len() - t.len() + 1);
+        }
+    }
+    path.display().to_string()
+}
+
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+/// The `[table]` header governing byte `offset`.
+fn enclosing_table(text: &str, offset: usize) -> String {
+    text[..offset.min(text.len())]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.split('#').next().unwrap_or(l).trim().to_owned())
+        .unwrap_or_else(|| "the top level".into())
+}
+
+fn describe_toml_error(e: &toml::de::Error, text: &str, path: &Path) -> SceneError {
+    let (offset, location) = match e.span() {
+        Some(span) => {
+            let (l, c) = line_col(text, span.start);
+            (span.start, format!("{}:{l}:{c}", path.display()))
+        }
+        None => (0, path.display().to_string()),
+    };
+    let raw = e.message().trim().to_owned();
+    let message = match parse_unknown_field(&raw) {
+        Some((unknown, expected)) => {
+            let table = enclosing_table(text, offset);
+            let best = expected
+                .iter()
+                .map(|k| (strsim::jaro_winkler(&unknown, k), k))
+                .filter(|(score, _)| *score > 0.7)
+                .max_by(|a, b| a.0.total_cmp(&b.0));
+            let hint = match best {
+                Some((_, k)) => format!("; did you mean `{k}`?"),
+                None => String::new(),
+            };
+            format!(
+                "unknown key `{unknown}` in {table}{hint} (valid keys: {})",
+                expected.join(", ")
+            )
+        }
+        None => raw,
+    };
+    SceneError::Invalid { location, message }
+}
+
+/// Splits serde's "unknown field `x`, expected one of `a`, `b`" (or
+/// "expected `a`") into the key and the valid keys.
+fn parse_unknown_field(msg: &str) -> Option<(String, Vec<String>)> {
+    let rest = msg.strip_prefix("unknown field `")?;
+    let (unknown, rest) = rest.split_once('`')?;
+    let expected = rest
+        .split('`')
+        .enumerate()
+        .filter(|(i, _)| i % 2 == 1)
+        .map(|(_, s)| s.to_owned())
+        .collect();
+    Some((unknown.to_owned(), expected))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[scene]
+name = "t"
+backend = "cpu"
+frames = 3
+
+[volume]
+source = "phantom:cube"
+dims = [8, 8, 8]
+
+[model]
+plugin = "affine"
+[model.params]
+field = "twist"
+angle_deg = 10
+
+[[interaction]]
+frame = 1
+kind = "grab"
+"#;
+
+    #[test]
+    fn parses_a_good_scene() {
+        let s = Scene::parse(GOOD, Path::new("t.toml")).unwrap();
+        assert_eq!(s.settings.frames, 3);
+        assert_eq!(s.model.as_ref().unwrap().plugin, "affine");
+        assert!(s.model_params_toml().contains("angle_deg = 10"));
+        assert_eq!(
+            s.interactions,
+            vec![Interaction {
+                frame: 1,
+                toml: "kind = \"grab\"\n".into()
+            }]
+        );
+        assert!(s.resample.is_some(), "a model implies the resample stage");
+    }
+
+    #[test]
+    fn misspelt_key_names_line_column_and_suggestion() {
+        let bad = GOOD.replace("backend = \"cpu\"", "backnd = \"cpu\"");
+        let e = Scene::parse(&bad, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("t.toml:4:1: unknown key `backnd` in [scene]; did you mean `backend`?"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn unknown_table_is_rejected() {
+        let bad = format!("{GOOD}\n[rendr]\nx = 1\n");
+        let e = Scene::parse(&bad, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown key `rendr`"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let e = Scene::parse(
+            &GOOD.replace("frames = 3", "frames = 0"),
+            Path::new("t.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("t.toml:5:1: `frames`"), "{e}");
+        let e = Scene::parse(
+            &GOOD.replace("backend = \"cpu\"", "backend = \"cuda\""),
+            Path::new("t.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("t.toml:4:") && e.contains("cuda"), "{e}");
+        let e = Scene::parse(
+            &GOOD.replace("dims = [8, 8, 8]", "dims = [100000, 100000, 100000]"),
+            Path::new("t.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("`dims`") && e.contains("max_voxels"), "{e}");
+        let e = Scene::parse(&GOOD.replace("frame = 1", "frame = 9"), Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("never happens"), "{e}");
+    }
+}

@@ -1,0 +1,16 @@
+// voxflex resampler: the displacement field (mm, SoA, one value per source voxel).
+
+@group(0) @binding(1) var<storage, read> DX: array<f32>;
+@group(0) @binding(2) var<storage, read> DY: array<f32>;
+@group(0) @binding(3) var<storage, read> DZ: array<f32>;
+
+// Deformed position of vertex (i, j, k): index + displacement / spacing
+// (sampling_mesh.rs: deformed_coordinate).
+fn vertex_position(i: u32, j: u32, k: u32) -> vec3<f32> {
+    let g = i + P.vdim.x * (j + P.vdim.y * k);
+    return vec3<f32>(
+        f32(i) + DX[g] * P.inv.x,
+        f32(j) + DY[g] * P.inv.y,
+        f32(k) + DZ[g] * P.inv.z,
+    );
+}

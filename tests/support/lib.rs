@@ -1,0 +1,111 @@
+//! Shared helpers of the integration tests: where the built binary and
+//! plugin libraries are, and how to run the CLI.
+//!
+//! The tests drive what users run: `target/<profile>/voxflex` and the
+//! `target/<profile>/libvoxflex_*.so` plugins. `cargo test` does not build
+//! `cdylib` crates nothing depends on, so build the workspace first
+//! (`scripts/test.sh` does: `cargo build --workspace` then `cargo test`).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The repository root.
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ has a parent")
+        .to_path_buf()
+}
+
+/// `target/<profile>`: the directory holding this test binary's `deps/`.
+pub fn target_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let deps = exe.parent().expect("deps dir");
+    deps.parent().expect("profile dir").to_path_buf()
+}
+
+/// The built `voxflex` binary.
+pub fn voxflex_bin() -> PathBuf {
+    let p = target_dir().join(format!("voxflex{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        p.is_file(),
+        "{} is missing: build the workspace first (`cargo build --workspace`, or scripts/test.sh)",
+        p.display()
+    );
+    p
+}
+
+/// The directory of the built plugins, checking that `names` are there.
+pub fn plugin_dir(names: &[&str]) -> PathBuf {
+    let dir = target_dir();
+    for n in names {
+        let f = dir.join(voxflex_runtime::plugin_loader::library_file_name(n));
+        assert!(
+            f.is_file(),
+            "{} is missing: build the plugins first (`cargo build --workspace`, or scripts/test.sh)",
+            f.display()
+        );
+    }
+    dir
+}
+
+/// Runs `voxflex args…` in `cwd` with the built plugins on the search path.
+pub fn voxflex(args: &[&str], cwd: &Path) -> Output {
+    Command::new(voxflex_bin())
+        .args(args)
+        .current_dir(cwd)
+        .env("VOXFLEX_PLUGIN_PATH", target_dir())
+        .env_remove("RUST_LOG")
+        .output()
+        .expect("run voxflex")
+}
+
+/// stdout + stderr of a finished command, for assertion messages.
+pub fn text(o: &Output) -> String {
+    format!(
+        "status {:?}\n--- stdout\n{}\n--- stderr\n{}",
+        o.status.code(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// Reads `metrics.json` from a run's output directory.
+pub fn metrics(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("metrics.json")).expect("metrics.json written");
+    serde_json::from_str(&text).expect("metrics.json is JSON")
+}
+
+/// A small scene on `phantom:<phantom>` with `plugin` and its params table body.
+pub fn scene(
+    backend: &str,
+    phantom: &str,
+    dims: usize,
+    frames: u64,
+    plugin: &str,
+    params: &str,
+    out: &Path,
+) -> String {
+    format!(
+        r#"[scene]
+name = "test"
+backend = "{backend}"
+frames = {frames}
+
+[volume]
+source = "phantom:{phantom}"
+dims = [{dims}, {dims}, {dims}]
+
+[model]
+plugin = "{plugin}"
+
+[model.params]
+{params}
+
+[output]
+dir = "{}"
+nifti = "deformed.nii.gz"
+"#,
+        out.display()
+    )
+}

@@ -1,0 +1,274 @@
+//! The CLI end to end: the demo scene, outputs, metrics, up-to-date runs,
+//! validation messages, plugin listing, and the plugin swap.
+
+use voxflex_integration_tests::*;
+
+fn twist(frames: u64) -> String {
+    format!("field = \"twist\"\nangle_deg = 30\nramp_frames = {frames}")
+}
+
+#[test]
+fn demo_scene_writes_slices_nifti_and_metrics() {
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let demo = repo_root().join("configs/demo.toml");
+    let o = voxflex(
+        &["run", demo.to_str().unwrap(), "--out", "demo"],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let out = tmp.path().join("demo");
+    for f in [
+        "axial.png",
+        "coronal.png",
+        "sagittal.png",
+        "deformed.nii.gz",
+        "metrics.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing\n{}", text(&o));
+    }
+    let m = metrics(&out);
+    assert_eq!(m["plugin"]["name"], "affine");
+    assert_eq!(m["up_to_date"], false);
+    assert!(m["stages"]["resample"]["runs"].as_u64().unwrap() >= 1);
+    assert!(m["stages"]["resample"]["wall_ms"].as_f64().unwrap() > 0.0);
+    assert!(m["stages"]["resample"]["voxels_touched"].as_u64().unwrap() > 0);
+    // The deformed volume reads back with the output grid of the metrics.
+    let v =
+        voxflex_core::io::read_volume(&out.join("deformed.nii.gz"), &Default::default()).unwrap();
+    let dims: Vec<usize> = m["output_dims"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(v.grid.dims.to_vec(), dims);
+}
+
+#[test]
+fn converged_frames_skip_downstream_stages_and_a_second_run_reruns_nothing() {
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // Ramp over 2 frames, then 3 converged frames.
+    std::fs::write(
+        tmp.path().join("s.toml"),
+        scene("cpu", "cube", 24, 5, "affine", &twist(2), &out),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&out);
+    assert_eq!(m["stages"]["model"]["runs"], 5);
+    assert_eq!(m["stages"]["map"]["runs"], 2);
+    assert_eq!(m["stages"]["map"]["skipped"], 3);
+    assert_eq!(m["stages"]["resample"]["runs"], 2);
+    assert_eq!(m["stages"]["resample"]["skipped"], 3);
+    assert_eq!(m["stages"]["output"]["runs"], 1);
+
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("up to date"),
+        "{}",
+        text(&o)
+    );
+    let m = metrics(&out);
+    assert_eq!(m["up_to_date"], true);
+    for stage in ["source", "model", "map", "resample", "output"] {
+        assert_eq!(m["stages"][stage]["runs"], 0, "{stage} re-ran: {m}");
+    }
+
+    // Touching the scene makes it stale again.
+    let text2 = std::fs::read_to_string(tmp.path().join("s.toml"))
+        .unwrap()
+        .replace("angle_deg = 30", "angle_deg = 31");
+    std::fs::write(tmp.path().join("s.toml"), text2).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(metrics(&out)["up_to_date"], false);
+}
+
+#[test]
+fn swap_plugins_by_editing_only_the_scene() {
+    plugin_dir(&["affine", "ripple"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let a = scene(
+        "cpu",
+        "head",
+        32,
+        1,
+        "affine",
+        "field = \"bend\"\nangle_deg = 20",
+        &out,
+    );
+    std::fs::write(tmp.path().join("s.toml"), &a).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(metrics(&out)["plugin"]["name"], "affine");
+    let first = std::fs::read(out.join("deformed.nii.gz")).unwrap();
+
+    let b = a
+        .replace("plugin = \"affine\"", "plugin = \"ripple\"")
+        .replace("field = \"bend\"\nangle_deg = 20", "amplitude_mm = 2.0");
+    std::fs::write(tmp.path().join("s.toml"), &b).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(metrics(&out)["plugin"]["name"], "ripple");
+    assert_ne!(
+        std::fs::read(out.join("deformed.nii.gz")).unwrap(),
+        first,
+        "a different model must give a different volume"
+    );
+}
+
+#[test]
+fn validate_accepts_the_demo_and_names_misspelt_keys() {
+    plugin_dir(&["affine"]);
+    let root = repo_root();
+    let o = voxflex(&["validate", "configs/demo.toml"], &root);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("configs/demo.toml: ok"));
+
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = std::fs::read_to_string(root.join("configs/demo.toml"))
+        .unwrap()
+        .replace("frames = 8", "frams = 8");
+    std::fs::write(tmp.path().join("bad.toml"), bad).unwrap();
+    let o = voxflex(&["validate", "bad.toml"], tmp.path());
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("bad.toml:")
+            && err.contains("unknown key `frams` in [scene]; did you mean `frames`?"),
+        "{}",
+        text(&o)
+    );
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+}
+
+#[test]
+fn plugin_errors_are_one_clear_line() {
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // Unknown plugin.
+    std::fs::write(
+        tmp.path().join("s.toml"),
+        scene("cpu", "cube", 8, 1, "warp-drive", "", &out),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("plugin `warp-drive` not found"),
+        "{}",
+        text(&o)
+    );
+    // Bad plugin parameter: the plugin names its key.
+    std::fs::write(
+        tmp.path().join("s.toml"),
+        scene(
+            "cpu",
+            "cube",
+            8,
+            1,
+            "affine",
+            "field = \"twist\"\nangel_deg = 3",
+            &out,
+        ),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("plugin `affine`") && err.contains("angel_deg"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn abi_mismatch_is_refused_naming_the_file_and_both_versions() {
+    let built = plugin_dir(&["mismatched"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let lib = voxflex_runtime::plugin_loader::library_file_name("mismatched");
+    std::fs::copy(built.join(&lib), tmp.path().join(&lib)).unwrap();
+    let out = tmp.path().join("out");
+    let s = scene("cpu", "cube", 8, 1, "mismatched", "", &out).replace(
+        "frames = 1",
+        &format!("frames = 1\nplugin_dirs = [\"{}\"]", tmp.path().display()),
+    );
+    std::fs::write(tmp.path().join("s.toml"), s).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let host = voxflex_abi::ABI_VERSION;
+    assert!(
+        err.contains(&tmp.path().join(&lib).display().to_string()),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("plugin was built for ABI v{}", host + 1))
+            && err.contains(&format!("this host speaks ABI v{host}")),
+        "{err}"
+    );
+    // `plugins` lists it as refused instead of failing.
+    let o = voxflex(
+        &["plugins", "--dir", tmp.path().to_str().unwrap()],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("(refused)"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn plugins_lists_name_kind_version_abi_capabilities_path() {
+    let dir = plugin_dir(&["affine"]);
+    let o = voxflex(&["plugins"], &repo_root());
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("affine "))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(
+        line.contains("deformation")
+            && line.contains(env!("CARGO_PKG_VERSION"))
+            && line.contains("v1"),
+        "{line}"
+    );
+    assert!(
+        line.contains("cpu, gpu") && line.contains(&dir.display().to_string()),
+        "{line}"
+    );
+}
+
+#[test]
+fn info_describes_phantoms_and_refuses_hostile_headers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = voxflex(&["info", "phantom:head", "--dims", "32,32,32"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("32") && out.contains("-1000"), "{out}");
+
+    // A NIfTI file cut in half: one line naming the file.
+    let v = voxflex_core::phantom::phantom("cube", [16, 16, 16]).unwrap();
+    let p = tmp.path().join("v.nii.gz");
+    voxflex_core::io::write_volume(&p, v.view()).unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    let o = voxflex(&["info", p.to_str().unwrap()], tmp.path());
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("v.nii.gz") && err.lines().count() == 1,
+        "{err}"
+    );
+}
