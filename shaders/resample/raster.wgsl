@@ -1,14 +1,33 @@
 // voxflex resampler, pass 1: one invocation per cell of the listed blocks.
-// Each non-removed tetrahedron atomic-mins its id into every output voxel
-// centre (inside the clip box) that passes the inclusion test of raster.rs.
+// Every output voxel centre in the cell's clipped bounding box goes to the
+// smallest tetrahedron of the cell that passes the inclusion test of
+// raster.rs (CellRaster): atomicMin(tet id) into the output slab.
 
 @group(0) @binding(4) var<storage, read> BLOCKS: array<u32>;
 @group(0) @binding(6) var<storage, read_write> OUT: array<atomic<u32>>;
 @group(0) @binding(7) var<storage, read> MASK: array<u32>;
 
+// FACE_TABLES.faces (sampling_mesh.rs): [parity][face][3 ascending corners].
+var<private> FACES: array<u32, 96> = array<u32, 96>(
+    1u, 2u, 4u, 0u, 2u, 4u, 0u, 1u, 4u, 0u, 1u, 2u, 2u, 3u, 7u, 1u, 3u, 7u, 1u, 2u, 7u, 1u, 2u, 3u,
+    4u, 5u, 7u, 1u, 5u, 7u, 1u, 4u, 7u, 1u, 4u, 5u, 4u, 6u, 7u, 2u, 6u, 7u, 2u, 4u, 7u, 2u, 4u, 6u,
+    1u, 3u, 5u, 0u, 3u, 5u, 0u, 1u, 5u, 0u, 1u, 3u, 2u, 3u, 6u, 0u, 3u, 6u, 0u, 2u, 6u, 0u, 2u, 3u,
+    4u, 5u, 6u, 0u, 5u, 6u, 0u, 4u, 6u, 0u, 4u, 5u, 5u, 6u, 7u, 3u, 6u, 7u, 3u, 5u, 7u, 3u, 5u, 6u,
+);
+
+// FACE_TABLES.tet_faces: [parity][tet][a] = face opposite corner slot a.
+var<private> TET_FACES: array<u32, 40> = array<u32, 40>(
+    0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u, 14u, 10u, 6u, 0u,
+    0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u, 15u, 9u, 5u, 1u,
+);
+
 var<private> PX: array<f32, 8>;
 var<private> PY: array<f32, 8>;
 var<private> PZ: array<f32, 8>;
+var<private> PN: array<vec3<f32>, 16>;
+var<private> PB: array<vec3<f32>, 16>;
+var<private> SG: array<f32, 20>;
+var<private> TH: array<f32, 20>;
 
 fn corner(c: u32) -> vec3<f32> {
     return vec3<f32>(PX[c], PY[c], PZ[c]);
@@ -39,76 +58,61 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         cmin = min(cmin, p);
         cmax = max(cmax, p);
     }
-    let clo = max(vec3<i32>(ceil(cmin)), P.clo.xyz);
-    let chi = min(vec3<i32>(floor(cmax)), P.chi.xyz);
-    if any(clo > chi) {
+    let lo = max(vec3<i32>(ceil(cmin)), P.clo.xyz);
+    let hi = min(vec3<i32>(floor(cmax)), P.chi.xyz);
+    if any(lo > hi) {
         return;
     }
     let cell = ci + P.cdim.x * (cj + P.cdim.y * ck);
-    var removed = 0u;
+    var live = 31u;
     if P.oorg.w != 0 {
-        removed = (MASK[cell / 4u] >> ((cell % 4u) * 8u)) & 0xffu;
+        live &= ~((MASK[cell / 4u] >> ((cell % 4u) * 8u)) & 0xffu);
     }
     let parity = (ci + cj + ck) & 1u;
+    for (var f = 0u; f < 16u; f++) {
+        let k = parity * 48u + f * 3u;
+        let pl = make_plane(corner(FACES[k]), corner(FACES[k + 1u]), corner(FACES[k + 2u]));
+        PN[f] = pl.n;
+        PB[f] = pl.b;
+    }
     let eps = P.inv.w;
-    for (var t = 0u; t < 5u; t++) {
-        if (removed & (1u << t)) != 0u {
-            continue;
+    for (var s = 0u; s < 20u; s++) {
+        let f = TET_FACES[parity * 20u + s];
+        let d = plane_eval(Plane(PN[f], PB[f]), corner(TETS[parity * 20u + s]));
+        if d == 0.0 || !(abs(d) <= 3.4028235e38) {
+            live &= ~(1u << (s / 4u));
         }
-        var cs: array<u32, 4>;
-        for (var a = 0u; a < 4u; a++) {
-            cs[a] = TETS[parity * 20u + t * 4u + a];
-        }
-        let p0 = corner(cs[0]);
-        let p1 = corner(cs[1]);
-        let p2 = corner(cs[2]);
-        let p3 = corner(cs[3]);
-        let tmin = min(min(p0, p1), min(p2, p3));
-        let tmax = max(max(p0, p1), max(p2, p3));
-        let lo = max(vec3<i32>(ceil(tmin)), P.clo.xyz);
-        let hi = min(vec3<i32>(floor(tmax)), P.chi.xyz);
-        if any(lo > hi) {
-            continue;
-        }
-        // Faces as lanes: plane normals n, base points b, sign and threshold.
-        var nx: vec4<f32>;
-        var ny: vec4<f32>;
-        var nz: vec4<f32>;
-        var bx: vec4<f32>;
-        var by: vec4<f32>;
-        var bz: vec4<f32>;
-        var sg: vec4<f32>;
-        var th: vec4<f32>;
-        var ok = true;
-        for (var a = 0u; a < 4u; a++) {
-            let f = make_plane(corner(cs[OTHERS[a * 3u]]), corner(cs[OTHERS[a * 3u + 1u]]), corner(cs[OTHERS[a * 3u + 2u]]));
-            let d = plane_eval(f, corner(cs[a]));
-            if d == 0.0 {
-                ok = false;
-            }
-            nx[a] = f.n.x;
-            ny[a] = f.n.y;
-            nz[a] = f.n.z;
-            bx[a] = f.b.x;
-            by[a] = f.b.y;
-            bz[a] = f.b.z;
-            sg[a] = select(-1.0, 1.0, d > 0.0);
-            th[a] = -eps * abs(d);
-        }
-        if !ok {
-            continue;
-        }
-        let id = cell * 5u + t;
-        for (var z = lo.z; z <= hi.z; z++) {
-            for (var y = lo.y; y <= hi.y; y++) {
-                let row = ny * (vec4<f32>(f32(y)) - by) + nz * (vec4<f32>(f32(z)) - bz);
-                for (var x = lo.x; x <= hi.x; x++) {
-                    let tv = nx * (vec4<f32>(f32(x)) - bx) + row;
-                    if all(sg * tv >= th) {
+        SG[s] = select(-1.0, 1.0, d > 0.0);
+        TH[s] = -eps * abs(d);
+    }
+    if live == 0u {
+        return;
+    }
+    let base = cell * 5u;
+    for (var z = lo.z; z <= hi.z; z++) {
+        for (var y = lo.y; y <= hi.y; y++) {
+            for (var x = lo.x; x <= hi.x; x++) {
+                let q = vec3<f32>(f32(x), f32(y), f32(z));
+                var tv: array<f32, 16>;
+                for (var f = 0u; f < 16u; f++) {
+                    tv[f] = plane_eval(Plane(PN[f], PB[f]), q);
+                }
+                for (var t = 0u; t < 5u; t++) {
+                    if (live & (1u << t)) == 0u {
+                        continue;
+                    }
+                    var ok = true;
+                    for (var a = 0u; a < 4u; a++) {
+                        let s = t * 4u + a;
+                        ok = ok && SG[s] * tv[TET_FACES[parity * 20u + s]] >= TH[s];
+                    }
+                    if ok {
                         let o = out_index(x, y, z);
+                        let id = base + t;
                         if atomicLoad(&OUT[o]) > id {
                             atomicMin(&OUT[o], id);
                         }
+                        break;
                     }
                 }
             }

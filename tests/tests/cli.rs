@@ -272,3 +272,32 @@ fn info_describes_phantoms_and_refuses_hostile_headers() {
         "{err}"
     );
 }
+
+#[test]
+fn scripted_interactions_reach_the_model_at_their_frame() {
+    plugin_dir(&["ripple"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let s = format!(
+        "{}\n[[interaction]]\nframe = 3\namplitude_mm = 4.0\n",
+        scene("cpu", "cube", 16, 5, "ripple", "amplitude_mm = 1.0", &out)
+    );
+    std::fs::write(tmp.path().join("s.toml"), s).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&out);
+    // Frame 0 maps the initial ripple, frame 3 the new amplitude; the rest skip.
+    assert_eq!(m["stages"]["map"]["runs"], 2, "{m}");
+    assert_eq!(m["stages"]["resample"]["runs"], 2, "{m}");
+    assert_eq!(m["stages"]["resample"]["skipped"], 3, "{m}");
+
+    // A bad interaction key is named by the plugin.
+    let s = format!(
+        "{}\n[[interaction]]\nframe = 1\namplitude = 4.0\n",
+        scene("cpu", "cube", 16, 2, "ripple", "", &out)
+    );
+    std::fs::write(tmp.path().join("s.toml"), s).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown field `amplitude`"), "{}", text(&o));
+}

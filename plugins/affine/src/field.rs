@@ -43,9 +43,9 @@ impl FieldUniforms {
         };
         let mut rows = [[0f32; 4]; 3];
         for (r, row) in rows.iter_mut().enumerate() {
-            for c in 0..4 {
+            for (c, v) in row.iter_mut().enumerate() {
                 let id = if c == r { 1.0 } else { 0.0 };
-                row[c] = (id + s * (p.matrix[r][c] - id)) as f32;
+                *v = (id + s * (p.matrix[r][c] - id)) as f32;
             }
         }
         let region = p.region.map_or([0.0; 4], |g| {

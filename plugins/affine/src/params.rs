@@ -114,7 +114,7 @@ impl AffineParams {
             return bad("ramp_frames", "must be at least 1");
         }
         if let Some(r) = self.region
-            && (!(r.radius > 0.0)
+            && (r.radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
                 || !r.radius.is_finite()
                 || r.centre.iter().any(|v| !v.is_finite()))
         {

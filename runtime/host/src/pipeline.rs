@@ -109,7 +109,6 @@ pub fn load_source(scene: &Scene) -> Result<Volume, RunError> {
                 &path,
                 &ReadOptions {
                     max_voxels: v.max_voxels,
-                    ..ReadOptions::default()
                 },
             )?)
         }

@@ -509,6 +509,34 @@ mod tests {
         assert!(slabs(&o, 0, 49, 100, 256).is_err());
     }
 
+    /// The numbers of a `var<private> NAME: array<u32, N> = array<u32, N>(…);` table.
+    fn wgsl_table(src: &str, name: &str) -> Vec<u32> {
+        let start = src.find(&format!("var<private> {name}:")).unwrap_or_else(|| panic!("{name} missing"));
+        let body = &src[start..];
+        let open = body.find(">(").expect("array literal") + 2;
+        let close = body[open..].find(");").expect("end of literal") + open;
+        body[open..close]
+            .split(',')
+            .map(|t| t.trim().trim_end_matches('u'))
+            .filter(|t| !t.is_empty())
+            .map(|t| t.parse().expect("u32 literal"))
+            .collect()
+    }
+
+    #[test]
+    fn wgsl_tables_match_rust() {
+        use super::super::sampling_mesh::{CELL_TETS, FACE_TABLES};
+        let tets: Vec<u32> = CELL_TETS.iter().flatten().flatten().map(|&v| v as u32).collect();
+        assert_eq!(wgsl_table(COMMON, "TETS"), tets);
+        let faces: Vec<u32> = FACE_TABLES.faces.iter().flatten().flatten().map(|&v| v as u32).collect();
+        assert_eq!(wgsl_table(RASTER, "FACES"), faces);
+        let tf: Vec<u32> = FACE_TABLES.tet_faces.iter().flatten().flatten().map(|&v| v as u32).collect();
+        assert_eq!(wgsl_table(RASTER, "TET_FACES"), tf);
+        assert_eq!(wgsl_table(COMMON, "OTHERS"), vec![1, 2, 3, 0, 2, 3, 0, 1, 3, 0, 1, 2]);
+        assert!(COMMON.contains(&format!("const BLOCK_EDGE: u32 = {}u;", super::super::blocks::BLOCK_EDGE)));
+        assert!(COMMON.contains(&format!("const CELLS_PER_BLOCK: u32 = {}u;", CELLS_PER_BLOCK)));
+    }
+
     #[test]
     fn kernels_are_assembled() {
         for (entry, src) in kernel_sources() {
