@@ -227,3 +227,115 @@ impl From<BindingDesc> for BufferBinding {
         }
     }
 }
+
+impl From<&voxflex_core::camera::Camera> for CameraDesc {
+    fn from(c: &voxflex_core::camera::Camera) -> Self {
+        use voxflex_core::camera::Projection;
+        let (projection, projection_parameter) = match c.projection {
+            Projection::Orthographic { height_mm } => (PROJECTION_ORTHOGRAPHIC, height_mm),
+            Projection::Perspective { fov_y_deg } => (PROJECTION_PERSPECTIVE, fov_y_deg),
+        };
+        Self {
+            target: c.target.to_array(),
+            azimuth_deg: c.azimuth_deg,
+            elevation_deg: c.elevation_deg,
+            distance_mm: c.distance_mm,
+            projection,
+            width: c.width,
+            projection_parameter,
+            height: c.height,
+            reserved: 0,
+        }
+    }
+}
+
+impl CameraDesc {
+    /// The camera, refusing unknown projections and non-finite values.
+    pub fn to_camera(&self) -> Result<voxflex_core::camera::Camera, String> {
+        use voxflex_core::camera::{Camera, Projection};
+        let finite = self.target.iter().all(|v| v.is_finite())
+            && [self.azimuth_deg, self.elevation_deg, self.distance_mm, self.projection_parameter]
+                .iter()
+                .all(|v| v.is_finite());
+        if !finite {
+            return Err("camera has a non-finite value".into());
+        }
+        let projection = match self.projection {
+            PROJECTION_ORTHOGRAPHIC => Projection::Orthographic {
+                height_mm: self.projection_parameter,
+            },
+            PROJECTION_PERSPECTIVE => Projection::Perspective {
+                fov_y_deg: self.projection_parameter,
+            },
+            p => return Err(format!("unknown projection code {p}")),
+        };
+        Ok(Camera {
+            target: DVec3::from_array(self.target),
+            azimuth_deg: self.azimuth_deg,
+            elevation_deg: self.elevation_deg,
+            distance_mm: self.distance_mm,
+            projection,
+            width: self.width,
+            height: self.height,
+        })
+    }
+}
+
+impl OpacityMapDesc {
+    /// Describes a map (valid while `map` is).
+    pub fn from_map(map: &voxflex_core::opacity_map::OpacityMap) -> Self {
+        Self {
+            origin: map.origin.map(|v| v as u64),
+            dims: map.dims.map(|v| v as u64),
+            outside: map.outside as u32,
+            reserved: 0,
+            values: map.values.as_ptr(),
+            len: map.values.len() as u64,
+        }
+    }
+
+    /// Copies the map, checking its size.
+    ///
+    /// # Safety
+    /// `values` must be valid for `len` reads.
+    pub unsafe fn to_map(&self) -> Result<voxflex_core::opacity_map::OpacityMap, String> {
+        let to_usize = |v: u64| usize::try_from(v).map_err(|_| format!("opacity map size {v} is too large"));
+        let origin = [to_usize(self.origin[0])?, to_usize(self.origin[1])?, to_usize(self.origin[2])?];
+        let dims = [to_usize(self.dims[0])?, to_usize(self.dims[1])?, to_usize(self.dims[2])?];
+        let len = to_usize(self.len)?;
+        let expected = dims
+            .iter()
+            .try_fold(1usize, |a, &b| a.checked_mul(b))
+            .ok_or("opacity map dims overflow")?;
+        if expected != len {
+            return Err(format!("opacity map holds {len} values but its dims {dims:?} need {expected}"));
+        }
+        if len > 0 && self.values.is_null() {
+            return Err("opacity map values pointer is null".into());
+        }
+        let outside = u16::try_from(self.outside).map_err(|_| "opacity map `outside` is not a u16".to_owned())?;
+        // SAFETY: guaranteed by the caller.
+        let values = unsafe { slice(self.values, len) }.to_vec();
+        Ok(voxflex_core::opacity_map::OpacityMap { origin, dims, outside, values })
+    }
+}
+
+impl From<voxflex_core::render::RenderStats> for RenderStatsDesc {
+    fn from(s: voxflex_core::render::RenderStats) -> Self {
+        Self {
+            rays: s.rays,
+            samples: s.samples,
+            terminated_early: s.terminated_early,
+        }
+    }
+}
+
+impl From<RenderStatsDesc> for voxflex_core::render::RenderStats {
+    fn from(s: RenderStatsDesc) -> Self {
+        Self {
+            rays: s.rays,
+            samples: s.samples,
+            terminated_early: s.terminated_early,
+        }
+    }
+}

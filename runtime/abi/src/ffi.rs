@@ -160,8 +160,8 @@ pub struct PluginDeclaration {
     pub capabilities: u32,
     /// The deformation vtable when `kind == Deformation`, else null.
     pub deformation: *const DeformationVTable,
-    /// Reserved for the renderer vtable, null.
-    pub renderer: *const c_void,
+    /// The renderer vtable when `kind == Renderer`, else null.
+    pub renderer: *const RendererVTable,
     /// Reserved for the actuator vtable, null.
     pub actuator: *const c_void,
 }
@@ -428,6 +428,148 @@ pub struct HostApi {
         bindings: *const BindingDesc,
         count: u64,
         workgroups: *const [u32; 3],
+        err: *mut ErrorBuf,
+    ) -> i32,
+}
+
+/// An orbit camera (mirror of `voxflex_core::camera::Camera`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct CameraDesc {
+    /// Point looked at, world mm.
+    pub target: [f64; 3],
+    /// Degrees about world +z.
+    pub azimuth_deg: f64,
+    /// Degrees above the x–y plane.
+    pub elevation_deg: f64,
+    /// Eye–target distance, mm.
+    pub distance_mm: f64,
+    /// [`PROJECTION_ORTHOGRAPHIC`] or [`PROJECTION_PERSPECTIVE`].
+    pub projection: u32,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Orthographic image height (mm) or perspective vertical field of view (degrees).
+    pub projection_parameter: f64,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+/// [`CameraDesc::projection`]: parallel rays.
+pub const PROJECTION_ORTHOGRAPHIC: u32 = 0;
+/// [`CameraDesc::projection`]: rays through the eye.
+pub const PROJECTION_PERSPECTIVE: u32 = 1;
+
+/// The volume a renderer draws: CPU values ([`RENDER_VOLUME_CPU`], `volume`)
+/// or an f32 GPU buffer on `volume.grid` ([`RENDER_VOLUME_GPU`], `buffer`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct RenderVolumeDesc {
+    /// Which of the two.
+    pub tag: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// The volume (for GPU: only `grid` is read).
+    pub volume: VolumeDesc,
+    /// GPU buffer id of `grid.len()` f32.
+    pub buffer: u64,
+}
+
+/// [`RenderVolumeDesc::tag`]: values on the CPU.
+pub const RENDER_VOLUME_CPU: u32 = 0;
+/// [`RenderVolumeDesc::tag`]: values in a GPU buffer.
+pub const RENDER_VOLUME_GPU: u32 = 1;
+
+/// A spatial opacity map (mirror of `voxflex_core::opacity_map::OpacityMap`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct OpacityMapDesc {
+    /// First voxel of the box, voxel indices.
+    pub origin: [u64; 3],
+    /// Box size, voxels.
+    pub dims: [u64; 3],
+    /// u16 fixed-point opacity outside the box.
+    pub outside: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// `len` u16 fixed-point opacities, x fastest.
+    pub values: *const u16,
+    /// Number of values.
+    pub len: u64,
+}
+
+/// Where a render goes: [`IMAGE_TARGET_CPU`] (`len` bytes RGBA8 at `pixels`)
+/// or [`IMAGE_TARGET_GPU`] (packed RGBA8 u32 buffer `buffer`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ImageTargetDesc {
+    /// Which of the two.
+    pub tag: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// CPU pixels.
+    pub pixels: *mut u8,
+    /// CPU byte count.
+    pub len: u64,
+    /// GPU buffer id.
+    pub buffer: u64,
+}
+
+/// [`ImageTargetDesc::tag`]: CPU bytes.
+pub const IMAGE_TARGET_CPU: u32 = 0;
+/// [`ImageTargetDesc::tag`]: GPU buffer.
+pub const IMAGE_TARGET_GPU: u32 = 1;
+
+/// Counters of one render (mirror of `voxflex_core::render::RenderStats`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RenderStatsDesc {
+    /// Primary rays.
+    pub rays: u64,
+    /// Volume samples.
+    pub samples: u64,
+    /// Rays stopped by early termination.
+    pub terminated_early: u64,
+}
+
+/// The functions of a renderer plugin; mirrors `voxflex_core::render::Renderer`.
+#[repr(C)]
+#[derive(Debug)]
+pub struct RendererVTable {
+    /// Creates an instance from the TOML text of the scene's `[render]` parameters.
+    pub create: unsafe extern "C" fn(
+        params_toml: StrRef,
+        host: *const HostApi,
+        out: *mut Instance,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// Destroys an instance made by `create`.
+    pub destroy: unsafe extern "C" fn(instance: Instance),
+    /// `Renderer::init`; `backend` is `ExecutionBackend` as u32.
+    pub init: unsafe extern "C" fn(instance: Instance, backend: u32, err: *mut ErrorBuf) -> i32,
+    /// `Renderer::configure` with TOML text.
+    pub configure: unsafe extern "C" fn(instance: Instance, toml: StrRef, err: *mut ErrorBuf) -> i32,
+    /// `Renderer::set_volume`.
+    pub set_volume: unsafe extern "C" fn(
+        instance: Instance,
+        volume: *const RenderVolumeDesc,
+        dirty: *const RegionDesc,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `Renderer::set_opacity_maps` (`count` maps at `maps`).
+    pub set_opacity_maps: unsafe extern "C" fn(
+        instance: Instance,
+        maps: *const OpacityMapDesc,
+        count: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `Renderer::render`.
+    pub render: unsafe extern "C" fn(
+        instance: Instance,
+        camera: *const CameraDesc,
+        target: *const ImageTargetDesc,
+        out_stats: *mut RenderStatsDesc,
         err: *mut ErrorBuf,
     ) -> i32,
 }

@@ -22,6 +22,7 @@ pub mod host_side;
 pub mod layout;
 pub mod log_bridge;
 pub mod plugin;
+pub mod renderer;
 
 /// Version of the boundary. Bump on any change to a function signature or
 /// to the meaning of a field; the layout hash catches layout changes.
@@ -34,3 +35,4 @@ pub const LAYOUT_HASH: u64 = layout::compute();
 pub const ENTRY_SYMBOL: &str = "voxflex_plugin_v1";
 
 pub use plugin::{DeformationPlugin, HostContext};
+pub use renderer::RendererPlugin;

@@ -216,24 +216,29 @@ fn setup_once(host: &HostContext) {
     });
 }
 
-struct InstanceState<P> {
-    model: P,
+pub(crate) struct InstanceState<P> {
+    pub(crate) model: P,
     _host: HostContext,
 }
 
-unsafe fn state<'a, P>(instance: Instance) -> Result<&'a mut InstanceState<P>, String> {
+/// # Safety
+/// `instance` is null or was made by [`create_instance::<P>`] and not destroyed.
+pub(crate) unsafe fn state<'a, P>(instance: Instance) -> Result<&'a mut InstanceState<P>, String> {
     if instance.is_null() {
         return Err("null plugin instance".into());
     }
-    // SAFETY: created by `create::<P>` and not yet destroyed (host contract).
+    // SAFETY: created by `create_instance::<P>` and not yet destroyed (host contract).
     Ok(unsafe { &mut *instance.cast::<InstanceState<P>>() })
 }
 
-unsafe extern "C" fn create<P: DeformationPlugin>(
+/// The body of every kind's `create`: set up the library, parse nothing
+/// itself, box what `make` builds.
+pub(crate) fn create_instance<P>(
     params: StrRef,
     host: *const HostApi,
     out: *mut Instance,
     err: *mut ErrorBuf,
+    make: impl FnOnce(&str, HostContext) -> Result<P, ModelError>,
 ) -> i32 {
     guard(err, || {
         if host.is_null() || out.is_null() {
@@ -244,7 +249,7 @@ unsafe extern "C" fn create<P: DeformationPlugin>(
         setup_once(&ctx);
         // SAFETY: the host keeps the text alive during the call.
         let text = unsafe { params.to_string_lossy() };
-        let model = P::create(&text, ctx.clone()).map_err(|e| e.to_string())?;
+        let model = make(&text, ctx.clone()).map_err(|e| e.to_string())?;
         let boxed = Box::new(InstanceState { model, _host: ctx });
         // SAFETY: `out` checked non-null.
         unsafe { *out = Box::into_raw(boxed).cast() };
@@ -252,14 +257,32 @@ unsafe extern "C" fn create<P: DeformationPlugin>(
     })
 }
 
-unsafe extern "C" fn destroy<P: DeformationPlugin>(instance: Instance) {
+/// The body of every kind's `destroy`.
+///
+/// # Safety
+/// `instance` is null or was made by [`create_instance::<P>`], destroyed once.
+pub(crate) unsafe fn destroy_instance<P>(instance: Instance) {
     if instance.is_null() {
         return;
     }
     let _ = std::panic::catch_unwind(|| {
-        // SAFETY: created by `create::<P>`, destroyed once (host contract).
+        // SAFETY: guaranteed by the caller.
         drop(unsafe { Box::from_raw(instance.cast::<InstanceState<P>>()) });
     });
+}
+
+unsafe extern "C" fn create<P: DeformationPlugin>(
+    params: StrRef,
+    host: *const HostApi,
+    out: *mut Instance,
+    err: *mut ErrorBuf,
+) -> i32 {
+    create_instance(params, host, out, err, P::create)
+}
+
+unsafe extern "C" fn destroy<P: DeformationPlugin>(instance: Instance) {
+    // SAFETY: host contract.
+    unsafe { destroy_instance::<P>(instance) }
 }
 
 unsafe extern "C" fn init<P: DeformationPlugin>(
@@ -457,12 +480,22 @@ macro_rules! export_deformation_plugin {
                 renderer: ::std::ptr::null(),
                 actuator: ::std::ptr::null(),
             };
+        $crate::__export_header!(__VOXFLEX_DECLARATION);
+    };
+}
+
+/// Emits the `voxflex_plugin_v1` entry point for a declaration static
+/// (shared by every kind's export macro).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __export_header {
+    ($decl:ident) => {
         static __VOXFLEX_HEADER: $crate::ffi::PluginHeader = $crate::ffi::PluginHeader {
             magic: $crate::ffi::PLUGIN_MAGIC,
             abi_version: $crate::ABI_VERSION,
             reserved: 0,
             layout_hash: $crate::LAYOUT_HASH,
-            declaration: &__VOXFLEX_DECLARATION,
+            declaration: &$decl,
         };
         /// The plugin's entry point, read by the voxflex host.
         #[unsafe(no_mangle)]

@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 use voxflex_abi::ffi::{
     CAPABILITY_CPU, CAPABILITY_GPU, DeformationVTable, PLUGIN_MAGIC, PluginEntry, PluginHeader,
-    PluginKind,
+    PluginKind, RendererVTable,
 };
 
 /// Loading a plugin failed.
@@ -84,6 +84,8 @@ pub struct LoadedPlugin {
     pub abi_version: u32,
     /// The deformation vtable (kind = deformation).
     pub deformation: Option<&'static DeformationVTable>,
+    /// The renderer vtable (kind = renderer).
+    pub renderer: Option<&'static RendererVTable>,
 }
 
 impl LoadedPlugin {
@@ -259,18 +261,20 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
     }
     let kind = PluginKind::from_code(decl.kind)
         .ok_or_else(|| invalid(format!("declares unknown plugin kind code {}", decl.kind)))?;
-    let deformation = match kind {
-        PluginKind::Deformation => {
-            if decl.deformation.is_null() {
-                return Err(invalid(
-                    "deformation plugin without a deformation vtable".into(),
-                ));
-            }
-            // SAFETY: static vtable in a never-unloaded library.
-            Some(unsafe { &*decl.deformation })
+    let (mut deformation, mut renderer) = (None, None);
+    match kind {
+        PluginKind::Deformation if decl.deformation.is_null() => {
+            return Err(invalid("deformation plugin without a deformation vtable".into()));
         }
-        _ => None,
-    };
+        // SAFETY: static vtable in a never-unloaded library.
+        PluginKind::Deformation => deformation = Some(unsafe { &*decl.deformation }),
+        PluginKind::Renderer if decl.renderer.is_null() => {
+            return Err(invalid("renderer plugin without a renderer vtable".into()));
+        }
+        // SAFETY: static vtable in a never-unloaded library.
+        PluginKind::Renderer => renderer = Some(unsafe { &*decl.renderer }),
+        PluginKind::Actuator => {}
+    }
     tracing::debug!(plugin = %name, %version, path = %path.display(), "plugin loaded");
     Ok(LoadedPlugin {
         path: path.to_path_buf(),
@@ -281,6 +285,7 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
         capabilities: decl.capabilities,
         abi_version: header.abi_version,
         deformation,
+        renderer,
     })
 }
 
