@@ -11,7 +11,11 @@ use voxflex_runtime::gpu_context::testing::test_gpu;
 fn run(check: fn(&dyn voxflex_core::gpu::GpuService) -> Result<(), String>) {
     let Some(gpu) = test_gpu() else { return };
     if let Err(e) = check(gpu.as_ref()) {
-        panic!("{} on {}", e, voxflex_core::gpu::GpuService::adapter_description(gpu.as_ref()));
+        panic!(
+            "{} on {}",
+            e,
+            voxflex_core::gpu::GpuService::adapter_description(gpu.as_ref())
+        );
     }
 }
 

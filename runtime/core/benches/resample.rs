@@ -37,7 +37,10 @@ fn bench(c: &mut Criterion) {
     let mut r = Resampler::new(params);
     group.bench_function("full_twist_256", |b| {
         b.iter(|| {
-            black_box(r.resample_cpu(vol.view(), base.as_ref(), None, DirtyRegion::All).unwrap());
+            black_box(
+                r.resample_cpu(vol.view(), base.as_ref(), None, DirtyRegion::All)
+                    .unwrap(),
+            );
         })
     });
 
@@ -59,14 +62,17 @@ fn bench(c: &mut Criterion) {
         max: at + DVec3::splat(radius),
     };
     let mut r = Resampler::new(params);
-    r.resample_cpu(vol.view(), base.as_ref(), None, DirtyRegion::All).unwrap();
+    r.resample_cpu(vol.view(), base.as_ref(), None, DirtyRegion::All)
+        .unwrap();
     let fields = [&bumped, &base];
     let mut n = 0usize;
     let mut touched = 0u64;
     group.bench_function("dirty_5pct_256", |b| {
         b.iter(|| {
             n += 1;
-            let rep = r.resample_cpu(vol.view(), fields[n % 2].as_ref(), None, dirty).unwrap();
+            let rep = r
+                .resample_cpu(vol.view(), fields[n % 2].as_ref(), None, dirty)
+                .unwrap();
             assert!(!rep.full);
             touched = rep.voxels_touched;
             black_box(rep);

@@ -12,12 +12,16 @@
 //! Units: world coordinates are millimetres; voxel indices address voxel
 //! centres (see [`grid`]).
 
+pub mod camera;
 pub mod deformation;
 pub mod error;
 pub mod gpu;
 pub mod grid;
 pub mod io;
+pub mod opacity;
+pub mod opacity_map;
 pub mod phantom;
+pub mod render;
 pub mod resample;
 pub mod stats;
 pub mod test_data;

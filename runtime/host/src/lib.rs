@@ -13,3 +13,4 @@ pub mod metrics;
 pub mod pipeline;
 pub mod plugin_loader;
 pub mod scene;
+pub mod visualise;

@@ -18,6 +18,7 @@ use crate::backend::{self, BackendError, ResolvedBackend};
 use crate::metrics::{PluginReport, RunMetrics};
 use crate::plugin_loader::{self, PluginError};
 use crate::scene::{Scene, SceneError, SliceName};
+use crate::visualise::{self, RenderStage};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -32,7 +33,9 @@ use voxflex_core::io::png::{SliceAxis, Window, write_slice_png};
 use voxflex_core::io::{ReadOptions, read_volume, write_atomically, write_volume};
 use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
 use voxflex_core::resample::gpu::GpuSource;
-use voxflex_core::resample::{
+use voxflex_core::glam::DVec3;
+use voxflex_core::grid::Grid;
+use voxflex_core::resample::{ResampleReport, 
     DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, Resampler,
 };
 use voxflex_core::volume::{Volume, VoxelData};
@@ -155,6 +158,11 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         Some(m) => Some(plugin_loader::load_by_name(&m.plugin, &plugin_dirs)?),
         None => None,
     };
+    // The renderer plugin is loaded only when the scene has a [render] table.
+    let renderer_plugin = match &scene.render {
+        Some(r) => Some(plugin_loader::load_by_name(&r.plugin, &plugin_dirs)?),
+        None => None,
+    };
 
     let mut metrics = RunMetrics {
         scene: scene.settings.name.clone(),
@@ -168,12 +176,13 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         ..Default::default()
     };
 
-    let fingerprint = fingerprint(scene, plugin.as_ref().map(|p| p.path.as_path()), &out_dir);
+    let plugin_files: Vec<&Path> = plugin.iter().chain(renderer_plugin.iter()).map(|p| p.path.as_path()).collect();
+    let fingerprint = fingerprint(scene, &plugin_files, &out_dir);
     if !opts.force && stamp_matches(&out_dir, &fingerprint) {
         metrics.up_to_date = true;
         metrics.backend = "none".into();
         metrics.backend_reason = "outputs up to date".into();
-        for stage in ["source", "model", "map", "resample", "output"] {
+        for stage in ["source", "model", "map", "resample", "output", "roi", "render"] {
             metrics.stage(stage).skipped = 1;
         }
         metrics.total_wall_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -184,7 +193,7 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     let _ = std::fs::remove_file(out_dir.join(STAMP_FILE));
 
     configure_threads(scene.settings.threads);
-    let resolved: ResolvedBackend = if scene.model.is_some() {
+    let resolved: ResolvedBackend = if scene.model.is_some() || scene.render.is_some() || !scene.rois.is_empty() {
         backend::resolve(scene.settings.backend)?
     } else {
         // Nothing to compute: never initialise a GPU.
@@ -258,6 +267,19 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         }
     };
 
+    let services = HostServices::new(gpu.clone(), rayon::current_num_threads());
+    let mut render_stage = match (&scene.render, &renderer_plugin) {
+        (Some(_), Some(p)) => Some(RenderStage::new(scene, p, services.clone(), resolved.backend)?),
+        _ => {
+            metrics.stages_not_built.push("render".into());
+            None
+        }
+    };
+    if scene.rois.is_empty() {
+        metrics.stages_not_built.push("roi".into());
+    }
+    let mut render_dirty = DirtyRegion::All;
+
     // Versions: a stage runs when its input version moved past what it consumed.
     let mut model_version = 0u64;
     let mut map_version = 0u64;
@@ -313,11 +335,12 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
             // Stage: resample.
             if map_version != resample_input {
                 let t = Instant::now();
-                let touched = resample_stage(d, &source, &gpu, dirty)?;
+                let report = resample_stage(d, &source, &gpu, dirty)?;
                 dirty = DirtyRegion::None;
                 resample_input = map_version;
                 resample_version += 1;
-                metrics.stage("resample").record_run(t.elapsed(), touched);
+                metrics.stage("resample").record_run(t.elapsed(), report.voxels_touched);
+                render_dirty = render_dirty.union(refilled_region(&report, d.resampler.output_grid()));
                 if let Some(g) = d.resampler.output_grid() {
                     metrics.output_dims = g.dims;
                 }
@@ -350,6 +373,25 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
             };
             let mut written = write_outputs(volume, &out_cfg, &out_dir, &suffix, last)?;
             metrics.outputs.append(&mut written);
+            // Stages: roi and render, on what was just written.
+            let maps = if scene.rois.is_empty() {
+                vec![]
+            } else {
+                let maps = visualise::grow_rois(scene, volume, gpu.as_ref(), &mut metrics)?;
+                if last {
+                    metrics.outputs.extend(visualise::write_maps(scene, &volume.grid, &maps, &out_dir)?);
+                }
+                maps
+            };
+            if let (Some(stage), Some(settings)) = (render_stage.as_mut(), &scene.render) {
+                let mut settings = settings.clone();
+                if !suffix.is_empty() {
+                    settings.file = settings.file.replace(".png", &format!("{suffix}.png"));
+                }
+                let files = stage.render(&settings, volume, render_dirty, &maps, &out_dir, &mut metrics)?;
+                metrics.outputs.extend(files);
+                render_dirty = DirtyRegion::None;
+            }
             output_input = resample_version;
             metrics
                 .stage("output")
@@ -381,7 +423,7 @@ fn resample_stage(
     source: &Volume,
     gpu: &Option<Arc<dyn GpuService>>,
     dirty: DirtyRegion,
-) -> Result<u64, RunError> {
+) -> Result<ResampleReport, RunError> {
     let report = match (&d.displacements, &gpu) {
         (Displacements::Cpu([x, y, z]), _) => {
             d.resampler
@@ -395,7 +437,22 @@ fn resample_stage(
             return Err(RunError::Other("GPU displacements without a GPU".into()));
         }
     };
-    Ok(report.voxels_touched)
+    Ok(report)
+}
+
+/// The world box (mm) of the output voxels a resample re-filled.
+fn refilled_region(report: &ResampleReport, output: Option<Grid>) -> DirtyRegion {
+    match (report.full || report.output_grid_changed, report.region, output) {
+        (false, Some((lo, hi)), Some(g)) => {
+            let f = |v: [usize; 3]| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+            DirtyRegion::Box {
+                min: g.index_to_world(f(lo)),
+                max: g.index_to_world(f(hi)),
+            }
+        }
+        (false, None, Some(_)) => DirtyRegion::None,
+        _ => DirtyRegion::All,
+    }
 }
 
 /// The resampled values, read back from the GPU when they live there.
@@ -476,7 +533,7 @@ fn file_identity(path: &Path) -> String {
 }
 
 /// Fingerprint of everything a run's outputs depend on.
-fn fingerprint(scene: &Scene, plugin: Option<&Path>, out_dir: &Path) -> String {
+fn fingerprint(scene: &Scene, plugins: &[&Path], out_dir: &Path) -> String {
     let mut parts = vec![
         format!("voxflex {}", env!("CARGO_PKG_VERSION")),
         format!(
@@ -487,7 +544,7 @@ fn fingerprint(scene: &Scene, plugin: Option<&Path>, out_dir: &Path) -> String {
         format!("out {}", out_dir.display()),
         format!("scene {}", scene.text),
     ];
-    if let Some(p) = plugin {
+    for p in plugins {
         parts.push(format!("plugin {}", file_identity(p)));
     }
     if let VolumeSource::File(p) = parse_source(&scene.volume.source) {

@@ -211,6 +211,148 @@ impl Default for OutputSettings {
     }
 }
 
+/// Projection names for `[render.camera] projection`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ProjectionName {
+    /// Parallel rays.
+    #[default]
+    Orthographic,
+    /// Rays through the eye.
+    Perspective,
+}
+
+/// `[render.camera]`: an orbit camera around the volume centre.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSettings {
+    /// Degrees about world +z; 0 looks along +y (anterior view).
+    #[serde(default)]
+    pub azimuth_deg: f64,
+    /// Degrees above the x–y plane.
+    #[serde(default)]
+    pub elevation_deg: f64,
+    /// Eye–centre distance, mm (default: twice the volume's diagonal).
+    #[serde(default)]
+    pub distance_mm: Option<f64>,
+    /// Ray geometry.
+    #[serde(default)]
+    pub projection: ProjectionName,
+    /// Perspective vertical field of view, degrees.
+    #[serde(default = "default_fov")]
+    pub fov_deg: f64,
+    /// Orthographic image height, mm (default: the volume's diagonal).
+    #[serde(default)]
+    pub height_mm: Option<f64>,
+}
+
+fn default_fov() -> f64 {
+    30.0
+}
+
+impl Default for CameraSettings {
+    fn default() -> Self {
+        Self {
+            azimuth_deg: 0.0,
+            elevation_deg: 0.0,
+            distance_mm: None,
+            projection: ProjectionName::Orthographic,
+            fov_deg: default_fov(),
+            height_mm: None,
+        }
+    }
+}
+
+/// `[render]`: direct volume rendering of the (deformed) volume.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSettings {
+    /// Renderer plugin (default `raycast`).
+    #[serde(default = "default_renderer")]
+    pub plugin: String,
+    /// Image width, pixels.
+    #[serde(default = "default_image_size")]
+    pub width: u32,
+    /// Image height, pixels.
+    #[serde(default = "default_image_size")]
+    pub height: u32,
+    /// The camera.
+    #[serde(default)]
+    pub camera: CameraSettings,
+    /// Frames of a turntable around the volume (0 = one image).
+    #[serde(default)]
+    pub turntable: u32,
+    /// Image file name in the output directory (`render.png`; a turntable
+    /// writes `render_000.png`, …).
+    #[serde(default = "default_render_file")]
+    pub file: String,
+    /// The renderer's own table (transfer function, shading, clipping…).
+    #[serde(default)]
+    pub params: toml::Table,
+}
+
+fn default_renderer() -> String {
+    "raycast".into()
+}
+fn default_image_size() -> u32 {
+    512
+}
+fn default_render_file() -> String {
+    "render.png".into()
+}
+
+/// A slice click seed for `[[roi]] seed_slice`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SliceSeed {
+    /// Slice orientation.
+    pub axis: SliceName,
+    /// Slice index (voxels along the slice normal).
+    pub index: usize,
+    /// `[column, row]` in the slice PNG, pixels from the top-left.
+    pub pixel: [usize; 2],
+}
+
+/// `[[roi]]`: a spatial opacity map grown from a seed.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RoiSettings {
+    /// Name used for the written map (`roi_<name>.nii.gz`).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Seed as a world point, mm.
+    #[serde(default)]
+    pub seed: Option<[f64; 3]>,
+    /// Seed as a slice click.
+    #[serde(default)]
+    pub seed_slice: Option<SliceSeed>,
+    /// Extinction scale λ (default 30).
+    #[serde(default = "default_lambda")]
+    pub lambda: f32,
+    /// Opacity outside the region (default 0.03).
+    #[serde(default = "default_o_min")]
+    pub o_min: f32,
+    /// Opacity of the seed (default 1).
+    #[serde(default = "default_o_max")]
+    pub o_max: f32,
+    /// Growth steps; absent = run to convergence.
+    #[serde(default)]
+    pub steps: Option<usize>,
+    /// Also write the map as NIfTI (u16 fixed point, 65535 = 1).
+    #[serde(default)]
+    pub write: bool,
+}
+
+fn default_lambda() -> f32 {
+    30.0
+}
+fn default_o_min() -> f32 {
+    0.03
+}
+fn default_o_max() -> f32 {
+    1.0
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SceneFile {
@@ -225,6 +367,10 @@ struct SceneFile {
     resample: Option<ResampleSettings>,
     #[serde(default)]
     output: Option<OutputSettings>,
+    #[serde(default)]
+    render: Option<RenderSettings>,
+    #[serde(default)]
+    roi: Vec<RoiSettings>,
 }
 
 /// A parsed, validated scene.
@@ -246,6 +392,10 @@ pub struct Scene {
     pub resample: Option<ResampleSettings>,
     /// `[output]`; none = write only metrics.
     pub output: Option<OutputSettings>,
+    /// `[render]`; none = the renderer plugin is never loaded.
+    pub render: Option<RenderSettings>,
+    /// `[[roi]]` opacity maps.
+    pub rois: Vec<RoiSettings>,
 }
 
 impl Scene {
@@ -321,6 +471,38 @@ impl Scene {
                 ));
             }
         }
+        if let Some(r) = &file.render {
+            if r.width == 0 || r.height == 0 || r.width > 16384 || r.height > 16384 {
+                return Err(invalid("width", format!("{}×{} pixels is out of range; use 1 to 16384", r.width, r.height)));
+            }
+            let c = r.camera;
+            let finite = [c.azimuth_deg, c.elevation_deg, c.fov_deg].iter().all(|v| v.is_finite())
+                && c.distance_mm.is_none_or(|d| d.is_finite() && d > 0.0)
+                && c.height_mm.is_none_or(|h| h.is_finite() && h > 0.0);
+            if !finite || c.elevation_deg.abs() >= 90.0 || !(c.fov_deg > 0.0 && c.fov_deg < 180.0) {
+                return Err(invalid(
+                    "camera",
+                    "needs finite angles, |elevation_deg| < 90, 0 < fov_deg < 180, and positive distance_mm / height_mm".into(),
+                ));
+            }
+            if r.turntable > 3600 {
+                return Err(invalid("turntable", format!("{} frames is absurd; use 0 to 3600", r.turntable)));
+            }
+            if !r.file.ends_with(".png") {
+                return Err(invalid("file", format!("`{}` must end in .png", r.file)));
+            }
+        }
+        for roi in &file.roi {
+            if roi.seed.is_some() == roi.seed_slice.is_some() {
+                return Err(SceneError::Invalid {
+                    location: locate_key(text, path, "[[roi]]"),
+                    message: "every [[roi]] needs exactly one of `seed = [x, y, z]` (mm) or `seed_slice = { axis, index, pixel }`".into(),
+                });
+            }
+            if roi.seed.is_some_and(|s| s.iter().any(|v| !v.is_finite())) {
+                return Err(invalid("seed", "must be three finite millimetre coordinates".into()));
+            }
+        }
         let mut interactions = vec![];
         for mut table in file.interaction {
             let frame = match table.remove("frame") {
@@ -362,6 +544,8 @@ impl Scene {
             interactions,
             resample,
             output: file.output,
+            render: file.render,
+            rois: file.roi,
         })
     }
 
@@ -388,6 +572,14 @@ impl Scene {
                 }
             })
             .collect()
+    }
+
+    /// The renderer's parameters as TOML text.
+    pub fn render_params_toml(&self) -> String {
+        self.render
+            .as_ref()
+            .map(|r| toml::to_string(&r.params).unwrap_or_default())
+            .unwrap_or_default()
     }
 
     /// The model's parameters as TOML text.

@@ -141,13 +141,21 @@ impl BlockLayout {
 #[inline]
 pub fn encode_ordered(v: f32) -> u32 {
     let b = v.to_bits();
-    if b & 0x8000_0000 != 0 { !b } else { b | 0x8000_0000 }
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
 }
 
 /// Inverse of [`encode_ordered`].
 #[inline]
 pub fn decode_ordered(u: u32) -> f32 {
-    f32::from_bits(if u & 0x8000_0000 != 0 { u & 0x7fff_ffff } else { !u })
+    f32::from_bits(if u & 0x8000_0000 != 0 {
+        u & 0x7fff_ffff
+    } else {
+        !u
+    })
 }
 
 #[cfg(test)]
@@ -175,7 +183,16 @@ mod tests {
 
     #[test]
     fn ordered_encoding() {
-        let vals = [f32::NEG_INFINITY, -3.5, -1e-30, 0.0, 1e-30, 2.0, 1e30, f32::INFINITY];
+        let vals = [
+            f32::NEG_INFINITY,
+            -3.5,
+            -1e-30,
+            0.0,
+            1e-30,
+            2.0,
+            1e30,
+            f32::INFINITY,
+        ];
         for w in vals.windows(2) {
             assert!(encode_ordered(w[0]) < encode_ordered(w[1]), "{w:?}");
         }

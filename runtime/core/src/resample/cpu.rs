@@ -3,20 +3,26 @@
 //!
 //! - block bounds: one task per block, min/max of its vertices' positions;
 //! - clear: the region's output words set to `u32::MAX` ("no owner");
-//! - pass 1: one task per cell block; per cell the eight deformed corners,
-//!   the sixteen face planes and, per candidate voxel centre of the cell's
-//!   clipped box, the smallest containing tetrahedron, `fetch_min(tet id)`
-//!   (after a relaxed load, so voxels that already hold a smaller id cost no
-//!   atomic read-modify-write);
+//! - pass 1: one task per cell block; its cells go four at a time, by
+//!   parity, through [`super::lanes`] (per cell the eight deformed corners,
+//!   the face planes and, per candidate voxel centre of the cell's clipped
+//!   box, the smallest containing tetrahedron), then `fetch_min(tet id)`
+//!   after a relaxed load, so voxels that already hold a smaller id cost no
+//!   atomic read-modify-write;
 //! - pass 2: one task per output row; owner → barycentric weights → value.
 //!
 //! The output `Vec<f32>` is viewed as `[AtomicU32]` during a call; no other
 //! per-voxel memory is used.
 
 use super::blocks::BlockBounds;
-use super::raster::{CellCorners, CellRaster, barycentric, interpolate};
-use super::sampling_mesh::{CELL_TETS, TETS_PER_CELL, TetDecoder, cell_parity, corner_offset, deformed_coordinate};
-use super::{DisplacementsRef, Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, VoxelBox};
+use super::lanes::{LANES, LaneCtx, raster_group};
+use super::raster::{barycentric, interpolate};
+use super::sampling_mesh::{
+    CELL_TETS, TetDecoder, cell_parity, corner_offset, deformed_coordinate,
+};
+use super::{
+    DisplacementsRef, Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, VoxelBox,
+};
 use crate::volume::{Sample, VoxelSlice};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -41,13 +47,18 @@ fn as_atomic(v: &mut [f32]) -> &[AtomicU32] {
 }
 
 impl Kernels for CpuKernels<'_> {
-    fn block_bounds(&mut self, c: &KernelConsts, blocks: &[u32], out: &mut [BlockBounds]) -> Result<(), ResampleError> {
+    fn block_bounds(
+        &mut self,
+        c: &KernelConsts,
+        blocks: &[u32],
+        out: &mut [BlockBounds],
+    ) -> Result<(), ResampleError> {
         let disp = self.disp;
         let t0 = std::time::Instant::now();
-        let _g = Tm(t0);
         out.par_iter_mut()
             .zip(blocks.par_iter())
             .for_each(|(o, &b)| *o = block_bounds(c, &disp, b as usize));
+        tracing::trace!(blocks = blocks.len(), elapsed = ?t0.elapsed(), "resample: block bounds (cpu)");
         Ok(())
     }
 
@@ -56,10 +67,11 @@ impl Kernels for CpuKernels<'_> {
         if self.out.len() != n {
             *self.out = Vec::new();
             let mut v = Vec::new();
-            v.try_reserve_exact(n).map_err(|_| ResampleError::OutOfMemory {
-                voxels: n,
-                bytes: n * 4,
-            })?;
+            v.try_reserve_exact(n)
+                .map_err(|_| ResampleError::OutOfMemory {
+                    voxels: n,
+                    bytes: n * 4,
+                })?;
             v.resize(n, 0.0);
             *self.out = v;
         }
@@ -79,13 +91,31 @@ impl Kernels for CpuKernels<'_> {
             clip: job.region,
             decoder: TetDecoder::new(&job.consts.mesh),
         };
-        job.blocks.par_iter().for_each(|&b| raster_block(&ctx, b as usize, out));
+        let lanes = LaneCtx {
+            vertex_dims: job.consts.mesh.vertex_dims(),
+            cell_dims: job.consts.mesh.cell_dims(),
+            inv_spacing: job.consts.inv_spacing,
+            eps: job.consts.eps,
+            disp: self.disp,
+            output: *job.output,
+            clip: job.region,
+        };
+        job.blocks
+            .par_iter()
+            .for_each(|&b| raster_block(&ctx, &lanes, b as usize, out));
         let t2 = std::time::Instant::now();
         if self.fill {
             crate::with_voxels!(self.source, |s| fill(s, &ctx, out));
         }
         let t3 = std::time::Instant::now();
-        if std::env::var_os("VFX_TIMING").is_some() { eprintln!("TIMING clear {:?} raster {:?} fill {:?}", t1-t0, t2-t1, t3-t2); }
+        tracing::trace!(
+            voxels = job.region.count(),
+            blocks = job.blocks.len(),
+            clear = ?(t1 - t0),
+            raster = ?(t2 - t1),
+            fill = ?(t3 - t2),
+            "resample: passes (cpu)"
+        );
         Ok(())
     }
 }
@@ -115,8 +145,16 @@ fn block_bounds(c: &KernelConsts, disp: &DisplacementsRef<'_>, b: usize) -> Bloc
                 ];
                 for a in 0..3 {
                     // NaN-propagating min/max: a NaN displacement must show.
-                    mn[a] = if p[a] < mn[a] || p[a].is_nan() { p[a] } else { mn[a] };
-                    mx[a] = if p[a] > mx[a] || p[a].is_nan() { p[a] } else { mx[a] };
+                    mn[a] = if p[a] < mn[a] || p[a].is_nan() {
+                        p[a]
+                    } else {
+                        mn[a]
+                    };
+                    mx[a] = if p[a] > mx[a] || p[a].is_nan() {
+                        p[a]
+                    } else {
+                        mx[a]
+                    };
                 }
             }
         }
@@ -161,60 +199,50 @@ impl RasterCtx<'_> {
     }
 }
 
-fn raster_block(ctx: &RasterCtx<'_>, b: usize, out: &[AtomicU32]) {
+fn raster_block(ctx: &RasterCtx<'_>, lanes: &LaneCtx<'_>, b: usize, out: &[AtomicU32]) {
     let (lo, hi) = ctx.c.layout.cells(b);
+    let mesh = &ctx.c.mesh;
+    // Same-parity cells of the block, four at a time.
+    let mut groups = [([[0usize; 3]; LANES], [0u8; LANES], 0usize); 2];
     for k in lo[2]..hi[2] {
         for j in lo[1]..hi[1] {
             for i in lo[0]..hi[0] {
-                raster_cell(ctx, [i, j, k], out);
-            }
-        }
-    }
-}
-
-#[inline(always)]
-fn raster_cell(ctx: &RasterCtx<'_>, cell: [usize; 3], out: &[AtomicU32]) {
-    let [nx, ny, _] = ctx.c.mesh.vertex_dims();
-    let base = cell[0] + nx * (cell[1] + ny * cell[2]);
-    let mut c = CellCorners::default();
-    for q in 0..8u8 {
-        let o = corner_offset(q);
-        let g = base + o[0] + nx * (o[1] + ny * o[2]);
-        let p = ctx.position([cell[0] + o[0], cell[1] + o[1], cell[2] + o[2]], g);
-        c.x[q as usize] = p[0];
-        c.y[q as usize] = p[1];
-        c.z[q as usize] = p[2];
-    }
-    let cell_lin = ctx.c.mesh.cell_linear(cell);
-    let removed = ctx.mask.map_or(0, |m| m.cell_bits(cell_lin));
-    if cell_parity(cell) == 0 {
-        raster_cell_p::<0>(ctx, &c, cell_lin, removed, out);
-    } else {
-        raster_cell_p::<1>(ctx, &c, cell_lin, removed, out);
-    }
-}
-
-#[inline(always)]
-fn raster_cell_p<const P: usize>(ctx: &RasterCtx<'_>, c: &CellCorners, cell_lin: usize, removed: u8, out: &[AtomicU32]) {
-    let Some(mut r) = CellRaster::<P>::new(c, removed, ctx.c.eps, &ctx.clip) else {
-        return;
-    };
-    let base_id = (cell_lin * TETS_PER_CELL) as u32;
-    let (lo, hi) = (r.lo, r.hi);
-    for z in lo[2]..=hi[2] {
-        for y in lo[1]..=hi[1] {
-            let o_row = ctx.output.linear([lo[0], y, z]);
-            for x in lo[0]..=hi[0] {
-                if let Some(t) = r.owner([x as f32, y as f32, z as f32]) {
-                    let id = base_id + t as u32;
-                    let o = &out[o_row + (x - lo[0]) as usize];
-                    if o.load(Relaxed) > id {
-                        o.fetch_min(id, Relaxed);
-                    }
+                let cell = [i, j, k];
+                let parity = cell_parity(cell);
+                let removed = ctx.mask.map_or(0, |m| m.cell_bits(mesh.cell_linear(cell)));
+                let g = &mut groups[parity];
+                g.0[g.2] = cell;
+                g.1[g.2] = removed;
+                g.2 += 1;
+                if g.2 == LANES {
+                    flush(lanes, parity, g, out);
                 }
             }
         }
     }
+    for (parity, g) in groups.iter_mut().enumerate() {
+        if g.2 > 0 {
+            flush(lanes, parity, g, out);
+        }
+    }
+}
+
+fn flush(
+    lanes: &LaneCtx<'_>,
+    parity: usize,
+    g: &mut ([[usize; 3]; LANES], [u8; LANES], usize),
+    out: &[AtomicU32],
+) {
+    for l in g.2..LANES {
+        g.0[l] = g.0[0];
+        g.1[l] = g.1[0];
+    }
+    if parity == 0 {
+        raster_group::<0>(lanes, &g.0, &g.1, g.2, out);
+    } else {
+        raster_group::<1>(lanes, &g.0, &g.1, g.2, out);
+    }
+    g.2 = 0;
 }
 
 /// Pass 2 over the region: owner id → interpolated value (f32 bits).
@@ -258,6 +286,3 @@ fn value_at<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, q: [f32; 3]) 
     }
     interpolate(barycentric(&p, q), v)
 }
-
-struct Tm(std::time::Instant);
-impl Drop for Tm { fn drop(&mut self) { if std::env::var_os("VFX_TIMING").is_some() { eprintln!("TIMING bounds {:?}", self.0.elapsed()); } } }

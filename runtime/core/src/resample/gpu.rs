@@ -61,7 +61,10 @@ mod bind {
 /// The full WGSL source of each kernel (for tools that validate shaders).
 pub fn kernel_sources() -> [(&'static str, String); 4] {
     [
-        ("block_bounds", format!("{COMMON}\n{DISPLACEMENT}\n{BOUNDS}")),
+        (
+            "block_bounds",
+            format!("{COMMON}\n{DISPLACEMENT}\n{BOUNDS}"),
+        ),
         ("clear", format!("{COMMON}\n{CLEAR}")),
         ("raster", format!("{COMMON}\n{DISPLACEMENT}\n{RASTER}")),
         ("fill", format!("{COMMON}\n{DISPLACEMENT}\n{FILL}")),
@@ -113,7 +116,11 @@ impl GpuSource {
     }
 }
 
-fn check_binding(gpu: &dyn GpuService, what: &'static str, bytes: u64) -> Result<(), ResampleError> {
+fn check_binding(
+    gpu: &dyn GpuService,
+    what: &'static str,
+    bytes: u64,
+) -> Result<(), ResampleError> {
     let limit = gpu.limits().max_storage_buffer_binding_size;
     if bytes > limit {
         return Err(ResampleError::BindingTooLarge { what, bytes, limit });
@@ -122,7 +129,11 @@ fn check_binding(gpu: &dyn GpuService, what: &'static str, bytes: u64) -> Result
 }
 
 /// Reads `out.len()` f32 from the start of a buffer in pieces of ≤ 64 MiB.
-pub(crate) fn read_f32(gpu: &dyn GpuService, buf: BufferId, out: &mut [f32]) -> Result<(), GpuError> {
+pub(crate) fn read_f32(
+    gpu: &dyn GpuService,
+    buf: BufferId,
+    out: &mut [f32],
+) -> Result<(), GpuError> {
     const CHUNK: usize = 16 << 20;
     for (n, chunk) in out.chunks_mut(CHUNK).enumerate() {
         gpu.read_buffer(buf, (n * CHUNK * 4) as u64, bytemuck::cast_slice_mut(chunk))?;
@@ -146,7 +157,12 @@ struct Owned {
 }
 
 /// Reuses `slot`'s buffer when it holds at least `bytes`, else replaces it.
-fn ensure(gpu: &dyn GpuService, slot: &mut Option<Owned>, bytes: u64, label: &str) -> Result<BufferId, GpuError> {
+fn ensure(
+    gpu: &dyn GpuService,
+    slot: &mut Option<Owned>,
+    bytes: u64,
+    label: &str,
+) -> Result<BufferId, GpuError> {
     let bytes = bytes.max(4).next_multiple_of(4);
     if let Some(o) = slot
         && o.bytes >= bytes
@@ -214,7 +230,12 @@ impl GpuState {
                 check_binding(gpu, "tetrahedron mask", bytes.len() as u64)?;
                 let mut padded = bytes.to_vec();
                 padded.resize(bytes.len().next_multiple_of(4), 0);
-                let id = ensure(gpu, &mut self.mask, padded.len() as u64, "voxflex.resample.mask")?;
+                let id = ensure(
+                    gpu,
+                    &mut self.mask,
+                    padded.len() as u64,
+                    "voxflex.resample.mask",
+                )?;
                 gpu.write_buffer(id, 0, &padded)?;
                 self.mask_generation = Some(m.generation());
             }
@@ -244,27 +265,52 @@ impl GpuState {
     }
 
     pub(crate) fn release(&mut self, gpu: &dyn GpuService) {
-        let mut all = vec![self.output.take(), self.bounds.take(), self.mask.take(), self.dummy.take()];
-        all.extend(self.params.drain(..));
-        all.extend(self.lists.drain(..));
+        let mut all = vec![
+            self.output.take(),
+            self.bounds.take(),
+            self.mask.take(),
+            self.dummy.take(),
+        ];
+        all.append(&mut self.params);
+        all.append(&mut self.lists);
         for o in all.into_iter().flatten() {
             gpu.destroy_buffer(o.id);
         }
         *self = GpuState::default();
     }
 
-    fn slot_buffers(&mut self, gpu: &dyn GpuService, slot: usize, list_bytes: u64) -> Result<(BufferId, BufferId), GpuError> {
+    fn slot_buffers(
+        &mut self,
+        gpu: &dyn GpuService,
+        slot: usize,
+        list_bytes: u64,
+    ) -> Result<(BufferId, BufferId), GpuError> {
         if self.params.len() <= slot {
             self.params.resize(slot + 1, None);
             self.lists.resize(slot + 1, None);
         }
-        let p = ensure(gpu, &mut self.params[slot], size_of::<Params>() as u64, "voxflex.resample.params")?;
-        let l = ensure(gpu, &mut self.lists[slot], list_bytes, "voxflex.resample.blocks")?;
+        let p = ensure(
+            gpu,
+            &mut self.params[slot],
+            size_of::<Params>() as u64,
+            "voxflex.resample.params",
+        )?;
+        let l = ensure(
+            gpu,
+            &mut self.lists[slot],
+            list_bytes,
+            "voxflex.resample.blocks",
+        )?;
         Ok((p, l))
     }
 }
 
-fn check_buffer(gpu: &dyn GpuService, what: &'static str, id: BufferId, need: u64) -> Result<(), ResampleError> {
+fn check_buffer(
+    gpu: &dyn GpuService,
+    what: &'static str,
+    id: BufferId,
+    need: u64,
+) -> Result<(), ResampleError> {
     let size = gpu.buffer_size(id)?;
     if size < need {
         return Err(ResampleError::Gpu(GpuError(format!(
@@ -321,7 +367,13 @@ impl GpuKernels<'_> {
 
 /// The z-slabs of the output: `(first z, last z, bound byte offset, bound
 /// bytes)` in output voxel indices, covering output planes `z0..=z1`.
-fn slabs(output: &OutputGrid, z0: usize, z1: usize, max_binding: u64, align: u64) -> Result<Vec<(usize, usize, u64, u64)>, ResampleError> {
+fn slabs(
+    output: &OutputGrid,
+    z0: usize,
+    z1: usize,
+    max_binding: u64,
+    align: u64,
+) -> Result<Vec<(usize, usize, u64, u64)>, ResampleError> {
     let plane = (output.dims[0] * output.dims[1]) as u64 * 4;
     let total = output.len() as u64 * 4;
     if total <= max_binding {
@@ -350,16 +402,29 @@ fn slabs(output: &OutputGrid, z0: usize, z1: usize, max_binding: u64, align: u64
 }
 
 impl Kernels for GpuKernels<'_> {
-    fn block_bounds(&mut self, c: &KernelConsts, blocks: &[u32], out: &mut [BlockBounds]) -> Result<(), ResampleError> {
+    fn block_bounds(
+        &mut self,
+        c: &KernelConsts,
+        blocks: &[u32],
+        out: &mut [BlockBounds],
+    ) -> Result<(), ResampleError> {
         if blocks.is_empty() {
             return Ok(());
         }
         let gpu = self.gpu;
-        let pl = self.state.pipelines.expect("prepare() compiles the kernels");
+        let pl = self
+            .state
+            .pipelines
+            .expect("prepare() compiles the kernels");
         let mut p = self.base_params(c);
         p.bdim[3] = blocks.len() as u32;
         let (pb, lb) = self.state.slot_buffers(gpu, 0, blocks.len() as u64 * 4)?;
-        let bb = ensure(gpu, &mut self.state.bounds, blocks.len() as u64 * 24, "voxflex.resample.bounds")?;
+        let bb = ensure(
+            gpu,
+            &mut self.state.bounds,
+            blocks.len() as u64 * 24,
+            "voxflex.resample.bounds",
+        )?;
         gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
         gpu.write_buffer(lb, 0, bytemuck::cast_slice(blocks))?;
         let mut b = vec![
@@ -368,14 +433,26 @@ impl Kernels for GpuKernels<'_> {
             BufferBinding::whole(bind::BOUNDS, bb),
         ];
         b.extend(self.disp_bindings());
-        let groups = crate::gpu::workgroups_1d(blocks.len() as u64, 1, gpu.limits().max_compute_workgroups_per_dimension)?;
+        let groups = crate::gpu::workgroups_1d(
+            blocks.len() as u64,
+            1,
+            gpu.limits().max_compute_workgroups_per_dimension,
+        )?;
         gpu.dispatch(pl.bounds, &b, groups)?;
         let mut words = vec![0u32; blocks.len() * 6];
         gpu.read_buffer(bb, 0, bytemuck::cast_slice_mut(&mut words))?;
         for (o, w) in out.iter_mut().zip(words.chunks_exact(6)) {
             *o = BlockBounds {
-                min: [decode_ordered(w[0]), decode_ordered(w[1]), decode_ordered(w[2])],
-                max: [decode_ordered(w[3]), decode_ordered(w[4]), decode_ordered(w[5])],
+                min: [
+                    decode_ordered(w[0]),
+                    decode_ordered(w[1]),
+                    decode_ordered(w[2]),
+                ],
+                max: [
+                    decode_ordered(w[3]),
+                    decode_ordered(w[4]),
+                    decode_ordered(w[5]),
+                ],
             };
         }
         Ok(())
@@ -396,14 +473,22 @@ impl Kernels for GpuKernels<'_> {
         if let Some(o) = self.state.output.take() {
             self.gpu.destroy_buffer(o.id);
         }
-        ensure(self.gpu, &mut self.state.output, bytes, "voxflex.resample.output")?;
+        ensure(
+            self.gpu,
+            &mut self.state.output,
+            bytes,
+            "voxflex.resample.output",
+        )?;
         Ok(())
     }
 
     fn rasterise(&mut self, job: &Job<'_>) -> Result<(), ResampleError> {
         let gpu = self.gpu;
         let limits = gpu.limits();
-        let pl = self.state.pipelines.expect("prepare() compiles the kernels");
+        let pl = self
+            .state
+            .pipelines
+            .expect("prepare() compiles the kernels");
         let out_id = self.state.output.expect("allocate_output() ran").id;
         let o = job.output;
         let r = job.region;
@@ -437,7 +522,12 @@ impl Kernels for GpuKernels<'_> {
             let mut p = base;
             p.bdim[3] = blocks.len() as u32;
             p.oorg[..3].copy_from_slice(&o.origin_index);
-            p.odim = [o.dims[0] as u32, o.dims[1] as u32, o.dims[2] as u32, (off / 4) as u32];
+            p.odim = [
+                o.dims[0] as u32,
+                o.dims[1] as u32,
+                o.dims[2] as u32,
+                (off / 4) as u32,
+            ];
             p.clo[..3].copy_from_slice(&clip.lo);
             p.chi[..3].copy_from_slice(&clip.hi);
             let (pb, lb) = self.state.slot_buffers(gpu, s, blocks.len() as u64 * 4)?;
@@ -505,13 +595,18 @@ mod tests {
             assert!(off <= z0 as u64 * plane);
             assert_eq!(off + bytes, (z1 as u64 + 1) * plane);
         }
-        assert_eq!(slabs(&o, 0, 49, 1 << 30, 256).unwrap(), vec![(0, 49, 0, 50 * plane)]);
+        assert_eq!(
+            slabs(&o, 0, 49, 1 << 30, 256).unwrap(),
+            vec![(0, 49, 0, 50 * plane)]
+        );
         assert!(slabs(&o, 0, 49, 100, 256).is_err());
     }
 
     /// The numbers of a `var<private> NAME: array<u32, N> = array<u32, N>(…);` table.
     fn wgsl_table(src: &str, name: &str) -> Vec<u32> {
-        let start = src.find(&format!("var<private> {name}:")).unwrap_or_else(|| panic!("{name} missing"));
+        let start = src
+            .find(&format!("var<private> {name}:"))
+            .unwrap_or_else(|| panic!("{name} missing"));
         let body = &src[start..];
         let open = body.find(">(").expect("array literal") + 2;
         let close = body[open..].find(");").expect("end of literal") + open;
@@ -526,15 +621,41 @@ mod tests {
     #[test]
     fn wgsl_tables_match_rust() {
         use super::super::sampling_mesh::{CELL_TETS, FACE_TABLES};
-        let tets: Vec<u32> = CELL_TETS.iter().flatten().flatten().map(|&v| v as u32).collect();
+        let tets: Vec<u32> = CELL_TETS
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|&v| v as u32)
+            .collect();
         assert_eq!(wgsl_table(COMMON, "TETS"), tets);
-        let faces: Vec<u32> = FACE_TABLES.faces.iter().flatten().flatten().map(|&v| v as u32).collect();
+        let faces: Vec<u32> = FACE_TABLES
+            .faces
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|&v| v as u32)
+            .collect();
         assert_eq!(wgsl_table(RASTER, "FACES"), faces);
-        let tf: Vec<u32> = FACE_TABLES.tet_faces.iter().flatten().flatten().map(|&v| v as u32).collect();
+        let tf: Vec<u32> = FACE_TABLES
+            .tet_faces
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|&v| v as u32)
+            .collect();
         assert_eq!(wgsl_table(RASTER, "TET_FACES"), tf);
-        assert_eq!(wgsl_table(COMMON, "OTHERS"), vec![1, 2, 3, 0, 2, 3, 0, 1, 3, 0, 1, 2]);
-        assert!(COMMON.contains(&format!("const BLOCK_EDGE: u32 = {}u;", super::super::blocks::BLOCK_EDGE)));
-        assert!(COMMON.contains(&format!("const CELLS_PER_BLOCK: u32 = {}u;", CELLS_PER_BLOCK)));
+        assert_eq!(
+            wgsl_table(COMMON, "OTHERS"),
+            vec![1, 2, 3, 0, 2, 3, 0, 1, 3, 0, 1, 2]
+        );
+        assert!(COMMON.contains(&format!(
+            "const BLOCK_EDGE: u32 = {}u;",
+            super::super::blocks::BLOCK_EDGE
+        )));
+        assert!(COMMON.contains(&format!(
+            "const CELLS_PER_BLOCK: u32 = {}u;",
+            CELLS_PER_BLOCK
+        )));
     }
 
     #[test]

@@ -203,7 +203,11 @@ mod tests {
 
     #[test]
     fn world_grid_keeps_spacing() {
-        let src = Grid::new([4, 4, 4], DVec3::new(0.5, 1.0, 2.0), DVec3::new(10.0, 0.0, 0.0));
+        let src = Grid::new(
+            [4, 4, 4],
+            DVec3::new(0.5, 1.0, 2.0),
+            DVec3::new(10.0, 0.0, 0.0),
+        );
         let g = OutputGrid {
             origin_index: [-2, 0, 1],
             dims: [8, 4, 4],

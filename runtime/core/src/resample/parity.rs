@@ -8,8 +8,8 @@
 //! the last bits can differ; at most [`MAX_COVERAGE_MISMATCH`] of the voxels
 //! may differ in being covered at all).
 
-use super::{DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, Resampler, TetMask};
 use super::gpu::GpuSource;
+use super::{DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, Resampler, TetMask};
 use crate::deformation::DirtyRegion;
 use crate::error::GpuError;
 use crate::gpu::{BufferId, GpuLimits, GpuService, GpuServiceExt, PipelineId};
@@ -75,7 +75,13 @@ impl Field {
 
 /// Twist about the z axis through `centre` (mm): rotation angle
 /// `rad_per_mm · (z − centre.z)`. Returns the map and its inverse.
-pub fn twist_z(centre: DVec3, rad_per_mm: f64) -> (impl Fn(DVec3) -> DVec3 + Sync, impl Fn(DVec3) -> DVec3 + Sync) {
+pub fn twist_z(
+    centre: DVec3,
+    rad_per_mm: f64,
+) -> (
+    impl Fn(DVec3) -> DVec3 + Sync,
+    impl Fn(DVec3) -> DVec3 + Sync,
+) {
     let rot = move |p: DVec3, s: f64| {
         let a = s * rad_per_mm * (p.z - centre.z);
         let (sn, cs) = a.sin_cos();
@@ -94,10 +100,16 @@ pub fn affine(
     deg: f64,
     scale: f64,
     t: DVec3,
-) -> (impl Fn(DVec3) -> DVec3 + Sync, impl Fn(DVec3) -> DVec3 + Sync) {
+) -> (
+    impl Fn(DVec3) -> DVec3 + Sync,
+    impl Fn(DVec3) -> DVec3 + Sync,
+) {
     let m = DMat3::from_axis_angle(axis.normalize(), deg.to_radians()) * scale;
     let mi = m.inverse();
-    (move |p| centre + m * (p - centre) + t, move |p| centre + mi * (p - t - centre))
+    (
+        move |p| centre + m * (p - centre) + t,
+        move |p| centre + mi * (p - t - centre),
+    )
 }
 
 /// A smooth bump confined to the ball of `radius` mm around `at`: moves
@@ -105,7 +117,11 @@ pub fn affine(
 pub fn bump(at: DVec3, radius: f64, amp: DVec3) -> impl Fn(DVec3) -> DVec3 + Sync {
     move |p| {
         let r2 = (p - at).length_squared() / (radius * radius);
-        if r2 >= 1.0 { p } else { p + amp * (1.0 - r2).powi(3) }
+        if r2 >= 1.0 {
+            p
+        } else {
+            p + amp * (1.0 - r2).powi(3)
+        }
     }
 }
 
@@ -182,7 +198,12 @@ impl GpuService for LimitedBinding<'_> {
     fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
         self.inner.compile(wgsl, entry_point)
     }
-    fn dispatch(&self, pipeline: PipelineId, bindings: &[crate::gpu::BufferBinding], workgroups: [u32; 3]) -> Result<(), GpuError> {
+    fn dispatch(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[crate::gpu::BufferBinding],
+        workgroups: [u32; 3],
+    ) -> Result<(), GpuError> {
         self.inner.dispatch(pipeline, bindings, workgroups)
     }
 }
@@ -203,12 +224,17 @@ impl GpuInputs {
         let up = |v: &[f32], l| gpu.upload(v, l).map_err(|x| x.to_string());
         Ok(Self {
             source,
-            disp: [up(&f.x, "parity.dx")?, up(&f.y, "parity.dy")?, up(&f.z, "parity.dz")?],
+            disp: [
+                up(&f.x, "parity.dx")?,
+                up(&f.y, "parity.dy")?,
+                up(&f.z, "parity.dz")?,
+            ],
         })
     }
     fn set_field(&self, gpu: &dyn GpuService, f: &Field) -> Result<(), String> {
         for (id, v) in self.disp.iter().zip([&f.x, &f.y, &f.z]) {
-            gpu.write_buffer(*id, 0, bytemuck::cast_slice(v)).map_err(|x| x.to_string())?;
+            gpu.write_buffer(*id, 0, bytemuck::cast_slice(v))
+                .map_err(|x| x.to_string())?;
         }
         Ok(())
     }
@@ -220,13 +246,25 @@ impl GpuInputs {
     }
 }
 
-fn cpu_run(vol: &Volume, f: &Field, mask: Option<&TetMask>, params: ResampleParams) -> Result<ResampleOutput, String> {
+fn cpu_run(
+    vol: &Volume,
+    f: &Field,
+    mask: Option<&TetMask>,
+    params: ResampleParams,
+) -> Result<ResampleOutput, String> {
     let mut r = Resampler::new(params);
-    r.resample_cpu(vol.view(), f.as_ref(), mask, DirtyRegion::All).map_err(e)?;
+    r.resample_cpu(vol.view(), f.as_ref(), mask, DirtyRegion::All)
+        .map_err(e)?;
     r.cpu_output().ok_or_else(|| "no CPU output".to_string())
 }
 
-fn gpu_run(gpu: &dyn GpuService, vol: &Volume, f: &Field, mask: Option<&TetMask>, params: ResampleParams) -> Result<ResampleOutput, String> {
+fn gpu_run(
+    gpu: &dyn GpuService,
+    vol: &Volume,
+    f: &Field,
+    mask: Option<&TetMask>,
+    params: ResampleParams,
+) -> Result<ResampleOutput, String> {
     let inputs = GpuInputs::new(gpu, vol, f)?;
     let mut r = Resampler::new(params);
     let out = r
@@ -241,15 +279,26 @@ fn gpu_run(gpu: &dyn GpuService, vol: &Volume, f: &Field, mask: Option<&TetMask>
 /// Compares two outputs: same grid, bit-identical when `tol` is `None`,
 /// else within `tol × data range` per voxel covered on both (see the module
 /// docs for coverage).
-pub fn compare(what: &str, want: &ResampleOutput, got: &ResampleOutput, background: f32, tol: Option<f32>) -> Result<(), String> {
+pub fn compare(
+    what: &str,
+    want: &ResampleOutput,
+    got: &ResampleOutput,
+    background: f32,
+    tol: Option<f32>,
+) -> Result<(), String> {
     if want.grid != got.grid {
-        return Err(format!("{what}: output grid {:?} != {:?}", got.grid, want.grid));
+        return Err(format!(
+            "{what}: output grid {:?} != {:?}",
+            got.grid, want.grid
+        ));
     }
     let (lo, hi) = want
         .values
         .iter()
         .filter(|v| v.is_finite())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let range = (hi - lo).max(1e-30);
     let mut coverage = 0usize;
     let mut worst = (0.0f32, 0usize);
@@ -258,7 +307,11 @@ pub fn compare(what: &str, want: &ResampleOutput, got: &ResampleOutput, backgrou
             None => {
                 if w.to_bits() != g.to_bits() {
                     let q = want.grid.unlinear(n);
-                    return Err(format!("{what}: voxel {q:?}: {g} (bits {:#x}) != {w} (bits {:#x})", g.to_bits(), w.to_bits()));
+                    return Err(format!(
+                        "{what}: voxel {q:?}: {g} (bits {:#x}) != {w} (bits {:#x})",
+                        g.to_bits(),
+                        w.to_bits()
+                    ));
                 }
             }
             Some(t) => {
@@ -270,26 +323,41 @@ pub fn compare(what: &str, want: &ResampleOutput, got: &ResampleOutput, backgrou
                 if d > worst.0 || d.is_nan() {
                     worst = (d, n);
                 }
-                if !(d <= t) {
+                if d.is_nan() || d > t {
                     let q = want.grid.unlinear(n);
-                    return Err(format!("{what}: voxel {q:?}: {g} vs {w} (relative error {d:e} > {t:e})"));
+                    return Err(format!(
+                        "{what}: voxel {q:?}: {g} vs {w} (relative error {d:e} > {t:e})"
+                    ));
                 }
             }
         }
     }
     if coverage as f64 > MAX_COVERAGE_MISMATCH * want.values.len() as f64 + 1.0 {
-        return Err(format!("{what}: {coverage} of {} voxels covered on one backend only", want.values.len()));
+        return Err(format!(
+            "{what}: {coverage} of {} voxels covered on one backend only",
+            want.values.len()
+        ));
     }
     Ok(())
 }
 
 fn test_grid() -> Grid {
-    Grid::new([23, 19, 17], DVec3::new(0.9, 1.1, 1.3), DVec3::new(-12.0, 4.0, 30.0))
+    Grid::new(
+        [23, 19, 17],
+        DVec3::new(0.9, 1.1, 1.3),
+        DVec3::new(-12.0, 4.0, 30.0),
+    )
 }
 
 fn twisted(grid: &Grid) -> Field {
     let (tw, _) = twist_z(grid.centre(), 0.6 / (grid.dims[2] as f64 * grid.spacing.z));
-    let (af, _) = affine(grid.centre(), DVec3::new(0.3, 1.0, 0.2), 10.0, 1.15, DVec3::new(2.3, -1.7, 0.9));
+    let (af, _) = affine(
+        grid.centre(),
+        DVec3::new(0.3, 1.0, 0.2),
+        10.0,
+        1.15,
+        DVec3::new(2.3, -1.7, 0.9),
+    );
     Field::from_map(grid, move |p| af(tw(p)))
 }
 
@@ -308,7 +376,13 @@ pub fn check_identity_bitwise(gpu: &dyn GpuService) -> Result<(), String> {
             grid,
             values: vol.data.as_slice().to_f32_vec(),
         };
-        compare(&format!("identity ({})", vol.scalar_type().name()), &want, &got, params.background, None)?;
+        compare(
+            &format!("identity ({})", vol.scalar_type().name()),
+            &want,
+            &got,
+            params.background,
+            None,
+        )?;
     }
     Ok(())
 }
@@ -353,7 +427,11 @@ pub fn check_output_slabs(gpu: &dyn GpuService) -> Result<(), String> {
 
     // Exact translation by (3, −2, 5) voxels: powers-of-two spacing keep
     // every position an exact integer, so GPU = CPU = shifted source, bitwise.
-    let g2 = Grid::new([21, 18, 16], DVec3::new(1.0, 0.5, 2.0), DVec3::new(-3.0, 1.0, 7.0));
+    let g2 = Grid::new(
+        [21, 18, 16],
+        DVec3::new(1.0, 0.5, 2.0),
+        DVec3::new(-3.0, 1.0, 7.0),
+    );
     let shift = DVec3::new(3.0, -2.0, 5.0);
     let t = Field::from_map(&g2, move |p| p + shift * g2.spacing);
     let vol2 = head_i16(&g2);
@@ -363,7 +441,13 @@ pub fn check_output_slabs(gpu: &dyn GpuService) -> Result<(), String> {
     };
     let want = cpu_run(&vol2, &t, None, params)?;
     let got = gpu_run(&small2, &vol2, &t, None, params)?;
-    compare("slabbed exact translation", &want, &got, params.background, None)?;
+    compare(
+        "slabbed exact translation",
+        &want,
+        &got,
+        params.background,
+        None,
+    )?;
     let src = vol2.data.as_slice();
     for l in 0..g2.len() {
         let [i, j, k] = g2.unlinear(l);
@@ -371,7 +455,12 @@ pub fn check_output_slabs(gpu: &dyn GpuService) -> Result<(), String> {
         let q = want.grid.world_to_index(w).round();
         let o = want.grid.linear(q.x as usize, q.y as usize, q.z as usize);
         if got.values[o].to_bits() != src.get_f32(l).to_bits() {
-            return Err(format!("translated voxel {:?}: {} != {}", [i, j, k], got.values[o], src.get_f32(l)));
+            return Err(format!(
+                "translated voxel {:?}: {} != {}",
+                [i, j, k],
+                got.values[o],
+                src.get_f32(l)
+            ));
         }
     }
 
@@ -395,7 +484,10 @@ pub fn check_mask_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
         ..Default::default()
     };
     let mut mask = TetMask::new(&grid).map_err(e)?;
-    for (n, c) in [[3, 3, 3], [10, 8, 7], [11, 8, 7], [0, 0, 0], [21, 17, 15]].into_iter().enumerate() {
+    for (n, c) in [[3, 3, 3], [10, 8, 7], [11, 8, 7], [0, 0, 0], [21, 17, 15]]
+        .into_iter()
+        .enumerate()
+    {
         for t in 0..5 {
             if t != n % 5 || c == [10, 8, 7] {
                 mask.remove(c, t).map_err(e)?;
@@ -419,10 +511,18 @@ pub fn check_dirty_matches_full(gpu: &dyn GpuService) -> Result<(), String> {
     let inputs = GpuInputs::new(gpu, &vol, &base)?;
     let mut r = Resampler::new(params);
     let result = (|| {
-        r.resample_gpu(gpu, &inputs.source, inputs.disp, None, DirtyRegion::All).map_err(e)?;
+        r.resample_gpu(gpu, &inputs.source, inputs.disp, None, DirtyRegion::All)
+            .map_err(e)?;
         let c = grid.index_to_world(DVec3::new(6.0, 7.0, 5.0));
         let mut field = base.clone();
-        for (step, amp) in [DVec3::new(1.5, -0.5, 0.7), DVec3::new(-1.0, 0.8, 0.0), DVec3::ZERO].into_iter().enumerate() {
+        for (step, amp) in [
+            DVec3::new(1.5, -0.5, 0.7),
+            DVec3::new(-1.0, 0.8, 0.0),
+            DVec3::ZERO,
+        ]
+        .into_iter()
+        .enumerate()
+        {
             let radius = 4.0;
             let moved = Field::from_map(&grid, bump(c, radius, amp));
             for l in 0..grid.len() {
@@ -435,15 +535,31 @@ pub fn check_dirty_matches_full(gpu: &dyn GpuService) -> Result<(), String> {
                 min: c - DVec3::splat(radius),
                 max: c + DVec3::splat(radius),
             };
-            let rep = r.resample_gpu(gpu, &inputs.source, inputs.disp, None, dirty).map_err(e)?;
+            let rep = r
+                .resample_gpu(gpu, &inputs.source, inputs.disp, None, dirty)
+                .map_err(e)?;
             if rep.full {
-                return Err(format!("step {step}: expected a dirty-region resample, got a full one"));
+                return Err(format!(
+                    "step {step}: expected a dirty-region resample, got a full one"
+                ));
             }
             let got = r.read_gpu_output(gpu).map_err(e)?;
             let full = gpu_run(gpu, &vol, &field, None, params)?;
-            compare(&format!("dirty step {step} vs full (GPU)"), &full, &got, params.background, None)?;
+            compare(
+                &format!("dirty step {step} vs full (GPU)"),
+                &full,
+                &got,
+                params.background,
+                None,
+            )?;
             let cpu = cpu_run(&vol, &field, None, params)?;
-            compare(&format!("dirty step {step} vs CPU"), &cpu, &got, params.background, Some(1e-5))?;
+            compare(
+                &format!("dirty step {step} vs CPU"),
+                &cpu,
+                &got,
+                params.background,
+                Some(1e-5),
+            )?;
         }
         Ok(())
     })();

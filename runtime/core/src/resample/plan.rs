@@ -19,7 +19,10 @@
 
 use super::blocks::BlockBounds;
 use super::output_grid::{OutputGrid, VoxelBox};
-use super::{Backend, Job, KernelConsts, Kernels, ResampleError, ResampleParams, ResampleReport, Session, TetMask};
+use super::{
+    Backend, Job, KernelConsts, Kernels, ResampleError, ResampleParams, ResampleReport, Session,
+    TetMask,
+};
 use crate::deformation::DirtyRegion;
 use crate::grid::Grid;
 use glam::DVec3;
@@ -28,17 +31,30 @@ use glam::DVec3;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct MaskState {
     pub generation: Option<u64>,
-    pub changed: Option<([usize; 3], [usize; 3])>,
+    pub changed: Option<VertexBox>,
 }
 
-/// The inclusive box of source vertices (voxel indices) inside a rest-space
-/// box (world mm), rounded outwards and clipped to the grid: `Ok(None)` when
-/// it holds no vertex, `Err(())` when the box is not finite (resample all).
-pub fn dirty_vertex_box(grid: &Grid, min: DVec3, max: DVec3) -> Result<Option<([usize; 3], [usize; 3])>, ()> {
+/// Inclusive box of source vertices (voxel indices): lower and upper corner.
+pub type VertexBox = ([usize; 3], [usize; 3]);
+
+/// The source vertices a rest-space dirty box covers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DirtyVertices {
+    /// The box holds no vertex.
+    None,
+    /// These vertices (rounded outwards, clipped to the grid).
+    Box(VertexBox),
+    /// The box is not finite: resample everything.
+    All,
+}
+
+/// The source vertices inside a rest-space box (world mm), rounded outwards
+/// and clipped to the grid.
+pub fn dirty_vertex_box(grid: &Grid, min: DVec3, max: DVec3) -> DirtyVertices {
     let a = grid.world_to_index(min);
     let b = grid.world_to_index(max);
     if !(a.is_finite() && b.is_finite()) {
-        return Err(());
+        return DirtyVertices::All;
     }
     let mut lo = [0usize; 3];
     let mut hi = [0usize; 3];
@@ -47,18 +63,15 @@ pub fn dirty_vertex_box(grid: &Grid, min: DVec3, max: DVec3) -> Result<Option<([
         let l = a[ax].min(b[ax]).floor();
         let h = a[ax].max(b[ax]).ceil();
         if h < 0.0 || l > n - 1.0 {
-            return Ok(None);
+            return DirtyVertices::None;
         }
         lo[ax] = l.max(0.0) as usize;
         hi[ax] = h.min(n - 1.0) as usize;
     }
-    Ok(Some((lo, hi)))
+    DirtyVertices::Box((lo, hi))
 }
 
-fn union_box(
-    a: Option<([usize; 3], [usize; 3])>,
-    b: ([usize; 3], [usize; 3]),
-) -> Option<([usize; 3], [usize; 3])> {
+fn union_box(a: Option<VertexBox>, b: VertexBox) -> Option<VertexBox> {
     Some(match a {
         None => b,
         Some((lo, hi)) => (
@@ -68,7 +81,11 @@ fn union_box(
     })
 }
 
-fn check_finite(c: &KernelConsts, blocks: &[u32], bounds: &[BlockBounds]) -> Result<(), ResampleError> {
+fn check_finite(
+    c: &KernelConsts,
+    blocks: &[u32],
+    bounds: &[BlockBounds],
+) -> Result<(), ResampleError> {
     if let Some(i) = bounds.iter().position(|b| !b.is_finite()) {
         return Err(ResampleError::NonFiniteDisplacement {
             near: c.layout.vertices(blocks[i] as usize),
@@ -94,7 +111,9 @@ pub(crate) fn drive<K: Kernels>(
     let mesh = super::SamplingMesh::new(grid)?;
     let sp = grid.spacing;
     if !(sp.x > 0.0 && sp.y > 0.0 && sp.z > 0.0 && sp.is_finite()) {
-        return Err(ResampleError::BadSpacing { spacing: sp.to_array() });
+        return Err(ResampleError::BadSpacing {
+            spacing: sp.to_array(),
+        });
     }
     if let Some(m) = mask
         && m.cell_dims() != mesh.cell_dims()
@@ -108,7 +127,11 @@ pub(crate) fn drive<K: Kernels>(
     let consts = KernelConsts {
         mesh,
         layout,
-        inv_spacing: [(1.0 / sp.x) as f32, (1.0 / sp.y) as f32, (1.0 / sp.z) as f32],
+        inv_spacing: [
+            (1.0 / sp.x) as f32,
+            (1.0 / sp.y) as f32,
+            (1.0 / sp.z) as f32,
+        ],
         eps: params.inclusion_epsilon.max(0.0),
         background: params.background,
     };
@@ -116,13 +139,14 @@ pub(crate) fn drive<K: Kernels>(
         generation: mask.map(|m| m.generation()),
         changed: mask.and_then(|m| m.changed_cells()),
     };
-    let max_voxels = (params.max_output_factor.max(1.0) * grid.len() as f64).min(u32::MAX as f64 - 1.0) as u64;
+    let max_voxels =
+        (params.max_output_factor.max(1.0) * grid.len() as f64).min(u32::MAX as f64 - 1.0) as u64;
     let nblocks = layout.count();
 
     // Decide: full, dirty, or nothing.
-    let reusable = session
-        .as_ref()
-        .is_some_and(|s| s.source_grid == *grid && s.backend == backend && s.bounds.len() == nblocks);
+    let reusable = session.as_ref().is_some_and(|s| {
+        s.source_grid == *grid && s.backend == backend && s.bounds.len() == nblocks
+    });
     let mut changed_vertices = None;
     let mut full = !reusable;
     if reusable {
@@ -131,8 +155,9 @@ pub(crate) fn drive<K: Kernels>(
             DirtyRegion::All => full = true,
             DirtyRegion::None => {}
             DirtyRegion::Box { min, max } => match dirty_vertex_box(grid, min, max) {
-                Ok(b) => changed_vertices = b,
-                Err(()) => full = true,
+                DirtyVertices::Box(b) => changed_vertices = Some(b),
+                DirtyVertices::None => {}
+                DirtyVertices::All => full = true,
             },
         }
         if s.mask.generation != mask_now.generation {
@@ -162,9 +187,14 @@ pub(crate) fn drive<K: Kernels>(
         check_finite(&consts, &all, &bounds)?;
         let u = union_all(&bounds);
         let need = VoxelBox::from_continuous(u.min, u.max, 0);
-        let previous = session.as_ref().filter(|s| s.source_grid == *grid).map(|s| s.output);
+        let previous = session
+            .as_ref()
+            .filter(|s| s.source_grid == *grid)
+            .map(|s| s.output);
         let base = previous.unwrap_or(OutputGrid::same_as_source(grid.dims));
-        output = base.grown_to_cover(&need, params.growth_margin, max_voxels)?.unwrap_or(base);
+        output = base
+            .grown_to_cover(&need, params.growth_margin, max_voxels)?
+            .unwrap_or(base);
         report.output_grid_changed = previous != Some(output);
         k.allocate_output(&output)?;
         region = output.index_box();
@@ -191,7 +221,10 @@ pub(crate) fn drive<K: Kernels>(
         let new_u = union_all(&newb);
         s.mask = mask_now;
         let need = VoxelBox::from_continuous(new_u.min, new_u.max, 0);
-        if let Some(grown) = s.output.grown_to_cover(&need, params.growth_margin, max_voxels)? {
+        if let Some(grown) = s
+            .output
+            .grown_to_cover(&need, params.growth_margin, max_voxels)?
+        {
             s.output = grown;
             k.allocate_output(&grown)?;
             report.full = true;
@@ -224,7 +257,10 @@ pub(crate) fn drive<K: Kernels>(
     };
     k.rasterise(&job)?;
     report.voxels_touched = region.count();
-    report.cells_rasterised = selected.iter().map(|&b| layout.cell_count(b as usize) as u64).sum();
+    report.cells_rasterised = selected
+        .iter()
+        .map(|&b| layout.cell_count(b as usize) as u64)
+        .sum();
     let o = output.origin_index;
     report.region = Some((
         [0, 1, 2].map(|a| (region.lo[a] - o[a]) as usize),
@@ -240,9 +276,19 @@ mod tests {
     #[test]
     fn dirty_box_rounds_outwards_and_clips() {
         let g = Grid::new([10, 10, 10], DVec3::splat(2.0), DVec3::splat(-10.0));
-        let b = dirty_vertex_box(&g, DVec3::new(-7.0, -10.0, 5.0), DVec3::new(-3.0, -10.0, 100.0));
-        assert_eq!(b, Ok(Some(([1, 0, 7], [4, 0, 9]))));
-        assert_eq!(dirty_vertex_box(&g, DVec3::splat(50.0), DVec3::splat(60.0)), Ok(None));
-        assert_eq!(dirty_vertex_box(&g, DVec3::splat(f64::NAN), DVec3::ZERO), Err(()));
+        let b = dirty_vertex_box(
+            &g,
+            DVec3::new(-7.0, -10.0, 5.0),
+            DVec3::new(-3.0, -10.0, 100.0),
+        );
+        assert_eq!(b, DirtyVertices::Box(([1, 0, 7], [4, 0, 9])));
+        assert_eq!(
+            dirty_vertex_box(&g, DVec3::splat(50.0), DVec3::splat(60.0)),
+            DirtyVertices::None
+        );
+        assert_eq!(
+            dirty_vertex_box(&g, DVec3::splat(f64::NAN), DVec3::ZERO),
+            DirtyVertices::All
+        );
     }
 }

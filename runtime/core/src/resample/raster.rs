@@ -20,17 +20,24 @@
 //!   the interpolated value is the vertex's value, bit for bit.
 //! - Inclusion: voxel centre `q` lies in the integer box of its cell (the
 //!   cell's deformed bounding box, clipped) and `sign(D_a) · t_a(q) ≥ −ε |D_a|`
-//!   for the four faces of the tetrahedron. Pass 1 works per cell: the
-//!   sixteen distinct face planes of the cell are built once and every
-//!   candidate voxel of the cell's box is given to the smallest passing
-//!   tetrahedron of the cell ([`CellRaster`]). Deformed cells are about one
-//!   voxel across, so this costs far less than setting up and scanning the
-//!   five tetrahedra's boxes separately (x-runs pay off only for cells many
-//!   voxels long).
+//!   (with `D_a` finite and non-zero) for the four faces of the tetrahedron.
+//!   Pass 1 works per cell: every candidate voxel centre of the cell's box
+//!   goes to the smallest passing tetrahedron of the cell. Cells are about a
+//!   voxel across, so this is much cheaper than scanning the five
+//!   tetrahedra's boxes separately (x-runs per tetrahedron pay off only for
+//!   cells many voxels long). `CellRaster` (test builds) is the scalar
+//!   statement of this predicate; the CPU kernel evaluates it four cells at a
+//!   time in [`super::lanes`] and the GPU in `raster.wgsl`, all three with
+//!   the same expressions.
 
+// Per-lane and per-face loops index several arrays by the same number.
+#![allow(clippy::needless_range_loop)]
+#[cfg(test)]
 use super::output_grid::VoxelBox;
+#[cfg(test)]
 use super::sampling_mesh::{CELL_TETS, CORNER_TABLES, FACE_TABLES, TETS_PER_CELL};
 
+#[cfg(test)]
 /// Deformed positions of the eight corners of a cell (source index units),
 /// structure of arrays, indexed by corner `c = cx + 2 cy + 4 cz`.
 #[derive(Clone, Copy, Debug, Default)]
@@ -40,6 +47,7 @@ pub(crate) struct CellCorners {
     pub z: [f32; 8],
 }
 
+#[cfg(test)]
 impl CellCorners {
     #[inline(always)]
     pub fn point(&self, c: usize) -> [f32; 3] {
@@ -93,16 +101,25 @@ impl FacePlane {
 #[inline(always)]
 pub(crate) fn ceil_i32(v: f32) -> i32 {
     let t = v as i32;
-    if (t as f32) < v { t.saturating_add(1) } else { t }
+    if (t as f32) < v {
+        t.saturating_add(1)
+    } else {
+        t
+    }
 }
 
 /// `⌊v⌋` as `i32` (saturating; no libm call on baseline x86-64).
 #[inline(always)]
 pub(crate) fn floor_i32(v: f32) -> i32 {
     let t = v as i32;
-    if (t as f32) > v { t.saturating_sub(1) } else { t }
+    if (t as f32) > v {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
 }
 
+#[cfg(test)]
 /// Up to four face planes as structure of arrays (lanes = faces), with the
 /// orientation `D` of each face in the tetrahedron being tested.
 #[derive(Clone, Copy, Debug, Default)]
@@ -115,6 +132,7 @@ struct Planes4 {
     bz: [f32; 4],
 }
 
+#[cfg(test)]
 impl Planes4 {
     #[inline(always)]
     fn set(&mut self, lane: usize, p: &FacePlane) {
@@ -131,12 +149,14 @@ impl Planes4 {
     fn eval(&self, q: [f32; 3]) -> [f32; 4] {
         let mut t = [0.0; 4];
         for l in 0..4 {
-            t[l] = self.nx[l] * (q[0] - self.bx[l]) + (self.ny[l] * (q[1] - self.by[l]) + self.nz[l] * (q[2] - self.bz[l]));
+            t[l] = self.nx[l] * (q[0] - self.bx[l])
+                + (self.ny[l] * (q[1] - self.by[l]) + self.nz[l] * (q[2] - self.bz[l]));
         }
         t
     }
 }
 
+#[cfg(test)]
 /// Per lane: `sign(D) · t ≥ −ε |D|` with `D` finite and non-zero, as a bit mask.
 #[inline(always)]
 fn pass_mask(d: &[f32; 4], t: &[f32; 4], eps: f32) -> u32 {
@@ -149,6 +169,7 @@ fn pass_mask(d: &[f32; 4], t: &[f32; 4], eps: f32) -> u32 {
     m
 }
 
+#[cfg(test)]
 /// One cell in pass 1: its corners, the clipped integer box of candidate
 /// voxel centres, and — computed lazily, when a candidate's test first needs
 /// them — face planes and orientations. `P` is the cell parity.
@@ -189,6 +210,7 @@ pub(crate) struct CellRaster<'c, const P: usize> {
     pub hi: [i32; 3],
 }
 
+#[cfg(test)]
 impl<'c, const P: usize> CellRaster<'c, P> {
     /// `None` when no candidate voxel centre lies in the clipped box of the
     /// cell or every tetrahedron is removed (`removed`: bit `t` = removed).
@@ -202,8 +224,12 @@ impl<'c, const P: usize> CellRaster<'c, P> {
         let coords = [&c.x, &c.y, &c.z];
         for a in 0..3 {
             let s = coords[a];
-            let mn = (s[0].min(s[1])).min(s[2].min(s[3])).min((s[4].min(s[5])).min(s[6].min(s[7])));
-            let mx = (s[0].max(s[1])).max(s[2].max(s[3])).max((s[4].max(s[5])).max(s[6].max(s[7])));
+            let mn = (s[0].min(s[1]))
+                .min(s[2].min(s[3]))
+                .min((s[4].min(s[5])).min(s[6].min(s[7])));
+            let mx = (s[0].max(s[1]))
+                .max(s[2].max(s[3]))
+                .max((s[4].max(s[5])).max(s[6].max(s[7])));
             lo[a] = ceil_i32(mn).max(clip.lo[a]);
             hi[a] = floor_i32(mx).min(clip.hi[a]);
             if lo[a] > hi[a] {
@@ -268,11 +294,16 @@ impl<'c, const P: usize> CellRaster<'c, P> {
     }
 }
 
+#[cfg(test)]
 /// Face plane `f` of a cell of parity `P`.
 #[inline(always)]
 fn plane_of<const P: usize>(c: &CellCorners, f: u8) -> FacePlane {
     let [u, v, w] = FACE_TABLES.faces[P][f as usize];
-    FacePlane::new(c.point(u as usize), c.point(v as usize), c.point(w as usize))
+    FacePlane::new(
+        c.point(u as usize),
+        c.point(v as usize),
+        c.point(w as usize),
+    )
 }
 
 /// Barycentric weights of `q` in the tetrahedron with corner positions `p`
@@ -325,7 +356,13 @@ mod tests {
 
     #[test]
     fn vertex_weights_are_exact_for_integer_positions() {
-        let c = corners_from(|k| [(k & 1) as f32 + 7.0, ((k >> 1) & 1) as f32 - 3.0, (k >> 2) as f32 + 100.0]);
+        let c = corners_from(|k| {
+            [
+                (k & 1) as f32 + 7.0,
+                ((k >> 1) & 1) as f32 - 3.0,
+                (k >> 2) as f32 + 100.0,
+            ]
+        });
         for parity in 0..2 {
             for tet in CELL_TETS[parity] {
                 let p = tet.map(|k| c.point(k as usize));
@@ -344,7 +381,13 @@ mod tests {
     }
 
     /// The straightforward predicate: per tetrahedron, its own four planes.
-    fn owner_spec(c: &CellCorners, parity: usize, removed: u8, eps: f32, q: [f32; 3]) -> Option<usize> {
+    fn owner_spec(
+        c: &CellCorners,
+        parity: usize,
+        removed: u8,
+        eps: f32,
+        q: [f32; 3],
+    ) -> Option<usize> {
         (0..TETS_PER_CELL).find(|&t| {
             if removed & (1 << t) != 0 {
                 return false;
@@ -360,9 +403,18 @@ mod tests {
         })
     }
 
-    fn check_cell<const P: usize>(c: &CellCorners, removed: u8, eps: f32) -> Result<(), TestCaseError> {
-        let clip = VoxelBox { lo: [-100; 3], hi: [100; 3] };
-        let Some(mut r) = CellRaster::<P>::new(c, removed, eps, &clip) else { return Ok(()) };
+    fn check_cell<const P: usize>(
+        c: &CellCorners,
+        removed: u8,
+        eps: f32,
+    ) -> Result<(), TestCaseError> {
+        let clip = VoxelBox {
+            lo: [-100; 3],
+            hi: [100; 3],
+        };
+        let Some(mut r) = CellRaster::<P>::new(c, removed, eps, &clip) else {
+            return Ok(());
+        };
         let (lo, hi) = (r.lo, r.hi);
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
@@ -377,7 +429,20 @@ mod tests {
 
     #[test]
     fn fast_rounding_matches_libm() {
-        for v in [0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 1.0000001, -2.9999998, 1e7 + 0.5, -8388607.5, 3e9, -3e9] {
+        for v in [
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            1.0000001,
+            -2.9999998,
+            1e7 + 0.5,
+            -8388607.5,
+            3e9,
+            -3e9,
+        ] {
             assert_eq!(ceil_i32(v), v.ceil() as i32, "ceil {v}");
             assert_eq!(floor_i32(v), v.floor() as i32, "floor {v}");
         }

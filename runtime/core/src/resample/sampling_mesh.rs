@@ -29,8 +29,20 @@ pub const TETS_PER_CELL: usize = 5;
 /// cell, for even (`[0]`) and odd (`[1]`) `i + j + k`. Tetrahedron 4 is the
 /// central one.
 pub const CELL_TETS: [[[u8; 4]; TETS_PER_CELL]; 2] = [
-    [[0, 1, 2, 4], [1, 2, 3, 7], [1, 4, 5, 7], [2, 4, 6, 7], [1, 2, 4, 7]],
-    [[0, 1, 3, 5], [0, 2, 3, 6], [0, 4, 5, 6], [3, 5, 6, 7], [0, 3, 5, 6]],
+    [
+        [0, 1, 2, 4],
+        [1, 2, 3, 7],
+        [1, 4, 5, 7],
+        [2, 4, 6, 7],
+        [1, 2, 4, 7],
+    ],
+    [
+        [0, 1, 3, 5],
+        [0, 2, 3, 6],
+        [0, 4, 5, 6],
+        [3, 5, 6, 7],
+        [0, 3, 5, 6],
+    ],
 ];
 
 /// Distinct triangular faces of one cell's five tetrahedra (12 on the cube's
@@ -42,11 +54,16 @@ pub const FACES_PER_CELL: usize = 16;
 pub(crate) struct FaceTables {
     /// `faces[parity][f]`: the three ascending corners of face `f`.
     pub faces: [[[u8; 3]; FACES_PER_CELL]; 2],
-    /// `tet_faces[parity][t][a]`: the face opposite corner `CELL_TETS[parity][t][a]`.
+    /// `tet_faces[parity][t][a]`: the face opposite corner `CELL_TETS[parity][t][a]`
+    /// (mirrored by `TET_FACES` in `raster.wgsl`; the CPU kernels use the
+    /// derived [`CORNER_TABLES`]).
+    #[cfg_attr(not(test), allow(dead_code))]
     pub tet_faces: [[[u8; 4]; TETS_PER_CELL]; 2],
 }
 
-const fn build_faces(tets: &[[u8; 4]; TETS_PER_CELL]) -> ([[u8; 3]; FACES_PER_CELL], [[u8; 4]; TETS_PER_CELL]) {
+const fn build_faces(
+    tets: &[[u8; 4]; TETS_PER_CELL],
+) -> ([[u8; 3]; FACES_PER_CELL], [[u8; 4]; TETS_PER_CELL]) {
     let mut faces = [[0u8; 3]; FACES_PER_CELL];
     let mut tet_faces = [[0u8; 4]; TETS_PER_CELL];
     let mut n = 0;
@@ -163,7 +180,11 @@ pub(crate) const CORNER_TABLES: CornerTables = CornerTables {
 /// Offset `[cx, cy, cz]` of cell corner `c` (`c = cx + 2 cy + 4 cz`).
 #[inline]
 pub const fn corner_offset(c: u8) -> [usize; 3] {
-    [(c & 1) as usize, ((c >> 1) & 1) as usize, ((c >> 2) & 1) as usize]
+    [
+        (c & 1) as usize,
+        ((c >> 1) & 1) as usize,
+        ((c >> 2) & 1) as usize,
+    ]
 }
 
 /// `0` for a cell with even `i + j + k` (cell indices), `1` for odd.
@@ -327,6 +348,7 @@ impl TetDecoder {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::needless_range_loop)]
     use super::*;
     use glam::DVec3;
     use std::collections::HashMap;
@@ -396,8 +418,9 @@ mod tests {
                 }
             }
         }
-        let on_surface =
-            |f: &[[usize; 3]; 3]| (0..3).any(|ax| f.iter().all(|p| p[ax] == 0) || f.iter().all(|p| p[ax] == 3));
+        let on_surface = |f: &[[usize; 3]; 3]| {
+            (0..3).any(|ax| f.iter().all(|p| p[ax] == 0) || f.iter().all(|p| p[ax] == 3))
+        };
         let mut interior = 0;
         for (f, n) in &faces {
             if on_surface(f) {
@@ -432,6 +455,35 @@ mod tests {
     }
 
     #[test]
+    fn corner_tables_split_each_cell() {
+        for p in 0..2 {
+            let central: Vec<u8> = FACE_TABLES.tet_faces[p][4].to_vec();
+            let mut interior: Vec<u8> = CORNER_TABLES.interior[p].iter().map(|i| i[0]).collect();
+            interior.sort();
+            let mut c = central.clone();
+            c.sort();
+            assert_eq!(
+                interior, c,
+                "the central tetrahedron's faces are the interior faces"
+            );
+            let mut all: Vec<u8> = interior.clone();
+            for k in 0..4 {
+                let [f, corner, opp] = CORNER_TABLES.interior[p][k];
+                assert!(!CELL_TETS[p][4].contains(&corner));
+                assert!(CELL_TETS[p][4].contains(&opp));
+                assert!(!FACE_TABLES.faces[p][f as usize].contains(&opp));
+                for [bf, bo] in CORNER_TABLES.boundary[p][k] {
+                    assert!(FACE_TABLES.faces[p][bf as usize].contains(&corner));
+                    assert!(!FACE_TABLES.faces[p][bf as usize].contains(&bo));
+                    all.push(bf);
+                }
+            }
+            all.sort();
+            assert_eq!(all, (0..16).collect::<Vec<u8>>(), "every face once");
+        }
+    }
+
+    #[test]
     fn fast_decoder_matches_division() {
         for dims in [[2, 2, 2], [3, 2, 9], [257, 130, 5], [600, 600, 600]] {
             let mesh = SamplingMesh::new(&Grid::new(dims, DVec3::ONE, DVec3::ZERO)).unwrap();
@@ -439,7 +491,11 @@ mod tests {
             let n = mesh.tet_count() as u64;
             let mut id = 0u64;
             while id < n {
-                assert_eq!(dec.decode(id as u32), mesh.decode_tet(id as u32), "{dims:?} id {id}");
+                assert_eq!(
+                    dec.decode(id as u32),
+                    mesh.decode_tet(id as u32),
+                    "{dims:?} id {id}"
+                );
                 id += 1 + id / 3;
             }
             assert_eq!(dec.decode((n - 1) as u32), mesh.decode_tet((n - 1) as u32));

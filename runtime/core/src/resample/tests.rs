@@ -1,20 +1,34 @@
 //! End-to-end tests of the CPU resampler (the GPU path is compared with it
 //! by [`super::parity`], run by the integration suite on a real device).
 
+#![allow(clippy::needless_range_loop)]
+
 use super::parity::{Field, affine, bump, head_i16, ramp, twist_z};
 use super::*;
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
 use proptest::prelude::*;
 
-fn run(vol: &Volume, f: &Field, mask: Option<&TetMask>, params: ResampleParams) -> (ResampleOutput, ResampleReport) {
+fn run(
+    vol: &Volume,
+    f: &Field,
+    mask: Option<&TetMask>,
+    params: ResampleParams,
+) -> (ResampleOutput, ResampleReport) {
     let mut r = Resampler::new(params);
-    let rep = r.resample_cpu(vol.view(), f.as_ref(), mask, DirtyRegion::All).unwrap();
+    let rep = r
+        .resample_cpu(vol.view(), f.as_ref(), mask, DirtyRegion::All)
+        .unwrap();
     (r.cpu_output().unwrap(), rep)
 }
 
 /// Pass-1 owners (tetrahedron ids, `u32::MAX` = none) of a full resample.
-fn owners(vol: &Volume, f: &Field, mask: Option<&TetMask>, params: ResampleParams) -> (OutputGrid, Vec<u32>) {
+fn owners(
+    vol: &Volume,
+    f: &Field,
+    mask: Option<&TetMask>,
+    params: ResampleParams,
+) -> (OutputGrid, Vec<u32>) {
     let mut session = None;
     let mut out = Vec::new();
     let mut k = cpu::CpuKernels {
@@ -24,15 +38,33 @@ fn owners(vol: &Volume, f: &Field, mask: Option<&TetMask>, params: ResampleParam
         out: &mut out,
         fill: false,
     };
-    plan::drive(&params, &mut session, &mut k, &vol.grid, Backend::Cpu, mask, DirtyRegion::All).unwrap();
-    (session.unwrap().output, out.iter().map(|v| v.to_bits()).collect())
+    plan::drive(
+        &params,
+        &mut session,
+        &mut k,
+        &vol.grid,
+        Backend::Cpu,
+        mask,
+        DirtyRegion::All,
+    )
+    .unwrap();
+    (
+        session.unwrap().output,
+        out.iter().map(|v| v.to_bits()).collect(),
+    )
 }
 
 #[test]
 fn identity_is_bit_exact() {
-    let grid = Grid::new([37, 29, 23], DVec3::new(0.7, 1.3, 2.5), DVec3::new(-20.0, 5.0, 100.0));
+    let grid = Grid::new(
+        [37, 29, 23],
+        DVec3::new(0.7, 1.3, 2.5),
+        DVec3::new(-20.0, 5.0, 100.0),
+    );
     let head = head_i16(&grid);
-    let mut special: Vec<f32> = (0..grid.len()).map(|l| (l as f32 * 0.377).sin() * 1e3).collect();
+    let mut special: Vec<f32> = (0..grid.len())
+        .map(|l| (l as f32 * 0.377).sin() * 1e3)
+        .collect();
     special[5] = -0.0;
     special[100] = f32::NAN;
     special[200] = f32::MIN_POSITIVE / 8.0;
@@ -41,12 +73,20 @@ fn identity_is_bit_exact() {
     let f32_vol = Volume::new(grid, VoxelData::F32(special)).unwrap();
     for vol in [head, f32_vol] {
         let (out, rep) = run(&vol, &Field::zero(&grid), None, ResampleParams::default());
-        assert_eq!(out.grid, grid, "identity output grid must be the input grid");
+        assert_eq!(
+            out.grid, grid,
+            "identity output grid must be the input grid"
+        );
         assert!(rep.full && rep.output_grid_changed);
         assert_eq!(rep.voxels_touched, grid.len() as u64);
         let src = vol.data.as_slice();
         for (l, v) in out.values.iter().enumerate() {
-            assert_eq!(v.to_bits(), src.get_f32(l).to_bits(), "voxel {:?}", grid.unlinear(l));
+            assert_eq!(
+                v.to_bits(),
+                src.get_f32(l).to_bits(),
+                "voxel {:?}",
+                grid.unlinear(l)
+            );
         }
     }
 }
@@ -72,15 +112,24 @@ fn check_ramp(
     };
     let (out, rep) = run(&vol, &Field::from_map(&grid, map), None, params);
     assert_eq!(out.grid.spacing, grid.spacing);
-    assert_eq!(rep.output_grid_changed, true);
+    assert!(rep.output_grid_changed);
     if expect_growth {
-        assert_ne!(out.grid.dims, grid.dims, "the deformed volume needs a larger output");
+        assert_ne!(
+            out.grid.dims, grid.dims,
+            "the deformed volume needs a larger output"
+        );
     }
-    let n = DVec3::new(grid.dims[0] as f64 - 1.0, grid.dims[1] as f64 - 1.0, grid.dims[2] as f64 - 1.0);
+    let n = DVec3::new(
+        grid.dims[0] as f64 - 1.0,
+        grid.dims[1] as f64 - 1.0,
+        grid.dims[2] as f64 - 1.0,
+    );
     let (mut inside, mut outside, mut worst) = (0, 0, 0.0f64);
     for l in 0..out.grid.len() {
         let [i, j, k] = out.grid.unlinear(l);
-        let w = out.grid.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+        let w = out
+            .grid
+            .index_to_world(DVec3::new(i as f64, j as f64, k as f64));
         let x = inv(w);
         let xi = grid.world_to_index(x);
         let v = out.values[l];
@@ -89,26 +138,53 @@ fn check_ramp(
             assert_ne!(v, params.background, "hole at output voxel {:?}", [i, j, k]);
             let err = (v as f64 - a.dot(x)).abs() / range;
             worst = worst.max(err);
-            assert!(err <= 1e-4, "voxel {:?}: {v} vs {} (relative {err:e})", [i, j, k], a.dot(x));
+            assert!(
+                err <= 1e-4,
+                "voxel {:?}: {v} vs {} (relative {err:e})",
+                [i, j, k],
+                a.dot(x)
+            );
         } else if xi.cmplt(DVec3::splat(-margin)).any() || xi.cmpgt(n + margin).any() {
             outside += 1;
-            assert_eq!(v, params.background, "voxel {:?} outside the mesh is covered", [i, j, k]);
+            assert_eq!(
+                v,
+                params.background,
+                "voxel {:?} outside the mesh is covered",
+                [i, j, k]
+            );
         }
     }
-    assert!(inside > grid.len() / 2 && outside > 0, "inside {inside}, outside {outside}");
+    assert!(
+        inside > grid.len() / 2 && outside > 0,
+        "inside {inside}, outside {outside}"
+    );
     eprintln!("ramp: {inside} voxels inside, worst relative error {worst:e}");
 }
 
 #[test]
 fn affine_ramp_matches_analytic() {
-    let grid = Grid::new([40, 36, 30], DVec3::new(0.8, 1.0, 1.25), DVec3::new(-10.0, 3.0, -7.0));
-    let (m, inv) = affine(grid.centre(), DVec3::new(0.2, 0.3, 1.0), 10.0, 1.1, DVec3::new(3.3, -2.1, 1.7));
+    let grid = Grid::new(
+        [40, 36, 30],
+        DVec3::new(0.8, 1.0, 1.25),
+        DVec3::new(-10.0, 3.0, -7.0),
+    );
+    let (m, inv) = affine(
+        grid.centre(),
+        DVec3::new(0.2, 0.3, 1.0),
+        10.0,
+        1.1,
+        DVec3::new(3.3, -2.1, 1.7),
+    );
     check_ramp(grid, m, inv, 1e-3, true);
 }
 
 #[test]
 fn twist_ramp_matches_analytic() {
-    let grid = Grid::new([48, 44, 40], DVec3::new(1.0, 0.9, 1.2), DVec3::new(5.0, -3.0, 2.0));
+    let grid = Grid::new(
+        [48, 44, 40],
+        DVec3::new(1.0, 0.9, 1.2),
+        DVec3::new(5.0, -3.0, 2.0),
+    );
     let (tw, untw) = twist_z(grid.centre(), 30f64.to_radians() / (39.0 * 1.2));
     // Shift by a fraction of a voxel along z so output voxel centres fall
     // between the mesh's vertex planes (where the twist is not planar-linear).
@@ -129,7 +205,13 @@ fn bary64(p: &[DVec3; 4], q: DVec3) -> [f64; 4] {
 }
 
 /// Deformed positions (f64 of the f32 the kernels use) of a tetrahedron.
-fn tet_points(mesh: &SamplingMesh, grid: &Grid, f: &Field, cell: [usize; 3], t: usize) -> [DVec3; 4] {
+fn tet_points(
+    mesh: &SamplingMesh,
+    grid: &Grid,
+    f: &Field,
+    cell: [usize; 3],
+    t: usize,
+) -> [DVec3; 4] {
     let inv = [0, 1, 2].map(|a| (1.0 / grid.spacing[a]) as f32);
     mesh.tet_vertices(cell, t).map(|v| {
         let g = grid.linear(v[0], v[1], v[2]);
@@ -245,20 +327,28 @@ fn removing_a_cell_makes_its_interior_background() {
             bary64(&tet_points(&mesh, &grid, &f, cell, t), q)
                 .into_iter()
                 .all(|b| b > 1e-6)
-        }) || (q.cmpgt(DVec3::new(6.0, 3.0, 6.0)).all() && q.cmplt(DVec3::new(9.0, 6.0, 9.0)).all());
+        }) || (q.cmpgt(DVec3::new(6.0, 3.0, 6.0)).all()
+            && q.cmplt(DVec3::new(9.0, 6.0, 9.0)).all());
         if in_cell {
             hidden += 1;
-            assert_eq!(cut.values[l], params.background, "voxel {q} inside the removed cell");
+            assert_eq!(
+                cut.values[l], params.background,
+                "voxel {q} inside the removed cell"
+            );
             assert_ne!(full.values[l], params.background);
         } else if cut.values[l] != full.values[l] {
             // Only the removed cell's closed surface may change.
-            let on_surface = q.cmpge(DVec3::new(6.0, 3.0, 6.0)).all() && q.cmple(DVec3::new(9.0, 6.0, 9.0)).all();
+            let on_surface = q.cmpge(DVec3::new(6.0, 3.0, 6.0)).all()
+                && q.cmple(DVec3::new(9.0, 6.0, 9.0)).all();
             assert!(on_surface, "voxel {q} outside the removed cell changed");
         } else {
             kept += 1;
         }
     }
-    assert_eq!(hidden, 8, "a 3×3×3 stretched cell has 2³ interior voxel centres");
+    assert_eq!(
+        hidden, 8,
+        "a 3×3×3 stretched cell has 2³ interior voxel centres"
+    );
     assert!(kept > 500);
 }
 
@@ -267,7 +357,11 @@ fn removing_a_cell_makes_its_interior_background() {
 /// voxels; a bump that pushes out of the output forces a full resample.
 #[test]
 fn dirty_region_equals_full_resample() {
-    let grid = Grid::new([40, 36, 32], DVec3::new(1.0, 1.1, 0.9), DVec3::new(-20.0, -18.0, -14.0));
+    let grid = Grid::new(
+        [40, 36, 32],
+        DVec3::new(1.0, 1.1, 0.9),
+        DVec3::new(-20.0, -18.0, -14.0),
+    );
     let vol = head_i16(&grid);
     let params = ResampleParams {
         background: -1024.0,
@@ -277,7 +371,9 @@ fn dirty_region_equals_full_resample() {
     let (tw, _) = twist_z(grid.centre(), 0.01);
     let base = Field::from_map(&grid, tw);
     let mut r = Resampler::new(params);
-    let rep = r.resample_cpu(vol.view(), base.as_ref(), None, DirtyRegion::All).unwrap();
+    let rep = r
+        .resample_cpu(vol.view(), base.as_ref(), None, DirtyRegion::All)
+        .unwrap();
     assert!(rep.full);
     let total = r.cpu_values().unwrap().len() as u64;
     let mut field = base.clone();
@@ -294,7 +390,11 @@ fn dirty_region_equals_full_resample() {
         let moved = Field::from_map(&grid, bump(at, radius, amp));
         let mut changed = 0;
         for l in 0..grid.len() {
-            let v = [field.x[l] + moved.x[l], field.y[l] + moved.y[l], field.z[l] + moved.z[l]];
+            let v = [
+                field.x[l] + moved.x[l],
+                field.y[l] + moved.y[l],
+                field.z[l] + moved.z[l],
+            ];
             changed += (v != [field.x[l], field.y[l], field.z[l]]) as usize;
             field.x[l] = v[0];
             field.y[l] = v[1];
@@ -304,12 +404,19 @@ fn dirty_region_equals_full_resample() {
             min: at - DVec3::splat(radius),
             max: at + DVec3::splat(radius),
         };
-        let rep = r.resample_cpu(vol.view(), field.as_ref(), None, dirty).unwrap();
+        let rep = r
+            .resample_cpu(vol.view(), field.as_ref(), None, dirty)
+            .unwrap();
         let (full, _) = run(&vol, &field, None, params);
         let got = r.cpu_output().unwrap();
         assert_eq!(got.grid, full.grid, "step {n}");
         for (l, (a, b)) in got.values.iter().zip(&full.values).enumerate() {
-            assert_eq!(a.to_bits(), b.to_bits(), "step {n}: voxel {:?}", full.grid.unlinear(l));
+            assert_eq!(
+                a.to_bits(),
+                b.to_bits(),
+                "step {n}: voxel {:?}",
+                full.grid.unlinear(l)
+            );
         }
         if n < 4 {
             assert!(!rep.full, "step {n} should be a dirty-region resample");
@@ -320,7 +427,10 @@ fn dirty_region_equals_full_resample() {
                 rep.voxels_touched
             );
         } else {
-            assert!(rep.full && rep.output_grid_changed, "step {n}: growth forces a full resample");
+            assert!(
+                rep.full && rep.output_grid_changed,
+                "step {n}: growth forces a full resample"
+            );
         }
     }
     // Cutting: a mask change with no displacement change.
@@ -329,15 +439,21 @@ fn dirty_region_equals_full_resample() {
         mask.remove([20, 18, 16], t).unwrap();
     }
     mask.remove([3, 4, 5], 2).unwrap();
-    let rep = r.resample_cpu(vol.view(), field.as_ref(), Some(&mask), DirtyRegion::None).unwrap();
+    let rep = r
+        .resample_cpu(vol.view(), field.as_ref(), Some(&mask), DirtyRegion::None)
+        .unwrap();
     assert!(!rep.full && rep.voxels_touched > 0 && rep.voxels_touched < total / 4);
     let (full, _) = run(&vol, &field, Some(&mask), params);
     assert_eq!(r.cpu_values().unwrap(), &full.values[..]);
     // Nothing changed: nothing done.
-    let rep = r.resample_cpu(vol.view(), field.as_ref(), Some(&mask), DirtyRegion::None).unwrap();
+    let rep = r
+        .resample_cpu(vol.view(), field.as_ref(), Some(&mask), DirtyRegion::None)
+        .unwrap();
     assert_eq!(rep, ResampleReport::default());
     // Dropping the mask restores the uncut volume.
-    let rep = r.resample_cpu(vol.view(), field.as_ref(), None, DirtyRegion::None).unwrap();
+    let rep = r
+        .resample_cpu(vol.view(), field.as_ref(), None, DirtyRegion::None)
+        .unwrap();
     assert!(!rep.full);
     let (full, _) = run(&vol, &field, None, params);
     assert_eq!(r.cpu_values().unwrap(), &full.values[..]);
@@ -349,11 +465,17 @@ fn output_never_shrinks_within_a_session() {
     let vol = head_i16(&grid);
     let mut r = Resampler::default();
     let big = Field::from_map(&grid, |p| p * 1.5);
-    r.resample_cpu(vol.view(), big.as_ref(), None, DirtyRegion::All).unwrap();
+    r.resample_cpu(vol.view(), big.as_ref(), None, DirtyRegion::All)
+        .unwrap();
     let g1 = r.output_grid().unwrap();
     assert!(g1.dims.iter().all(|&d| d > 10));
     let rep = r
-        .resample_cpu(vol.view(), Field::zero(&grid).as_ref(), None, DirtyRegion::All)
+        .resample_cpu(
+            vol.view(),
+            Field::zero(&grid).as_ref(),
+            None,
+            DirtyRegion::All,
+        )
         .unwrap();
     assert!(!rep.output_grid_changed);
     assert_eq!(r.output_grid().unwrap(), g1);
@@ -362,7 +484,9 @@ fn output_never_shrinks_within_a_session() {
     let o = out.grid.world_to_index(grid.origin).round();
     for l in 0..grid.len() {
         let [i, j, k] = grid.unlinear(l);
-        let v = out.values[out.grid.linear(i + o.x as usize, j + o.y as usize, k + o.z as usize)];
+        let v = out.values[out
+            .grid
+            .linear(i + o.x as usize, j + o.y as usize, k + o.z as usize)];
         assert_eq!(v, vol.data.as_slice().get_f32(l));
     }
 }
@@ -374,34 +498,72 @@ fn bad_inputs_are_errors_not_panics() {
     let mut r = Resampler::default();
     let mut f = Field::zero(&grid);
     f.y.pop();
-    let e = r.resample_cpu(vol.view(), f.as_ref(), None, DirtyRegion::All).unwrap_err();
-    assert!(matches!(e, ResampleError::SizeMismatch { what: "y displacements", .. }), "{e}");
+    let e = r
+        .resample_cpu(vol.view(), f.as_ref(), None, DirtyRegion::All)
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ResampleError::SizeMismatch {
+                what: "y displacements",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let mut f = Field::zero(&grid);
     f.z[100] = f32::NAN;
-    let e = r.resample_cpu(vol.view(), f.as_ref(), None, DirtyRegion::All).unwrap_err();
-    assert!(matches!(e, ResampleError::NonFiniteDisplacement { .. }), "{e}");
+    let e = r
+        .resample_cpu(vol.view(), f.as_ref(), None, DirtyRegion::All)
+        .unwrap_err();
+    assert!(
+        matches!(e, ResampleError::NonFiniteDisplacement { .. }),
+        "{e}"
+    );
     let f = Field::from_map(&grid, |p| p * 1e4);
-    let e = r.resample_cpu(vol.view(), f.as_ref(), None, DirtyRegion::All).unwrap_err();
+    let e = r
+        .resample_cpu(vol.view(), f.as_ref(), None, DirtyRegion::All)
+        .unwrap_err();
     assert!(matches!(e, ResampleError::OutputTooLarge { .. }), "{e}");
     let flat = Grid::new([6, 6, 1], DVec3::ONE, DVec3::ZERO);
     let fv = head_i16(&flat);
     let e = r
-        .resample_cpu(fv.view(), Field::zero(&flat).as_ref(), None, DirtyRegion::All)
+        .resample_cpu(
+            fv.view(),
+            Field::zero(&flat).as_ref(),
+            None,
+            DirtyRegion::All,
+        )
         .unwrap_err();
     assert!(matches!(e, ResampleError::GridTooSmall { .. }), "{e}");
     let other = TetMask::new(&Grid::new([5, 6, 6], DVec3::ONE, DVec3::ZERO)).unwrap();
     let e = r
-        .resample_cpu(vol.view(), Field::zero(&grid).as_ref(), Some(&other), DirtyRegion::All)
+        .resample_cpu(
+            vol.view(),
+            Field::zero(&grid).as_ref(),
+            Some(&other),
+            DirtyRegion::All,
+        )
         .unwrap_err();
     assert!(matches!(e, ResampleError::MaskMismatch { .. }), "{e}");
     let bad = Grid::new([6, 6, 6], DVec3::new(1.0, 0.0, 1.0), DVec3::ZERO);
     let bv = Volume::new(bad, vol.data.clone()).unwrap();
     let e = r
-        .resample_cpu(bv.view(), Field::zero(&grid).as_ref(), None, DirtyRegion::All)
+        .resample_cpu(
+            bv.view(),
+            Field::zero(&grid).as_ref(),
+            None,
+            DirtyRegion::All,
+        )
         .unwrap_err();
     assert!(matches!(e, ResampleError::BadSpacing { .. }), "{e}");
     // After errors the resampler still works.
-    r.resample_cpu(vol.view(), Field::zero(&grid).as_ref(), None, DirtyRegion::All)
-        .unwrap();
+    r.resample_cpu(
+        vol.view(),
+        Field::zero(&grid).as_ref(),
+        None,
+        DirtyRegion::All,
+    )
+    .unwrap();
     assert_eq!(r.cpu_values().unwrap().len(), grid.len());
 }

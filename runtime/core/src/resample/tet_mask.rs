@@ -75,7 +75,11 @@ impl TetMask {
         }
         let l = self.mesh.cell_linear(cell);
         let old = self.bits[l];
-        let new = if removed { old | (1 << t) } else { old & !(1 << t) };
+        let new = if removed {
+            old | (1 << t)
+        } else {
+            old & !(1 << t)
+        };
         if new != old {
             self.bits[l] = new;
             self.generation = next_generation();

@@ -1,0 +1,513 @@
+//! The rayon path: one ray per pixel, 16 × 16-pixel tiles spread over the
+//! thread pool. Every formula mirrors `shaders/raycast/raycast.wgsl` (same
+//! [`RayUniforms`], same f32 operations in the same order), so the two
+//! paths agree to a rounding error.
+//!
+//! Per ray: clip the ray to the box (voxel-centre box ∩ crop box) and the
+//! clip planes → interval `[t0, t1]` (mm, `t ≥ 0` in front of the eye);
+//! samples at the midpoints of steps of Δt (the last, shorter step at its
+//! own midpoint with its own length, so a homogeneous medium integrates
+//! exactly); empty-space skipping jumps over macro-cells the transfer
+//! function makes transparent; front-to-back compositing stops at the
+//! termination threshold.
+
+use crate::macrocell::MacroCells;
+use crate::transfer::Lut;
+use crate::uniforms::{
+    FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_MAP_NEAREST, FLAG_SHADING, RayUniforms,
+};
+use rayon::prelude::*;
+use voxflex_core::glam::Vec3;
+use voxflex_core::opacity_map::{OPACITY_ONE, OpacityMap};
+use voxflex_core::render::RenderStats;
+
+/// Tile edge, pixels.
+pub const TILE: u32 = 16;
+
+/// Largest ray parameter (mm): "no far limit".
+const T_FAR: f32 = 3.0e38;
+
+/// What the CPU path renders: the uniforms and borrowed per-version data.
+pub struct Scene<'a> {
+    /// The frame's constants.
+    pub u: &'a RayUniforms,
+    /// The volume as f32, x fastest.
+    pub values: &'a [f32],
+    /// The transfer function table.
+    pub lut: &'a Lut,
+    /// The macro-cells (min/max).
+    pub cells: &'a MacroCells,
+    /// Per-cell emptiness under `lut` ([`MacroCells::empty_flags`]).
+    pub empty: &'a [u8],
+    /// The combined opacity map, if any.
+    pub map: Option<&'a OpacityMap>,
+}
+
+/// One ray's result: linear premultiplied RGBA (background included).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RayResult {
+    /// Linear, premultiplied RGBA.
+    pub rgba: [f32; 4],
+    /// Volume samples taken.
+    pub samples: u32,
+    /// Stopped by early ray termination.
+    pub terminated: bool,
+}
+
+/// Where a sample's trilinear footprint sits.
+#[derive(Clone, Copy)]
+struct Footprint {
+    /// Lower corner voxel.
+    i: [usize; 3],
+    /// Fractions in [0, 1].
+    f: Vec3,
+    /// Linear index of the lower corner.
+    base: usize,
+}
+
+/// Precomputed integer constants of a [`Scene`].
+struct Kernel<'a> {
+    s: &'a Scene<'a>,
+    dims: [usize; 3],
+    /// Largest lower-corner index per axis (`max(n, 2) − 2`).
+    max0: [usize; 3],
+    /// Offset to the upper corner per axis (0 on a 1-voxel axis).
+    off: [usize; 3],
+    /// Voxel-index upper bound `n − 1` per axis.
+    upper: Vec3,
+    cell: f32,
+    cell_counts: [usize; 3],
+    flags: u32,
+    dt: f32,
+}
+
+#[inline(always)]
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    a + t * (b - a)
+}
+
+impl<'a> Kernel<'a> {
+    fn new(s: &'a Scene<'a>) -> Self {
+        let u = s.u;
+        let dims = [u.dims[0] as usize, u.dims[1] as usize, u.dims[2] as usize];
+        let strides = [1, dims[0], dims[0] * dims[1]];
+        Self {
+            s,
+            dims,
+            max0: dims.map(|n| n.max(2) - 2),
+            off: std::array::from_fn(|a| if dims[a] > 1 { strides[a] } else { 0 }),
+            upper: Vec3::new(
+                dims[0].max(1) as f32 - 1.0,
+                dims[1].max(1) as f32 - 1.0,
+                dims[2].max(1) as f32 - 1.0,
+            ),
+            cell: u.step[3],
+            cell_counts: [
+                u.cells[0] as usize,
+                u.cells[1] as usize,
+                u.cells[2] as usize,
+            ],
+            flags: u.flags(),
+            dt: u.step[0],
+        }
+    }
+
+    /// The primary ray of pixel `(px, py)`: origin (mm) and unit direction.
+    #[inline]
+    fn ray(&self, px: u32, py: u32) -> (Vec3, Vec3) {
+        let u = self.s.u;
+        let nx = 2.0 * (px as f32 + 0.5) / u.image[0] as f32 - 1.0;
+        let ny = 1.0 - 2.0 * (py as f32 + 0.5) / u.image[1] as f32;
+        let eye = Vec3::from_slice(&u.eye[..3]);
+        let right = Vec3::from_slice(&u.right[..3]);
+        let up = Vec3::from_slice(&u.up[..3]);
+        let fwd = Vec3::from_slice(&u.forward[..3]);
+        if u.image[2] == 0 {
+            (eye + right * nx + up * ny, fwd)
+        } else {
+            (eye, (fwd + right * nx + up * ny).normalize())
+        }
+    }
+
+    /// The part `[t0, t1]` of the ray inside the box and every clip plane
+    /// (`t0 ≥ t1` when none).
+    #[inline]
+    fn interval(&self, o: Vec3, d: Vec3) -> (f32, f32) {
+        let u = self.s.u;
+        let (mut t0, mut t1) = (0.0f32, T_FAR);
+        for a in 0..3 {
+            let (lo, hi) = (u.box_min[a], u.box_max[a]);
+            if d[a].abs() < 1e-12 {
+                if o[a] < lo || o[a] > hi {
+                    return (1.0, 0.0);
+                }
+            } else {
+                let inv = 1.0 / d[a];
+                let ta = (lo - o[a]) * inv;
+                let tb = (hi - o[a]) * inv;
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        for pl in &u.planes[..u.counts[0] as usize] {
+            let n = Vec3::new(pl[0], pl[1], pl[2]);
+            let s = n.dot(o) + pl[3];
+            let nd = n.dot(d);
+            if nd.abs() < 1e-12 {
+                if s < 0.0 {
+                    return (1.0, 0.0);
+                }
+            } else {
+                let th = -s / nd;
+                if nd > 0.0 {
+                    t0 = t0.max(th);
+                } else {
+                    t1 = t1.min(th);
+                }
+            }
+        }
+        (t0, t1)
+    }
+
+    #[inline(always)]
+    fn footprint(&self, p: Vec3) -> Footprint {
+        let p = p.clamp(Vec3::ZERO, self.upper);
+        let i = [
+            (p.x as usize).min(self.max0[0]),
+            (p.y as usize).min(self.max0[1]),
+            (p.z as usize).min(self.max0[2]),
+        ];
+        Footprint {
+            i,
+            f: p - Vec3::new(i[0] as f32, i[1] as f32, i[2] as f32),
+            base: i[0] + self.dims[0] * (i[1] + self.dims[1] * i[2]),
+        }
+    }
+
+    /// Trilinear value at a footprint.
+    #[inline(always)]
+    fn value(&self, fp: &Footprint) -> f32 {
+        let [ox, oy, oz] = self.off;
+        let b = fp.base;
+        let v = &self.s.values[b..=b + ox + oy + oz];
+        let x00 = lerp(v[0], v[ox], fp.f.x);
+        let x10 = lerp(v[oy], v[ox + oy], fp.f.x);
+        let x01 = lerp(v[oz], v[ox + oz], fp.f.x);
+        let x11 = lerp(v[oy + oz], v[ox + oy + oz], fp.f.x);
+        lerp(lerp(x00, x10, fp.f.y), lerp(x01, x11, fp.f.y), fp.f.z)
+    }
+
+    /// Central difference along `axis` of the trilinear field at the
+    /// footprint (`f(p + e) − f(p − e)`, voxel units, clamped at the edges).
+    #[inline(always)]
+    fn diff(&self, fp: &Footprint, axis: usize) -> f32 {
+        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+        let strides = [1, self.dims[0], self.dims[0] * self.dims[1]];
+        let n = self.dims[axis];
+        let i0 = fp.i[axis];
+        let sa = strides[axis];
+        // Indices along `axis`: i0 − 1, i0, i0 + 1, i0 + 2 (clamped).
+        let im = i0.saturating_sub(1);
+        let i1 = (i0 + 1).min(n - 1);
+        let i2 = (i0 + 2).min(n - 1);
+        let fa = fp.f[axis];
+        let (fb, fc) = (fp.f[b], fp.f[c]);
+        let row0 = fp.base - i0 * sa;
+        let mut acc = [0f32; 4];
+        let ob = [0, self.off[b]];
+        let oc = [0, self.off[c]];
+        let v = self.s.values;
+        for (slot, (db, dc)) in acc
+            .iter_mut()
+            .zip([(0, 0), (1, 0), (0, 1), (1, 1)])
+        {
+            let r = row0 + ob[db] + oc[dc];
+            *slot = (1.0 - fa) * (v[r + i1 * sa] - v[r + im * sa]) + fa * (v[r + i2 * sa] - v[r + i0 * sa]);
+        }
+        lerp(lerp(acc[0], acc[1], fb), lerp(acc[2], acc[3], fb), fc)
+    }
+
+    /// Gradient (value units per mm) at a footprint.
+    #[inline(always)]
+    fn gradient(&self, fp: &Footprint) -> Vec3 {
+        let g = self.s.u.grad_scale;
+        Vec3::new(
+            self.diff(fp, 0) * g[0],
+            self.diff(fp, 1) * g[1],
+            self.diff(fp, 2) * g[2],
+        )
+    }
+
+    /// Combined opacity-map value of voxel `(i, j, k)`.
+    #[inline(always)]
+    fn map_at(m: &OpacityMap, i: usize, j: usize, k: usize) -> f32 {
+        let x = i.wrapping_sub(m.origin[0]);
+        let y = j.wrapping_sub(m.origin[1]);
+        let z = k.wrapping_sub(m.origin[2]);
+        let q = if x < m.dims[0] && y < m.dims[1] && z < m.dims[2] {
+            m.values[x + m.dims[0] * (y + m.dims[1] * z)]
+        } else {
+            m.outside
+        };
+        q as f32 / OPACITY_ONE
+    }
+
+    /// Opacity-map factor `o` at a sample.
+    #[inline]
+    fn map_factor(&self, m: &OpacityMap, fp: &Footprint, p: Vec3) -> f32 {
+        if self.flags & FLAG_MAP_NEAREST != 0 {
+            let q = (p + Vec3::splat(0.5)).floor().clamp(Vec3::ZERO, self.upper);
+            return Self::map_at(m, q.x as usize, q.y as usize, q.z as usize);
+        }
+        let [i0, j0, k0] = fp.i;
+        let i1 = (i0 + 1).min(self.dims[0] - 1);
+        let j1 = (j0 + 1).min(self.dims[1] - 1);
+        let k1 = (k0 + 1).min(self.dims[2] - 1);
+        let f = fp.f;
+        let x00 = lerp(Self::map_at(m, i0, j0, k0), Self::map_at(m, i1, j0, k0), f.x);
+        let x10 = lerp(Self::map_at(m, i0, j1, k0), Self::map_at(m, i1, j1, k0), f.x);
+        let x01 = lerp(Self::map_at(m, i0, j0, k1), Self::map_at(m, i1, j0, k1), f.x);
+        let x11 = lerp(Self::map_at(m, i0, j1, k1), Self::map_at(m, i1, j1, k1), f.x);
+        lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z)
+    }
+
+    /// Linear index of the macro-cell holding voxel position `p`.
+    #[inline]
+    fn cell_of(&self, p: Vec3) -> ([usize; 3], usize) {
+        let p = p.clamp(Vec3::ZERO, self.upper);
+        let c = [
+            ((p.x / self.cell) as usize).min(self.cell_counts[0] - 1),
+            ((p.y / self.cell) as usize).min(self.cell_counts[1] - 1),
+            ((p.z / self.cell) as usize).min(self.cell_counts[2] - 1),
+        ];
+        let l = c[0] + self.cell_counts[0] * (c[1] + self.cell_counts[1] * c[2]);
+        (c, l)
+    }
+
+    /// Ray parameter (mm) where the ray `oi + t·di` (voxel space) leaves cell `c`.
+    #[inline]
+    fn cell_exit(&self, c: [usize; 3], oi: Vec3, di: Vec3) -> f32 {
+        let mut t = T_FAR;
+        for a in 0..3 {
+            if di[a] > 0.0 {
+                t = t.min(((c[a] + 1) as f32 * self.cell - oi[a]) / di[a]);
+            } else if di[a] < 0.0 {
+                t = t.min((c[a] as f32 * self.cell - oi[a]) / di[a]);
+            }
+        }
+        t
+    }
+
+    /// Casts the ray of pixel `(px, py)`.
+    fn cast(&self, px: u32, py: u32) -> RayResult {
+        let u = self.s.u;
+        let (o, d) = self.ray(px, py);
+        let (t0, t1) = self.interval(o, d);
+        let mut out = if t0 < t1 {
+            if u.image[3] == 0 {
+                self.composite(o, d, t0, t1)
+            } else {
+                self.mip(o, d, t0, t1)
+            }
+        } else {
+            RayResult::default()
+        };
+        if self.flags & FLAG_BACKGROUND != 0 {
+            let k = 1.0 - out.rgba[3];
+            for (c, b) in out.rgba.iter_mut().zip(u.background) {
+                *c += k * b;
+            }
+        }
+        out
+    }
+
+    /// Sample schedule of `[t0, t1]`: full steps and whether a last partial step follows.
+    #[inline]
+    fn schedule(&self, t0: f32, t1: f32) -> (u32, f32, u32) {
+        let span = t1 - t0;
+        let n_full = (span / self.dt).floor() as u32;
+        let rem = span - n_full as f32 * self.dt;
+        let n_total = n_full + (rem > 1e-4 * self.dt) as u32;
+        (n_full, rem, n_total)
+    }
+
+    /// Index of the first sample at or past ray parameter `t_exit`.
+    #[inline]
+    fn next_sample(&self, k: u32, t0: f32, t_exit: f32, n_total: u32) -> u32 {
+        let next = ((t_exit - t0) / self.dt - 0.5).ceil().clamp(0.0, n_total as f32) as u32;
+        next.max(k + 1)
+    }
+
+    fn composite(&self, o: Vec3, d: Vec3, t0: f32, t1: f32) -> RayResult {
+        let u = self.s.u;
+        let lut = self.s.lut;
+        let origin = Vec3::from_slice(&u.origin[..3]);
+        let inv_sp = Vec3::from_slice(&u.inv_spacing[..3]);
+        let oi = (o - origin) * inv_sp;
+        let di = d * inv_sp;
+        let (n_full, rem, n_total) = self.schedule(t0, t1);
+        let ess = self.flags & FLAG_ESS != 0;
+        let et = self.flags & FLAG_EARLY_TERMINATION != 0;
+        let shade = self.flags & FLAG_SHADING != 0;
+        let threshold = u.step[1];
+        let [ka, kd, ks, shininess] = u.shading;
+        let map = self.s.map;
+        let (mut c_acc, mut a_acc) = (Vec3::ZERO, 0.0f32);
+        let mut samples = 0u32;
+        let mut terminated = false;
+        let mut cell_exit = -1.0f32;
+        let mut k = 0u32;
+        while k < n_total {
+            let (t, len) = if k < n_full {
+                (t0 + (k as f32 + 0.5) * self.dt, self.dt)
+            } else {
+                (t0 + n_full as f32 * self.dt + 0.5 * rem, rem)
+            };
+            let p = oi + di * t;
+            if ess && t >= cell_exit {
+                let (c, l) = self.cell_of(p);
+                let exit = self.cell_exit(c, oi, di);
+                if self.s.empty[l] != 0 {
+                    k = self.next_sample(k, t0, exit, n_total);
+                    cell_exit = -1.0;
+                    continue;
+                }
+                cell_exit = exit;
+            }
+            k += 1;
+            let fp = self.footprint(p);
+            let v = self.value(&fp);
+            samples += 1;
+            let [r, g, b, kappa] = lut.lookup(v);
+            if kappa <= 0.0 {
+                continue;
+            }
+            let mut alpha = 1.0 - (-kappa * len).exp();
+            if let Some(m) = map {
+                alpha *= self.map_factor(m, &fp, p);
+            }
+            if alpha <= 0.0 {
+                continue;
+            }
+            let mut col = Vec3::new(r, g, b);
+            if shade {
+                let grad = self.gradient(&fp);
+                let len2 = grad.length_squared();
+                let ndl = if len2 > 1e-20 {
+                    (grad.dot(d) / len2.sqrt()).abs()
+                } else {
+                    1.0
+                };
+                let spec = if ndl > 0.0 { ndl.powf(shininess) } else { 0.0 };
+                col = col * (ka + kd * ndl) + Vec3::splat(ks * spec);
+            }
+            let w = (1.0 - a_acc) * alpha;
+            c_acc += col * w;
+            a_acc += w;
+            if et && a_acc >= threshold {
+                terminated = true;
+                break;
+            }
+        }
+        RayResult {
+            rgba: [c_acc.x, c_acc.y, c_acc.z, a_acc],
+            samples,
+            terminated,
+        }
+    }
+
+    fn mip(&self, o: Vec3, d: Vec3, t0: f32, t1: f32) -> RayResult {
+        let u = self.s.u;
+        let origin = Vec3::from_slice(&u.origin[..3]);
+        let inv_sp = Vec3::from_slice(&u.inv_spacing[..3]);
+        let oi = (o - origin) * inv_sp;
+        let di = d * inv_sp;
+        let (n_full, rem, n_total) = self.schedule(t0, t1);
+        let ess = self.flags & FLAG_ESS != 0;
+        let mut vmax = f32::MIN;
+        let mut pmax = Vec3::ZERO;
+        let mut samples = 0u32;
+        let mut cell_exit = -1.0f32;
+        let mut k = 0u32;
+        while k < n_total {
+            let t = if k < n_full {
+                t0 + (k as f32 + 0.5) * self.dt
+            } else {
+                t0 + n_full as f32 * self.dt + 0.5 * rem
+            };
+            let p = oi + di * t;
+            if ess && t >= cell_exit {
+                let (c, l) = self.cell_of(p);
+                let exit = self.cell_exit(c, oi, di);
+                if samples > 0 && self.s.cells.max[l] <= vmax {
+                    k = self.next_sample(k, t0, exit, n_total);
+                    cell_exit = -1.0;
+                    continue;
+                }
+                cell_exit = exit;
+            }
+            k += 1;
+            let v = self.value(&self.footprint(p));
+            samples += 1;
+            if v > vmax {
+                vmax = v;
+                pmax = p;
+            }
+        }
+        if samples == 0 {
+            return RayResult::default();
+        }
+        let [r, g, b, kappa] = self.s.lut.lookup(vmax);
+        let mut alpha = 1.0 - (-kappa * u.step[2]).exp();
+        if let Some(m) = self.s.map {
+            alpha *= self.map_factor(m, &self.footprint(pmax), pmax);
+        }
+        RayResult {
+            rgba: [r * alpha, g * alpha, b * alpha, alpha],
+            samples,
+            terminated: false,
+        }
+    }
+}
+
+/// Renders the whole image: linear premultiplied RGBA per pixel (row-major
+/// from the top-left), background composited, and the statistics.
+pub fn render(scene: &Scene<'_>) -> (Vec<[f32; 4]>, RenderStats) {
+    let k = Kernel::new(scene);
+    let (w, h) = (scene.u.image[0], scene.u.image[1]);
+    let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
+    let tiles: Vec<(Vec<[f32; 4]>, RenderStats)> = (0..tx * ty)
+        .into_par_iter()
+        .map(|t| {
+            let (x0, y0) = ((t % tx) * TILE, (t / tx) * TILE);
+            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+            let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+            let mut stats = RenderStats::default();
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let r = k.cast(x, y);
+                    stats.rays += 1;
+                    stats.samples += r.samples as u64;
+                    stats.terminated_early += r.terminated as u64;
+                    px.push(r.rgba);
+                }
+            }
+            (px, stats)
+        })
+        .collect();
+    let mut image = vec![[0f32; 4]; w as usize * h as usize];
+    let mut stats = RenderStats::default();
+    for (t, (px, s)) in tiles.into_iter().enumerate() {
+        let t = t as u32;
+        let (x0, y0) = ((t % tx) * TILE, (t / tx) * TILE);
+        let tw = ((x0 + TILE).min(w) - x0) as usize;
+        for (r, row) in px.chunks(tw).enumerate() {
+            let start = (y0 as usize + r) * w as usize + x0 as usize;
+            image[start..start + tw].copy_from_slice(row);
+        }
+        stats.rays += s.rays;
+        stats.samples += s.samples;
+        stats.terminated_early += s.terminated_early;
+    }
+    (image, stats)
+}

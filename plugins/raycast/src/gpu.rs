@@ -1,0 +1,444 @@
+//! The WGSL path: buffers on the host's GPU through [`GpuService`] and the
+//! two kernels `shaders/raycast/cells.wgsl` (macro-cell min/max over a box of
+//! cells) and `shaders/raycast/raycast.wgsl` (one invocation per pixel).
+//!
+//! Buffers (32-bit scalars only, see DESIGN.md "Backends"):
+//! - the volume, f32 per voxel: the caller's own buffer for
+//!   `RenderVolume::Gpu` (bound as is, no copy), else ours, uploaded once per
+//!   version and only over the z-slab of planes the dirty region touches;
+//! - `lut`: [`LUT_SIZE`] `vec4<f32>` (linear RGB, κ);
+//! - `accel`: the TF's non-zero prefix counts, then cell minima and maxima;
+//! - `maps`: the combined opacity map, u16 packed two per u32;
+//! - the output, RGBA8 packed per u32; `stats`: three u32 counters.
+//!
+//! Every binding must fit `max_storage_buffer_binding_size` (128 MiB on
+//! lavapipe, i.e. 32 Mi voxels of f32); larger volumes are refused with an
+//! error that says to render on the CPU.
+
+use crate::macrocell::{IndexBox, MacroCells};
+use crate::transfer::{LUT_SIZE, Lut};
+use crate::uniforms::{ACCEL_CELLS_OFFSET, RayUniforms};
+use std::sync::Arc;
+use voxflex_core::error::ModelError;
+use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt};
+use voxflex_core::opacity_map::OpacityMap;
+use voxflex_core::render::RenderStats;
+use voxflex_core::volume::{Sample, VolumeView};
+use voxflex_core::with_voxels;
+
+/// The WGSL of the ray-casting kernel.
+pub const RAYCAST_WGSL: &str = include_str!("../../../shaders/raycast/raycast.wgsl");
+/// The WGSL of the macro-cell kernel.
+pub const CELLS_WGSL: &str = include_str!("../../../shaders/raycast/cells.wgsl");
+
+/// Uniforms of `cells.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct CellUniforms {
+    dims: [u32; 4],
+    counts: [u32; 4],
+    lo: [u32; 4],
+    size: [u32; 4],
+}
+
+/// Where the GPU volume lives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum VolumeBuffer {
+    /// The caller's buffer (`RenderVolume::Gpu`), bound directly.
+    External(BufferId),
+    /// Ours, uploaded from a CPU volume.
+    Owned(BufferId),
+}
+
+/// GPU state of one renderer.
+pub struct GpuRenderer {
+    gpu: Arc<dyn GpuService>,
+    uniforms: BufferId,
+    cell_uniforms: BufferId,
+    stats: BufferId,
+    lut: BufferId,
+    volume: Option<VolumeBuffer>,
+    /// Voxels of the current volume.
+    voxels: usize,
+    /// The accel buffer and its cell count.
+    accel: Option<(BufferId, usize)>,
+    /// The prefix currently written into `accel` (rewritten when either changes).
+    accel_prefix: Option<Vec<u32>>,
+    maps: Option<BufferId>,
+    output: Option<(BufferId, u64)>,
+}
+
+fn too_big(what: &str, bytes: u64, limit: u64) -> ModelError {
+    ModelError(format!(
+        "{what} needs {:.1} MiB in one GPU binding, above this GPU's max_storage_buffer_binding_size \
+         of {:.1} MiB; render on the CPU (backend = \"cpu\") or use a smaller volume/image",
+        bytes as f64 / 1048576.0,
+        limit as f64 / 1048576.0
+    ))
+}
+
+impl GpuRenderer {
+    /// Creates the fixed buffers.
+    pub fn new(gpu: Arc<dyn GpuService>) -> Result<Self, ModelError> {
+        let uniforms =
+            gpu.create_buffer(std::mem::size_of::<RayUniforms>() as u64, "raycast uniforms")?;
+        let cell_uniforms = gpu.create_buffer(
+            std::mem::size_of::<CellUniforms>() as u64,
+            "raycast cell uniforms",
+        )?;
+        let stats = gpu.create_buffer(16, "raycast stats")?;
+        let lut = gpu.create_buffer((LUT_SIZE * 16) as u64, "raycast lut")?;
+        Ok(Self {
+            gpu,
+            uniforms,
+            cell_uniforms,
+            stats,
+            lut,
+            volume: None,
+            voxels: 0,
+            accel: None,
+            accel_prefix: None,
+            maps: None,
+            output: None,
+        })
+    }
+
+    fn max_binding(&self) -> u64 {
+        self.gpu.limits().max_storage_buffer_binding_size
+    }
+
+    fn volume_id(&self) -> Result<BufferId, ModelError> {
+        match self.volume {
+            Some(VolumeBuffer::External(id) | VolumeBuffer::Owned(id)) => Ok(id),
+            None => Err(ModelError::new("render before set_volume: no volume on the GPU")),
+        }
+    }
+
+    fn drop_owned_volume(&mut self) {
+        if let Some(VolumeBuffer::Owned(id)) = self.volume.take() {
+            self.gpu.destroy_buffer(id);
+        }
+    }
+
+    /// Binds the caller's f32 buffer of `voxels` values as the volume.
+    pub fn set_external_volume(&mut self, id: BufferId, voxels: usize) -> Result<(), ModelError> {
+        let need = voxels as u64 * 4;
+        let have = self.gpu.buffer_size(id)?;
+        if have < need {
+            return Err(ModelError(format!(
+                "RenderVolume::Gpu buffer {} holds {have} bytes but the grid needs {need} (f32 per voxel)",
+                id.0
+            )));
+        }
+        if need > self.max_binding() {
+            return Err(too_big("the volume", need, self.max_binding()));
+        }
+        if self.volume != Some(VolumeBuffer::External(id)) {
+            self.drop_owned_volume();
+        }
+        self.volume = Some(VolumeBuffer::External(id));
+        self.voxels = voxels;
+        Ok(())
+    }
+
+    /// Uploads the z-slab of planes `region` touches of a CPU volume (the
+    /// whole volume when the buffer is new or resized).
+    pub fn upload_volume(
+        &mut self,
+        view: &VolumeView<'_>,
+        region: IndexBox,
+    ) -> Result<(), ModelError> {
+        let voxels = view.grid.len();
+        let need = voxels as u64 * 4;
+        if need > self.max_binding() {
+            return Err(too_big("the volume", need, self.max_binding()));
+        }
+        let mut region = region;
+        let fresh = !matches!(self.volume, Some(VolumeBuffer::Owned(_))) || self.voxels != voxels;
+        if fresh {
+            self.drop_owned_volume();
+            let id = self.gpu.create_buffer(need.max(4), "raycast volume")?;
+            self.volume = Some(VolumeBuffer::Owned(id));
+            self.voxels = voxels;
+            region = IndexBox::all(view.grid.dims);
+        }
+        let id = self.volume_id()?;
+        let plane = view.grid.dims[0] * view.grid.dims[1];
+        let (k0, k1) = (region.lo[2], region.hi[2]);
+        // Convert in chunks of planes to bound the staging memory (≤ 16 MiB).
+        let per_chunk = ((4usize << 20) / plane.max(1)).max(1);
+        let mut k = k0;
+        while k <= k1 {
+            let kend = (k + per_chunk - 1).min(k1);
+            let (a, b) = (k * plane, (kend + 1) * plane);
+            let staging: Vec<f32> = with_voxels!(view.data, |s| s[a..b]
+                .iter()
+                .map(|v| {
+                    let v = v.to_f32();
+                    if v.is_nan() { 0.0 } else { v }
+                })
+                .collect());
+            self.gpu
+                .write_buffer(id, a as u64 * 4, bytemuck::cast_slice(&staging))?;
+            k = kend + 1;
+        }
+        Ok(())
+    }
+
+    /// Makes sure the accel buffer holds `cells` cells (new buffers start
+    /// unbuilt; the caller rebuilds every cell then).
+    fn ensure_accel(&mut self, cells: usize) -> Result<(BufferId, bool), ModelError> {
+        if let Some((id, n)) = self.accel
+            && n == cells
+        {
+            return Ok((id, false));
+        }
+        if let Some((id, _)) = self.accel.take() {
+            self.gpu.destroy_buffer(id);
+        }
+        let bytes = ((ACCEL_CELLS_OFFSET + 2 * cells) * 4) as u64;
+        if bytes > self.max_binding() {
+            return Err(too_big("the macro-cell grid", bytes, self.max_binding()));
+        }
+        let id = self.gpu.create_buffer(bytes, "raycast accel")?;
+        self.accel = Some((id, cells));
+        self.accel_prefix = None;
+        Ok((id, true))
+    }
+
+    /// Recomputes the min/max of the cells in `cells` of a grid of `dims`
+    /// voxels with cell edge `cell`. Returns true when the whole grid was
+    /// rebuilt (a new accel buffer) instead.
+    pub fn rebuild_cells(
+        &mut self,
+        dims: [usize; 3],
+        cell: usize,
+        cells: IndexBox,
+    ) -> Result<bool, ModelError> {
+        let counts = MacroCells::counts_for(dims, cell);
+        let total: usize = counts.iter().product();
+        let (accel, fresh) = self.ensure_accel(total)?;
+        let cells = if fresh { IndexBox::all(counts) } else { cells };
+        let size = [
+            cells.hi[0] + 1 - cells.lo[0],
+            cells.hi[1] + 1 - cells.lo[1],
+            cells.hi[2] + 1 - cells.lo[2],
+        ];
+        let n = size[0] * size[1] * size[2];
+        let u = CellUniforms {
+            dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, cell as u32],
+            counts: [
+                counts[0] as u32,
+                counts[1] as u32,
+                counts[2] as u32,
+                ACCEL_CELLS_OFFSET as u32,
+            ],
+            lo: [
+                cells.lo[0] as u32,
+                cells.lo[1] as u32,
+                cells.lo[2] as u32,
+                total as u32,
+            ],
+            size: [size[0] as u32, size[1] as u32, size[2] as u32, n as u32],
+        };
+        self.gpu
+            .write_buffer(self.cell_uniforms, 0, bytemuck::bytes_of(&u))?;
+        let pipeline = self.gpu.compile(CELLS_WGSL, "main")?;
+        let volume = self.volume_id()?;
+        self.gpu.dispatch(
+            pipeline,
+            &[
+                BufferBinding::whole(0, self.cell_uniforms),
+                BufferBinding {
+                    binding: 1,
+                    buffer: volume,
+                    offset: 0,
+                    size: self.voxels as u64 * 4,
+                },
+                BufferBinding::whole(2, accel),
+            ],
+            self.gpu.workgroups_for(n as u64, 64)?,
+        )?;
+        Ok(fresh)
+    }
+
+    /// Reads the macro-cells back (for the value range and for tests).
+    pub fn read_cells(&self, dims: [usize; 3], cell: usize) -> Result<MacroCells, ModelError> {
+        let (id, total) = self
+            .accel
+            .ok_or_else(|| ModelError::new("no macro-cells on the GPU yet"))?;
+        let mut words = vec![0u32; 2 * total];
+        self.gpu.read_buffer(
+            id,
+            (ACCEL_CELLS_OFFSET * 4) as u64,
+            bytemuck::cast_slice_mut(&mut words),
+        )?;
+        let mut m = MacroCells::new(dims, cell);
+        if m.len() != total {
+            return Err(ModelError::new("macro-cell grid on the GPU has a stale size"));
+        }
+        for l in 0..total {
+            m.min[l] = f32::from_bits(words[l]);
+            m.max[l] = f32::from_bits(words[total + l]);
+        }
+        Ok(m)
+    }
+
+    /// Uploads the transfer-function table and its prefix counts.
+    pub fn set_lut(&mut self, lut: &Lut) -> Result<(), ModelError> {
+        self.gpu
+            .write_buffer(self.lut, 0, bytemuck::cast_slice(&lut.entries))?;
+        self.write_prefix(&lut.nonzero_prefix)
+    }
+
+    fn write_prefix(&mut self, prefix: &[u32]) -> Result<(), ModelError> {
+        if self.accel_prefix.as_deref() == Some(prefix) {
+            return Ok(());
+        }
+        if let Some((id, _)) = self.accel {
+            self.gpu.write_buffer(id, 0, bytemuck::cast_slice(prefix))?;
+            self.accel_prefix = Some(prefix.to_vec());
+        }
+        Ok(())
+    }
+
+    /// Uploads the combined opacity map (or a placeholder when there is none).
+    pub fn set_map(&mut self, map: Option<&OpacityMap>) -> Result<(), ModelError> {
+        if let Some(id) = self.maps.take() {
+            self.gpu.destroy_buffer(id);
+        }
+        let words: Vec<u32> = match map {
+            Some(m) => m
+                .values
+                .chunks(2)
+                .map(|p| p[0] as u32 | (p.get(1).copied().unwrap_or(0) as u32) << 16)
+                .collect(),
+            None => vec![0],
+        };
+        let bytes = words.len() as u64 * 4;
+        if bytes > self.max_binding() {
+            return Err(too_big("the opacity map", bytes, self.max_binding()));
+        }
+        let words = if words.is_empty() { vec![0] } else { words };
+        self.maps = Some(self.gpu.upload(&words, "raycast opacity map")?);
+        Ok(())
+    }
+
+    /// Renders one frame into `out` (our buffer when `None`); returns the
+    /// buffer written and the statistics.
+    pub fn render(
+        &mut self,
+        u: &RayUniforms,
+        lut: &Lut,
+        out: Option<BufferId>,
+    ) -> Result<(BufferId, RenderStats), ModelError> {
+        let (w, h) = (u.image[0] as u64, u.image[1] as u64);
+        let bytes = w * h * 4;
+        if bytes > self.max_binding() {
+            return Err(too_big("the image", bytes, self.max_binding()));
+        }
+        let limit = self.gpu.limits().max_compute_workgroups_per_dimension as u64;
+        let groups = [w.div_ceil(8), h.div_ceil(8)];
+        if groups.iter().any(|&g| g > limit) {
+            return Err(ModelError(format!(
+                "a {w}×{h} image needs {groups:?} workgroups of 8×8, above the GPU's {limit} per dimension"
+            )));
+        }
+        let target = match out {
+            Some(id) => {
+                let have = self.gpu.buffer_size(id)?;
+                if have < bytes {
+                    return Err(ModelError(format!(
+                        "ImageTarget::Gpu buffer {} holds {have} bytes but a {w}×{h} image needs {bytes}",
+                        id.0
+                    )));
+                }
+                id
+            }
+            None => match self.output {
+                Some((id, n)) if n == bytes => id,
+                _ => {
+                    if let Some((id, _)) = self.output.take() {
+                        self.gpu.destroy_buffer(id);
+                    }
+                    let id = self.gpu.create_buffer(bytes, "raycast image")?;
+                    self.output = Some((id, bytes));
+                    id
+                }
+            },
+        };
+        let accel = self
+            .accel
+            .map(|a| a.0)
+            .ok_or_else(|| ModelError::new("render before the macro-cells were built"))?;
+        self.write_prefix(&lut.nonzero_prefix)?;
+        if self.maps.is_none() {
+            self.set_map(None)?;
+        }
+        let maps = self.maps.expect("map buffer just made");
+        self.gpu
+            .write_buffer(self.uniforms, 0, bytemuck::bytes_of(u))?;
+        self.gpu.write_buffer(self.stats, 0, &[0u8; 16])?;
+        let pipeline = self.gpu.compile(RAYCAST_WGSL, "main")?;
+        let volume = self.volume_id()?;
+        self.gpu.dispatch(
+            pipeline,
+            &[
+                BufferBinding::whole(0, self.uniforms),
+                BufferBinding {
+                    binding: 1,
+                    buffer: volume,
+                    offset: 0,
+                    size: self.voxels as u64 * 4,
+                },
+                BufferBinding::whole(2, self.lut),
+                BufferBinding::whole(3, accel),
+                BufferBinding::whole(4, maps),
+                BufferBinding {
+                    binding: 5,
+                    buffer: target,
+                    offset: 0,
+                    size: bytes,
+                },
+                BufferBinding::whole(6, self.stats),
+            ],
+            [groups[0] as u32, groups[1] as u32, 1],
+        )?;
+        let mut s = [0u32; 4];
+        self.gpu.download(self.stats, &mut s)?;
+        Ok((
+            target,
+            RenderStats {
+                rays: w * h,
+                samples: s[0] as u64 | (s[1] as u64) << 32,
+                terminated_early: s[2] as u64,
+            },
+        ))
+    }
+
+    /// The service (for read-backs by the caller).
+    pub fn service(&self) -> &Arc<dyn GpuService> {
+        &self.gpu
+    }
+}
+
+impl Drop for GpuRenderer {
+    fn drop(&mut self) {
+        let g = &self.gpu;
+        for id in [self.uniforms, self.cell_uniforms, self.stats, self.lut] {
+            g.destroy_buffer(id);
+        }
+        if let Some(VolumeBuffer::Owned(id)) = self.volume {
+            g.destroy_buffer(id);
+        }
+        for id in self
+            .accel
+            .map(|a| a.0)
+            .into_iter()
+            .chain(self.maps)
+            .chain(self.output.map(|o| o.0))
+        {
+            g.destroy_buffer(id);
+        }
+    }
+}

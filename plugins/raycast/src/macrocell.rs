@@ -1,0 +1,367 @@
+//! Voxel boxes, the CPU's f32 copy of the volume and the min/max
+//! **macro-cell grid** of empty-space skipping.
+//!
+//! Macro-cell `c` (per axis) covers voxel indices `[c·s, (c+1)·s]` for edge
+//! `s` — *including* the shared border voxel `(c+1)·s`, so every trilinear
+//! sample taken inside the cell reads only voxels the cell's `[min, max]`
+//! range covers. A grid of `n` voxels has `max(1, ⌈(n−1)/s⌉)` cells. A cell
+//! is empty for the composite mode when the transfer function has κ = 0 over
+//! its whole range ([`crate::transfer::Lut::range_is_empty`]); the MIP mode
+//! skips cells whose max cannot beat the ray's running maximum.
+
+use crate::transfer::Lut;
+use rayon::prelude::*;
+use voxflex_core::deformation::DirtyRegion;
+use voxflex_core::grid::Grid;
+use voxflex_core::volume::{Sample, VolumeView};
+use voxflex_core::with_voxels;
+
+/// An inclusive box of voxel (or cell) indices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IndexBox {
+    /// First index on each axis.
+    pub lo: [usize; 3],
+    /// Last index on each axis (inclusive).
+    pub hi: [usize; 3],
+}
+
+impl IndexBox {
+    /// Every index of a lattice of `dims` (which must be non-empty).
+    pub fn all(dims: [usize; 3]) -> Self {
+        Self {
+            lo: [0; 3],
+            hi: dims.map(|n| n.saturating_sub(1)),
+        }
+    }
+
+    /// Number of indices in the box.
+    pub fn len(&self) -> usize {
+        (0..3).map(|a| self.hi[a] + 1 - self.lo[a]).product()
+    }
+
+    /// Never true (a box holds at least one index); for clippy's sake.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// The smallest box holding both.
+    pub fn union(&self, o: &IndexBox) -> IndexBox {
+        IndexBox {
+            lo: std::array::from_fn(|a| self.lo[a].min(o.lo[a])),
+            hi: std::array::from_fn(|a| self.hi[a].max(o.hi[a])),
+        }
+    }
+}
+
+/// The voxels of `grid` a dirty world box (mm) may have changed: the box
+/// converted to voxel indices, widened by one voxel for rounding and clamped
+/// to the grid. `None` when nothing changed or the box misses the grid.
+pub fn dirty_voxels(grid: &Grid, dirty: DirtyRegion) -> Option<IndexBox> {
+    if grid.is_empty() {
+        return None;
+    }
+    match dirty {
+        DirtyRegion::None => None,
+        DirtyRegion::All => Some(IndexBox::all(grid.dims)),
+        DirtyRegion::Box { min, max } => {
+            let a = grid.world_to_index(min);
+            let b = grid.world_to_index(max);
+            let (lo, hi) = (a.min(b), a.max(b));
+            if !(lo.is_finite() && hi.is_finite()) {
+                return Some(IndexBox::all(grid.dims));
+            }
+            let mut out = IndexBox::all(grid.dims);
+            for ax in 0..3 {
+                let n = grid.dims[ax] as f64;
+                let l = (lo[ax].floor() - 1.0).max(0.0);
+                let h = (hi[ax].ceil() + 1.0).min(n - 1.0);
+                if l > n - 1.0 || h < 0.0 || l > h {
+                    return None;
+                }
+                out.lo[ax] = l as usize;
+                out.hi[ax] = h as usize;
+            }
+            Some(out)
+        }
+    }
+}
+
+/// Converts the voxels of `region` of `view` to f32 into `out` (the whole
+/// grid, x fastest). NaN voxels read as 0.
+pub fn convert_region(view: &VolumeView<'_>, region: IndexBox, out: &mut [f32]) {
+    fn run<T: Sample>(src: &[T], dims: [usize; 3], region: IndexBox, out: &mut [f32]) {
+        let slab = dims[0] * dims[1];
+        out.par_chunks_mut(slab.max(1))
+            .enumerate()
+            .skip(region.lo[2])
+            .take(region.hi[2] + 1 - region.lo[2])
+            .for_each(|(k, plane)| {
+                for j in region.lo[1]..=region.hi[1] {
+                    let row = j * dims[0];
+                    let base = k * slab + row;
+                    for i in region.lo[0]..=region.hi[0] {
+                        let v = src[base + i].to_f32();
+                        plane[row + i] = if v.is_nan() { 0.0 } else { v };
+                    }
+                }
+            });
+    }
+    let dims = view.grid.dims;
+    with_voxels!(view.data, |s| run(s, dims, region, out));
+}
+
+/// The min/max macro-cell grid of a volume.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MacroCells {
+    /// Cell edge, voxels.
+    pub cell: usize,
+    /// Volume dims, voxels.
+    pub dims: [usize; 3],
+    /// Cells per axis.
+    pub counts: [usize; 3],
+    /// Smallest value of each cell (x fastest).
+    pub min: Vec<f32>,
+    /// Largest value of each cell.
+    pub max: Vec<f32>,
+}
+
+impl MacroCells {
+    /// Cells per axis for a volume of `dims` and cell edge `cell`.
+    pub fn counts_for(dims: [usize; 3], cell: usize) -> [usize; 3] {
+        dims.map(|n| n.saturating_sub(1).div_ceil(cell).max(1))
+    }
+
+    /// An unbuilt grid (every cell `[+∞, −∞]`).
+    pub fn new(dims: [usize; 3], cell: usize) -> Self {
+        let counts = Self::counts_for(dims, cell);
+        let n = counts.iter().product();
+        Self {
+            cell,
+            dims,
+            counts,
+            min: vec![f32::INFINITY; n],
+            max: vec![f32::NEG_INFINITY; n],
+        }
+    }
+
+    /// Total cells.
+    pub fn len(&self) -> usize {
+        self.min.len()
+    }
+
+    /// True when there is no cell.
+    pub fn is_empty(&self) -> bool {
+        self.min.is_empty()
+    }
+
+    /// The cells whose range covers any voxel of `voxels`.
+    pub fn cells_touching(&self, voxels: IndexBox) -> IndexBox {
+        Self::touching(self.dims, self.cell, voxels)
+    }
+
+    /// The cells (edge `cell`, volume of `dims` voxels) whose range covers
+    /// any voxel of `voxels`.
+    pub fn touching(dims: [usize; 3], cell: usize, voxels: IndexBox) -> IndexBox {
+        let counts = Self::counts_for(dims, cell);
+        IndexBox {
+            lo: std::array::from_fn(|a| (voxels.lo[a].saturating_sub(1) / cell).min(counts[a] - 1)),
+            hi: std::array::from_fn(|a| (voxels.hi[a] / cell).min(counts[a] - 1)),
+        }
+    }
+
+    /// Voxel range (inclusive) of cell `c` along axis `a`.
+    #[inline]
+    fn span(&self, a: usize, c: usize) -> (usize, usize) {
+        let lo = c * self.cell;
+        let hi = ((c + 1) * self.cell).min(self.dims[a] - 1);
+        (lo.min(self.dims[a] - 1), hi)
+    }
+
+    /// Recomputes the min/max of the cells in `cells` from `values`
+    /// (`dims` f32, x fastest).
+    pub fn rebuild(&mut self, values: &[f32], cells: IndexBox) {
+        let [cx, cy, _] = self.counts;
+        let layer = cx * cy;
+        let this = &*self;
+        let results: Vec<(usize, Vec<(f32, f32)>)> = (cells.lo[2]..=cells.hi[2])
+            .into_par_iter()
+            .map(|ck| {
+                let mut out = Vec::with_capacity((cells.hi[1] + 1 - cells.lo[1]) * (cells.hi[0] + 1 - cells.lo[0]));
+                let (k0, k1) = this.span(2, ck);
+                for cj in cells.lo[1]..=cells.hi[1] {
+                    let (j0, j1) = this.span(1, cj);
+                    for ci in cells.lo[0]..=cells.hi[0] {
+                        let (i0, i1) = this.span(0, ci);
+                        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                        for k in k0..=k1 {
+                            for j in j0..=j1 {
+                                let row = (k * this.dims[1] + j) * this.dims[0];
+                                for &v in &values[row + i0..=row + i1] {
+                                    lo = lo.min(v);
+                                    hi = hi.max(v);
+                                }
+                            }
+                        }
+                        out.push((lo, hi));
+                    }
+                }
+                (ck, out)
+            })
+            .collect();
+        for (ck, row) in results {
+            let mut it = row.into_iter();
+            for cj in cells.lo[1]..=cells.hi[1] {
+                for ci in cells.lo[0]..=cells.hi[0] {
+                    let (lo, hi) = it.next().expect("one result per cell");
+                    let c = ci + cx * cj + layer * ck;
+                    self.min[c] = lo;
+                    self.max[c] = hi;
+                }
+            }
+        }
+    }
+
+    /// Per-cell emptiness under a transfer function (1 = every sample in the
+    /// cell has κ = 0).
+    pub fn empty_flags(&self, lut: &Lut) -> Vec<u8> {
+        self.min
+            .par_iter()
+            .zip(&self.max)
+            .map(|(&lo, &hi)| lut.range_is_empty(lo, hi) as u8)
+            .collect()
+    }
+
+    /// Smallest and largest value over all cells (`(0, 0)` if unbuilt).
+    pub fn value_range(&self) -> (f32, f32) {
+        let lo = self.min.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = self.max.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxflex_core::glam::DVec3;
+    use voxflex_core::volume::VoxelSlice;
+
+    fn brute(values: &[f32], dims: [usize; 3], cell: usize) -> MacroCells {
+        let mut m = MacroCells::new(dims, cell);
+        let [cx, cy, _] = m.counts;
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let v = values[i + dims[0] * (j + dims[1] * k)];
+                    // Every cell whose inclusive span holds (i, j, k).
+                    let cand = |x: usize, a: usize| {
+                        let mut c = vec![(x / cell).min(m.counts[a] - 1)];
+                        if x.is_multiple_of(cell) && x > 0 {
+                            c.push(x / cell - 1);
+                        }
+                        c
+                    };
+                    for &ck in &cand(k, 2) {
+                        for &cj in &cand(j, 1) {
+                            for &ci in &cand(i, 0) {
+                                let c = ci + cx * (cj + cy * ck);
+                                m.min[c] = m.min[c].min(v);
+                                m.max[c] = m.max[c].max(v);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        m
+    }
+
+    fn field(dims: [usize; 3]) -> Vec<f32> {
+        (0..dims.iter().product::<usize>())
+            .map(|l| ((l * 7919) % 1013) as f32 - 500.0)
+            .collect()
+    }
+
+    #[test]
+    fn full_build_matches_brute_force() {
+        for dims in [[17, 9, 8], [16, 16, 16], [1, 5, 3], [2, 2, 2]] {
+            let v = field(dims);
+            let mut m = MacroCells::new(dims, 4);
+            let all = IndexBox::all(m.counts);
+            m.rebuild(&v, all);
+            assert_eq!(m, brute(&v, dims, 4), "{dims:?}");
+        }
+    }
+
+    #[test]
+    fn dirty_rebuild_equals_full_rebuild() {
+        let dims = [30, 21, 19];
+        let grid = Grid::new(dims, DVec3::new(0.5, 1.0, 2.0), DVec3::new(-3.0, 4.0, 1.0));
+        let mut v = field(dims);
+        let mut m = MacroCells::new(dims, 8);
+        m.rebuild(&v, IndexBox::all(m.counts));
+        // Change a local box of voxels, including a cell-border voxel (i = 8, 16).
+        for k in 5..=9 {
+            for j in 7..=8 {
+                for i in 8..=16 {
+                    v[i + dims[0] * (j + dims[1] * k)] = 5000.0 + i as f32;
+                }
+            }
+        }
+        let lo = grid.index_to_world(DVec3::new(8.0, 7.0, 5.0));
+        let hi = grid.index_to_world(DVec3::new(16.0, 8.0, 9.0));
+        let vox = dirty_voxels(&grid, DirtyRegion::Box { min: lo, max: hi }).unwrap();
+        let cells = m.cells_touching(vox);
+        assert!(cells.len() < m.len());
+        m.rebuild(&v, cells);
+        let mut full = MacroCells::new(dims, 8);
+        full.rebuild(&v, IndexBox::all(full.counts));
+        assert_eq!(m, full);
+        assert_eq!(m, brute(&v, dims, 8));
+    }
+
+    #[test]
+    fn dirty_boxes_convert_to_voxels() {
+        let grid = Grid::new([10, 10, 10], DVec3::ONE, DVec3::ZERO);
+        assert_eq!(dirty_voxels(&grid, DirtyRegion::None), None);
+        assert_eq!(
+            dirty_voxels(&grid, DirtyRegion::All),
+            Some(IndexBox::all([10; 3]))
+        );
+        let b = dirty_voxels(
+            &grid,
+            DirtyRegion::Box {
+                min: DVec3::splat(2.5),
+                max: DVec3::splat(3.5),
+            },
+        )
+        .unwrap();
+        assert_eq!(b.lo, [1; 3]);
+        assert_eq!(b.hi, [5; 3]);
+        let miss = DirtyRegion::Box {
+            min: DVec3::splat(20.0),
+            max: DVec3::splat(30.0),
+        };
+        assert_eq!(dirty_voxels(&grid, miss), None);
+    }
+
+    #[test]
+    fn conversion_covers_the_region_only() {
+        let grid = Grid::new([4, 3, 2], DVec3::ONE, DVec3::ZERO);
+        let data: Vec<i16> = (0..24).map(|x| x as i16 - 5).collect();
+        let view = VolumeView {
+            grid,
+            data: VoxelSlice::I16(&data),
+        };
+        let mut out = vec![-1.0f32; 24];
+        let region = IndexBox {
+            lo: [1, 1, 1],
+            hi: [2, 2, 1],
+        };
+        convert_region(&view, region, &mut out);
+        for l in 0..24 {
+            let [i, j, k] = grid.unlinear(l);
+            let inside = (1..=2).contains(&i) && (1..=2).contains(&j) && k == 1;
+            assert_eq!(out[l], if inside { data[l] as f32 } else { -1.0 });
+        }
+    }
+}

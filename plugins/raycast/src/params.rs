@@ -1,0 +1,470 @@
+//! The renderer's parameters: the TOML of the scene's `[render]` params
+//! table, also accepted (partially) by `Renderer::configure`.
+//!
+//! Every key is optional; defaults in brackets:
+//!
+//! ```toml
+//! mode = "composite"              # "composite" (emission–absorption) | "mip"
+//! sample_distance = 0.5           # ray step, in voxels of the smallest spacing
+//! opacity_unit_distance = 1.0     # mm: TF alpha is the opacity of a slab this thick
+//! early_termination = true        # stop a ray once its opacity reaches the threshold
+//! termination_threshold = 0.998   # 1 − 0.5/255: the rest cannot change an 8-bit pixel
+//! empty_space_skipping = true     # skip macro-cells the TF makes transparent
+//! macro_cell = 8                  # macro-cell edge, voxels (2..=64)
+//! opacity_map_interpolation = "trilinear"   # | "nearest"
+//! background = [0, 0, 0, 1]       # sRGB (+ alpha) composited behind; absent = keep alpha
+//! transfer_function = { preset = "ct-bone", shift = 0.0 }
+//! # or: transfer_function = { points = [[value, r, g, b, a], …], shift = 0.0, normalized = false }
+//! shading = { enabled = true, ambient = 0.1, diffuse = 0.9, specular = 0.2, shininess = 10.0 }
+//! clip_planes = [{ point = [0, 0, 0], normal = [1, 0, 0] }]   # ≤ 6; keeps the side the normal points to
+//! crop_box = { min = [-50, -50, -50], max = [50, 50, 50] }    # world mm
+//! ```
+
+use crate::transfer::{ControlPoint, PRESETS, TransferFunction, ValueUnits};
+use serde::Deserialize;
+use voxflex_core::error::ModelError;
+
+/// Most clip planes at once.
+pub const MAX_CLIP_PLANES: usize = 6;
+
+/// How the samples along a ray become a pixel.
+#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum RenderMode {
+    /// Emission–absorption, front to back (the default).
+    #[default]
+    Composite,
+    /// Maximum intensity projection, then the transfer function.
+    Mip,
+}
+
+/// How opacity maps are read between voxel centres.
+#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MapInterpolation {
+    /// Trilinear interpolation of the voxel opacities (the default).
+    #[default]
+    Trilinear,
+    /// The nearest voxel's opacity.
+    Nearest,
+}
+
+/// Blinn–Phong shading with a headlight, on the gradient of the volume.
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Shading {
+    /// Shade composite samples (MIP is never shaded).
+    pub enabled: bool,
+    /// Ambient coefficient.
+    pub ambient: f64,
+    /// Diffuse coefficient.
+    pub diffuse: f64,
+    /// Specular coefficient (white highlight).
+    pub specular: f64,
+    /// Specular exponent.
+    pub shininess: f64,
+}
+
+impl Default for Shading {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            ambient: 0.1,
+            diffuse: 0.9,
+            specular: 0.2,
+            shininess: 10.0,
+        }
+    }
+}
+
+/// A half-space kept by clipping: points `x` with `normal · (x − point) ≥ 0`.
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ClipPlane {
+    /// A point on the plane, world mm.
+    pub point: [f64; 3],
+    /// Normal pointing into the kept side (any non-zero length).
+    pub normal: [f64; 3],
+}
+
+/// An axis-aligned box in world mm; only what is inside is drawn.
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CropBox {
+    /// Lower corner, world mm.
+    pub min: [f64; 3],
+    /// Upper corner, world mm.
+    pub max: [f64; 3],
+}
+
+/// The `transfer_function` table as written: a preset or points.
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TransferFunctionSpec {
+    /// A built-in preset name (`ct-bone`, `ct-soft-tissue`, `ct-lung`, `mri-t1`).
+    pub preset: Option<String>,
+    /// Control points `[value, r, g, b, a]` (sRGB colour, alpha per
+    /// `opacity_unit_distance`), values non-decreasing.
+    pub points: Option<Vec<Vec<f64>>>,
+    /// Offset added to every point's value, in the points' units.
+    #[serde(default)]
+    pub shift: f64,
+    /// `points` values are fractions of the volume's value range (0 = min,
+    /// 1 = max) instead of data units. Presets carry their own units.
+    pub normalized: Option<bool>,
+}
+
+/// Parameters of the `raycast` renderer (see the module docs for the TOML).
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RaycastParams {
+    /// Composite or MIP.
+    pub mode: RenderMode,
+    /// Ray step in voxels of the smallest spacing (> 0).
+    pub sample_distance: f64,
+    /// Thickness (mm) of the slab whose opacity the TF alpha gives (> 0).
+    pub opacity_unit_distance: f64,
+    /// Stop rays whose accumulated opacity reaches `termination_threshold`.
+    pub early_termination: bool,
+    /// Opacity at which a ray stops, in (0, 1].
+    pub termination_threshold: f64,
+    /// Skip macro-cells whose value range the TF maps to zero opacity.
+    pub empty_space_skipping: bool,
+    /// Edge of a macro-cell, voxels (2..=64).
+    pub macro_cell: u32,
+    /// Opacity-map interpolation.
+    pub opacity_map_interpolation: MapInterpolation,
+    /// Background sRGB colour (3 values, alpha 1) or sRGB + alpha (4 values)
+    /// composited behind the volume; `None` keeps the image's alpha.
+    pub background: Option<Vec<f64>>,
+    /// Transfer function (default: the `ct-bone` preset).
+    pub transfer_function: TransferFunctionSpec,
+    /// Gradient shading.
+    pub shading: Shading,
+    /// Clip planes (≤ [`MAX_CLIP_PLANES`]).
+    pub clip_planes: Vec<ClipPlane>,
+    /// Crop box, world mm.
+    pub crop_box: Option<CropBox>,
+}
+
+impl Default for RaycastParams {
+    fn default() -> Self {
+        Self {
+            mode: RenderMode::Composite,
+            sample_distance: 0.5,
+            opacity_unit_distance: 1.0,
+            early_termination: true,
+            termination_threshold: 0.998,
+            empty_space_skipping: true,
+            macro_cell: 8,
+            opacity_map_interpolation: MapInterpolation::Trilinear,
+            background: None,
+            transfer_function: TransferFunctionSpec::default(),
+            shading: Shading::default(),
+            clip_planes: Vec::new(),
+            crop_box: None,
+        }
+    }
+}
+
+fn bad<T>(key: &str, why: impl std::fmt::Display) -> Result<T, ModelError> {
+    Err(ModelError(format!("[render] {key}: {why}")))
+}
+
+/// A toml parse error as one line naming the offending line of the text.
+fn toml_error(text: &str, e: &toml::de::Error) -> ModelError {
+    let msg = e.message().trim().replace('\n', " ");
+    match e.span() {
+        Some(span) => {
+            let start = span.start.min(text.len());
+            let line_no = text[..start].matches('\n').count() + 1;
+            let line = text.lines().nth(line_no - 1).unwrap_or("").trim();
+            ModelError(format!("[render] line {line_no} `{line}`: {msg}"))
+        }
+        None => ModelError(format!("[render]: {msg}")),
+    }
+}
+
+fn finite(key: &str, v: f64) -> Result<(), ModelError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        bad(key, format!("must be a finite number (got {v})"))
+    }
+}
+
+impl RaycastParams {
+    /// Parses and validates the TOML text; errors name the key.
+    pub fn from_toml(text: &str) -> Result<Self, ModelError> {
+        let p: RaycastParams = toml::from_str(text).map_err(|e| toml_error(text, &e))?;
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// `self` with the top-level keys present in `text` replaced (nested
+    /// tables such as `shading` are replaced whole). Validates the result.
+    pub fn merged(&self, text: &str) -> Result<Self, ModelError> {
+        // The partial text alone must be valid (every key has a default), which
+        // also gives errors that point at its lines.
+        Self::from_toml(text)?;
+        let update: toml::Table = toml::from_str(text).map_err(|e| toml_error(text, &e))?;
+        let mut base = toml::Table::try_from(self.clone())
+            .map_err(|e| ModelError(format!("[render]: cannot re-encode settings: {e}")))?;
+        for (k, v) in update {
+            base.insert(k, v);
+        }
+        let p: RaycastParams = toml::Value::Table(base)
+            .try_into()
+            .map_err(|e: toml::de::Error| ModelError(format!("[render]: {}", e.message())))?;
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// Checks ranges, finiteness and the transfer function.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        finite("sample_distance", self.sample_distance)?;
+        if self.sample_distance <= 0.0 {
+            return bad("sample_distance", "must be > 0 (voxels)");
+        }
+        finite("opacity_unit_distance", self.opacity_unit_distance)?;
+        if self.opacity_unit_distance <= 0.0 {
+            return bad("opacity_unit_distance", "must be > 0 (mm)");
+        }
+        finite("termination_threshold", self.termination_threshold)?;
+        if !(self.termination_threshold > 0.0 && self.termination_threshold <= 1.0) {
+            return bad("termination_threshold", "must be in (0, 1]");
+        }
+        if !(2..=64).contains(&self.macro_cell) {
+            return bad("macro_cell", "must be 2..=64 voxels");
+        }
+        if let Some(bg) = &self.background {
+            if bg.len() != 3 && bg.len() != 4 {
+                return bad("background", "give [r, g, b] or [r, g, b, a] (sRGB, 0–1)");
+            }
+            for (c, v) in bg.iter().enumerate() {
+                finite(&format!("background[{c}]"), *v)?;
+                if !(0.0..=1.0).contains(v) {
+                    return bad(&format!("background[{c}]"), "must be in [0, 1]");
+                }
+            }
+        }
+        let s = &self.shading;
+        for (key, v) in [
+            ("shading.ambient", s.ambient),
+            ("shading.diffuse", s.diffuse),
+            ("shading.specular", s.specular),
+            ("shading.shininess", s.shininess),
+        ] {
+            finite(key, v)?;
+            if v < 0.0 {
+                return bad(key, "must be ≥ 0");
+            }
+        }
+        if self.clip_planes.len() > MAX_CLIP_PLANES {
+            return bad(
+                "clip_planes",
+                format!(
+                    "at most {MAX_CLIP_PLANES} planes (got {})",
+                    self.clip_planes.len()
+                ),
+            );
+        }
+        for (n, p) in self.clip_planes.iter().enumerate() {
+            for (c, v) in p.point.iter().chain(&p.normal).enumerate() {
+                let field = if c < 3 { "point" } else { "normal" };
+                finite(&format!("clip_planes[{n}].{field}"), *v)?;
+            }
+            let len2: f64 = p.normal.iter().map(|v| v * v).sum();
+            if len2 <= 1e-24 {
+                return bad(&format!("clip_planes[{n}].normal"), "must not be zero");
+            }
+        }
+        if let Some(b) = &self.crop_box {
+            for (c, v) in b.min.iter().chain(&b.max).enumerate() {
+                let field = if c < 3 { "min" } else { "max" };
+                finite(&format!("crop_box.{field}"), *v)?;
+            }
+            if (0..3).any(|a| b.min[a] > b.max[a]) {
+                return bad("crop_box", "min must be ≤ max on every axis");
+            }
+        }
+        self.transfer_function()?;
+        Ok(())
+    }
+
+    /// The transfer function the parameters describe (preset or points,
+    /// shifted), validated.
+    pub fn transfer_function(&self) -> Result<TransferFunction, ModelError> {
+        let spec = &self.transfer_function;
+        finite("transfer_function.shift", spec.shift)?;
+        let tf = match (&spec.preset, &spec.points) {
+            (Some(_), Some(_)) => {
+                return bad(
+                    "transfer_function",
+                    "give either `preset` or `points`, not both",
+                );
+            }
+            (Some(name), None) => {
+                if spec.normalized.is_some() {
+                    return bad(
+                        "transfer_function.normalized",
+                        "applies to `points` only; presets carry their own units",
+                    );
+                }
+                TransferFunction::preset(name).ok_or_else(|| {
+                    ModelError(format!(
+                        "[render] transfer_function.preset: unknown preset `{name}`; built-in presets: {}",
+                        PRESETS.join(", ")
+                    ))
+                })?
+            }
+            (None, None) => TransferFunction::preset("ct-bone").expect("built-in preset"),
+            (None, Some(points)) => {
+                if points.is_empty() {
+                    return bad("transfer_function.points", "needs at least one point");
+                }
+                let mut out = Vec::with_capacity(points.len());
+                for (n, p) in points.iter().enumerate() {
+                    let key = format!("transfer_function.points[{n}]");
+                    if p.len() != 5 {
+                        return bad(
+                            &key,
+                            format!("needs 5 numbers [value, r, g, b, a], got {}", p.len()),
+                        );
+                    }
+                    for v in p {
+                        finite(&key, *v)?;
+                    }
+                    if p[1..].iter().any(|v| !(0.0..=1.0).contains(v)) {
+                        return bad(&key, "colour and alpha must be in [0, 1]");
+                    }
+                    if let Some(prev) = out.last().map(|c: &ControlPoint| c.value)
+                        && (p[0] as f32) < prev
+                    {
+                        return bad(
+                            &key,
+                            format!(
+                                "values must be non-decreasing, but {} follows {prev}",
+                                p[0]
+                            ),
+                        );
+                    }
+                    out.push(ControlPoint {
+                        value: p[0] as f32,
+                        rgba: [p[1] as f32, p[2] as f32, p[3] as f32, p[4] as f32],
+                    });
+                }
+                TransferFunction {
+                    points: out,
+                    units: if spec.normalized.unwrap_or(false) {
+                        ValueUnits::Normalized
+                    } else {
+                        ValueUnits::Data
+                    },
+                }
+            }
+        };
+        Ok(tf.shifted(spec.shift as f32))
+    }
+
+    /// The background as linear premultiplied RGBA, if any.
+    pub fn background_linear(&self) -> Option<[f32; 4]> {
+        self.background.as_ref().map(|bg| {
+            let a = bg.get(3).copied().unwrap_or(1.0) as f32;
+            let c = |i: usize| crate::color::srgb_to_linear(bg[i] as f32) * a;
+            [c(0), c(1), c(2), a]
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(text: &str) -> String {
+        RaycastParams::from_toml(text).unwrap_err().0
+    }
+
+    #[test]
+    fn defaults_parse() {
+        let p = RaycastParams::from_toml("").unwrap();
+        assert_eq!(p, RaycastParams::default());
+        assert_eq!(
+            p.transfer_function().unwrap(),
+            TransferFunction::preset("ct-bone").unwrap()
+        );
+    }
+
+    #[test]
+    fn full_example_parses() {
+        let p = RaycastParams::from_toml(
+            r#"
+            mode = "mip"
+            sample_distance = 0.25
+            background = [0.1, 0.2, 0.3]
+            transfer_function = { points = [[0, 0, 0, 0, 0], [100, 1, 1, 1, 0.5]], shift = 10 }
+            shading = { enabled = false }
+            clip_planes = [{ point = [0, 0, 0], normal = [1, 0, 0] }]
+            crop_box = { min = [-1, -2, -3], max = [1, 2, 3] }
+            opacity_map_interpolation = "nearest"
+            "#,
+        )
+        .unwrap();
+        assert_eq!(p.mode, RenderMode::Mip);
+        assert!(!p.shading.enabled);
+        assert_eq!(p.shading.ambient, 0.1);
+        assert_eq!(p.transfer_function().unwrap().points[1].value, 110.0);
+        assert_eq!(p.background_linear().unwrap()[3], 1.0);
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        assert!(err("sample_distanse = 1").contains("sample_distanse"));
+        assert!(err("shading = { ambiant = 0.1 }").contains("ambiant"));
+        assert!(err("transfer_function = { preset = \"ct-bone\", shfit = 2 }").contains("shfit"));
+    }
+
+    #[test]
+    fn nan_and_ranges_are_named() {
+        assert!(err("sample_distance = nan").contains("sample_distance"));
+        assert!(err("sample_distance = -1").contains("sample_distance"));
+        assert!(err("termination_threshold = 1.5").contains("termination_threshold"));
+        assert!(err("shading = { specular = nan }").contains("shading.specular"));
+        assert!(err("crop_box = { min = [0, 0, nan], max = [1, 1, 1] }").contains("crop_box.min"));
+        assert!(
+            err("clip_planes = [{ point = [0, 0, 0], normal = [0, 0, 0] }]")
+                .contains("clip_planes[0].normal")
+        );
+        assert!(err("transfer_function = { preset = \"ct-bone\", shift = inf }").contains("shift"));
+        assert!(err("background = [1, 1]").contains("background"));
+        assert!(err("macro_cell = 1").contains("macro_cell"));
+        // A type error points at its line.
+        assert!(err("mode = \"composite\"\nsample_distance = \"x\"").contains("sample_distance"));
+    }
+
+    #[test]
+    fn transfer_function_errors_are_named() {
+        let e = err("transfer_function = { points = [[0, 0, 0, 0, 0], [10, 1, 1, 1, 1], [5, 1, 1, 1, 1]] }");
+        assert!(e.contains("transfer_function.points[2]") && e.contains("non-decreasing"), "{e}");
+        let e = err("transfer_function = { points = [[0, 0, 0, 0, nan]] }");
+        assert!(e.contains("transfer_function.points[0]"), "{e}");
+        let e = err("transfer_function = { points = [[0, 0, 0, 2, 0]] }");
+        assert!(e.contains("[0, 1]"), "{e}");
+        let e = err("transfer_function = { preset = \"ct-boen\" }");
+        assert!(e.contains("transfer_function.preset") && e.contains("ct-boen"), "{e}");
+        let e = err("transfer_function = { preset = \"ct-bone\", points = [[0, 0, 0, 0, 0]] }");
+        assert!(e.contains("either"), "{e}");
+        let e = err("transfer_function = { points = [[0, 0, 0, 0]] }");
+        assert!(e.contains("5 numbers"), "{e}");
+    }
+
+    #[test]
+    fn merged_replaces_only_given_keys() {
+        let p = RaycastParams::from_toml("sample_distance = 0.25\nmode = \"mip\"").unwrap();
+        let q = p.merged("shading = { enabled = false }").unwrap();
+        assert_eq!(q.sample_distance, 0.25);
+        assert_eq!(q.mode, RenderMode::Mip);
+        assert!(!q.shading.enabled);
+        assert!(p.merged("sample_distance = 0").is_err());
+    }
+}

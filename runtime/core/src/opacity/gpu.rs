@@ -1,0 +1,574 @@
+//! The WGSL path of the opacity growth, written against [`GpuService`]
+//! (`shaders/opacity/*.wgsl`; the CPU twin is [`super::cpu`] with
+//! [`super::frontier`]).
+//!
+//! One Jacobi step is three kernels, each one invocation per list entry
+//! (3-D-folded dispatch, workgroups of 64), the same phases as the CPU:
+//!
+//! - `enumerate` — per frontier voxel: the 26-neighbours its new value
+//!   lifts, deduplicated by `atomicOr` on a candidate bitset, appended to the
+//!   candidate list (one `atomicAdd` per workgroup on the global counter);
+//! - `evaluate` — per candidate: the update rule (field read-only), the new
+//!   value kept per candidate; the candidate bit cleared;
+//! - `apply` — per candidate: the risen values stored (an `atomicAdd` on
+//!   the voxel's half of a packed u32 word), appended to the next frontier,
+//!   and the region box grown (workgroup min/max, then one global atomic
+//!   per workgroup).
+//!
+//! **Counts.** Dispatch-indirect is not part of [`GpuService`], so each
+//! step reads back 4 bytes (the candidate count, which sizes `evaluate`
+//! and `apply`) and then 32 bytes (next-frontier length and region box,
+//! which size the next `enumerate` and decide whether the working box must
+//! grow): two small read-backs per step. On lavapipe that costs far less
+//! than the kernels; on a real GPU a step is bounded by the sync latency
+//! (tens of µs), which is acceptable for the ~100 steps of a growth.
+//!
+//! **Memory** (all 32-bit storage, one binding each): the volume's values
+//! as f32 (4 bytes per volume voxel, shared by every growth of a
+//! [`GpuOpacityVolume`]); per growth, the field as packed u16 (2 bytes per
+//! working-box voxel), the candidate bitset (1 bit per working-box voxel),
+//! and four lists of u32 (frontier, next frontier, candidates, new values),
+//! grown geometrically with the largest step (at most 4 bytes per
+//! working-box voxel each). The volume's values must fit one storage
+//! binding (128 MiB on lavapipe: 32 Mi voxels), else
+//! [`OpacityError::BindingTooLarge`]; everything else is then smaller.
+//!
+//! Buffers are not freed on drop (the growth holds no GPU handle): call
+//! [`GpuGrowth::release`] and [`GpuOpacityVolume::release`].
+
+use super::bounds::{VoxelBounds, grown_working_box, initial_working_box};
+use super::extinction::{Extinction, sanitize};
+use super::params::GrowthParams;
+use super::report::GrowthReport;
+use super::seed::{Seed, SeedStats, seed_stats};
+use super::{OpacityError, check_volume};
+use crate::error::GpuError;
+use crate::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+use crate::grid::Grid;
+use crate::opacity_map::OpacityMap;
+use crate::volume::VolumeView;
+
+const COMMON: &str = include_str!("../../../../shaders/opacity/common.wgsl");
+const STEP: &str = include_str!("../../../../shaders/opacity/step.wgsl");
+const REGROW: &str = include_str!("../../../../shaders/opacity/regrow.wgsl");
+
+/// Threads per workgroup (`WG` in `common.wgsl`).
+const WORKGROUP: u32 = 64;
+
+/// Binding numbers (see `common.wgsl`).
+mod bind {
+    pub const PARAMS: u32 = 0;
+    pub const VALUES: u32 = 1;
+    pub const FIELD: u32 = 2;
+    pub const FLAGS: u32 = 3;
+    pub const FRONT: u32 = 4;
+    pub const CAND: u32 = 5;
+    pub const NEWVAL: u32 = 6;
+    pub const NEXT: u32 = 7;
+    pub const COUNTERS: u32 = 8;
+    pub const OLD_FIELD: u32 = 9;
+    pub const REGROW: u32 = 10;
+}
+
+/// The full WGSL source of each kernel (for tools that validate shaders).
+pub fn kernel_sources() -> [(&'static str, String); 5] {
+    let step = format!("{COMMON}\n{STEP}");
+    let regrow = format!("{COMMON}\n{REGROW}");
+    [
+        ("enumerate", step.clone()),
+        ("evaluate", step.clone()),
+        ("apply", step),
+        ("regrow", regrow.clone()),
+        ("remap", regrow),
+    ]
+}
+
+/// `Params` of `common.wgsl`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+struct Params {
+    vdim: [u32; 4],
+    blo: [u32; 4],
+    bdim: [u32; 4],
+    ext: [f32; 4],
+    q: [u32; 4],
+}
+
+/// `Regrow` of `common.wgsl`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+struct Regrow {
+    olo: [u32; 4],
+    odim: [u32; 4],
+    nlo: [u32; 4],
+    ndim: [u32; 4],
+}
+
+/// u32 words of the counters buffer.
+const COUNTERS: usize = 12;
+
+/// A volume's values on the GPU, as sanitised f32 (see
+/// [`super::extinction::sanitize`]), one storage binding; shared by any
+/// number of [`GpuGrowth`]s.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuOpacityVolume {
+    /// Geometry (voxel index ↔ mm).
+    pub grid: Grid,
+    /// `grid.len()` f32 values, x fastest.
+    pub values: BufferId,
+}
+
+impl GpuOpacityVolume {
+    /// Converts a volume to sanitised f32 and uploads it; fails when it does
+    /// not fit one storage binding.
+    pub fn upload(gpu: &dyn GpuService, volume: VolumeView<'_>) -> Result<Self, OpacityError> {
+        check_volume(&volume)?;
+        check_binding(gpu, "the volume's values (f32)", volume.grid.len() as u64 * 4)?;
+        let values: Vec<f32> = volume.data.to_f32_vec().into_iter().map(sanitize).collect();
+        let id = gpu.upload(&values, "voxflex.opacity.values")?;
+        Ok(Self {
+            grid: volume.grid,
+            values: id,
+        })
+    }
+
+    /// Frees the values buffer.
+    pub fn release(self, gpu: &dyn GpuService) {
+        gpu.destroy_buffer(self.values);
+    }
+}
+
+fn check_binding(gpu: &dyn GpuService, what: &'static str, bytes: u64) -> Result<(), OpacityError> {
+    let limit = gpu.limits().max_storage_buffer_binding_size;
+    if bytes > limit {
+        return Err(OpacityError::BindingTooLarge { what, bytes, limit });
+    }
+    Ok(())
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Pipelines {
+    enumerate: PipelineId,
+    evaluate: PipelineId,
+    apply: PipelineId,
+    regrow: PipelineId,
+    remap: PipelineId,
+}
+
+impl Pipelines {
+    fn compile(gpu: &dyn GpuService) -> Result<Self, GpuError> {
+        let [a, b, c, d, e] = kernel_sources();
+        Ok(Self {
+            enumerate: gpu.compile(&a.1, a.0)?,
+            evaluate: gpu.compile(&b.1, b.0)?,
+            apply: gpu.compile(&c.1, c.0)?,
+            regrow: gpu.compile(&d.1, d.0)?,
+            remap: gpu.compile(&e.1, e.0)?,
+        })
+    }
+}
+
+/// A buffer the growth owns, with its size in bytes.
+#[derive(Clone, Copy, Debug)]
+struct Owned {
+    id: BufferId,
+    bytes: u64,
+}
+
+impl Owned {
+    fn new(gpu: &dyn GpuService, bytes: u64, label: &str) -> Result<Self, GpuError> {
+        let bytes = bytes.max(4).next_multiple_of(4);
+        Ok(Self {
+            id: gpu.create_buffer(bytes, label)?,
+            bytes,
+        })
+    }
+
+    /// Replaces the buffer by a larger one (contents lost) when it holds
+    /// fewer than `bytes`; grows by at least half.
+    fn ensure(&mut self, gpu: &dyn GpuService, bytes: u64, label: &str) -> Result<(), GpuError> {
+        if self.bytes >= bytes {
+            return Ok(());
+        }
+        let new = Owned::new(gpu, bytes.max(self.bytes + self.bytes / 2), label)?;
+        gpu.destroy_buffer(self.id);
+        *self = new;
+        Ok(())
+    }
+}
+
+/// A region growing in progress on the GPU: the same steps, maps and counts
+/// as [`super::CpuGrowth`], bit for bit.
+#[derive(Debug)]
+pub struct GpuGrowth {
+    dims: [usize; 3],
+    params: GrowthParams,
+    stats: SeedStats,
+    ext: Extinction,
+    work: VoxelBounds,
+    region: VoxelBounds,
+    n_front: u32,
+    pipes: Pipelines,
+    params_buf: Owned,
+    regrow_buf: Owned,
+    counters: Owned,
+    field: Owned,
+    flags: Owned,
+    front: Owned,
+    next: Owned,
+    cand: Owned,
+    newval: Owned,
+    total: GrowthReport,
+}
+
+impl GpuGrowth {
+    /// Seeds a growth on the GPU. `volume` is the CPU copy of the volume
+    /// behind `values` (the seed's 1-ring statistics are measured on it,
+    /// exactly as on the CPU path).
+    pub fn new(
+        gpu: &dyn GpuService,
+        values: &GpuOpacityVolume,
+        volume: VolumeView<'_>,
+        seed: &Seed,
+        params: GrowthParams,
+    ) -> Result<Self, OpacityError> {
+        params.validate()?;
+        check_volume(&volume)?;
+        if values.grid.dims != volume.grid.dims {
+            return Err(OpacityError::GpuVolumeMismatch {
+                expected: volume.grid.dims,
+                actual: values.grid.dims,
+            });
+        }
+        let voxel = seed.resolve(&volume.grid)?;
+        let stats = seed_stats(volume, voxel, &params)?;
+        let ext = Extinction::new(&stats, &params)?;
+        let dims = volume.grid.dims;
+        let region = VoxelBounds::point(voxel);
+        let work = initial_working_box(&region, dims);
+        let pipes = Pipelines::compile(gpu)?;
+
+        // Initial field: q_min everywhere, q_max at the seed.
+        let mut half = vec![ext.q_min; work.len().next_multiple_of(2)];
+        let s = work.local_linear(voxel);
+        half[s] = ext.q_max;
+        let words: Vec<u32> = half.chunks(2).map(|p| p[0] as u32 | (p[1] as u32) << 16).collect();
+        let mut made: Vec<Owned> = Vec::new();
+        let mut mk = |bytes: u64, label: &str| -> Result<Owned, GpuError> {
+            let o = Owned::new(gpu, bytes, label)?;
+            made.push(o);
+            Ok(o)
+        };
+        let result = (|| -> Result<Self, GpuError> {
+            let field = mk(words.len() as u64 * 4, "voxflex.opacity.field")?;
+            gpu.write_buffer(field.id, 0, bytemuck::cast_slice(&words))?;
+            let front = mk(1024, "voxflex.opacity.frontier")?;
+            gpu.write_buffer(front.id, 0, bytemuck::bytes_of(&(s as u32)))?;
+            let g = Self {
+                dims,
+                params,
+                stats,
+                ext,
+                work,
+                region,
+                n_front: 1,
+                pipes,
+                params_buf: mk(std::mem::size_of::<Params>() as u64, "voxflex.opacity.params")?,
+                regrow_buf: mk(std::mem::size_of::<Regrow>() as u64, "voxflex.opacity.regrow")?,
+                counters: mk(COUNTERS as u64 * 4, "voxflex.opacity.counters")?,
+                flags: mk(bitset_bytes(work.len()), "voxflex.opacity.flags")?,
+                field,
+                front,
+                next: mk(1024, "voxflex.opacity.next")?,
+                cand: mk(1024, "voxflex.opacity.candidates")?,
+                newval: mk(1024, "voxflex.opacity.newval")?,
+                total: GrowthReport::default(),
+            };
+            g.write_params(gpu)?;
+            Ok(g)
+        })();
+        match result {
+            Ok(g) => Ok(g),
+            Err(e) => {
+                for o in made {
+                    gpu.destroy_buffer(o.id);
+                }
+                Err(e.into())
+            }
+        }
+    }
+
+    /// Runs up to `n` steps (fewer if it converges first) and reports them.
+    /// Resumable, like [`super::CpuGrowth::step`].
+    pub fn step(&mut self, gpu: &dyn GpuService, values: &GpuOpacityVolume, n: usize) -> Result<GrowthReport, OpacityError> {
+        if values.grid.dims != self.dims {
+            return Err(OpacityError::GpuVolumeMismatch {
+                expected: self.dims,
+                actual: values.grid.dims,
+            });
+        }
+        let mut rep = GrowthReport::default();
+        let result = (|| -> Result<(), GpuError> {
+            for _ in 0..n {
+                if self.n_front == 0 {
+                    break;
+                }
+                if let Some(nb) = grown_working_box(&self.work, &self.region, self.dims) {
+                    self.regrow(gpu, nb)?;
+                    rep.regrows += 1;
+                }
+                let (visits, useful) = self.one_step(gpu, values)?;
+                rep.steps += 1;
+                rep.visits += visits;
+                rep.useful += useful;
+            }
+            Ok(())
+        })();
+        rep.converged = self.n_front == 0;
+        self.total.merge(&rep);
+        result?;
+        Ok(rep)
+    }
+
+    /// Runs to convergence and reports the steps it took from here.
+    pub fn run(&mut self, gpu: &dyn GpuService, values: &GpuOpacityVolume) -> Result<GrowthReport, OpacityError> {
+        self.step(gpu, values, usize::MAX)
+    }
+
+    /// True when no voxel can change any more.
+    pub fn is_converged(&self) -> bool {
+        self.n_front == 0
+    }
+
+    /// Reads the map back: the region's box, `outside = o_min`.
+    pub fn map(&self, gpu: &dyn GpuService) -> Result<OpacityMap, OpacityError> {
+        let w = self.work;
+        let mut words = vec![0u32; w.len().div_ceil(2)];
+        const CHUNK: usize = 16 << 20;
+        for (n, chunk) in words.chunks_mut(CHUNK).enumerate() {
+            gpu.read_buffer(self.field.id, (n * CHUNK * 4) as u64, bytemuck::cast_slice_mut(chunk))?;
+        }
+        let get = |l: usize| (words[l >> 1] >> ((l & 1) * 16)) as u16;
+        let r = self.region;
+        let d = r.dims();
+        let mut values = Vec::with_capacity(r.len());
+        for z in 0..d[2] {
+            for y in 0..d[1] {
+                let start = w.local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
+                values.extend((0..d[0]).map(|x| get(start + x)));
+            }
+        }
+        Ok(OpacityMap {
+            origin: r.lo,
+            dims: d,
+            outside: self.ext.q_min,
+            values,
+        })
+    }
+
+    /// Counts of every step run so far.
+    pub fn report(&self) -> GrowthReport {
+        self.total
+    }
+
+    /// The seed's statistics (`d_s`, σ_s).
+    pub fn stats(&self) -> &SeedStats {
+        &self.stats
+    }
+
+    /// The constants of the update rule.
+    pub fn extinction(&self) -> &Extinction {
+        &self.ext
+    }
+
+    /// The parameters the growth was seeded with.
+    pub fn params(&self) -> &GrowthParams {
+        &self.params
+    }
+
+    /// Box (voxel indices) of the voxels raised so far, seed included.
+    pub fn region(&self) -> VoxelBounds {
+        self.region
+    }
+
+    /// Box (voxel indices) the working field covers.
+    pub fn working_box(&self) -> VoxelBounds {
+        self.work
+    }
+
+    /// GPU bytes this growth holds (the shared volume not included).
+    pub fn gpu_bytes(&self) -> u64 {
+        self.all().iter().map(|o| o.bytes).sum()
+    }
+
+    /// Frees every buffer of this growth (not the shared volume).
+    pub fn release(self, gpu: &dyn GpuService) {
+        for o in self.all() {
+            gpu.destroy_buffer(o.id);
+        }
+    }
+
+    fn all(&self) -> [Owned; 9] {
+        [
+            self.params_buf,
+            self.regrow_buf,
+            self.counters,
+            self.field,
+            self.flags,
+            self.front,
+            self.next,
+            self.cand,
+            self.newval,
+        ]
+    }
+
+    fn write_params(&self, gpu: &dyn GpuService) -> Result<(), GpuError> {
+        let d = self.work.dims();
+        let p = Params {
+            vdim: [self.dims[0] as u32, self.dims[1] as u32, self.dims[2] as u32, 0],
+            blo: [
+                self.work.lo[0] as u32,
+                self.work.lo[1] as u32,
+                self.work.lo[2] as u32,
+                self.work.len() as u32,
+            ],
+            bdim: [d[0] as u32, d[1] as u32, d[2] as u32, 0],
+            ext: [self.ext.mean, self.ext.sigma, self.ext.scale, self.ext.cap],
+            q: [self.ext.q_min as u32, self.ext.q_max as u32, 0, 0],
+        };
+        gpu.write_buffer(self.params_buf.id, 0, bytemuck::bytes_of(&p))
+    }
+
+    /// One step; returns (visits, useful).
+    fn one_step(&mut self, gpu: &dyn GpuService, values: &GpuOpacityVolume) -> Result<(u64, u64), GpuError> {
+        let b = |binding, o: &Owned| BufferBinding::whole(binding, o.id);
+        let box_len = self.work.len() as u64;
+        let bound = (26 * self.n_front as u64).min(box_len);
+        self.cand.ensure(gpu, bound * 4, "voxflex.opacity.candidates")?;
+        self.newval.ensure(gpu, bound * 4, "voxflex.opacity.newval")?;
+        let mut counters = [0u32; COUNTERS];
+        counters[0] = self.n_front;
+        counters[4..7].fill(u32::MAX);
+        gpu.write_buffer(self.counters.id, 0, bytemuck::cast_slice(&counters))?;
+        gpu.dispatch(
+            self.pipes.enumerate,
+            &[
+                b(bind::PARAMS, &self.params_buf),
+                BufferBinding::whole(bind::VALUES, values.values),
+                b(bind::FIELD, &self.field),
+                b(bind::FLAGS, &self.flags),
+                b(bind::FRONT, &self.front),
+                b(bind::CAND, &self.cand),
+                b(bind::COUNTERS, &self.counters),
+            ],
+            gpu.workgroups_for(self.n_front as u64, WORKGROUP)?,
+        )?;
+        let mut n_cand = 0u32;
+        gpu.read_buffer(self.counters.id, 4, bytemuck::bytes_of_mut(&mut n_cand))?;
+        if n_cand == 0 {
+            self.n_front = 0;
+            return Ok((0, 0));
+        }
+        self.next.ensure(gpu, n_cand as u64 * 4, "voxflex.opacity.next")?;
+        let groups = gpu.workgroups_for(n_cand as u64, WORKGROUP)?;
+        gpu.dispatch(
+            self.pipes.evaluate,
+            &[
+                b(bind::PARAMS, &self.params_buf),
+                BufferBinding::whole(bind::VALUES, values.values),
+                b(bind::FIELD, &self.field),
+                b(bind::FLAGS, &self.flags),
+                b(bind::CAND, &self.cand),
+                b(bind::NEWVAL, &self.newval),
+                b(bind::COUNTERS, &self.counters),
+            ],
+            groups,
+        )?;
+        gpu.dispatch(
+            self.pipes.apply,
+            &[
+                b(bind::PARAMS, &self.params_buf),
+                b(bind::FIELD, &self.field),
+                b(bind::CAND, &self.cand),
+                b(bind::NEWVAL, &self.newval),
+                b(bind::NEXT, &self.next),
+                b(bind::COUNTERS, &self.counters),
+            ],
+            groups,
+        )?;
+        let mut tail = [0u32; COUNTERS - 2];
+        gpu.read_buffer(self.counters.id, 8, bytemuck::cast_slice_mut(&mut tail))?;
+        let n_next = tail[0];
+        if n_next > 0 {
+            let (lo, hi) = (&tail[2..5], &tail[6..9]);
+            let grown = VoxelBounds {
+                lo: [lo[0] as usize, lo[1] as usize, lo[2] as usize],
+                hi: [hi[0] as usize, hi[1] as usize, hi[2] as usize],
+            };
+            self.region = self.region.union(&grown);
+        }
+        std::mem::swap(&mut self.front, &mut self.next);
+        self.n_front = n_next;
+        Ok((n_cand as u64, n_next as u64))
+    }
+
+    /// Moves the field into a larger working box (`nb ⊇ self.work`).
+    fn regrow(&mut self, gpu: &dyn GpuService, nb: VoxelBounds) -> Result<(), GpuError> {
+        let old = self.work;
+        let (od, nd) = (old.dims(), nb.dims());
+        let r = Regrow {
+            olo: [old.lo[0] as u32, old.lo[1] as u32, old.lo[2] as u32, self.n_front],
+            odim: [od[0] as u32, od[1] as u32, od[2] as u32, self.ext.q_min as u32],
+            nlo: [nb.lo[0] as u32, nb.lo[1] as u32, nb.lo[2] as u32, nb.len() as u32],
+            ndim: [nd[0] as u32, nd[1] as u32, nd[2] as u32, 0],
+        };
+        gpu.write_buffer(self.regrow_buf.id, 0, bytemuck::bytes_of(&r))?;
+        let words = nb.len().div_ceil(2) as u64;
+        let field = Owned::new(gpu, words * 4, "voxflex.opacity.field")?;
+        let flags = match Owned::new(gpu, bitset_bytes(nb.len()), "voxflex.opacity.flags") {
+            Ok(f) => f,
+            Err(e) => {
+                gpu.destroy_buffer(field.id);
+                return Err(e);
+            }
+        };
+        let moved = (|| -> Result<(), GpuError> {
+            gpu.dispatch(
+                self.pipes.regrow,
+                &[
+                    BufferBinding::whole(bind::FIELD, field.id),
+                    BufferBinding::whole(bind::OLD_FIELD, self.field.id),
+                    BufferBinding::whole(bind::REGROW, self.regrow_buf.id),
+                ],
+                gpu.workgroups_for(words, WORKGROUP)?,
+            )?;
+            self.next.ensure(gpu, self.n_front as u64 * 4, "voxflex.opacity.next")?;
+            gpu.dispatch(
+                self.pipes.remap,
+                &[
+                    BufferBinding::whole(bind::FRONT, self.front.id),
+                    BufferBinding::whole(bind::NEXT, self.next.id),
+                    BufferBinding::whole(bind::REGROW, self.regrow_buf.id),
+                ],
+                gpu.workgroups_for(self.n_front as u64, WORKGROUP)?,
+            )
+        })();
+        if let Err(e) = moved {
+            gpu.destroy_buffer(field.id);
+            gpu.destroy_buffer(flags.id);
+            return Err(e);
+        }
+        gpu.destroy_buffer(self.field.id);
+        gpu.destroy_buffer(self.flags.id);
+        self.field = field;
+        self.flags = flags;
+        std::mem::swap(&mut self.front, &mut self.next);
+        self.work = nb;
+        self.write_params(gpu)
+    }
+}
+
+/// Bytes of a bitset of `n` bits in u32 words.
+fn bitset_bytes(n: usize) -> u64 {
+    n.div_ceil(32) as u64 * 4
+}

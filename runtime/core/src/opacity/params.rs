@@ -1,0 +1,62 @@
+//! [`GrowthParams`]: the constants of the opacity region growing.
+
+use super::OpacityError;
+use crate::opacity_map::to_fixed;
+
+/// Constants of the region growing (CEIG 2016): the opacity range, the
+/// extinction scale λ and the floor under the seed's standard deviation.
+///
+/// All opacities are dimensionless, in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrowthParams {
+    /// Opacity of every voxel the growth does not raise (the map's
+    /// [`crate::opacity_map::OpacityMap::outside`]), in [0, 1). Default 0.03.
+    pub o_min: f32,
+    /// Opacity of the seed and the ceiling of every voxel, in (o_min, 1].
+    /// Default 1.
+    pub o_max: f32,
+    /// Extinction scale λ > 0: a voxel whose value differs from the seed's
+    /// mean `d_s` by `|d_s − d_v|` extinguishes `E_v = (|d_s − d_v| − σ_s) /
+    /// (λ σ_s)` of opacity per step, so a larger λ lets the region flow
+    /// further across intensity differences. Default 30 (the paper's).
+    pub lambda: f32,
+    /// Floor under the seed's standard deviation, as a fraction of the
+    /// volume's value range: `σ_s ← max(σ_s, sigma_floor · (max − min))`
+    /// (`sigma_floor · max(|d_s|, 1)` for a constant volume). Keeps `E_v`
+    /// finite when the seed sits in a homogeneous region (σ_s = 0). Default
+    /// 1e-3.
+    pub sigma_floor: f32,
+}
+
+impl Default for GrowthParams {
+    fn default() -> Self {
+        Self {
+            o_min: 0.03,
+            o_max: 1.0,
+            lambda: 30.0,
+            sigma_floor: 1e-3,
+        }
+    }
+}
+
+impl GrowthParams {
+    /// Checks every field; the error names the value at fault.
+    pub fn validate(&self) -> Result<(), OpacityError> {
+        if !(self.lambda.is_finite() && self.lambda > 0.0) {
+            return Err(OpacityError::BadLambda { lambda: self.lambda });
+        }
+        let unit = |o: f32| o.is_finite() && (0.0..=1.0).contains(&o);
+        if !unit(self.o_min) || !unit(self.o_max) || to_fixed(self.o_min) >= to_fixed(self.o_max) {
+            return Err(OpacityError::BadOpacityRange {
+                o_min: self.o_min,
+                o_max: self.o_max,
+            });
+        }
+        if !(self.sigma_floor.is_finite() && self.sigma_floor > 0.0) {
+            return Err(OpacityError::BadSigmaFloor {
+                sigma_floor: self.sigma_floor,
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,229 @@
+//! The visual stages of a scene, after resampling: spatial opacity maps
+//! (`[[roi]]`) and direct volume rendering (`[render]`). Both are built only
+//! when the scene asks for them; the renderer plugin is never loaded
+//! otherwise.
+
+use crate::metrics::RunMetrics;
+use crate::pipeline::RunError;
+use crate::plugin_loader::LoadedPlugin;
+use crate::scene::{ProjectionName, RenderSettings, RoiSettings, Scene, SliceName};
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+use voxflex_abi::host_side::HostServices;
+use voxflex_abi::renderer::RendererProxy;
+use voxflex_core::camera::{Camera, Projection};
+use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
+use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::GpuService;
+use voxflex_core::grid::Grid;
+use voxflex_core::io::png::SliceAxis;
+use voxflex_core::io::{write_atomically, write_volume};
+use voxflex_core::opacity::{CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed};
+use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
+use voxflex_core::volume::{Volume, VoxelData};
+
+/// The seed of a `[[roi]]` table.
+pub fn roi_seed(roi: &RoiSettings) -> Seed {
+    match (roi.seed, roi.seed_slice) {
+        (Some(p), _) => Seed::World(DVec3::from_array(p)),
+        (None, Some(s)) => Seed::Slice {
+            axis: match s.axis {
+                SliceName::Axial => SliceAxis::Axial,
+                SliceName::Coronal => SliceAxis::Coronal,
+                SliceName::Sagittal => SliceAxis::Sagittal,
+            },
+            index: s.index,
+            pixel: s.pixel,
+        },
+        // Refused by scene validation.
+        (None, None) => Seed::Voxel([0, 0, 0]),
+    }
+}
+
+/// Grows every `[[roi]]` map over `volume`, on the GPU when one is given.
+pub fn grow_rois(
+    scene: &Scene,
+    volume: &Volume,
+    gpu: Option<&Arc<dyn GpuService>>,
+    metrics: &mut RunMetrics,
+) -> Result<Vec<OpacityMap>, RunError> {
+    let t = Instant::now();
+    let mut maps = vec![];
+    let (mut visits, mut useful) = (0u64, 0u64);
+    let uploaded = match gpu {
+        Some(g) if !scene.rois.is_empty() => Some(GpuOpacityVolume::upload(g.as_ref(), volume.view()).map_err(roi_err)?),
+        _ => None,
+    };
+    for roi in &scene.rois {
+        let params = GrowthParams {
+            o_min: roi.o_min,
+            o_max: roi.o_max,
+            lambda: roi.lambda,
+            ..GrowthParams::default()
+        };
+        let seed = roi_seed(roi);
+        let (map, report) = match (gpu, &uploaded) {
+            (Some(g), Some(values)) => {
+                let mut growth = GpuGrowth::new(g.as_ref(), values, volume.view(), &seed, params).map_err(roi_err)?;
+                let report = match roi.steps {
+                    Some(n) => growth.step(g.as_ref(), values, n),
+                    None => growth.run(g.as_ref(), values),
+                }
+                .map_err(roi_err)?;
+                let map = growth.map(g.as_ref()).map_err(roi_err)?;
+                growth.release(g.as_ref());
+                (map, report)
+            }
+            _ => {
+                let mut growth = CpuGrowth::new(volume.view(), &seed, params).map_err(roi_err)?;
+                let report = match roi.steps {
+                    Some(n) => growth.step(volume.view(), n),
+                    None => growth.run(volume.view()),
+                }
+                .map_err(roi_err)?;
+                (growth.map(), report)
+            }
+        };
+        visits += report.visits;
+        useful += report.useful;
+        maps.push(map);
+    }
+    if let (Some(g), Some(values)) = (gpu, uploaded) {
+        values.release(g.as_ref());
+    }
+    let stage = metrics.stage("roi");
+    stage.record_run(t.elapsed(), visits);
+    stage.notes.insert("useful_visits".into(), useful.into());
+    stage.notes.insert(
+        "useful_fraction".into(),
+        (useful as f64 / visits.max(1) as f64).into(),
+    );
+    stage.notes.insert(
+        "map_bytes".into(),
+        maps.iter().map(OpacityMap::bytes).sum::<usize>().into(),
+    );
+    Ok(maps)
+}
+
+fn roi_err(e: impl std::fmt::Display) -> RunError {
+    RunError::Other(format!("[[roi]]: {e}"))
+}
+
+/// Writes opacity maps as NIfTI (u16 fixed point on the map's voxel box).
+pub fn write_maps(scene: &Scene, grid: &Grid, maps: &[OpacityMap], dir: &Path) -> Result<Vec<String>, RunError> {
+    let mut written = vec![];
+    for (n, (roi, map)) in scene.rois.iter().zip(maps).enumerate() {
+        if !roi.write {
+            continue;
+        }
+        let name = roi.name.clone().unwrap_or_else(|| n.to_string());
+        let file = format!("roi_{name}.nii.gz");
+        let o = map.origin;
+        let sub = Grid::new(
+            map.dims,
+            grid.spacing,
+            grid.index_to_world(DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64)),
+        );
+        let v = Volume::new(sub, VoxelData::U16(map.values.clone())).map_err(|e| RunError::Other(e.to_string()))?;
+        write_volume(&dir.join(&file), v.view())?;
+        written.push(file);
+    }
+    Ok(written)
+}
+
+/// The camera of `[render]` for a volume on `grid`, turned `extra_azimuth` degrees.
+pub fn camera_for(settings: &RenderSettings, grid: &Grid, extra_azimuth: f64) -> Camera {
+    let (lo, hi) = grid.world_bounds();
+    let diagonal = (hi - lo).length().max(1.0);
+    let c = settings.camera;
+    Camera {
+        target: grid.centre(),
+        azimuth_deg: c.azimuth_deg + extra_azimuth,
+        elevation_deg: c.elevation_deg,
+        distance_mm: c.distance_mm.unwrap_or(2.0 * diagonal),
+        projection: match c.projection {
+            ProjectionName::Orthographic => Projection::Orthographic {
+                height_mm: c.height_mm.unwrap_or(diagonal),
+            },
+            ProjectionName::Perspective => Projection::Perspective { fov_y_deg: c.fov_deg },
+        },
+        width: settings.width,
+        height: settings.height,
+    }
+}
+
+/// The renderer stage: the loaded plugin instance.
+pub struct RenderStage {
+    renderer: RendererProxy,
+}
+
+impl RenderStage {
+    /// Creates and initialises the scene's renderer plugin.
+    pub fn new(
+        scene: &Scene,
+        plugin: &LoadedPlugin,
+        services: Arc<HostServices>,
+        backend: ExecutionBackend,
+    ) -> Result<Self, RunError> {
+        let vtable = plugin.renderer.ok_or_else(|| {
+            RunError::Other(format!(
+                "{}: [render] plugin `{}` is a {} plugin, not a renderer",
+                scene.path.display(),
+                plugin.name,
+                plugin.kind_name()
+            ))
+        })?;
+        // SAFETY: checked, never-unloaded library.
+        let mut renderer = unsafe { RendererProxy::create(&plugin.name, vtable, &scene.render_params_toml(), services) }?;
+        renderer.init(backend)?;
+        Ok(Self { renderer })
+    }
+
+    /// Renders `volume` with `maps` and writes the image(s); returns the files.
+    pub fn render(
+        &mut self,
+        settings: &RenderSettings,
+        volume: &Volume,
+        dirty: DirtyRegion,
+        maps: &[OpacityMap],
+        dir: &Path,
+        metrics: &mut RunMetrics,
+    ) -> Result<Vec<String>, RunError> {
+        let t = Instant::now();
+        self.renderer.set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
+        self.renderer.set_opacity_maps(maps)?;
+        let frames = settings.turntable.max(1);
+        let mut written = vec![];
+        let (mut rays, mut samples) = (0u64, 0u64);
+        for f in 0..frames {
+            let camera = camera_for(settings, &volume.grid, 360.0 * f as f64 / frames as f64);
+            let mut pixels = vec![0u8; settings.width as usize * settings.height as usize * 4];
+            let stats = self.renderer.render(&camera, ImageTarget::Cpu(&mut pixels))?;
+            rays += stats.rays;
+            samples += stats.samples;
+            let file = if settings.turntable == 0 {
+                settings.file.clone()
+            } else {
+                settings.file.replace(".png", &format!("_{f:03}.png"))
+            };
+            write_rgba_png(&dir.join(&file), settings.width, settings.height, &pixels)?;
+            written.push(file);
+        }
+        let stage = metrics.stage("render");
+        stage.record_run(t.elapsed(), rays);
+        stage.notes.insert("samples".into(), samples.into());
+        Ok(written)
+    }
+}
+
+fn write_rgba_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<(), RunError> {
+    let img = image::RgbaImage::from_raw(width, height, rgba.to_vec())
+        .ok_or_else(|| RunError::Other(format!("{}: image size mismatch", path.display())))?;
+    write_atomically(path, |w| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut buf, image::ImageFormat::Png).map_err(std::io::Error::other)?;
+        w.write_all(buf.get_ref())
+    })?;
+    Ok(())
+}

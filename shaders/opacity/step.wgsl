@@ -1,0 +1,171 @@
+// The three kernels of one Jacobi step (frontier.rs: enumerate, evaluate,
+// apply), each one invocation per list entry, 3-D-folded dispatch.
+
+// Phase 1: one invocation per frontier voxel u; lists each 26-neighbour v
+// that u's new value lifts (rise(q_u, e_v) > q_v), once (candidate bit),
+// appending per workgroup.
+@compute @workgroup_size(64)
+fn enumerate(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let i = flat_index(gid, nwg);
+    var mine: array<u32, 26>;
+    var n = 0u;
+    if (i < atomicLoad(&counters[0])) {
+        let u = front[i];
+        let qu = field_get(u);
+        let c = vec3<i32>(box_coords(u));
+        for (var dz = -1; dz <= 1; dz++) {
+            for (var dy = -1; dy <= 1; dy++) {
+                for (var dx = -1; dx <= 1; dx++) {
+                    let p = c + vec3<i32>(dx, dy, dz);
+                    if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                        continue;
+                    }
+                    let pc = vec3<u32>(p);
+                    let v = box_linear(pc);
+                    let q = field_get(v);
+                    if (q == P.q.y) {
+                        continue;
+                    }
+                    let bit = 1u << (v & 31u);
+                    if ((atomicLoad(&flags[v >> 5u]) & bit) != 0u) {
+                        continue;
+                    }
+                    let e = extinction(values[vol_linear(pc)]);
+                    if (rise(qu, e) <= q) {
+                        continue;
+                    }
+                    if ((atomicOr(&flags[v >> 5u], bit) & bit) != 0u) {
+                        continue;
+                    }
+                    mine[n] = v;
+                    n += 1u;
+                }
+            }
+        }
+    }
+    let local = atomicAdd(&w_count, n);
+    workgroupBarrier();
+    if (lid == 0u) {
+        w_base = atomicAdd(&counters[1], atomicLoad(&w_count));
+    }
+    workgroupBarrier();
+    let base = w_base + local;
+    for (var k = 0u; k < n; k++) {
+        cand[base + k] = mine[k];
+    }
+}
+
+// Phase 2: one invocation per candidate; the update rule and the pump
+// shortcut, field read-only.
+@compute @workgroup_size(64)
+fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat_index(gid, nwg);
+    if (i >= atomicLoad(&counters[1])) {
+        return;
+    }
+    let v = cand[i];
+    let cu = box_coords(v);
+    let c = vec3<i32>(cu);
+    var m = 0u;
+    for (var dz = -1; dz <= 1; dz++) {
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
+                let p = c + vec3<i32>(dx, dy, dz);
+                if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                    continue;
+                }
+                m = max(m, field_get(box_linear(vec3<u32>(p))));
+            }
+        }
+    }
+    let old = field_get(v);
+    let e = extinction(values[vol_linear(cu)]);
+    var new_q = max(rise(m, e), old);
+    // The pump shortcut (extinction.rs: Extinction::may_pump, pumps).
+    if (new_q > old && e < 0 && new_q < P.q.y) {
+        var pump = false;
+        for (var dz = -1; dz <= 1; dz++) {
+            for (var dy = -1; dy <= 1; dy++) {
+                for (var dx = -1; dx <= 1; dx++) {
+                    let p = c + vec3<i32>(dx, dy, dz);
+                    if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                        continue;
+                    }
+                    let pc = vec3<u32>(p);
+                    let en = extinction(values[vol_linear(pc)]);
+                    let qn = field_get(box_linear(pc));
+                    if (e + en < 0 && (qn > P.q.x || rise(new_q, en) > P.q.x)) {
+                        pump = true;
+                    }
+                }
+            }
+        }
+        if (pump) {
+            new_q = P.q.y;
+        }
+    }
+    newval[i] = new_q;
+    atomicAnd(&flags[v >> 5u], ~(1u << (v & 31u)));
+}
+
+var<workgroup> w_min: array<atomic<u32>, 3>;
+var<workgroup> w_max: array<atomic<u32>, 3>;
+
+// Phase 3: one invocation per candidate; stores risen values, appends them
+// to the next frontier and grows the region box (per workgroup).
+@compute @workgroup_size(64)
+fn apply(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    if (lid == 0u) {
+        atomicStore(&w_min[0], NONE);
+        atomicStore(&w_min[1], NONE);
+        atomicStore(&w_min[2], NONE);
+    }
+    workgroupBarrier();
+    let i = flat_index(gid, nwg);
+    var changed = false;
+    var v = 0u;
+    if (i < atomicLoad(&counters[1])) {
+        v = cand[i];
+        let old = field_get(v);
+        let new_q = newval[i];
+        if (new_q > old) {
+            // Only this invocation writes this half-word, and new_q <= 0xffff: no carry.
+            atomicAdd(&field[v >> 1u], (new_q - old) << ((v & 1u) * 16u));
+            changed = true;
+            let p = P.blo.xyz + box_coords(v);
+            atomicMin(&w_min[0], p.x);
+            atomicMin(&w_min[1], p.y);
+            atomicMin(&w_min[2], p.z);
+            atomicMax(&w_max[0], p.x);
+            atomicMax(&w_max[1], p.y);
+            atomicMax(&w_max[2], p.z);
+        }
+    }
+    var local = 0u;
+    if (changed) {
+        local = atomicAdd(&w_count, 1u);
+    }
+    workgroupBarrier();
+    if (lid == 0u) {
+        let total = atomicLoad(&w_count);
+        if (total > 0u) {
+            w_base = atomicAdd(&counters[2], total);
+            for (var a = 0u; a < 3u; a++) {
+                atomicMin(&counters[4u + a], atomicLoad(&w_min[a]));
+                atomicMax(&counters[8u + a], atomicLoad(&w_max[a]));
+            }
+        }
+    }
+    workgroupBarrier();
+    if (changed) {
+        next[w_base + local] = v;
+    }
+}
