@@ -20,17 +20,20 @@ struct Regrow {
     olo: vec4<u32>,   // old box lower corner; w = frontier entries to remap
     odim: vec4<u32>,  // old box dims; w = q_min
     nlo: vec4<u32>,   // new box lower corner; w = new box voxels
-    ndim: vec4<u32>,  // new box dims; w unused
+    ndim: vec4<u32>,  // new box dims; w = q_max
 }
 
 const WG: u32 = 64u;
 const E_BOUND: f32 = 131072.0;   // extinction.rs: E_BOUND
 const NONE: u32 = 0xffffffffu;
+const MARK_CANDIDATE: u32 = 1u;  // frontier.rs
+const MARK_DONE: u32 = 2u;
 
 @group(0) @binding(0) var<storage, read> P: Params;
 @group(0) @binding(1) var<storage, read> values: array<f32>;            // sanitised voxel values
 @group(0) @binding(2) var<storage, read_write> field: array<atomic<u32>>;
-@group(0) @binding(3) var<storage, read_write> flags: array<atomic<u32>>; // candidate bit per box voxel
+// Two marks per box voxel, 16 voxels per word: bit 2i candidate, bit 2i+1 done.
+@group(0) @binding(3) var<storage, read_write> marks: array<atomic<u32>>;
 @group(0) @binding(4) var<storage, read> front: array<u32>;              // frontier (box indices)
 @group(0) @binding(5) var<storage, read_write> cand: array<u32>;         // candidates (box indices)
 @group(0) @binding(6) var<storage, read_write> newval: array<u32>;       // new value per candidate

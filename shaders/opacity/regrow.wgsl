@@ -41,3 +41,22 @@ fn remap(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
     let o = R.olo.xyz + vec3<u32>(x, r % R.odim.y, r / R.odim.y) - R.nlo.xyz;
     next[i] = o.x + R.ndim.x * (o.y + R.ndim.y * o.z);
 }
+
+// One invocation per u32 word of the new marks: done where the new field
+// holds q_max, no candidate (frontier.rs: marks_for).
+@compute @workgroup_size(64)
+fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let w = flat_index(gid, nwg);
+    let n = R.nlo.w;
+    if (w >= (n + 15u) / 16u) {
+        return;
+    }
+    var word = 0u;
+    for (var i = 0u; i < 16u; i++) {
+        let v = 16u * w + i;
+        if (v < n && field_get(v) == R.ndim.w) {
+            word = word | (MARK_DONE << (2u * i));
+        }
+    }
+    atomicStore(&marks[w], word);
+}

@@ -2,8 +2,8 @@
 // apply), each one invocation per list entry, 3-D-folded dispatch.
 
 // Phase 1: one invocation per frontier voxel u; lists each 26-neighbour v
-// that u's new value lifts (rise(q_u, e_v) > q_v), once (candidate bit),
-// appending per workgroup.
+// that u's new value lifts (rise(q_u, e_v) > q_v), once (candidate mark),
+// skipping done voxels, appending per workgroup.
 @compute @workgroup_size(64)
 fn enumerate(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -26,19 +26,17 @@ fn enumerate(
                     }
                     let pc = vec3<u32>(p);
                     let v = box_linear(pc);
+                    let sh = (v & 15u) * 2u;
+                    if (((atomicLoad(&marks[v >> 4u]) >> sh) & (MARK_CANDIDATE | MARK_DONE)) != 0u) {
+                        continue;
+                    }
                     let q = field_get(v);
-                    if (q == P.q.y) {
-                        continue;
-                    }
-                    let bit = 1u << (v & 31u);
-                    if ((atomicLoad(&flags[v >> 5u]) & bit) != 0u) {
-                        continue;
-                    }
                     let e = extinction(values[vol_linear(pc)]);
                     if (rise(qu, e) <= q) {
                         continue;
                     }
-                    if ((atomicOr(&flags[v >> 5u], bit) & bit) != 0u) {
+                    let bit = MARK_CANDIDATE << sh;
+                    if ((atomicOr(&marks[v >> 4u], bit) & bit) != 0u) {
                         continue;
                     }
                     mine[n] = v;
@@ -109,7 +107,12 @@ fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgrou
         }
     }
     newval[i] = new_q;
-    atomicAnd(&flags[v >> 5u], ~(1u << (v & 31u)));
+    // Clear the candidate mark; set the done mark at the ceiling.
+    var done = 0u;
+    if (new_q == rise(P.q.y, e)) {
+        done = MARK_DONE;
+    }
+    atomicXor(&marks[v >> 4u], (MARK_CANDIDATE | done) << ((v & 15u) * 2u));
 }
 
 var<workgroup> w_min: array<atomic<u32>, 3>;

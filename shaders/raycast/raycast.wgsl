@@ -7,7 +7,8 @@
 //   vol    f32 per voxel, x fastest (voxel indices; centres at integers)
 //   lut    LUT_SIZE × vec4: linear r, g, b and extinction κ (per mm)
 //   accel  [0, LUT_SIZE]: count of entries with κ > 0 before each entry;
-//          from counts.z: cell minima (f32 bits), then cell maxima
+//          from counts.z: cell minima (f32 bits), cell maxima, leap
+//          distances (u32, see leap.wgsl), scratch
 //   maps   combined opacity map, u16 fixed point packed two per word
 //          (even voxel in the low half)
 //   out_px RGBA8 per pixel, R in the low byte (sRGB, straight alpha)
@@ -130,22 +131,14 @@ fn lut_lookup(v: f32) -> vec4<f32> {
     return vec4<f32>(lerp(a.x, b.x, f), lerp(a.y, b.y, f), lerp(a.z, b.z, f), lerp(a.w, b.w, f));
 }
 
-fn cell_min(l: u32) -> f32 {
-    return bitcast<f32>(accel[u.counts.z + l]);
-}
-
 fn cell_max(l: u32) -> f32 {
     return bitcast<f32>(accel[u.counts.z + u.counts.w + l]);
 }
 
-// Same as Lut::range_is_empty.
-fn cell_is_empty(l: u32) -> bool {
-    let top = u.lut.z - 1.0;
-    let a = u32(clamp(floor((cell_min(l) - u.lut.x) * u.lut.y), 0.0, top));
-    let b = u32(clamp(floor((cell_max(l) - u.lut.x) * u.lut.y), 0.0, top));
-    let lo = select(0u, a - 1u, a > 0u);
-    let hi = min(b + 2u, u32(top));
-    return accel[hi + 1u] == accel[lo];
+// 0: the cell may hold a visible sample; d > 0: every cell within d − 1
+// cells is empty (MacroCells::leap_distances).
+fn cell_leap(l: u32) -> u32 {
+    return accel[u.counts.z + 2u * u.counts.w + l];
 }
 
 fn map_at(i: u32, j: u32, k: u32) -> f32 {
@@ -182,20 +175,21 @@ struct Cell {
 
 fn cell_of(p_in: vec3<f32>) -> Cell {
     let p = clamp(p_in, vec3<f32>(0.0), upper());
-    let c = min(vec3<u32>(p / u.step.w), u.cells.xyz - vec3<u32>(1u));
+    let c = min(vec3<u32>(p * (1.0 / u.step.w)), u.cells.xyz - vec3<u32>(1u));
     var out: Cell;
     out.c = c;
     out.l = c.x + u.cells.x * (c.y + u.cells.y * c.z);
     return out;
 }
 
-fn cell_exit(c: vec3<u32>, oi: vec3<f32>, di: vec3<f32>) -> f32 {
+// Where the ray leaves the block of cells within d − 1 of cell c (d = 1: the cell).
+fn cell_exit(c: vec3<u32>, d: u32, oi: vec3<f32>, di: vec3<f32>) -> f32 {
     var t = T_FAR;
     for (var a = 0u; a < 3u; a++) {
         if (di[a] > 0.0) {
-            t = min(t, (f32(c[a] + 1u) * u.step.w - oi[a]) / di[a]);
+            t = min(t, (f32(c[a] + d) * u.step.w - oi[a]) * (1.0 / di[a]));
         } else if (di[a] < 0.0) {
-            t = min(t, (f32(c[a]) * u.step.w - oi[a]) / di[a]);
+            t = min(t, ((f32(c[a]) + 1.0 - f32(d)) * u.step.w - oi[a]) * (1.0 / di[a]));
         }
     }
     return t;
@@ -275,14 +269,14 @@ fn schedule(t0: f32, t1: f32) -> Schedule {
     let dt = u.step.x;
     let span = t1 - t0;
     var s: Schedule;
-    s.n_full = u32(floor(span / dt));
+    s.n_full = u32(span * (1.0 / dt));
     s.rem = span - f32(s.n_full) * dt;
     s.n_total = s.n_full + select(0u, 1u, s.rem > 1e-4 * dt);
     return s;
 }
 
 fn next_sample(k: u32, t0: f32, t_exit: f32, n_total: u32) -> u32 {
-    let next = u32(clamp(ceil((t_exit - t0) / u.step.x - 0.5), 0.0, f32(n_total)));
+    let next = u32(ceil(clamp((t_exit - t0) * (1.0 / u.step.x) - 0.5, 0.0, f32(n_total))));
     return max(next, k + 1u);
 }
 
@@ -315,13 +309,13 @@ fn composite(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
         let p = oi + di * t;
         if (ess && t >= exit_t) {
             let c = cell_of(p);
-            let e = cell_exit(c.c, oi, di);
-            if (cell_is_empty(c.l)) {
-                k = next_sample(k, t0, e, s.n_total);
+            let d = cell_leap(c.l);
+            if (d > 0u) {
+                k = next_sample(k, t0, cell_exit(c.c, d, oi, di), s.n_total);
                 exit_t = -1.0;
                 continue;
             }
-            exit_t = e;
+            exit_t = cell_exit(c.c, 1u, oi, di);
         }
         k += 1u;
         let fp = footprint(p);
@@ -389,7 +383,7 @@ fn mip(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
         let p = oi + di * t;
         if (ess && t >= exit_t) {
             let c = cell_of(p);
-            let e = cell_exit(c.c, oi, di);
+            let e = cell_exit(c.c, 1u, oi, di);
             if (samples > 0u && cell_max(c.l) <= vmax) {
                 k = next_sample(k, t0, e, s.n_total);
                 exit_t = -1.0;

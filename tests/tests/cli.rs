@@ -299,5 +299,81 @@ fn scripted_interactions_reach_the_model_at_their_frame() {
     std::fs::write(tmp.path().join("s.toml"), s).unwrap();
     let o = voxflex(&["run", "s.toml"], tmp.path());
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown field `amplitude`"), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("unknown field `amplitude`"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn roi_maps_grow_from_a_seed_and_stages_nobody_asked_for_are_not_built() {
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // Seed in the brain of the head phantom (world centre is inside it).
+    let s = format!(
+        "{}\n[[roi]]\nname = \"brain\"\nseed = [0.0, 0.0, 0.0]\nwrite = true\n",
+        scene(
+            "cpu",
+            "head",
+            40,
+            1,
+            "affine",
+            "field = \"twist\"\nangle_deg = 10",
+            &out
+        )
+    );
+    std::fs::write(tmp.path().join("s.toml"), s).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&out);
+    assert_eq!(m["stages"]["roi"]["runs"], 1, "{m}");
+    assert!(
+        m["stages"]["roi"]["notes"]["useful_fraction"]
+            .as_f64()
+            .unwrap()
+            > 0.5,
+        "{m}"
+    );
+    let nb: Vec<&str> = m["stages_not_built"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(nb.contains(&"render") && !nb.contains(&"roi"), "{m}");
+    let map =
+        voxflex_core::io::read_volume(&out.join("roi_brain.nii.gz"), &Default::default()).unwrap();
+    let v = map.data.as_slice().to_f32_vec();
+    let inside = v.iter().filter(|&&q| q > 0.5 * 65535.0).count();
+    assert!(
+        inside > 1000,
+        "the brain map holds only {inside} voxels above 0.5"
+    );
+
+    // A scene with neither [[roi]] nor [render] builds neither.
+    std::fs::write(
+        tmp.path().join("t.toml"),
+        scene(
+            "cpu",
+            "cube",
+            8,
+            1,
+            "affine",
+            "field = \"twist\"",
+            &tmp.path().join("o2"),
+        ),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "t.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&tmp.path().join("o2"));
+    let nb: Vec<&str> = m["stages_not_built"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(nb.contains(&"render") && nb.contains(&"roi"), "{m}");
 }

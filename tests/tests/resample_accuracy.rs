@@ -99,7 +99,10 @@ fn compare(
         if !inside {
             continue;
         }
-        assert!(value.is_finite(), "voxel {l} inside the deformed mesh was not written");
+        assert!(
+            value.is_finite(),
+            "voxel {l} inside the deformed mesh was not written"
+        );
         let e = (value as f64 - reference(rest)).abs();
         max = max.max(e);
         sum2 += e * e;
@@ -189,10 +192,18 @@ fn head_phantom_twist_error_against_direct_analytic_resampling() {
 
 #[test]
 fn identity_field_reproduces_the_volume_exactly() {
-    for volume in [voxflex_core::phantom::phantom("head", [33, 40, 37]).unwrap(), voxflex_core::phantom::ramp([20, 17, 9])] {
+    for volume in [
+        voxflex_core::phantom::phantom("head", [33, 40, 37]).unwrap(),
+        voxflex_core::phantom::ramp([20, 17, 9]),
+    ] {
         let (g, out) = deform(&volume, "field = \"affine\"");
         assert_eq!(g, volume.grid, "the identity must not grow the output grid");
         let src = volume.data.as_slice().to_f32_vec();
-        assert!(src.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits()), "identity resample is not bit-exact");
+        assert!(
+            src.iter()
+                .zip(&out)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "identity resample is not bit-exact"
+        );
     }
 }

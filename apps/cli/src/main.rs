@@ -58,6 +58,67 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         dims: Option<Vec<usize>>,
     },
+    /// Grow a spatial opacity map (ROI) from a seed and write it as NIfTI (u16, 65535 = opacity 1).
+    Roi {
+        /// A volume file or `phantom:<name>`.
+        volume: String,
+        /// Seed point, world mm: x,y,z.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+        seed: Vec<f64>,
+        /// Output file (.nii or .nii.gz).
+        #[arg(long)]
+        out: PathBuf,
+        /// Extinction scale λ.
+        #[arg(long, default_value_t = 30.0)]
+        lambda: f32,
+        /// Opacity outside the region.
+        #[arg(long, default_value_t = 0.03)]
+        o_min: f32,
+        /// Opacity of the seed.
+        #[arg(long, default_value_t = 1.0)]
+        o_max: f32,
+        /// Growth steps (default: run to convergence).
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Phantom resolution (x,y,z), phantoms only.
+        #[arg(long, value_delimiter = ',')]
+        dims: Option<Vec<usize>>,
+    },
+    /// Render a volume with the `raycast` plugin into a PNG (one image or a turntable).
+    Render {
+        /// A volume file or `phantom:<name>`.
+        volume: String,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Transfer-function preset: ct-bone, ct-soft-tissue, ct-lung, mri-t1.
+        #[arg(long, default_value = "ct-bone")]
+        preset: String,
+        /// Maximum intensity projection instead of compositing.
+        #[arg(long)]
+        mip: bool,
+        /// Image size in pixels: WIDTHxHEIGHT.
+        #[arg(long, default_value = "512x512")]
+        size: String,
+        /// Camera azimuth, degrees about +z (0 = anterior view).
+        #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+        azimuth: f64,
+        /// Camera elevation, degrees.
+        #[arg(long, default_value_t = 15.0, allow_hyphen_values = true)]
+        elevation: f64,
+        /// Perspective field of view in degrees (default: orthographic).
+        #[arg(long)]
+        perspective: Option<f64>,
+        /// Turntable frames (0 = one image); files get _000, _001, … suffixes.
+        #[arg(long, default_value_t = 0)]
+        turntable: u32,
+        /// Backend: cpu, gpu or auto.
+        #[arg(long, default_value = "auto")]
+        backend: voxflex_runtime::backend::BackendChoice,
+        /// Phantom resolution (x,y,z), phantoms only.
+        #[arg(long, value_delimiter = ',')]
+        dims: Option<Vec<usize>>,
+    },
     /// Benchmark the resampling pipeline through the real plugin path.
     Bench(bench::BenchArgs),
 }
@@ -73,9 +134,18 @@ fn main() {
         .with_writer(std::io::stderr)
         .init();
     if let Err(e) = dispatch(cli.command) {
-        // One line: the chain of causes, joined.
-        let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-        eprintln!("error: {}", chain.join(": "));
+        // One line: the chain of causes, joined, skipping a cause whose text
+        // the message before it already carries.
+        let mut line = String::new();
+        for cause in e.chain().map(|c| c.to_string()) {
+            if !line.contains(&cause) {
+                if !line.is_empty() {
+                    line.push_str(": ");
+                }
+                line.push_str(&cause);
+            }
+        }
+        eprintln!("error: {line}");
         std::process::exit(1);
     }
 }
@@ -102,6 +172,50 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Validate { scene } => validate(scene),
         Command::Plugins { dirs } => plugins(dirs),
         Command::Info { volume, dims } => info(volume, dims),
+        Command::Roi {
+            volume,
+            seed,
+            out,
+            lambda,
+            o_min,
+            o_max,
+            steps,
+            dims,
+        } => roi(volume, dims, seed, out, lambda, o_min, o_max, steps),
+        Command::Render {
+            volume,
+            out,
+            preset,
+            mip,
+            size,
+            azimuth,
+            elevation,
+            perspective,
+            turntable,
+            backend,
+            dims,
+        } => {
+            let (width, height) = size
+                .split_once('x')
+                .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+                .with_context(|| format!("--size `{size}`: use WIDTHxHEIGHT, e.g. 512x512"))?;
+            let camera = voxflex_runtime::scene::CameraSettings {
+                azimuth_deg: azimuth,
+                elevation_deg: elevation,
+                projection: if perspective.is_some() {
+                    voxflex_runtime::scene::ProjectionName::Perspective
+                } else {
+                    voxflex_runtime::scene::ProjectionName::Orthographic
+                },
+                fov_deg: perspective.unwrap_or(30.0),
+                ..Default::default()
+            };
+            let params = format!(
+                "mode = \"{}\"\ntransfer_function = {{ preset = \"{preset}\" }}\nbackground = [0, 0, 0]\n",
+                if mip { "mip" } else { "composite" }
+            );
+            render(volume, dims, out, params, width, height, camera, turntable, backend)
+        }
         Command::Bench(args) => {
             let report = bench::run(&args)?;
             println!("{report}");
@@ -228,9 +342,9 @@ fn plugins(dirs: Vec<PathBuf>) -> Result<()> {
     Ok(())
 }
 
-fn info(source: String, dims: Option<Vec<usize>>) -> Result<()> {
+fn load_volume(source: &str, dims: Option<Vec<usize>>) -> Result<voxflex_core::volume::Volume> {
     use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
-    let volume = match parse_source(&source) {
+    Ok(match parse_source(source) {
         VolumeSource::Phantom(name) => {
             let d = match dims.as_deref() {
                 Some([x, y, z]) => [*x, *y, *z],
@@ -245,11 +359,113 @@ fn info(source: String, dims: Option<Vec<usize>>) -> Result<()> {
             }
             voxflex_core::io::read_volume(&p, &voxflex_core::io::ReadOptions::default())?
         }
-    };
+    })
+}
+
+fn info(source: String, dims: Option<Vec<usize>>) -> Result<()> {
+    let volume = load_volume(&source, dims)?;
     println!("{source}");
     println!(
         "{}",
         voxflex_core::stats::VolumeStats::compute(volume.view())
     );
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn roi(
+    source: String,
+    dims: Option<Vec<usize>>,
+    seed: Vec<f64>,
+    out: PathBuf,
+    lambda: f32,
+    o_min: f32,
+    o_max: f32,
+    steps: Option<usize>,
+) -> Result<()> {
+    use voxflex_core::opacity::{CpuGrowth, GrowthParams, Seed};
+    let [x, y, z] = seed[..] else {
+        bail!("--seed needs three millimetre coordinates: x,y,z");
+    };
+    let name = out.to_string_lossy();
+    if !(name.ends_with(".nii") || name.ends_with(".nii.gz")) {
+        bail!("--out `{name}` must end in .nii or .nii.gz");
+    }
+    let volume = load_volume(&source, dims)?;
+    let params = GrowthParams {
+        o_min,
+        o_max,
+        lambda,
+        ..GrowthParams::default()
+    };
+    let seed = Seed::World(voxflex_core::glam::DVec3::new(x, y, z));
+    let mut growth = CpuGrowth::new(volume.view(), &seed, params)?;
+    let report = match steps {
+        Some(n) => growth.step(volume.view(), n)?,
+        None => growth.run(volume.view())?,
+    };
+    let map = growth.map();
+    let written = voxflex_runtime::visualise::map_volume(&volume.grid, &map);
+    voxflex_core::io::write_volume(&out, written.view())?;
+    println!(
+        "{}: {} steps, {} visits ({:.0}% useful), map box {:?} ({} bytes) → {}",
+        source,
+        report.steps,
+        report.visits,
+        100.0 * report.useful as f64 / report.visits.max(1) as f64,
+        map.dims,
+        map.bytes(),
+        out.display()
+    );
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render(
+    source: String,
+    dims: Option<Vec<usize>>,
+    out: PathBuf,
+    params_toml: String,
+    width: u32,
+    height: u32,
+    camera: voxflex_runtime::scene::CameraSettings,
+    turntable: u32,
+    backend: voxflex_runtime::backend::BackendChoice,
+) -> Result<()> {
+    use voxflex_runtime::scene::RenderSettings;
+    let name = out.to_string_lossy().into_owned();
+    if !name.ends_with(".png") {
+        bail!("--out `{name}` must end in .png");
+    }
+    if width == 0 || height == 0 || width > 16384 || height > 16384 {
+        bail!("--size {width}x{height} is out of range; use 1 to 16384 pixels per side");
+    }
+    let volume = load_volume(&source, dims)?;
+    let resolved = voxflex_runtime::backend::resolve(backend)?;
+    let plugin = plugin_loader::load_by_name("raycast", &plugin_loader::search_path(&[]))?;
+    let services = voxflex_abi::host_side::HostServices::new(resolved.gpu_service(), rayon::current_num_threads());
+    let mut stage = voxflex_runtime::visualise::RenderStage::new("voxflex render", &plugin, &params_toml, services, resolved.backend)?;
+    let dir = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let file = out.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or(name);
+    let settings = RenderSettings {
+        plugin: "raycast".into(),
+        width,
+        height,
+        camera,
+        turntable,
+        file,
+        params: Default::default(),
+    };
+    let mut metrics = voxflex_runtime::metrics::RunMetrics::default();
+    let written = stage.render(&settings, &volume, voxflex_core::deformation::DirtyRegion::All, &[], &dir, &mut metrics)?;
+    let wall = metrics.stages.get("render").map_or(0.0, |s| s.wall_ms);
+    for f in written {
+        println!("wrote {}", dir.join(f).display());
+    }
+    println!("{} in {wall:.0} ms", resolved.reason);
     Ok(())
 }

@@ -37,8 +37,8 @@ pub struct Scene<'a> {
     pub lut: &'a Lut,
     /// The macro-cells (min/max).
     pub cells: &'a MacroCells,
-    /// Per-cell emptiness under `lut` ([`MacroCells::empty_flags`]).
-    pub empty: &'a [u8],
+    /// Per-cell leap distances under `lut` ([`MacroCells::leap_distances`]).
+    pub leap: &'a [u8],
     /// The combined opacity map, if any.
     pub map: Option<&'a OpacityMap>,
 }
@@ -76,7 +76,12 @@ struct Kernel<'a> {
     /// Voxel-index upper bound `n − 1` per axis.
     upper: Vec3,
     cell: f32,
+    inv_cell: f32,
+    inv_dt: f32,
     cell_counts: [usize; 3],
+    /// The shininess when it is a small whole number (then `powi`, much
+    /// cheaper than `powf`, gives the same value to rounding).
+    shininess_int: Option<i32>,
     flags: u32,
     dt: f32,
 }
@@ -102,11 +107,17 @@ impl<'a> Kernel<'a> {
                 dims[2].max(1) as f32 - 1.0,
             ),
             cell: u.step[3],
+            inv_cell: 1.0 / u.step[3],
+            inv_dt: 1.0 / u.step[0],
             cell_counts: [
                 u.cells[0] as usize,
                 u.cells[1] as usize,
                 u.cells[2] as usize,
             ],
+            shininess_int: {
+                let s = u.shading[3];
+                (s == s.round() && (0.0..=128.0).contains(&s)).then_some(s as i32)
+            },
             flags: u.flags(),
             dt: u.step[0],
         }
@@ -217,12 +228,10 @@ impl<'a> Kernel<'a> {
         let ob = [0, self.off[b]];
         let oc = [0, self.off[c]];
         let v = self.s.values;
-        for (slot, (db, dc)) in acc
-            .iter_mut()
-            .zip([(0, 0), (1, 0), (0, 1), (1, 1)])
-        {
+        for (slot, (db, dc)) in acc.iter_mut().zip([(0, 0), (1, 0), (0, 1), (1, 1)]) {
             let r = row0 + ob[db] + oc[dc];
-            *slot = (1.0 - fa) * (v[r + i1 * sa] - v[r + im * sa]) + fa * (v[r + i2 * sa] - v[r + i0 * sa]);
+            *slot = (1.0 - fa) * (v[r + i1 * sa] - v[r + im * sa])
+                + fa * (v[r + i2 * sa] - v[r + i0 * sa]);
         }
         lerp(lerp(acc[0], acc[1], fb), lerp(acc[2], acc[3], fb), fc)
     }
@@ -264,10 +273,26 @@ impl<'a> Kernel<'a> {
         let j1 = (j0 + 1).min(self.dims[1] - 1);
         let k1 = (k0 + 1).min(self.dims[2] - 1);
         let f = fp.f;
-        let x00 = lerp(Self::map_at(m, i0, j0, k0), Self::map_at(m, i1, j0, k0), f.x);
-        let x10 = lerp(Self::map_at(m, i0, j1, k0), Self::map_at(m, i1, j1, k0), f.x);
-        let x01 = lerp(Self::map_at(m, i0, j0, k1), Self::map_at(m, i1, j0, k1), f.x);
-        let x11 = lerp(Self::map_at(m, i0, j1, k1), Self::map_at(m, i1, j1, k1), f.x);
+        let x00 = lerp(
+            Self::map_at(m, i0, j0, k0),
+            Self::map_at(m, i1, j0, k0),
+            f.x,
+        );
+        let x10 = lerp(
+            Self::map_at(m, i0, j1, k0),
+            Self::map_at(m, i1, j1, k0),
+            f.x,
+        );
+        let x01 = lerp(
+            Self::map_at(m, i0, j0, k1),
+            Self::map_at(m, i1, j0, k1),
+            f.x,
+        );
+        let x11 = lerp(
+            Self::map_at(m, i0, j1, k1),
+            Self::map_at(m, i1, j1, k1),
+            f.x,
+        );
         lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z)
     }
 
@@ -276,23 +301,25 @@ impl<'a> Kernel<'a> {
     fn cell_of(&self, p: Vec3) -> ([usize; 3], usize) {
         let p = p.clamp(Vec3::ZERO, self.upper);
         let c = [
-            ((p.x / self.cell) as usize).min(self.cell_counts[0] - 1),
-            ((p.y / self.cell) as usize).min(self.cell_counts[1] - 1),
-            ((p.z / self.cell) as usize).min(self.cell_counts[2] - 1),
+            ((p.x * self.inv_cell) as usize).min(self.cell_counts[0] - 1),
+            ((p.y * self.inv_cell) as usize).min(self.cell_counts[1] - 1),
+            ((p.z * self.inv_cell) as usize).min(self.cell_counts[2] - 1),
         ];
         let l = c[0] + self.cell_counts[0] * (c[1] + self.cell_counts[1] * c[2]);
         (c, l)
     }
 
-    /// Ray parameter (mm) where the ray `oi + t·di` (voxel space) leaves cell `c`.
+    /// Ray parameter (mm) where the ray `oi + t·di` (voxel space, `inv_di`
+    /// = 1/di) leaves the block of cells within `d − 1` of cell `c` (`d = 1`:
+    /// the cell itself).
     #[inline]
-    fn cell_exit(&self, c: [usize; 3], oi: Vec3, di: Vec3) -> f32 {
+    fn cell_exit(&self, c: [usize; 3], d: u32, oi: Vec3, di: Vec3, inv_di: Vec3) -> f32 {
         let mut t = T_FAR;
         for a in 0..3 {
             if di[a] > 0.0 {
-                t = t.min(((c[a] + 1) as f32 * self.cell - oi[a]) / di[a]);
+                t = t.min(((c[a] as u32 + d) as f32 * self.cell - oi[a]) * inv_di[a]);
             } else if di[a] < 0.0 {
-                t = t.min((c[a] as f32 * self.cell - oi[a]) / di[a]);
+                t = t.min(((c[a] as f32 + 1.0 - d as f32) * self.cell - oi[a]) * inv_di[a]);
             }
         }
         t
@@ -325,7 +352,8 @@ impl<'a> Kernel<'a> {
     #[inline]
     fn schedule(&self, t0: f32, t1: f32) -> (u32, f32, u32) {
         let span = t1 - t0;
-        let n_full = (span / self.dt).floor() as u32;
+        // span ≥ 0: truncation is floor (and avoids a libm call).
+        let n_full = (span * self.inv_dt) as u32;
         let rem = span - n_full as f32 * self.dt;
         let n_total = n_full + (rem > 1e-4 * self.dt) as u32;
         (n_full, rem, n_total)
@@ -334,7 +362,10 @@ impl<'a> Kernel<'a> {
     /// Index of the first sample at or past ray parameter `t_exit`.
     #[inline]
     fn next_sample(&self, k: u32, t0: f32, t_exit: f32, n_total: u32) -> u32 {
-        let next = ((t_exit - t0) / self.dt - 0.5).ceil().clamp(0.0, n_total as f32) as u32;
+        let x = ((t_exit - t0) * self.inv_dt - 0.5).clamp(0.0, n_total as f32);
+        // ceil(x) for x ≥ 0 without a libm call.
+        let i = x as u32;
+        let next = if (i as f32) < x { i + 1 } else { i };
         next.max(k + 1)
     }
 
@@ -345,6 +376,7 @@ impl<'a> Kernel<'a> {
         let inv_sp = Vec3::from_slice(&u.inv_spacing[..3]);
         let oi = (o - origin) * inv_sp;
         let di = d * inv_sp;
+        let inv_di = Vec3::ONE / di;
         let (n_full, rem, n_total) = self.schedule(t0, t1);
         let ess = self.flags & FLAG_ESS != 0;
         let et = self.flags & FLAG_EARLY_TERMINATION != 0;
@@ -366,13 +398,14 @@ impl<'a> Kernel<'a> {
             let p = oi + di * t;
             if ess && t >= cell_exit {
                 let (c, l) = self.cell_of(p);
-                let exit = self.cell_exit(c, oi, di);
-                if self.s.empty[l] != 0 {
+                let d = self.s.leap[l] as u32;
+                if d > 0 {
+                    let exit = self.cell_exit(c, d, oi, di, inv_di);
                     k = self.next_sample(k, t0, exit, n_total);
                     cell_exit = -1.0;
                     continue;
                 }
-                cell_exit = exit;
+                cell_exit = self.cell_exit(c, 1, oi, di, inv_di);
             }
             k += 1;
             let fp = self.footprint(p);
@@ -398,7 +431,11 @@ impl<'a> Kernel<'a> {
                 } else {
                     1.0
                 };
-                let spec = if ndl > 0.0 { ndl.powf(shininess) } else { 0.0 };
+                let spec = match self.shininess_int {
+                    _ if ndl <= 0.0 => 0.0,
+                    Some(n) => ndl.powi(n),
+                    None => ndl.powf(shininess),
+                };
                 col = col * (ka + kd * ndl) + Vec3::splat(ks * spec);
             }
             let w = (1.0 - a_acc) * alpha;
@@ -422,6 +459,7 @@ impl<'a> Kernel<'a> {
         let inv_sp = Vec3::from_slice(&u.inv_spacing[..3]);
         let oi = (o - origin) * inv_sp;
         let di = d * inv_sp;
+        let inv_di = Vec3::ONE / di;
         let (n_full, rem, n_total) = self.schedule(t0, t1);
         let ess = self.flags & FLAG_ESS != 0;
         let mut vmax = f32::MIN;
@@ -438,7 +476,7 @@ impl<'a> Kernel<'a> {
             let p = oi + di * t;
             if ess && t >= cell_exit {
                 let (c, l) = self.cell_of(p);
-                let exit = self.cell_exit(c, oi, di);
+                let exit = self.cell_exit(c, 1, oi, di, inv_di);
                 if samples > 0 && self.s.cells.max[l] <= vmax {
                     k = self.next_sample(k, t0, exit, n_total);
                     cell_exit = -1.0;

@@ -7,7 +7,9 @@
 //!   `RenderVolume::Gpu` (bound as is, no copy), else ours, uploaded once per
 //!   version and only over the z-slab of planes the dirty region touches;
 //! - `lut`: [`LUT_SIZE`] `vec4<f32>` (linear RGB, κ);
-//! - `accel`: the TF's non-zero prefix counts, then cell minima and maxima;
+//! - `accel`: the TF's non-zero prefix counts, then cell minima, maxima,
+//!   leap distances and a scratch copy (three `leap.wgsl` passes per change
+//!   of cells or transfer function);
 //! - `maps`: the combined opacity map, u16 packed two per u32;
 //! - the output, RGBA8 packed per u32; `stats`: three u32 counters.
 //!
@@ -30,6 +32,17 @@ use voxflex_core::with_voxels;
 pub const RAYCAST_WGSL: &str = include_str!("../../../shaders/raycast/raycast.wgsl");
 /// The WGSL of the macro-cell kernel.
 pub const CELLS_WGSL: &str = include_str!("../../../shaders/raycast/cells.wgsl");
+/// The WGSL of the leap-distance kernel (one separable pass per dispatch).
+pub const LEAP_WGSL: &str = include_str!("../../../shaders/raycast/leap.wgsl");
+
+/// Uniforms of `leap.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct LeapUniforms {
+    counts: [u32; 4],
+    offs: [u32; 4],
+    lut: [f32; 4],
+}
 
 /// Uniforms of `cells.wgsl`.
 #[repr(C)]
@@ -57,6 +70,8 @@ pub struct GpuRenderer {
     cell_uniforms: BufferId,
     stats: BufferId,
     lut: BufferId,
+    /// One uniforms buffer per leap pass.
+    leap_uniforms: [BufferId; 3],
     volume: Option<VolumeBuffer>,
     /// Voxels of the current volume.
     voxels: usize,
@@ -80,15 +95,24 @@ fn too_big(what: &str, bytes: u64, limit: u64) -> ModelError {
 impl GpuRenderer {
     /// Creates the fixed buffers.
     pub fn new(gpu: Arc<dyn GpuService>) -> Result<Self, ModelError> {
-        let uniforms =
-            gpu.create_buffer(std::mem::size_of::<RayUniforms>() as u64, "raycast uniforms")?;
+        let uniforms = gpu.create_buffer(
+            std::mem::size_of::<RayUniforms>() as u64,
+            "raycast uniforms",
+        )?;
         let cell_uniforms = gpu.create_buffer(
             std::mem::size_of::<CellUniforms>() as u64,
             "raycast cell uniforms",
         )?;
         let stats = gpu.create_buffer(16, "raycast stats")?;
         let lut = gpu.create_buffer((LUT_SIZE * 16) as u64, "raycast lut")?;
+        let bytes = std::mem::size_of::<LeapUniforms>() as u64;
+        let leap_uniforms = [
+            gpu.create_buffer(bytes, "raycast leap uniforms x")?,
+            gpu.create_buffer(bytes, "raycast leap uniforms y")?,
+            gpu.create_buffer(bytes, "raycast leap uniforms z")?,
+        ];
         Ok(Self {
+            leap_uniforms,
             gpu,
             uniforms,
             cell_uniforms,
@@ -110,7 +134,9 @@ impl GpuRenderer {
     fn volume_id(&self) -> Result<BufferId, ModelError> {
         match self.volume {
             Some(VolumeBuffer::External(id) | VolumeBuffer::Owned(id)) => Ok(id),
-            None => Err(ModelError::new("render before set_volume: no volume on the GPU")),
+            None => Err(ModelError::new(
+                "render before set_volume: no volume on the GPU",
+            )),
         }
     }
 
@@ -196,7 +222,7 @@ impl GpuRenderer {
         if let Some((id, _)) = self.accel.take() {
             self.gpu.destroy_buffer(id);
         }
-        let bytes = ((ACCEL_CELLS_OFFSET + 2 * cells) * 4) as u64;
+        let bytes = ((ACCEL_CELLS_OFFSET + 4 * cells) * 4) as u64;
         if bytes > self.max_binding() {
             return Err(too_big("the macro-cell grid", bytes, self.max_binding()));
         }
@@ -275,13 +301,45 @@ impl GpuRenderer {
         )?;
         let mut m = MacroCells::new(dims, cell);
         if m.len() != total {
-            return Err(ModelError::new("macro-cell grid on the GPU has a stale size"));
+            return Err(ModelError::new(
+                "macro-cell grid on the GPU has a stale size",
+            ));
         }
         for l in 0..total {
             m.min[l] = f32::from_bits(words[l]);
             m.max[l] = f32::from_bits(words[total + l]);
         }
         Ok(m)
+    }
+
+    /// Recomputes the leap distances from the cells and the TF table (three
+    /// separable passes; the result lands where `raycast.wgsl` reads it).
+    pub fn update_leap(&mut self, lut: &Lut, counts: [usize; 3]) -> Result<(), ModelError> {
+        self.write_prefix(&lut.nonzero_prefix)?;
+        let (accel, total) = self
+            .accel
+            .ok_or_else(|| ModelError::new("leap distances before the macro-cells were built"))?;
+        let base = ACCEL_CELLS_OFFSET as u32;
+        let t = total as u32;
+        let (a, b) = (base + 2 * t, base + 3 * t);
+        let pipeline = self.gpu.compile(LEAP_WGSL, "main")?;
+        let groups = self.gpu.workgroups_for(total as u64, 64)?;
+        // x: emptiness → a, y: a → b, z: b → a.
+        for (axis, (src, dst)) in [(a, a), (a, b), (b, a)].into_iter().enumerate() {
+            let u = LeapUniforms {
+                counts: [counts[0] as u32, counts[1] as u32, counts[2] as u32, t],
+                offs: [base, src, dst, axis as u32],
+                lut: [lut.lo, lut.scale, LUT_SIZE as f32, 0.0],
+            };
+            let ub = self.leap_uniforms[axis];
+            self.gpu.write_buffer(ub, 0, bytemuck::bytes_of(&u))?;
+            self.gpu.dispatch(
+                pipeline,
+                &[BufferBinding::whole(0, ub), BufferBinding::whole(1, accel)],
+                groups,
+            )?;
+        }
+        Ok(())
     }
 
     /// Uploads the transfer-function table and its prefix counts.
@@ -425,7 +483,10 @@ impl GpuRenderer {
 impl Drop for GpuRenderer {
     fn drop(&mut self) {
         let g = &self.gpu;
-        for id in [self.uniforms, self.cell_uniforms, self.stats, self.lut] {
+        for id in [self.uniforms, self.cell_uniforms, self.stats, self.lut]
+            .into_iter()
+            .chain(self.leap_uniforms)
+        {
             g.destroy_buffer(id);
         }
         if let Some(VolumeBuffer::Owned(id)) = self.volume {

@@ -29,9 +29,13 @@
 //! - **Empty-space skipping.** A min/max macro-cell grid (`macro_cell`³
 //!   voxels, including the shared border voxel) is built once per volume
 //!   version and rebuilt only over the dirty region passed to `set_volume`.
-//!   Composite rays jump over cells whose `[min, max]` the TF maps to κ = 0
-//!   everywhere (a prefix count over the TF table, one entry of margin);
-//!   MIP rays jump over cells whose max cannot beat their running maximum.
+//!   A cell is empty when the TF maps its whole `[min, max]` to κ = 0 (a
+//!   prefix count over the TF table, one entry of margin). Per TF and
+//!   volume version a leap distance is derived for every cell (Chebyshev
+//!   distance to the nearest non-empty cell, capped at 16 cells), so a
+//!   composite ray in empty space jumps over a whole block of empty cells at
+//!   once; MIP rays jump cell by cell over cells whose max cannot beat their
+//!   running maximum.
 //!   Skipping is exact: it never changes a pixel (up to float rounding at
 //!   cell faces).
 //! - **Early ray termination** at `termination_threshold` (default
@@ -57,6 +61,19 @@
 //! version (the dirty z-slab of planes). Volumes, maps and images above the
 //! GPU's largest storage binding are refused with an error.
 //!
+//! ## Accuracy and speed (tested in `src/tests.rs`, measured here)
+//!
+//! - Homogeneous box, κ known: every pixel's opacity equals
+//!   `1 − exp(−κ L)` for the analytic chord L (bound 1e-3; measured 2.4e-6).
+//! - Default step (0.5 voxel) vs a 16×-oversampled reference, 64³ head,
+//!   `ct-soft-tissue`, shaded: RMS error bound 0.01 of the linear RGBA
+//!   (measured 5e-3), shrinking about 4× per halving of the step.
+//! - Empty-space skipping + early termination vs brute force: ≤ 1/255.
+//! - CPU vs GPU (lavapipe): ≤ 2/255 per channel (measured ≤ 1/255).
+//! - `cargo bench -p voxflex-raycast --bench render`: 512² image of the 256³
+//!   CT head phantom, `ct-bone`, shaded, 0.5-voxel steps, 2 cores: see the
+//!   benchmark's docs for the figures.
+//!
 //! ## Scene usage
 //!
 //! ```toml
@@ -69,6 +86,8 @@
 //! ```
 //!
 //! Every key and its default: [`params`].
+
+#![warn(missing_docs)]
 
 pub mod color;
 pub mod cpu;
@@ -128,8 +147,8 @@ pub struct RaycastRenderer {
     range: Option<(f32, f32)>,
     lut: Option<LutCache>,
     lut_generation: u64,
-    /// Emptiness per cell for (cells_version, lut generation).
-    empty: Option<(u64, u64, Vec<u8>)>,
+    /// Leap distances per cell for (cells_version, lut generation).
+    leap: Option<(u64, u64, Vec<u8>)>,
     maps: Vec<OpacityMap>,
     /// Combined map for the current dims (`None` = not computed yet).
     combined: Option<Option<OpacityMap>>,
@@ -137,6 +156,8 @@ pub struct RaycastRenderer {
     /// The GPU has the current combined map / LUT generation.
     gpu_map_current: bool,
     gpu_lut_generation: u64,
+    /// (cells_version, lut generation) of the GPU's leap distances.
+    gpu_leap_key: Option<(u64, u64)>,
 }
 
 impl RaycastRenderer {
@@ -169,12 +190,13 @@ impl RaycastRenderer {
             range: None,
             lut: None,
             lut_generation: 0,
-            empty: None,
+            leap: None,
             maps: Vec::new(),
             combined: None,
             gpu: None,
             gpu_map_current: false,
             gpu_lut_generation: u64::MAX,
+            gpu_leap_key: None,
         })
     }
 
@@ -193,9 +215,9 @@ impl RaycastRenderer {
     }
 
     fn service(&self) -> Result<Arc<dyn GpuService>, ModelError> {
-        self.service
-            .clone()
-            .ok_or_else(|| ModelError::new("this needs the GPU, but the host offered no GPU service"))
+        self.service.clone().ok_or_else(|| {
+            ModelError::new("this needs the GPU, but the host offered no GPU service")
+        })
     }
 
     /// The current macro-cells (the GPU path reads them back).
@@ -304,7 +326,9 @@ impl RaycastRenderer {
             return bad("distance_mm must be > 0");
         }
         match camera.projection {
-            Projection::Orthographic { height_mm } if !(height_mm > 0.0 && height_mm.is_finite()) => {
+            Projection::Orthographic { height_mm }
+                if !(height_mm > 0.0 && height_mm.is_finite()) =>
+            {
                 bad("orthographic height_mm must be finite and > 0")
             }
             Projection::Perspective { fov_y_deg } if !(fov_y_deg > 0.0 && fov_y_deg < 180.0) => {
@@ -322,7 +346,14 @@ impl RaycastRenderer {
         self.ensure_combined(grid.dims);
         let lut = &self.lut.as_ref().expect("made above").lut;
         let map = self.combined.as_ref().and_then(|m| m.as_ref());
-        Ok(RayUniforms::new(&self.params, &grid, camera, lut, self.cell(), map))
+        Ok(RayUniforms::new(
+            &self.params,
+            &grid,
+            camera,
+            lut,
+            self.cell(),
+            map,
+        ))
     }
 
     /// Renders on the CPU path into linear, premultiplied RGBA (before the
@@ -339,17 +370,22 @@ impl RaycastRenderer {
         }
         let u = self.frame(camera)?;
         let generation = self.lut.as_ref().expect("made by frame").generation;
-        let stale = !matches!(&self.empty, Some((c, g, _)) if *c == self.cells_version && *g == generation);
+        let stale =
+            !matches!(&self.leap, Some((c, g, _)) if *c == self.cells_version && *g == generation);
         let lut = &self.lut.as_ref().expect("made by frame").lut;
         if stale {
-            self.empty = Some((self.cells_version, generation, self.cells.empty_flags(lut)));
+            self.leap = Some((
+                self.cells_version,
+                generation,
+                self.cells.leap_distances(lut),
+            ));
         }
         let scene = cpu::Scene {
             u: &u,
             values: &self.values,
             lut,
             cells: &self.cells,
-            empty: &self.empty.as_ref().expect("made above").2,
+            leap: &self.leap.as_ref().expect("made above").2,
             map: self.combined.as_ref().and_then(|m| m.as_ref()),
         };
         Ok(cpu::render(&scene))
@@ -460,7 +496,10 @@ fn check_len(have: usize, pixels: usize) -> Result<(), ModelError> {
 
 fn check_grid(grid: &Grid) -> Result<(), ModelError> {
     if grid.dims.contains(&0) {
-        return Err(ModelError(format!("volume dims {:?} hold no voxel", grid.dims)));
+        return Err(ModelError(format!(
+            "volume dims {:?} hold no voxel",
+            grid.dims
+        )));
     }
     if grid.dims.iter().any(|&n| n > u32::MAX as usize) || grid.len() > u32::MAX as usize {
         return Err(ModelError(format!(
@@ -494,10 +533,11 @@ impl Renderer for RaycastRenderer {
         self.cells = MacroCells::new([1, 1, 1], self.cell());
         self.external = None;
         self.range = None;
-        self.empty = None;
+        self.leap = None;
         self.combined = None;
         self.gpu_map_current = false;
         self.gpu_lut_generation = u64::MAX;
+        self.gpu_leap_key = None;
         tracing::debug!(?backend, "raycast renderer initialised");
         Ok(())
     }
@@ -514,7 +554,11 @@ impl Renderer for RaycastRenderer {
         Ok(())
     }
 
-    fn set_volume(&mut self, volume: RenderVolume<'_>, dirty: DirtyRegion) -> Result<(), ModelError> {
+    fn set_volume(
+        &mut self,
+        volume: RenderVolume<'_>,
+        dirty: DirtyRegion,
+    ) -> Result<(), ModelError> {
         let grid = match volume {
             RenderVolume::Cpu(view) => {
                 check_grid(&view.grid)?;
@@ -569,7 +613,11 @@ impl Renderer for RaycastRenderer {
         Ok(())
     }
 
-    fn render(&mut self, camera: &Camera, target: ImageTarget<'_>) -> Result<RenderStats, ModelError> {
+    fn render(
+        &mut self,
+        camera: &Camera,
+        target: ImageTarget<'_>,
+    ) -> Result<RenderStats, ModelError> {
         let stats = match self.backend {
             ExecutionBackend::Cpu => {
                 let (pixels, stats) = self.render_linear(camera)?;
@@ -583,6 +631,13 @@ impl Renderer for RaycastRenderer {
                 if self.gpu_lut_generation != cache.generation {
                     gpu.set_lut(&cache.lut)?;
                     self.gpu_lut_generation = cache.generation;
+                }
+                let key = (self.cells_version, cache.generation);
+                if self.gpu_leap_key != Some(key) {
+                    let grid = self.grid.expect("checked by frame");
+                    let counts = MacroCells::counts_for(grid.dims, self.params.macro_cell as usize);
+                    gpu.update_leap(&cache.lut, counts)?;
+                    self.gpu_leap_key = Some(key);
                 }
                 if !self.gpu_map_current {
                     gpu.set_map(self.combined.as_ref().and_then(|m| m.as_ref()))?;
@@ -607,3 +662,16 @@ impl Renderer for RaycastRenderer {
 
 #[cfg(test)]
 mod tests;
+
+impl voxflex_abi::RendererPlugin for RaycastRenderer {
+    const NAME: &'static str = "raycast";
+    const DESCRIPTION: &'static str =
+        "emission-absorption ray casting: transfer functions, shading, MIP, opacity maps, clipping";
+    const CAPABILITIES: u32 = voxflex_abi::ffi::CAPABILITY_CPU | voxflex_abi::ffi::CAPABILITY_GPU;
+
+    fn create(params_toml: &str, host: voxflex_abi::HostContext) -> Result<Self, ModelError> {
+        RaycastRenderer::create(params_toml, host.gpu())
+    }
+}
+
+voxflex_abi::export_renderer_plugin!(RaycastRenderer);

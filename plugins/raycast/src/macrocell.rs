@@ -16,6 +16,9 @@ use voxflex_core::grid::Grid;
 use voxflex_core::volume::{Sample, VolumeView};
 use voxflex_core::with_voxels;
 
+/// Largest leap distance, cells ([`MacroCells::leap_distances`]).
+pub const LEAP_CAP: u8 = 16;
+
 /// An inclusive box of voxel (or cell) indices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct IndexBox {
@@ -186,7 +189,9 @@ impl MacroCells {
         let results: Vec<(usize, Vec<(f32, f32)>)> = (cells.lo[2]..=cells.hi[2])
             .into_par_iter()
             .map(|ck| {
-                let mut out = Vec::with_capacity((cells.hi[1] + 1 - cells.lo[1]) * (cells.hi[0] + 1 - cells.lo[0]));
+                let mut out = Vec::with_capacity(
+                    (cells.hi[1] + 1 - cells.lo[1]) * (cells.hi[0] + 1 - cells.lo[0]),
+                );
                 let (k0, k1) = this.span(2, ck);
                 for cj in cells.lo[1]..=cells.hi[1] {
                     let (j0, j1) = this.span(1, cj);
@@ -229,6 +234,58 @@ impl MacroCells {
             .zip(&self.max)
             .map(|(&lo, &hi)| lut.range_is_empty(lo, hi) as u8)
             .collect()
+    }
+
+    /// The **leap distance** of every cell for composite rendering: 0 for a
+    /// cell some sample of which may be visible under `lut`, else the
+    /// Chebyshev distance (in cells, capped at [`LEAP_CAP`]) to the nearest
+    /// such cell. Every cell within `d − 1` cells of a cell at distance `d`
+    /// is empty, so a ray can jump to the exit of that `(2d − 1)³` block at
+    /// once. Computed by three separable passes, identically by
+    /// `shaders/raycast/leap.wgsl`.
+    pub fn leap_distances(&self, lut: &Lut) -> Vec<u8> {
+        let empty = self.empty_flags(lut);
+        let [cx, cy, _] = self.counts;
+        let strides = [1, cx, cx * cy];
+        let cap = LEAP_CAP as u32;
+        let mut a: Vec<u32> = vec![0; self.len()];
+        let mut b: Vec<u32> = vec![0; self.len()];
+        for axis in 0..3 {
+            let (src, dst) = if axis == 1 {
+                (&a, &mut b)
+            } else {
+                (&b, &mut a)
+            };
+            let n = self.counts[axis];
+            let st = strides[axis];
+            dst.par_chunks_mut(cx * cy)
+                .enumerate()
+                .for_each(|(z, plane)| {
+                    for (xy, out) in plane.iter_mut().enumerate() {
+                        let l = xy + z * cx * cy;
+                        let pos = [xy % cx, xy / cx, z][axis];
+                        let line = l - pos * st;
+                        let mut best = cap;
+                        for o in 0..cap.min(n as u32) {
+                            if o >= best {
+                                break;
+                            }
+                            for q in [pos.wrapping_sub(o as usize), pos + o as usize] {
+                                if q < n {
+                                    let v = if axis == 0 {
+                                        if empty[line + q * st] != 0 { cap } else { 0 }
+                                    } else {
+                                        src[line + q * st]
+                                    };
+                                    best = best.min(o.max(v));
+                                }
+                            }
+                        }
+                        *out = best;
+                    }
+                });
+        }
+        a.into_iter().map(|d| d as u8).collect()
     }
 
     /// Smallest and largest value over all cells (`(0, 0)` if unbuilt).
@@ -310,13 +367,71 @@ mod tests {
         let lo = grid.index_to_world(DVec3::new(8.0, 7.0, 5.0));
         let hi = grid.index_to_world(DVec3::new(16.0, 8.0, 9.0));
         let vox = dirty_voxels(&grid, DirtyRegion::Box { min: lo, max: hi }).unwrap();
-        let cells = m.cells_touching(vox);
+        assert!(vox.lo[0] <= 8 && vox.hi[0] >= 16);
+        // The exact changed voxels (no rounding margin) must be enough.
+        let exact = IndexBox {
+            lo: [8, 7, 5],
+            hi: [16, 8, 9],
+        };
+        let cells = m.cells_touching(exact);
         assert!(cells.len() < m.len());
         m.rebuild(&v, cells);
         let mut full = MacroCells::new(dims, 8);
         full.rebuild(&v, IndexBox::all(full.counts));
         assert_eq!(m, full);
         assert_eq!(m, brute(&v, dims, 8));
+    }
+
+    #[test]
+    fn leap_distances_are_capped_chebyshev_distances() {
+        use crate::transfer::{ControlPoint, TransferFunction, ValueUnits};
+        // Opaque above 0.5; cells are empty unless they hold a "1".
+        let tf = TransferFunction {
+            points: vec![
+                ControlPoint {
+                    value: 0.0,
+                    rgba: [0.0; 4],
+                },
+                ControlPoint {
+                    value: 0.5,
+                    rgba: [0.0; 4],
+                },
+                ControlPoint {
+                    value: 0.6,
+                    rgba: [1.0; 4],
+                },
+            ],
+            units: ValueUnits::Data,
+        };
+        let lut = tf.lut((0.0, 1.0), 1.0);
+        let dims = [150, 90, 41];
+        let mut v = vec![0f32; dims.iter().product()];
+        for (i, j, k) in [(3, 4, 5), (140, 80, 40), (75, 10, 20)] {
+            v[i + dims[0] * (j + dims[1] * k)] = 1.0;
+        }
+        let mut m = MacroCells::new(dims, 4);
+        m.rebuild(&v, IndexBox::all(m.counts));
+        let empty = m.empty_flags(&lut);
+        let leap = m.leap_distances(&lut);
+        let [cx, cy, cz] = m.counts;
+        let full: Vec<[usize; 3]> = (0..m.len())
+            .filter(|&l| empty[l] == 0)
+            .map(|l| [l % cx, (l / cx) % cy, l / (cx * cy)])
+            .collect();
+        assert!(!full.is_empty() && full.len() < 30);
+        for z in 0..cz {
+            for y in 0..cy {
+                for x in 0..cx {
+                    let d = full
+                        .iter()
+                        .map(|n| x.abs_diff(n[0]).max(y.abs_diff(n[1])).max(z.abs_diff(n[2])))
+                        .min()
+                        .unwrap()
+                        .min(LEAP_CAP as usize);
+                    assert_eq!(leap[x + cx * (y + cy * z)] as usize, d, "{x} {y} {z}");
+                }
+            }
+        }
     }
 
     #[test]

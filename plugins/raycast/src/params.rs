@@ -343,10 +343,7 @@ impl RaycastParams {
                     {
                         return bad(
                             &key,
-                            format!(
-                                "values must be non-decreasing, but {} follows {prev}",
-                                p[0]
-                            ),
+                            format!("values must be non-decreasing, but {} follows {prev}", p[0]),
                         );
                     }
                     out.push(ControlPoint {
@@ -444,14 +441,22 @@ mod tests {
 
     #[test]
     fn transfer_function_errors_are_named() {
-        let e = err("transfer_function = { points = [[0, 0, 0, 0, 0], [10, 1, 1, 1, 1], [5, 1, 1, 1, 1]] }");
-        assert!(e.contains("transfer_function.points[2]") && e.contains("non-decreasing"), "{e}");
+        let e = err(
+            "transfer_function = { points = [[0, 0, 0, 0, 0], [10, 1, 1, 1, 1], [5, 1, 1, 1, 1]] }",
+        );
+        assert!(
+            e.contains("transfer_function.points[2]") && e.contains("non-decreasing"),
+            "{e}"
+        );
         let e = err("transfer_function = { points = [[0, 0, 0, 0, nan]] }");
         assert!(e.contains("transfer_function.points[0]"), "{e}");
         let e = err("transfer_function = { points = [[0, 0, 0, 2, 0]] }");
         assert!(e.contains("[0, 1]"), "{e}");
         let e = err("transfer_function = { preset = \"ct-boen\" }");
-        assert!(e.contains("transfer_function.preset") && e.contains("ct-boen"), "{e}");
+        assert!(
+            e.contains("transfer_function.preset") && e.contains("ct-boen"),
+            "{e}"
+        );
         let e = err("transfer_function = { preset = \"ct-bone\", points = [[0, 0, 0, 0, 0]] }");
         assert!(e.contains("either"), "{e}");
         let e = err("transfer_function = { points = [[0, 0, 0, 0]] }");

@@ -31,7 +31,11 @@ fn rgba8(r: &mut RaycastRenderer, cam: &Camera) -> (Vec<u8>, RenderStats) {
 
 fn max_diff(a: &[u8], b: &[u8]) -> u8 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).max().unwrap_or(0)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x.abs_diff(*y))
+        .max()
+        .unwrap_or(0)
 }
 
 fn rms(a: &[[f32; 4]], b: &[[f32; 4]]) -> f64 {
@@ -96,7 +100,9 @@ fn check_beer_lambert(extra: &str, crop: Option<(DVec3, DVec3)>, perspective: Op
             max_l = max_l.max(l);
         }
     }
-    eprintln!("Beer–Lambert {extra:?} {perspective:?}: max |A − (1 − e^(−κL))| = {max_err:.2e}, L ≤ {max_l:.1} mm");
+    eprintln!(
+        "Beer–Lambert {extra:?} {perspective:?}: max |A − (1 − e^(−κL))| = {max_err:.2e}, L ≤ {max_l:.1} mm"
+    );
     assert!(max_err < 1e-3, "max error {max_err}");
     assert!(hits > 100 && max_l > 10.0, "{hits} hits, L ≤ {max_l}");
 }
@@ -273,7 +279,9 @@ fn opacity_maps_weight_the_integral() {
         origin: [15, 10, 5],
         dims: [30, 10, 30],
         outside: to_fixed(0.05),
-        values: (0..9000).map(|l| to_fixed((l % 97) as f32 / 96.0)).collect(),
+        values: (0..9000)
+            .map(|l| to_fixed((l % 97) as f32 / 96.0))
+            .collect(),
     };
     r.set_opacity_maps(&[a.clone(), b.clone()]).unwrap();
     let (two, _) = r.render_linear(&cam).unwrap();
@@ -283,7 +291,8 @@ fn opacity_maps_weight_the_integral() {
     assert_eq!(two, one);
     assert_ne!(two, plain);
     // Nearest lookup is a different, valid reading of the same maps.
-    r.configure("opacity_map_interpolation = \"nearest\"").unwrap();
+    r.configure("opacity_map_interpolation = \"nearest\"")
+        .unwrap();
     r.set_opacity_maps(&[a, b]).unwrap();
     let (nearest, _) = r.render_linear(&cam).unwrap();
     assert_ne!(nearest, two);
@@ -445,7 +454,9 @@ fn gpu_matches_cpu() {
             origin: [4, 6, 8],
             dims: [20, 20, 20],
             outside: to_fixed(0.1),
-            values: (0..8000).map(|l| to_fixed((l % 13) as f32 / 12.0)).collect(),
+            values: (0..8000)
+                .map(|l| to_fixed((l % 13) as f32 / 12.0))
+                .collect(),
         },
         OpacityMap {
             origin: [15, 10, 5],
@@ -474,7 +485,10 @@ fn gpu_matches_cpu() {
             false,
         ),
         ("transfer_function = { preset = \"mri-t1\" }", false),
-        ("sample_distance = 1.3\nempty_space_skipping = false\nearly_termination = false", false),
+        (
+            "sample_distance = 1.3\nempty_space_skipping = false\nearly_termination = false",
+            false,
+        ),
     ];
     for (toml, with_maps) in cases {
         let mut c = with_volume(cpu(toml), &vol);

@@ -160,12 +160,7 @@ impl RayUniforms {
                 grid.dims[2] as u32,
                 cell as u32,
             ],
-            cells: [
-                counts[0] as u32,
-                counts[1] as u32,
-                counts[2] as u32,
-                flags,
-            ],
+            cells: [counts[0] as u32, counts[1] as u32, counts[2] as u32, flags],
             origin: v4(grid.origin, 0.0),
             inv_spacing: v4(1.0 / spacing, 0.0),
             grad_scale: v4(0.5 / spacing, 0.0),

@@ -254,9 +254,14 @@ impl CameraDesc {
     pub fn to_camera(&self) -> Result<voxflex_core::camera::Camera, String> {
         use voxflex_core::camera::{Camera, Projection};
         let finite = self.target.iter().all(|v| v.is_finite())
-            && [self.azimuth_deg, self.elevation_deg, self.distance_mm, self.projection_parameter]
-                .iter()
-                .all(|v| v.is_finite());
+            && [
+                self.azimuth_deg,
+                self.elevation_deg,
+                self.distance_mm,
+                self.projection_parameter,
+            ]
+            .iter()
+            .all(|v| v.is_finite());
         if !finite {
             return Err("camera has a non-finite value".into());
         }
@@ -299,24 +304,41 @@ impl OpacityMapDesc {
     /// # Safety
     /// `values` must be valid for `len` reads.
     pub unsafe fn to_map(&self) -> Result<voxflex_core::opacity_map::OpacityMap, String> {
-        let to_usize = |v: u64| usize::try_from(v).map_err(|_| format!("opacity map size {v} is too large"));
-        let origin = [to_usize(self.origin[0])?, to_usize(self.origin[1])?, to_usize(self.origin[2])?];
-        let dims = [to_usize(self.dims[0])?, to_usize(self.dims[1])?, to_usize(self.dims[2])?];
+        let to_usize =
+            |v: u64| usize::try_from(v).map_err(|_| format!("opacity map size {v} is too large"));
+        let origin = [
+            to_usize(self.origin[0])?,
+            to_usize(self.origin[1])?,
+            to_usize(self.origin[2])?,
+        ];
+        let dims = [
+            to_usize(self.dims[0])?,
+            to_usize(self.dims[1])?,
+            to_usize(self.dims[2])?,
+        ];
         let len = to_usize(self.len)?;
         let expected = dims
             .iter()
             .try_fold(1usize, |a, &b| a.checked_mul(b))
             .ok_or("opacity map dims overflow")?;
         if expected != len {
-            return Err(format!("opacity map holds {len} values but its dims {dims:?} need {expected}"));
+            return Err(format!(
+                "opacity map holds {len} values but its dims {dims:?} need {expected}"
+            ));
         }
         if len > 0 && self.values.is_null() {
             return Err("opacity map values pointer is null".into());
         }
-        let outside = u16::try_from(self.outside).map_err(|_| "opacity map `outside` is not a u16".to_owned())?;
+        let outside = u16::try_from(self.outside)
+            .map_err(|_| "opacity map `outside` is not a u16".to_owned())?;
         // SAFETY: guaranteed by the caller.
         let values = unsafe { slice(self.values, len) }.to_vec();
-        Ok(voxflex_core::opacity_map::OpacityMap { origin, dims, outside, values })
+        Ok(voxflex_core::opacity_map::OpacityMap {
+            origin,
+            dims,
+            outside,
+            values,
+        })
     }
 }
 

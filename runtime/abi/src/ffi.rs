@@ -549,7 +549,8 @@ pub struct RendererVTable {
     /// `Renderer::init`; `backend` is `ExecutionBackend` as u32.
     pub init: unsafe extern "C" fn(instance: Instance, backend: u32, err: *mut ErrorBuf) -> i32,
     /// `Renderer::configure` with TOML text.
-    pub configure: unsafe extern "C" fn(instance: Instance, toml: StrRef, err: *mut ErrorBuf) -> i32,
+    pub configure:
+        unsafe extern "C" fn(instance: Instance, toml: StrRef, err: *mut ErrorBuf) -> i32,
     /// `Renderer::set_volume`.
     pub set_volume: unsafe extern "C" fn(
         instance: Instance,

@@ -156,15 +156,70 @@ pub const fn compute() -> u64 {
             gpu_dispatch
         }
     );
-    hash_type!(h, CameraDesc {
-        target, azimuth_deg, elevation_deg, distance_mm, projection, width,
-        projection_parameter, height, reserved
-    });
-    hash_type!(h, RenderVolumeDesc { tag, reserved, volume, buffer });
-    hash_type!(h, OpacityMapDesc { origin, dims, outside, reserved, values, len });
-    hash_type!(h, ImageTargetDesc { tag, reserved, pixels, len, buffer });
-    hash_type!(h, RenderStatsDesc { rays, samples, terminated_early });
-    hash_type!(h, RendererVTable { create, destroy, init, configure, set_volume, set_opacity_maps, render });
+    hash_type!(
+        h,
+        CameraDesc {
+            target,
+            azimuth_deg,
+            elevation_deg,
+            distance_mm,
+            projection,
+            width,
+            projection_parameter,
+            height,
+            reserved
+        }
+    );
+    hash_type!(
+        h,
+        RenderVolumeDesc {
+            tag,
+            reserved,
+            volume,
+            buffer
+        }
+    );
+    hash_type!(
+        h,
+        OpacityMapDesc {
+            origin,
+            dims,
+            outside,
+            reserved,
+            values,
+            len
+        }
+    );
+    hash_type!(
+        h,
+        ImageTargetDesc {
+            tag,
+            reserved,
+            pixels,
+            len,
+            buffer
+        }
+    );
+    hash_type!(
+        h,
+        RenderStatsDesc {
+            rays,
+            samples,
+            terminated_early
+        }
+    );
+    hash_type!(
+        h,
+        RendererVTable {
+            create,
+            destroy,
+            init,
+            configure,
+            set_volume,
+            set_opacity_maps,
+            render
+        }
+    );
     h = mix(h, size_of::<PluginKind>() as u64);
     h
 }

@@ -48,15 +48,25 @@ unsafe extern "C" fn destroy<P: RendererPlugin>(instance: Instance) {
     unsafe { destroy_instance::<P>(instance) }
 }
 
-unsafe extern "C" fn init<P: RendererPlugin>(instance: Instance, backend: u32, err: *mut ErrorBuf) -> i32 {
+unsafe extern "C" fn init<P: RendererPlugin>(
+    instance: Instance,
+    backend: u32,
+    err: *mut ErrorBuf,
+) -> i32 {
     guard(err, || {
         // SAFETY: host contract.
         let s = unsafe { state::<P>(instance) }?;
-        s.model.init(backend_of(backend)?).map_err(|e| e.to_string())
+        s.model
+            .init(backend_of(backend)?)
+            .map_err(|e| e.to_string())
     })
 }
 
-unsafe extern "C" fn configure<P: RendererPlugin>(instance: Instance, toml: StrRef, err: *mut ErrorBuf) -> i32 {
+unsafe extern "C" fn configure<P: RendererPlugin>(
+    instance: Instance,
+    toml: StrRef,
+    err: *mut ErrorBuf,
+) -> i32 {
     guard(err, || {
         // SAFETY: host contract; text alive during the call.
         let (s, text) = unsafe { (state::<P>(instance)?, toml.to_string_lossy()) };
@@ -87,7 +97,9 @@ unsafe extern "C" fn set_volume<P: RendererPlugin>(
             },
             t => return Err(format!("unknown render volume tag {t}")),
         };
-        s.model.set_volume(volume, region).map_err(|e| e.to_string())
+        s.model
+            .set_volume(volume, region)
+            .map_err(|e| e.to_string())
     })
 }
 
@@ -111,7 +123,10 @@ unsafe extern "C" fn set_opacity_maps<P: RendererPlugin>(
             unsafe { std::slice::from_raw_parts(maps, count) }
         };
         // SAFETY: each descriptor's values alive during the call.
-        let maps: Vec<OpacityMap> = descs.iter().map(|d| unsafe { d.to_map() }).collect::<Result<_, _>>()?;
+        let maps: Vec<OpacityMap> = descs
+            .iter()
+            .map(|d| unsafe { d.to_map() })
+            .collect::<Result<_, _>>()?;
         s.model.set_opacity_maps(&maps).map_err(|e| e.to_string())
     })
 }
@@ -172,17 +187,23 @@ pub const fn renderer_vtable<P: RendererPlugin>() -> RendererVTable {
 #[macro_export]
 macro_rules! export_renderer_plugin {
     ($ty:ty) => {
-        static __VOXFLEX_VTABLE: $crate::ffi::RendererVTable = $crate::renderer::renderer_vtable::<$ty>();
-        static __VOXFLEX_DECLARATION: $crate::ffi::PluginDeclaration = $crate::ffi::PluginDeclaration {
-            name: $crate::ffi::StrRef::from_static(<$ty as $crate::renderer::RendererPlugin>::NAME),
-            version: $crate::ffi::StrRef::from_static(env!("CARGO_PKG_VERSION")),
-            description: $crate::ffi::StrRef::from_static(<$ty as $crate::renderer::RendererPlugin>::DESCRIPTION),
-            kind: $crate::ffi::PluginKind::Renderer as u32,
-            capabilities: <$ty as $crate::renderer::RendererPlugin>::CAPABILITIES,
-            deformation: ::std::ptr::null(),
-            renderer: &__VOXFLEX_VTABLE,
-            actuator: ::std::ptr::null(),
-        };
+        static __VOXFLEX_VTABLE: $crate::ffi::RendererVTable =
+            $crate::renderer::renderer_vtable::<$ty>();
+        static __VOXFLEX_DECLARATION: $crate::ffi::PluginDeclaration =
+            $crate::ffi::PluginDeclaration {
+                name: $crate::ffi::StrRef::from_static(
+                    <$ty as $crate::renderer::RendererPlugin>::NAME,
+                ),
+                version: $crate::ffi::StrRef::from_static(env!("CARGO_PKG_VERSION")),
+                description: $crate::ffi::StrRef::from_static(
+                    <$ty as $crate::renderer::RendererPlugin>::DESCRIPTION,
+                ),
+                kind: $crate::ffi::PluginKind::Renderer as u32,
+                capabilities: <$ty as $crate::renderer::RendererPlugin>::CAPABILITIES,
+                deformation: ::std::ptr::null(),
+                renderer: &__VOXFLEX_VTABLE,
+                actuator: ::std::ptr::null(),
+            };
         $crate::__export_header!(__VOXFLEX_DECLARATION);
     };
 }
@@ -212,18 +233,34 @@ impl RendererProxy {
         let mut sink = ErrorSink::new();
         let mut instance: Instance = std::ptr::null_mut();
         // SAFETY: valid vtable; arguments live during the call.
-        let status = unsafe { (vtable.create)(StrRef::new(params_toml), services.api(), &mut instance, sink.as_ffi()) };
-        sink.check(status).map_err(|m| ModelError(format!("plugin `{name}`: {m}")))?;
+        let status = unsafe {
+            (vtable.create)(
+                StrRef::new(params_toml),
+                services.api(),
+                &mut instance,
+                sink.as_ffi(),
+            )
+        };
+        sink.check(status)
+            .map_err(|m| ModelError(format!("plugin `{name}`: {m}")))?;
         if instance.is_null() {
-            return Err(ModelError(format!("plugin `{name}`: create returned no instance")));
+            return Err(ModelError(format!(
+                "plugin `{name}`: create returned no instance"
+            )));
         }
-        Ok(Self { name: name.to_owned(), vtable, instance, _services: services })
+        Ok(Self {
+            name: name.to_owned(),
+            vtable,
+            instance,
+            _services: services,
+        })
     }
 
     fn call(&self, f: impl FnOnce(*mut ErrorBuf) -> i32) -> Result<(), ModelError> {
         let mut sink = ErrorSink::new();
         let status = f(sink.as_ffi());
-        sink.check(status).map_err(|m| ModelError(format!("plugin `{}`: {m}", self.name)))
+        sink.check(status)
+            .map_err(|m| ModelError(format!("plugin `{}`: {m}", self.name)))
     }
 }
 
@@ -247,7 +284,11 @@ impl Renderer for RendererProxy {
         self.call(|err| unsafe { (vt.configure)(inst, StrRef::new(settings_toml), err) })
     }
 
-    fn set_volume(&mut self, volume: RenderVolume<'_>, dirty: DirtyRegion) -> Result<(), ModelError> {
+    fn set_volume(
+        &mut self,
+        volume: RenderVolume<'_>,
+        dirty: DirtyRegion,
+    ) -> Result<(), ModelError> {
         let desc = match volume {
             RenderVolume::Cpu(view) => RenderVolumeDesc {
                 tag: RENDER_VOLUME_CPU,
@@ -278,10 +319,16 @@ impl Renderer for RendererProxy {
         let descs: Vec<OpacityMapDesc> = maps.iter().map(OpacityMapDesc::from_map).collect();
         let (vt, inst) = (self.vtable, self.instance);
         // SAFETY: descriptors and maps alive during the call.
-        self.call(|err| unsafe { (vt.set_opacity_maps)(inst, descs.as_ptr(), descs.len() as u64, err) })
+        self.call(|err| unsafe {
+            (vt.set_opacity_maps)(inst, descs.as_ptr(), descs.len() as u64, err)
+        })
     }
 
-    fn render(&mut self, camera: &Camera, target: ImageTarget<'_>) -> Result<RenderStats, ModelError> {
+    fn render(
+        &mut self,
+        camera: &Camera,
+        target: ImageTarget<'_>,
+    ) -> Result<RenderStats, ModelError> {
         let cam = CameraDesc::from(camera);
         let desc = match target {
             ImageTarget::Cpu(pixels) => ImageTargetDesc {

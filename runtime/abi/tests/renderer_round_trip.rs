@@ -34,7 +34,11 @@ impl Renderer for Flat {
         }
         Ok(())
     }
-    fn set_volume(&mut self, volume: RenderVolume<'_>, dirty: DirtyRegion) -> Result<(), ModelError> {
+    fn set_volume(
+        &mut self,
+        volume: RenderVolume<'_>,
+        dirty: DirtyRegion,
+    ) -> Result<(), ModelError> {
         match volume {
             RenderVolume::Cpu(v) => {
                 let all = v.data.to_f32_vec();
@@ -47,17 +51,33 @@ impl Renderer for Flat {
     }
     fn set_opacity_maps(&mut self, maps: &[OpacityMap]) -> Result<(), ModelError> {
         self.maps = maps.len();
-        assert!(maps.iter().all(|m| m.values.len() == m.dims.iter().product::<usize>()));
+        assert!(
+            maps.iter()
+                .all(|m| m.values.len() == m.dims.iter().product::<usize>())
+        );
         Ok(())
     }
-    fn render(&mut self, camera: &Camera, target: ImageTarget<'_>) -> Result<RenderStats, ModelError> {
+    fn render(
+        &mut self,
+        camera: &Camera,
+        target: ImageTarget<'_>,
+    ) -> Result<RenderStats, ModelError> {
         let ImageTarget::Cpu(px) = target else {
             return Err(ModelError::new("cpu only"));
         };
         for p in px.chunks_mut(4) {
-            p.copy_from_slice(&[self.mean as u8, self.maps as u8, camera.azimuth_deg as u8, 255]);
+            p.copy_from_slice(&[
+                self.mean as u8,
+                self.maps as u8,
+                camera.azimuth_deg as u8,
+                255,
+            ]);
         }
-        Ok(RenderStats { rays: (camera.width * camera.height) as u64, samples: 7, terminated_early: 1 })
+        Ok(RenderStats {
+            rays: (camera.width * camera.height) as u64,
+            samples: 7,
+            terminated_early: 1,
+        })
     }
 }
 
@@ -87,10 +107,36 @@ fn render_round_trip() {
     r.configure("shading = true").unwrap();
     let grid = Grid::new([2, 1, 1], DVec3::ONE, DVec3::ZERO);
     let data = [10u8, 30];
-    r.set_volume(RenderVolume::Cpu(VolumeView { grid, data: VoxelSlice::U8(&data) }), DirtyRegion::All).unwrap();
-    r.set_volume(RenderVolume::Gpu { grid, values: BufferId(9) }, DirtyRegion::None).unwrap();
-    r.set_volume(RenderVolume::Cpu(VolumeView { grid, data: VoxelSlice::U8(&data) }), DirtyRegion::All).unwrap();
-    let map = OpacityMap { origin: [0, 0, 0], dims: [2, 1, 1], outside: 0, values: vec![1, 2] };
+    r.set_volume(
+        RenderVolume::Cpu(VolumeView {
+            grid,
+            data: VoxelSlice::U8(&data),
+        }),
+        DirtyRegion::All,
+    )
+    .unwrap();
+    r.set_volume(
+        RenderVolume::Gpu {
+            grid,
+            values: BufferId(9),
+        },
+        DirtyRegion::None,
+    )
+    .unwrap();
+    r.set_volume(
+        RenderVolume::Cpu(VolumeView {
+            grid,
+            data: VoxelSlice::U8(&data),
+        }),
+        DirtyRegion::All,
+    )
+    .unwrap();
+    let map = OpacityMap {
+        origin: [0, 0, 0],
+        dims: [2, 1, 1],
+        outside: 0,
+        values: vec![1, 2],
+    };
     r.set_opacity_maps(&[map.clone(), map]).unwrap();
     let camera = Camera {
         target: DVec3::ZERO,
@@ -104,15 +150,28 @@ fn render_round_trip() {
     let mut px = vec![0u8; 3 * 2 * 4];
     let stats = r.render(&camera, ImageTarget::Cpu(&mut px)).unwrap();
     assert_eq!(&px[..4], &[20, 2, 33, 255]);
-    assert_eq!(stats, RenderStats { rays: 6, samples: 7, terminated_early: 1 });
+    assert_eq!(
+        stats,
+        RenderStats {
+            rays: 6,
+            samples: 7,
+            terminated_early: 1
+        }
+    );
 }
 
 #[test]
 fn renderer_errors_and_panics_name_the_plugin() {
     let e = proxy("panic").err().unwrap().to_string();
-    assert!(e.starts_with("plugin `flat`: plugin panicked: flat panics on request"), "{e}");
+    assert!(
+        e.starts_with("plugin `flat`: plugin panicked: flat panics on request"),
+        "{e}"
+    );
     let mut r = proxy("").unwrap();
-    assert_eq!(r.configure("bad = 1").unwrap_err().to_string(), "plugin `flat`: [render] bad: unknown key");
+    assert_eq!(
+        r.configure("bad = 1").unwrap_err().to_string(),
+        "plugin `flat`: [render] bad: unknown key"
+    );
     let camera = Camera {
         target: DVec3::NAN,
         azimuth_deg: 0.0,
@@ -123,6 +182,9 @@ fn renderer_errors_and_panics_name_the_plugin() {
         height: 1,
     };
     let mut px = vec![0u8; 4];
-    let e = r.render(&camera, ImageTarget::Cpu(&mut px)).unwrap_err().to_string();
+    let e = r
+        .render(&camera, ImageTarget::Cpu(&mut px))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("non-finite"), "{e}");
 }

@@ -122,7 +122,7 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         / (4.0 * std::f64::consts::PI))
         .cbrt();
     let full_params = format!(
-        "field = \"twist\"\naxis = \"z\"\nangle_deg = 60\nramp_frames = {}",
+        "field = \"twist\"\naxis = \"z\"\nangle_deg = 40\nramp_frames = {}",
         repeat + 1
     );
     let local_params = format!(
@@ -253,7 +253,7 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     let overhead = per_frame.as_secs_f64() / frame.as_secs_f64() * 100.0;
     let _ = writeln!(
         out,
-        "plugin boundary: {:.2} µs per frame ({overhead:.5}% of a {:.1} ms full frame)",
+        "plugin boundary: {:.2} µs per frame ({overhead:.1e} % of a {:.1} ms full frame)",
         per_frame.as_secs_f64() * 1e6,
         ms(frame)
     );

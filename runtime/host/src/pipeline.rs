@@ -28,15 +28,15 @@ use voxflex_core::deformation::{
     RestPoints,
 };
 use voxflex_core::error::{GpuError, IoError, ModelError};
+use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
+use voxflex_core::grid::Grid;
 use voxflex_core::io::png::{SliceAxis, Window, write_slice_png};
 use voxflex_core::io::{ReadOptions, read_volume, write_atomically, write_volume};
 use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
 use voxflex_core::resample::gpu::GpuSource;
-use voxflex_core::glam::DVec3;
-use voxflex_core::grid::Grid;
-use voxflex_core::resample::{ResampleReport, 
-    DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, Resampler,
+use voxflex_core::resample::{
+    DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, ResampleReport, Resampler,
 };
 use voxflex_core::volume::{Volume, VoxelData};
 
@@ -176,13 +176,19 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         ..Default::default()
     };
 
-    let plugin_files: Vec<&Path> = plugin.iter().chain(renderer_plugin.iter()).map(|p| p.path.as_path()).collect();
+    let plugin_files: Vec<&Path> = plugin
+        .iter()
+        .chain(renderer_plugin.iter())
+        .map(|p| p.path.as_path())
+        .collect();
     let fingerprint = fingerprint(scene, &plugin_files, &out_dir);
     if !opts.force && stamp_matches(&out_dir, &fingerprint) {
         metrics.up_to_date = true;
         metrics.backend = "none".into();
         metrics.backend_reason = "outputs up to date".into();
-        for stage in ["source", "model", "map", "resample", "output", "roi", "render"] {
+        for stage in [
+            "source", "model", "map", "resample", "output", "roi", "render",
+        ] {
             metrics.stage(stage).skipped = 1;
         }
         metrics.total_wall_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -193,12 +199,13 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     let _ = std::fs::remove_file(out_dir.join(STAMP_FILE));
 
     configure_threads(scene.settings.threads);
-    let resolved: ResolvedBackend = if scene.model.is_some() || scene.render.is_some() || !scene.rois.is_empty() {
-        backend::resolve(scene.settings.backend)?
-    } else {
-        // Nothing to compute: never initialise a GPU.
-        backend::resolve(crate::backend::BackendChoice::Cpu)?
-    };
+    let resolved: ResolvedBackend =
+        if scene.model.is_some() || scene.render.is_some() || !scene.rois.is_empty() {
+            backend::resolve(scene.settings.backend)?
+        } else {
+            // Nothing to compute: never initialise a GPU.
+            backend::resolve(crate::backend::BackendChoice::Cpu)?
+        };
     metrics.backend = match resolved.backend {
         ExecutionBackend::Cpu => "cpu".into(),
         ExecutionBackend::Gpu => "gpu".into(),
@@ -269,7 +276,13 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
 
     let services = HostServices::new(gpu.clone(), rayon::current_num_threads());
     let mut render_stage = match (&scene.render, &renderer_plugin) {
-        (Some(_), Some(p)) => Some(RenderStage::new(scene, p, services.clone(), resolved.backend)?),
+        (Some(_), Some(p)) => Some(RenderStage::new(
+            &scene.path.display().to_string(),
+            p,
+            &scene.render_params_toml(),
+            services.clone(),
+            resolved.backend,
+        )?),
         _ => {
             metrics.stages_not_built.push("render".into());
             None
@@ -339,8 +352,11 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
                 dirty = DirtyRegion::None;
                 resample_input = map_version;
                 resample_version += 1;
-                metrics.stage("resample").record_run(t.elapsed(), report.voxels_touched);
-                render_dirty = render_dirty.union(refilled_region(&report, d.resampler.output_grid()));
+                metrics
+                    .stage("resample")
+                    .record_run(t.elapsed(), report.voxels_touched);
+                render_dirty =
+                    render_dirty.union(refilled_region(&report, d.resampler.output_grid()));
                 if let Some(g) = d.resampler.output_grid() {
                     metrics.output_dims = g.dims;
                 }
@@ -379,7 +395,12 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
             } else {
                 let maps = visualise::grow_rois(scene, volume, gpu.as_ref(), &mut metrics)?;
                 if last {
-                    metrics.outputs.extend(visualise::write_maps(scene, &volume.grid, &maps, &out_dir)?);
+                    metrics.outputs.extend(visualise::write_maps(
+                        scene,
+                        &volume.grid,
+                        &maps,
+                        &out_dir,
+                    )?);
                 }
                 maps
             };
@@ -388,7 +409,14 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
                 if !suffix.is_empty() {
                     settings.file = settings.file.replace(".png", &format!("{suffix}.png"));
                 }
-                let files = stage.render(&settings, volume, render_dirty, &maps, &out_dir, &mut metrics)?;
+                let files = stage.render(
+                    &settings,
+                    volume,
+                    render_dirty,
+                    &maps,
+                    &out_dir,
+                    &mut metrics,
+                )?;
                 metrics.outputs.extend(files);
                 render_dirty = DirtyRegion::None;
             }
@@ -442,7 +470,11 @@ fn resample_stage(
 
 /// The world box (mm) of the output voxels a resample re-filled.
 fn refilled_region(report: &ResampleReport, output: Option<Grid>) -> DirtyRegion {
-    match (report.full || report.output_grid_changed, report.region, output) {
+    match (
+        report.full || report.output_grid_changed,
+        report.region,
+        output,
+    ) {
         (false, Some((lo, hi)), Some(g)) => {
             let f = |v: [usize; 3]| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64);
             DirtyRegion::Box {

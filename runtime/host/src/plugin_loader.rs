@@ -264,7 +264,9 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
     let (mut deformation, mut renderer) = (None, None);
     match kind {
         PluginKind::Deformation if decl.deformation.is_null() => {
-            return Err(invalid("deformation plugin without a deformation vtable".into()));
+            return Err(invalid(
+                "deformation plugin without a deformation vtable".into(),
+            ));
         }
         // SAFETY: static vtable in a never-unloaded library.
         PluginKind::Deformation => deformation = Some(unsafe { &*decl.deformation }),

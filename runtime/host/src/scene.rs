@@ -473,10 +473,18 @@ impl Scene {
         }
         if let Some(r) = &file.render {
             if r.width == 0 || r.height == 0 || r.width > 16384 || r.height > 16384 {
-                return Err(invalid("width", format!("{}×{} pixels is out of range; use 1 to 16384", r.width, r.height)));
+                return Err(invalid(
+                    "width",
+                    format!(
+                        "{}×{} pixels is out of range; use 1 to 16384",
+                        r.width, r.height
+                    ),
+                ));
             }
             let c = r.camera;
-            let finite = [c.azimuth_deg, c.elevation_deg, c.fov_deg].iter().all(|v| v.is_finite())
+            let finite = [c.azimuth_deg, c.elevation_deg, c.fov_deg]
+                .iter()
+                .all(|v| v.is_finite())
                 && c.distance_mm.is_none_or(|d| d.is_finite() && d > 0.0)
                 && c.height_mm.is_none_or(|h| h.is_finite() && h > 0.0);
             if !finite || c.elevation_deg.abs() >= 90.0 || !(c.fov_deg > 0.0 && c.fov_deg < 180.0) {
@@ -486,7 +494,10 @@ impl Scene {
                 ));
             }
             if r.turntable > 3600 {
-                return Err(invalid("turntable", format!("{} frames is absurd; use 0 to 3600", r.turntable)));
+                return Err(invalid(
+                    "turntable",
+                    format!("{} frames is absurd; use 0 to 3600", r.turntable),
+                ));
             }
             if !r.file.ends_with(".png") {
                 return Err(invalid("file", format!("`{}` must end in .png", r.file)));
@@ -500,7 +511,10 @@ impl Scene {
                 });
             }
             if roi.seed.is_some_and(|s| s.iter().any(|v| !v.is_finite())) {
-                return Err(invalid("seed", "must be three finite millimetre coordinates".into()));
+                return Err(invalid(
+                    "seed",
+                    "must be three finite millimetre coordinates".into(),
+                ));
             }
         }
         let mut interactions = vec![];

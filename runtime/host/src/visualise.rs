@@ -19,7 +19,9 @@ use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
 use voxflex_core::io::png::SliceAxis;
 use voxflex_core::io::{write_atomically, write_volume};
-use voxflex_core::opacity::{CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed};
+use voxflex_core::opacity::{
+    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed,
+};
 use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
 use voxflex_core::volume::{Volume, VoxelData};
 
@@ -52,7 +54,9 @@ pub fn grow_rois(
     let mut maps = vec![];
     let (mut visits, mut useful) = (0u64, 0u64);
     let uploaded = match gpu {
-        Some(g) if !scene.rois.is_empty() => Some(GpuOpacityVolume::upload(g.as_ref(), volume.view()).map_err(roi_err)?),
+        Some(g) if !scene.rois.is_empty() => {
+            Some(GpuOpacityVolume::upload(g.as_ref(), volume.view()).map_err(roi_err)?)
+        }
         _ => None,
     };
     for roi in &scene.rois {
@@ -65,7 +69,8 @@ pub fn grow_rois(
         let seed = roi_seed(roi);
         let (map, report) = match (gpu, &uploaded) {
             (Some(g), Some(values)) => {
-                let mut growth = GpuGrowth::new(g.as_ref(), values, volume.view(), &seed, params).map_err(roi_err)?;
+                let mut growth = GpuGrowth::new(g.as_ref(), values, volume.view(), &seed, params)
+                    .map_err(roi_err)?;
                 let report = match roi.steps {
                     Some(n) => growth.step(g.as_ref(), values, n),
                     None => growth.run(g.as_ref(), values),
@@ -110,8 +115,28 @@ fn roi_err(e: impl std::fmt::Display) -> RunError {
     RunError::Other(format!("[[roi]]: {e}"))
 }
 
+/// An opacity map as a u16 volume (65535 = opacity 1) on its voxel box of
+/// `grid` (same spacing; origin at the box's first voxel, mm).
+pub fn map_volume(grid: &Grid, map: &OpacityMap) -> Volume {
+    let o = map.origin;
+    let sub = Grid::new(
+        map.dims,
+        grid.spacing,
+        grid.index_to_world(DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64)),
+    );
+    Volume {
+        grid: sub,
+        data: VoxelData::U16(map.values.clone()),
+    }
+}
+
 /// Writes opacity maps as NIfTI (u16 fixed point on the map's voxel box).
-pub fn write_maps(scene: &Scene, grid: &Grid, maps: &[OpacityMap], dir: &Path) -> Result<Vec<String>, RunError> {
+pub fn write_maps(
+    scene: &Scene,
+    grid: &Grid,
+    maps: &[OpacityMap],
+    dir: &Path,
+) -> Result<Vec<String>, RunError> {
     let mut written = vec![];
     for (n, (roi, map)) in scene.rois.iter().zip(maps).enumerate() {
         if !roi.write {
@@ -119,14 +144,7 @@ pub fn write_maps(scene: &Scene, grid: &Grid, maps: &[OpacityMap], dir: &Path) -
         }
         let name = roi.name.clone().unwrap_or_else(|| n.to_string());
         let file = format!("roi_{name}.nii.gz");
-        let o = map.origin;
-        let sub = Grid::new(
-            map.dims,
-            grid.spacing,
-            grid.index_to_world(DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64)),
-        );
-        let v = Volume::new(sub, VoxelData::U16(map.values.clone())).map_err(|e| RunError::Other(e.to_string()))?;
-        write_volume(&dir.join(&file), v.view())?;
+        write_volume(&dir.join(&file), map_volume(grid, map).view())?;
         written.push(file);
     }
     Ok(written)
@@ -146,7 +164,9 @@ pub fn camera_for(settings: &RenderSettings, grid: &Grid, extra_azimuth: f64) ->
             ProjectionName::Orthographic => Projection::Orthographic {
                 height_mm: c.height_mm.unwrap_or(diagonal),
             },
-            ProjectionName::Perspective => Projection::Perspective { fov_y_deg: c.fov_deg },
+            ProjectionName::Perspective => Projection::Perspective {
+                fov_y_deg: c.fov_deg,
+            },
         },
         width: settings.width,
         height: settings.height,
@@ -159,23 +179,25 @@ pub struct RenderStage {
 }
 
 impl RenderStage {
-    /// Creates and initialises the scene's renderer plugin.
+    /// Creates and initialises a renderer plugin with the TOML text of its
+    /// parameters; `context` (e.g. the scene file) prefixes errors.
     pub fn new(
-        scene: &Scene,
+        context: &str,
         plugin: &LoadedPlugin,
+        params_toml: &str,
         services: Arc<HostServices>,
         backend: ExecutionBackend,
     ) -> Result<Self, RunError> {
         let vtable = plugin.renderer.ok_or_else(|| {
             RunError::Other(format!(
-                "{}: [render] plugin `{}` is a {} plugin, not a renderer",
-                scene.path.display(),
+                "{context}: [render] plugin `{}` is a {} plugin, not a renderer",
                 plugin.name,
                 plugin.kind_name()
             ))
         })?;
         // SAFETY: checked, never-unloaded library.
-        let mut renderer = unsafe { RendererProxy::create(&plugin.name, vtable, &scene.render_params_toml(), services) }?;
+        let mut renderer =
+            unsafe { RendererProxy::create(&plugin.name, vtable, params_toml, services) }?;
         renderer.init(backend)?;
         Ok(Self { renderer })
     }
@@ -191,7 +213,8 @@ impl RenderStage {
         metrics: &mut RunMetrics,
     ) -> Result<Vec<String>, RunError> {
         let t = Instant::now();
-        self.renderer.set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
+        self.renderer
+            .set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
         self.renderer.set_opacity_maps(maps)?;
         let frames = settings.turntable.max(1);
         let mut written = vec![];
@@ -199,7 +222,9 @@ impl RenderStage {
         for f in 0..frames {
             let camera = camera_for(settings, &volume.grid, 360.0 * f as f64 / frames as f64);
             let mut pixels = vec![0u8; settings.width as usize * settings.height as usize * 4];
-            let stats = self.renderer.render(&camera, ImageTarget::Cpu(&mut pixels))?;
+            let stats = self
+                .renderer
+                .render(&camera, ImageTarget::Cpu(&mut pixels))?;
             rays += stats.rays;
             samples += stats.samples;
             let file = if settings.turntable == 0 {
@@ -222,7 +247,8 @@ fn write_rgba_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<(
         .ok_or_else(|| RunError::Other(format!("{}: image size mismatch", path.display())))?;
     write_atomically(path, |w| {
         let mut buf = std::io::Cursor::new(Vec::new());
-        img.write_to(&mut buf, image::ImageFormat::Png).map_err(std::io::Error::other)?;
+        img.write_to(&mut buf, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)?;
         w.write_all(buf.get_ref())
     })?;
     Ok(())

@@ -3,7 +3,7 @@
 
 use super::bounds::{VoxelBounds, grown_working_box, initial_working_box};
 use super::extinction::Extinction;
-use super::frontier::{Lattice, apply, enumerate, evaluate};
+use super::frontier::{Lattice, apply, count, enumerate, evaluate, group, marks_for};
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::{Seed, SeedStats, seed_stats};
@@ -22,7 +22,7 @@ use std::sync::atomic::{AtomicU16, AtomicU64, Ordering::Relaxed};
 /// its dims can be checked).
 ///
 /// Working memory: 2 bytes per voxel of the working box (the u16 field) +
-/// 1 bit (the candidate bitset) + 4 bytes per frontier voxel and 8 per
+/// 2 bits (candidate and done marks) + 4 bytes per frontier voxel and 8 per
 /// candidate during a step. The working box is the region's box plus a
 /// margin of `max(8, extent/4)` voxels per side (see
 /// [`super::bounds::grown_working_box`]); [`CpuGrowth::map`] crops to the
@@ -35,8 +35,10 @@ pub struct CpuGrowth {
     ext: Extinction,
     work: VoxelBounds,
     field: Vec<AtomicU16>,
-    flags: Vec<AtomicU64>,
-    frontier: Vec<u32>,
+    /// Two bits per box voxel: candidate, done (see `frontier`).
+    marks: Vec<AtomicU64>,
+    /// Voxels that changed in the last step, by group (see `frontier`).
+    frontier: Vec<Vec<u32>>,
     region: VoxelBounds,
     total: GrowthReport,
 }
@@ -62,9 +64,9 @@ impl CpuGrowth {
             stats,
             ext,
             work,
-            flags: zero_bits(work.len()),
+            marks: marks_for(&field, ext.q_max),
             field,
-            frontier: vec![s as u32],
+            frontier: group([s as u32], work.dims()),
             region,
             total: GrowthReport::default(),
         })
@@ -81,40 +83,57 @@ impl CpuGrowth {
             });
         }
         let mut rep = GrowthReport::default();
+        let mut tm = [0f64; 5];
+        let prof = std::env::var_os("VOXFLEX_PHASES").is_some();
         for _ in 0..n {
-            if self.frontier.is_empty() {
+            let t0 = std::time::Instant::now();
+            if self.is_converged() {
                 break;
             }
             if let Some(nb) = grown_working_box(&self.work, &self.region, self.dims) {
                 self.regrow(nb);
                 rep.regrows += 1;
             }
+            let t1 = std::time::Instant::now();
+            tm[0] += (t1 - t0).as_secs_f64();
             let lat = Lattice::new(&self.work, self.dims);
-            let cands = with_voxels!(volume.data, |s| enumerate(
+            let found = with_voxels!(volume.data, |s| enumerate(
                 &lat,
                 &self.field,
-                &self.flags,
+                &self.marks,
                 &self.ext,
                 s,
                 &self.frontier
             ));
+            let t2 = std::time::Instant::now();
+            tm[1] += (t2 - t1).as_secs_f64();
             let changes = with_voxels!(volume.data, |s| evaluate(
                 &lat,
                 &self.field,
-                &self.flags,
+                &self.marks,
                 &self.ext,
                 s,
-                &cands
+                &found
             ));
+            let t3 = std::time::Instant::now();
+            tm[2] += (t3 - t2).as_secs_f64();
             for b in changes.iter().filter_map(|c| c.bounds) {
                 self.region = self.region.union(&b);
             }
             self.frontier = apply(&self.field, &changes);
+            let t4 = std::time::Instant::now();
+            tm[3] += (t4 - t3).as_secs_f64();
+            drop(changes);
+            drop(found);
+            tm[4] += t4.elapsed().as_secs_f64();
             rep.steps += 1;
-            rep.visits += cands.len() as u64;
-            rep.useful += self.frontier.len() as u64;
+            let _ = count;
+            rep.useful += self.frontier_len() as u64;
         }
-        rep.converged = self.frontier.is_empty();
+        if prof {
+            eprintln!("PHASES regrow {:.0} enum {:.0} eval {:.0} apply {:.0} drop {:.0} ms", tm[0]*1e3, tm[1]*1e3, tm[2]*1e3, tm[3]*1e3, tm[4]*1e3);
+        }
+        rep.converged = self.is_converged();
         self.total.merge(&rep);
         Ok(rep)
     }
@@ -126,7 +145,7 @@ impl CpuGrowth {
 
     /// True when no voxel can change any more.
     pub fn is_converged(&self) -> bool {
-        self.frontier.is_empty()
+        self.frontier.iter().all(Vec::is_empty)
     }
 
     /// The map as it stands, over the region's box (voxels that ever rose
@@ -183,12 +202,12 @@ impl CpuGrowth {
 
     /// Voxels that changed in the last step (the next step's sources).
     pub fn frontier_len(&self) -> usize {
-        self.frontier.len()
+        self.frontier.iter().map(Vec::len).sum()
     }
 
     /// Bytes of working state held between steps (field, bitset, frontier).
     pub fn working_bytes(&self) -> usize {
-        self.field.len() * 2 + self.flags.len() * 8 + self.frontier.capacity() * 4
+        self.field.len() * 2 + self.marks.len() * 8 + self.frontier.iter().map(|g| g.capacity() * 4).sum::<usize>()
     }
 
     /// Moves the field into a larger working box (`nb ⊇ self.work`).
@@ -213,15 +232,9 @@ impl CpuGrowth {
             }
         });
         self.field = values.into_iter().map(AtomicU16::new).collect();
-        self.flags = zero_bits(nb.len());
-        self.frontier
-            .par_iter_mut()
-            .for_each(|l| *l = nb.local_linear(old.voxel_of(*l as usize)) as u32);
+        self.marks = marks_for(&self.field, self.ext.q_max);
+        let moved = self.frontier.iter().flatten().map(|&l| nb.local_linear(old.voxel_of(l as usize)) as u32);
+        self.frontier = group(moved.collect::<Vec<_>>(), nb.dims());
         self.work = nb;
     }
-}
-
-/// A bitset of `n` zero bits.
-fn zero_bits(n: usize) -> Vec<AtomicU64> {
-    (0..n.div_ceil(64)).map(|_| AtomicU64::new(0)).collect()
 }

@@ -34,6 +34,16 @@ pub const SANE_MAX: f32 = 1e30;
 /// clamped value still extinguishes (or lifts) fully.
 const E_BOUND: f32 = 131_072.0;
 
+/// `x.round_ties_even()` for `|x| ≤ 2²²`, without a libm call: adding
+/// `1.5 · 2²³` leaves no fraction bits, so the addition itself rounds to
+/// the nearest integer, ties to even (IEEE default rounding), and the
+/// subtraction is exact. (WGSL's `round` is ties-to-even too.)
+#[inline]
+pub fn round_ties_even_small(x: f32) -> f32 {
+    const MAGIC: f32 = 12_582_912.0;
+    (x + MAGIC) - MAGIC
+}
+
 /// A voxel value as the growth reads it: NaN → `+1e30`, everything else
 /// clamped to `[−1e30, 1e30]`, so differences never overflow. Integer
 /// volumes pass unchanged. The GPU path uploads values through this too.
@@ -90,7 +100,7 @@ impl Extinction {
     pub fn fixed(&self, value: f32) -> i32 {
         let a = (self.mean - sanitize(value)).abs().min(self.cap);
         let e = ((a - self.sigma) * self.scale).clamp(-E_BOUND, E_BOUND);
-        e.round_ties_even() as i32
+        round_ties_even_small(e) as i32
     }
 
     /// `E_v` as a real opacity difference (for display and tests).

@@ -6,10 +6,12 @@
 //! (3-D-folded dispatch, workgroups of 64), the same phases as the CPU:
 //!
 //! - `enumerate` — per frontier voxel: the 26-neighbours its new value
-//!   lifts, deduplicated by `atomicOr` on a candidate bitset, appended to the
-//!   candidate list (one `atomicAdd` per workgroup on the global counter);
-//! - `evaluate` — per candidate: the update rule (field read-only), the new
-//!   value kept per candidate; the candidate bit cleared;
+//!   lifts, skipping voxels marked done, deduplicated by `atomicOr` on a
+//!   candidate mark, appended to the candidate list (one `atomicAdd` per
+//!   workgroup on the global counter);
+//! - `evaluate` — per candidate: the update rule and the pump shortcut
+//!   (field read-only), the new value kept per candidate; the candidate mark
+//!   cleared and the done mark set at the ceiling (one `atomicXor`);
 //! - `apply` — per candidate: the risen values stored (an `atomicAdd` on
 //!   the voxel's half of a packed u32 word), appended to the next frontier,
 //!   and the region box grown (workgroup min/max, then one global atomic
@@ -26,7 +28,7 @@
 //! **Memory** (all 32-bit storage, one binding each): the volume's values
 //! as f32 (4 bytes per volume voxel, shared by every growth of a
 //! [`GpuOpacityVolume`]); per growth, the field as packed u16 (2 bytes per
-//! working-box voxel), the candidate bitset (1 bit per working-box voxel),
+//! working-box voxel), the marks (2 bits per working-box voxel),
 //! and four lists of u32 (frontier, next frontier, candidates, new values),
 //! grown geometrically with the largest step (at most 4 bytes per
 //! working-box voxel each). The volume's values must fit one storage
@@ -60,7 +62,7 @@ mod bind {
     pub const PARAMS: u32 = 0;
     pub const VALUES: u32 = 1;
     pub const FIELD: u32 = 2;
-    pub const FLAGS: u32 = 3;
+    pub const MARKS: u32 = 3;
     pub const FRONT: u32 = 4;
     pub const CAND: u32 = 5;
     pub const NEWVAL: u32 = 6;
@@ -71,7 +73,7 @@ mod bind {
 }
 
 /// The full WGSL source of each kernel (for tools that validate shaders).
-pub fn kernel_sources() -> [(&'static str, String); 5] {
+pub fn kernel_sources() -> [(&'static str, String); 6] {
     let step = format!("{COMMON}\n{STEP}");
     let regrow = format!("{COMMON}\n{REGROW}");
     [
@@ -79,7 +81,8 @@ pub fn kernel_sources() -> [(&'static str, String); 5] {
         ("evaluate", step.clone()),
         ("apply", step),
         ("regrow", regrow.clone()),
-        ("remap", regrow),
+        ("remap", regrow.clone()),
+        ("mark", regrow),
     ]
 }
 
@@ -153,17 +156,19 @@ struct Pipelines {
     apply: PipelineId,
     regrow: PipelineId,
     remap: PipelineId,
+    mark: PipelineId,
 }
 
 impl Pipelines {
     fn compile(gpu: &dyn GpuService) -> Result<Self, GpuError> {
-        let [a, b, c, d, e] = kernel_sources();
+        let [a, b, c, d, e, f] = kernel_sources();
         Ok(Self {
             enumerate: gpu.compile(&a.1, a.0)?,
             evaluate: gpu.compile(&b.1, b.0)?,
             apply: gpu.compile(&c.1, c.0)?,
             regrow: gpu.compile(&d.1, d.0)?,
             remap: gpu.compile(&e.1, e.0)?,
+            mark: gpu.compile(&f.1, f.0)?,
         })
     }
 }
@@ -213,7 +218,7 @@ pub struct GpuGrowth {
     regrow_buf: Owned,
     counters: Owned,
     field: Owned,
-    flags: Owned,
+    marks: Owned,
     front: Owned,
     next: Owned,
     cand: Owned,
@@ -263,6 +268,9 @@ impl GpuGrowth {
             let field = mk(words.len() as u64 * 4, "voxflex.opacity.field")?;
             gpu.write_buffer(field.id, 0, bytemuck::cast_slice(&words))?;
             let front = mk(1024, "voxflex.opacity.frontier")?;
+            // The seed (at q_max) is done.
+            let mut marks0 = vec![0u32; work.len().div_ceil(16)];
+            marks0[s >> 4] = 2 << ((s & 15) * 2);
             gpu.write_buffer(front.id, 0, bytemuck::bytes_of(&(s as u32)))?;
             let g = Self {
                 dims,
@@ -276,7 +284,7 @@ impl GpuGrowth {
                 params_buf: mk(std::mem::size_of::<Params>() as u64, "voxflex.opacity.params")?,
                 regrow_buf: mk(std::mem::size_of::<Regrow>() as u64, "voxflex.opacity.regrow")?,
                 counters: mk(COUNTERS as u64 * 4, "voxflex.opacity.counters")?,
-                flags: mk(bitset_bytes(work.len()), "voxflex.opacity.flags")?,
+                marks: mk(marks_bytes(work.len()), "voxflex.opacity.marks")?,
                 field,
                 front,
                 next: mk(1024, "voxflex.opacity.next")?,
@@ -284,6 +292,7 @@ impl GpuGrowth {
                 newval: mk(1024, "voxflex.opacity.newval")?,
                 total: GrowthReport::default(),
             };
+            gpu.write_buffer(g.marks.id, 0, bytemuck::cast_slice(&marks0))?;
             g.write_params(gpu)?;
             Ok(g)
         })();
@@ -414,7 +423,7 @@ impl GpuGrowth {
             self.regrow_buf,
             self.counters,
             self.field,
-            self.flags,
+            self.marks,
             self.front,
             self.next,
             self.cand,
@@ -456,7 +465,7 @@ impl GpuGrowth {
                 b(bind::PARAMS, &self.params_buf),
                 BufferBinding::whole(bind::VALUES, values.values),
                 b(bind::FIELD, &self.field),
-                b(bind::FLAGS, &self.flags),
+                b(bind::MARKS, &self.marks),
                 b(bind::FRONT, &self.front),
                 b(bind::CAND, &self.cand),
                 b(bind::COUNTERS, &self.counters),
@@ -477,7 +486,7 @@ impl GpuGrowth {
                 b(bind::PARAMS, &self.params_buf),
                 BufferBinding::whole(bind::VALUES, values.values),
                 b(bind::FIELD, &self.field),
-                b(bind::FLAGS, &self.flags),
+                b(bind::MARKS, &self.marks),
                 b(bind::CAND, &self.cand),
                 b(bind::NEWVAL, &self.newval),
                 b(bind::COUNTERS, &self.counters),
@@ -520,12 +529,12 @@ impl GpuGrowth {
             olo: [old.lo[0] as u32, old.lo[1] as u32, old.lo[2] as u32, self.n_front],
             odim: [od[0] as u32, od[1] as u32, od[2] as u32, self.ext.q_min as u32],
             nlo: [nb.lo[0] as u32, nb.lo[1] as u32, nb.lo[2] as u32, nb.len() as u32],
-            ndim: [nd[0] as u32, nd[1] as u32, nd[2] as u32, 0],
+            ndim: [nd[0] as u32, nd[1] as u32, nd[2] as u32, self.ext.q_max as u32],
         };
         gpu.write_buffer(self.regrow_buf.id, 0, bytemuck::bytes_of(&r))?;
         let words = nb.len().div_ceil(2) as u64;
         let field = Owned::new(gpu, words * 4, "voxflex.opacity.field")?;
-        let flags = match Owned::new(gpu, bitset_bytes(nb.len()), "voxflex.opacity.flags") {
+        let marks = match Owned::new(gpu, marks_bytes(nb.len()), "voxflex.opacity.marks") {
             Ok(f) => f,
             Err(e) => {
                 gpu.destroy_buffer(field.id);
@@ -542,6 +551,15 @@ impl GpuGrowth {
                 ],
                 gpu.workgroups_for(words, WORKGROUP)?,
             )?;
+            gpu.dispatch(
+                self.pipes.mark,
+                &[
+                    BufferBinding::whole(bind::FIELD, field.id),
+                    BufferBinding::whole(bind::MARKS, marks.id),
+                    BufferBinding::whole(bind::REGROW, self.regrow_buf.id),
+                ],
+                gpu.workgroups_for(nb.len().div_ceil(16) as u64, WORKGROUP)?,
+            )?;
             self.next.ensure(gpu, self.n_front as u64 * 4, "voxflex.opacity.next")?;
             gpu.dispatch(
                 self.pipes.remap,
@@ -555,20 +573,20 @@ impl GpuGrowth {
         })();
         if let Err(e) = moved {
             gpu.destroy_buffer(field.id);
-            gpu.destroy_buffer(flags.id);
+            gpu.destroy_buffer(marks.id);
             return Err(e);
         }
         gpu.destroy_buffer(self.field.id);
-        gpu.destroy_buffer(self.flags.id);
+        gpu.destroy_buffer(self.marks.id);
         self.field = field;
-        self.flags = flags;
+        self.marks = marks;
         std::mem::swap(&mut self.front, &mut self.next);
         self.work = nb;
         self.write_params(gpu)
     }
 }
 
-/// Bytes of a bitset of `n` bits in u32 words.
-fn bitset_bytes(n: usize) -> u64 {
-    n.div_ceil(32) as u64 * 4
+/// Bytes of the marks of `n` voxels (2 bits each, in u32 words).
+fn marks_bytes(n: usize) -> u64 {
+    n.div_ceil(16) as u64 * 4
 }

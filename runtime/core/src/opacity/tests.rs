@@ -516,6 +516,18 @@ fn extinction_matches_the_paper_formula() {
 }
 
 #[test]
+fn fast_rounding_is_ties_to_even() {
+    use super::extinction::round_ties_even_small;
+    let mut rng = super::parity::XorShift::new(3);
+    let ties = (-300..300).map(|i| i as f32 + 0.5);
+    let random = (0..100_000).map(|_| ((rng.uniform() - 0.5) * 2.0 * 131_072.0) as f32);
+    let edges = [0.0, -0.0, 0.49999997, -0.49999997, 131_072.0, -131_072.0, 131_071.5, -131_071.5];
+    for x in ties.chain(random).chain(edges) {
+        assert_eq!(round_ties_even_small(x), x.round_ties_even(), "{x}");
+    }
+}
+
+#[test]
 fn gaussian_transfer_function() {
     let tf = GaussianTf::new(100.0, 5.0);
     assert!((tf.opacity(100.0, 0.8) - 0.8).abs() < 1e-6);

@@ -95,11 +95,18 @@ fn test(d: &V, eps: f32) -> Test {
         thr: [0.0; LANES],
         ok: 0,
     };
+    // The two halves of "usable" are separate lane masks so that each is
+    // one vector compare (as one condition LLVM tests it lane by lane).
+    let (mut nonzero, mut finite) = (0u32, 0u32);
     for l in 0..LANES {
         t.sign[l] = if d[l] > 0.0 { 1.0 } else { -1.0 };
         t.thr[l] = -eps * d[l].abs();
-        t.ok |= ((d[l] != 0.0 && d[l].abs() < f32::INFINITY) as u32) << l;
+        nonzero |= ((d[l] != 0.0) as u32) << l;
     }
+    for l in 0..LANES {
+        finite |= ((d[l].abs() < f32::INFINITY) as u32) << l;
+    }
+    t.ok = nonzero & finite;
     t
 }
 

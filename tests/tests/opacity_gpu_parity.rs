@@ -1,0 +1,40 @@
+//! The opacity growth's WGSL path against its rayon twin on a real device
+//! (lavapipe in CI): identical maps and identical step / visit / useful
+//! counts after every step and at convergence, several growths sharing one
+//! uploaded volume, and clean refusals. The checks live in
+//! `voxflex_core::opacity::parity`; on a machine without an adapter these
+//! tests print SKIPPED, except under `CI=true`.
+
+use voxflex_core::opacity::parity;
+use voxflex_runtime::gpu_context::testing::test_gpu;
+
+fn run(check: fn(&dyn voxflex_core::gpu::GpuService) -> Result<(), String>) {
+    let Some(gpu) = test_gpu() else { return };
+    if let Err(e) = check(gpu.as_ref()) {
+        panic!(
+            "{} on {}",
+            e,
+            voxflex_core::gpu::GpuService::adapter_description(gpu.as_ref())
+        );
+    }
+}
+
+#[test]
+fn converged_maps_are_identical() {
+    run(parity::check_converged_matches_cpu);
+}
+
+#[test]
+fn every_step_is_identical() {
+    run(parity::check_stepwise_matches_cpu);
+}
+
+#[test]
+fn several_maps_share_one_volume() {
+    run(parity::check_several_maps);
+}
+
+#[test]
+fn oversized_and_mismatched_volumes_are_refused() {
+    run(parity::check_refusals);
+}

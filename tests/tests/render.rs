@@ -1,0 +1,113 @@
+//! Rendering through the real path: the `raycast` plugin loaded from its
+//! shared library by the runtime, from scenes, from `voxflex render`, and on
+//! both backends.
+
+use std::sync::Arc;
+use voxflex_abi::host_side::HostServices;
+use voxflex_abi::renderer::RendererProxy;
+use voxflex_core::camera::{Camera, Projection};
+use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
+use voxflex_core::gpu::{GpuService, GpuServiceExt};
+use voxflex_core::opacity::{CpuGrowth, GrowthParams, Seed};
+use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
+use voxflex_integration_tests::*;
+use voxflex_runtime::gpu_context::testing::test_gpu;
+
+fn raycast(gpu: Option<Arc<dyn GpuService>>, params: &str, backend: ExecutionBackend) -> RendererProxy {
+    let p = voxflex_runtime::plugin_loader::load_by_name("raycast", &[plugin_dir(&["raycast"])]).unwrap();
+    // SAFETY: checked, never-unloaded library.
+    let mut r = unsafe { RendererProxy::create("raycast", p.renderer.unwrap(), params, HostServices::new(gpu, 2)) }.unwrap();
+    r.init(backend).unwrap();
+    r
+}
+
+fn camera(grid: &voxflex_core::grid::Grid) -> Camera {
+    Camera {
+        target: grid.centre(),
+        azimuth_deg: 25.0,
+        elevation_deg: 10.0,
+        distance_mm: 600.0,
+        projection: Projection::Orthographic { height_mm: 300.0 },
+        width: 96,
+        height: 80,
+    }
+}
+
+#[test]
+fn cpu_and_gpu_images_agree_through_the_plugin() {
+    let Some(gpu) = test_gpu() else { return };
+    let gpu: Arc<dyn GpuService> = gpu;
+    let volume = voxflex_core::phantom::phantom("head", [48, 56, 52]).unwrap();
+    let mut growth = CpuGrowth::new(volume.view(), &Seed::World(volume.grid.centre()), GrowthParams::default()).unwrap();
+    growth.run(volume.view()).unwrap();
+    let maps = [growth.map()];
+    for params in ["transfer_function = { preset = \"ct-bone\" }", "mode = \"mip\"\ntransfer_function = { preset = \"ct-soft-tissue\" }"] {
+        for with_maps in [false, true] {
+            let cam = camera(&volume.grid);
+            let n = (cam.width * cam.height) as usize;
+            let mut cpu = raycast(Some(gpu.clone()), params, ExecutionBackend::Cpu);
+            cpu.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All).unwrap();
+            let mut a = vec![0u8; n * 4];
+            let mut g = raycast(Some(gpu.clone()), params, ExecutionBackend::Gpu);
+            g.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All).unwrap();
+            if with_maps {
+                cpu.set_opacity_maps(&maps).unwrap();
+                g.set_opacity_maps(&maps).unwrap();
+            }
+            cpu.render(&cam, ImageTarget::Cpu(&mut a)).unwrap();
+            let out = gpu.create_buffer(n as u64 * 4, "image").unwrap();
+            g.render(&cam, ImageTarget::Gpu(out)).unwrap();
+            let mut packed = vec![0u32; n];
+            gpu.download(out, &mut packed).unwrap();
+            gpu.destroy_buffer(out);
+            let b: Vec<u8> = packed.iter().flat_map(|p| p.to_le_bytes()).collect();
+            let worst = a.iter().zip(&b).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+            assert!(a.iter().any(|&v| v > 0), "{params}: empty image");
+            assert!(worst <= 2, "{params}, maps {with_maps}: CPU and GPU differ by {worst}/255");
+        }
+    }
+}
+
+#[test]
+fn a_scene_renders_with_its_roi_maps() {
+    plugin_dir(&["affine", "raycast"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let base = scene("cpu", "head", 40, 1, "affine", "field = \"twist\"\nangle_deg = 20", &tmp.path().join("plain"));
+    let render = "\n[render]\nwidth = 64\nheight = 64\nfile = \"r.png\"\n[render.params]\ntransfer_function = { preset = \"ct-soft-tissue\" }\n";
+    std::fs::write(tmp.path().join("a.toml"), format!("{base}{render}")).unwrap();
+    let o = voxflex(&["run", "a.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let plain = image_bytes(&tmp.path().join("plain/r.png"));
+
+    let with_roi = format!("{}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{render}", base.replace("/plain", "/roi"));
+    std::fs::write(tmp.path().join("b.toml"), with_roi).unwrap();
+    let o = voxflex(&["run", "b.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&tmp.path().join("roi"));
+    assert_eq!(m["stages"]["render"]["runs"], 1, "{m}");
+    assert_eq!(m["stages"]["roi"]["runs"], 1, "{m}");
+    let roi = image_bytes(&tmp.path().join("roi/r.png"));
+    assert_ne!(plain, roi, "an opacity map must change the rendering");
+}
+
+fn image_bytes(p: &std::path::Path) -> Vec<u8> {
+    let bytes = std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    assert_eq!(&bytes[1..4], b"PNG");
+    bytes
+}
+
+#[test]
+fn render_command_writes_a_png_and_names_bad_presets() {
+    plugin_dir(&["raycast"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let o = voxflex(
+        &["render", "phantom:head", "--dims", "32,32,32", "--out", "shots/head.png", "--size", "64x48", "--backend", "cpu"],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    image_bytes(&tmp.path().join("shots/head.png"));
+    let o = voxflex(&["render", "phantom:head", "--dims", "16,16,16", "--out", "x.png", "--preset", "ct-bones", "--backend", "cpu"], tmp.path());
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("unknown preset `ct-bones`") && err.lines().count() == 1, "{err}");
+}
