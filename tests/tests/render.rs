@@ -88,6 +88,13 @@ fn a_scene_renders_with_its_roi_maps() {
     assert_eq!(m["stages"]["roi"]["runs"], 1, "{m}");
     let roi = image_bytes(&tmp.path().join("roi/r.png"));
     assert_ne!(plain, roi, "an opacity map must change the rendering");
+
+    // The automatic Gaussian transfer function around the seed's intensity.
+    let gauss = format!("{}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\ngaussian_tf = true\n{render}", base.replace("/plain", "/gauss"));
+    std::fs::write(tmp.path().join("c.toml"), gauss).unwrap();
+    let o = voxflex(&["run", "c.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_ne!(image_bytes(&tmp.path().join("gauss/r.png")), roi, "the Gaussian TF must change the rendering");
 }
 
 fn image_bytes(p: &std::path::Path) -> Vec<u8> {

@@ -402,6 +402,7 @@ mod tests {
                 },
             ],
             units: ValueUnits::Data,
+            gaussian: None,
         };
         let lut = tf.lut((0.0, 1.0), 1.0);
         let dims = [150, 90, 41];

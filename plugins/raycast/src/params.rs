@@ -112,6 +112,34 @@ pub struct TransferFunctionSpec {
     /// `points` values are fractions of the volume's value range (0 = min,
     /// 1 = max) instead of data units. Presets carry their own units.
     pub normalized: Option<bool>,
+    /// The automatic Gaussian transfer function of the opacity-map paper
+    /// (`f(x) = t(x)·(a + b·g(x))`); the host fills it from a `[[roi]]` with
+    /// `gaussian_tf = true`.
+    pub gaussian: Option<GaussianSpec>,
+}
+
+/// `transfer_function.gaussian`: `g` is a Gaussian at `mean` with `sigma`
+/// (data units); `a` (default 0.01) and `b` (default 0.99) as in the paper.
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GaussianSpec {
+    /// Centre of the Gaussian (the seed's mean `d_s`), data units.
+    pub mean: f64,
+    /// Its standard deviation (the seed's σ_s), data units, > 0.
+    pub sigma: f64,
+    /// Floor of the weight.
+    #[serde(default = "gaussian_a")]
+    pub a: f64,
+    /// Gain of the Gaussian.
+    #[serde(default = "gaussian_b")]
+    pub b: f64,
+}
+
+fn gaussian_a() -> f64 {
+    0.01
+}
+fn gaussian_b() -> f64 {
+    0.99
 }
 
 /// Parameters of the `raycast` renderer (see the module docs for the TOML).
@@ -358,10 +386,26 @@ impl RaycastParams {
                     } else {
                         ValueUnits::Data
                     },
+                    gaussian: None,
                 }
             }
         };
-        Ok(tf.shifted(spec.shift as f32))
+        let mut tf = tf.shifted(spec.shift as f32);
+        if let Some(g) = spec.gaussian {
+            for (key, v) in [("mean", g.mean), ("sigma", g.sigma), ("a", g.a), ("b", g.b)] {
+                finite(&format!("transfer_function.gaussian.{key}"), v)?;
+            }
+            if g.sigma <= 0.0 || g.a < 0.0 || g.b < 0.0 {
+                return bad("transfer_function.gaussian", "needs sigma > 0 and a, b ≥ 0");
+            }
+            tf.gaussian = Some(voxflex_core::opacity::GaussianTf {
+                mean: g.mean as f32,
+                sigma: g.sigma as f32,
+                a: g.a as f32,
+                b: g.b as f32,
+            });
+        }
+        Ok(tf)
     }
 
     /// The background as linear premultiplied RGBA, if any.

@@ -51,6 +51,10 @@ pub struct TransferFunction {
     pub points: Vec<ControlPoint>,
     /// Units of the values.
     pub units: ValueUnits,
+    /// The automatic Gaussian transfer function of the opacity-map paper:
+    /// when set, every opacity `t(x)` becomes `t(x) · (a + b · g(x))`, `g`
+    /// a Gaussian at the ROI seed's mean and σ (data units).
+    pub gaussian: Option<voxflex_core::opacity::GaussianTf>,
 }
 
 const fn cp(value: f32, r: f32, g: f32, b: f32, a: f32) -> ControlPoint {
@@ -121,6 +125,7 @@ impl TransferFunction {
         Some(Self {
             points: points.to_vec(),
             units,
+            gaussian: None,
         })
     }
 
@@ -180,6 +185,10 @@ impl TransferFunction {
                     ValueUnits::Normalized => (v - dlo) / span,
                 };
                 let [r, g, b, a] = self.evaluate(fv);
+                let a = match &self.gaussian {
+                    Some(gauss) => gauss.opacity(v, a),
+                    None => a,
+                };
                 let a = a.clamp(0.0, ALPHA_MAX);
                 let kappa = -(1.0 - a).ln() * inv_unit;
                 [
@@ -263,7 +272,20 @@ mod tests {
                 .map(|p| cp(p[0], p[1], p[2], p[3], p[4]))
                 .collect(),
             units: ValueUnits::Data,
+            gaussian: None,
         }
+    }
+
+    #[test]
+    fn gaussian_tf_weights_opacity_around_the_seed_mean() {
+        let mut t = tf(&[[0.0, 1.0, 1.0, 1.0, 0.5], [100.0, 1.0, 1.0, 1.0, 0.5]]);
+        let plain = t.lut((0.0, 0.0), 1.0);
+        t.gaussian = Some(voxflex_core::opacity::GaussianTf::new(50.0, 5.0));
+        let weighted = t.lut((0.0, 0.0), 1.0);
+        // At the mean the weight is a + b = 1; four σ away it is ≈ a = 0.01.
+        assert!((weighted.lookup(50.0)[3] - plain.lookup(50.0)[3]).abs() < 1e-3 * plain.lookup(50.0)[3]);
+        let far = -(1.0 - 0.5 * 0.01f32 - 0.5 * 0.99 * (-8.0f32).exp()).ln();
+        assert!((weighted.lookup(70.0)[3] - far).abs() < 1e-3, "{}", weighted.lookup(70.0)[3]);
     }
 
     #[test]

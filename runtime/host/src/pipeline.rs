@@ -393,7 +393,10 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
             let maps = if scene.rois.is_empty() {
                 vec![]
             } else {
-                let maps = visualise::grow_rois(scene, volume, gpu.as_ref(), &mut metrics)?;
+                let (maps, stats) = visualise::grow_rois(scene, volume, gpu.as_ref(), &mut metrics)?;
+                if let (Some(stage), Some(settings)) = (render_stage.as_mut(), visualise::gaussian_tf_settings(scene, &stats)) {
+                    stage.configure(&settings)?;
+                }
                 if last {
                     metrics.outputs.extend(visualise::write_maps(
                         scene,

@@ -341,6 +341,11 @@ pub struct RoiSettings {
     /// Also write the map as NIfTI (u16 fixed point, 65535 = 1).
     #[serde(default)]
     pub write: bool,
+    /// Weight the renderer's transfer function by the paper's automatic
+    /// Gaussian around this seed's mean and σ (`t(x)·(a + b·g(x))`, a = 0.01,
+    /// b = 0.99). At most one `[[roi]]` may set it.
+    #[serde(default)]
+    pub gaussian_tf: bool,
 }
 
 fn default_lambda() -> f32 {
@@ -516,6 +521,9 @@ impl Scene {
                     "must be three finite millimetre coordinates".into(),
                 ));
             }
+        }
+        if file.roi.iter().filter(|r| r.gaussian_tf).count() > 1 {
+            return Err(invalid("gaussian_tf", "at most one [[roi]] may set it".into()));
         }
         let mut interactions = vec![];
         for mut table in file.interaction {

@@ -20,7 +20,7 @@ use voxflex_core::grid::Grid;
 use voxflex_core::io::png::SliceAxis;
 use voxflex_core::io::{write_atomically, write_volume};
 use voxflex_core::opacity::{
-    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed,
+    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed, SeedStats,
 };
 use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
 use voxflex_core::volume::{Volume, VoxelData};
@@ -49,9 +49,9 @@ pub fn grow_rois(
     volume: &Volume,
     gpu: Option<&Arc<dyn GpuService>>,
     metrics: &mut RunMetrics,
-) -> Result<Vec<OpacityMap>, RunError> {
+) -> Result<(Vec<OpacityMap>, Vec<SeedStats>), RunError> {
     let t = Instant::now();
-    let mut maps = vec![];
+    let (mut maps, mut stats) = (vec![], vec![]);
     let (mut visits, mut useful) = (0u64, 0u64);
     let uploaded = match gpu {
         Some(g) if !scene.rois.is_empty() => {
@@ -77,6 +77,7 @@ pub fn grow_rois(
                 }
                 .map_err(roi_err)?;
                 let map = growth.map(g.as_ref()).map_err(roi_err)?;
+                stats.push(*growth.stats());
                 growth.release(g.as_ref());
                 (map, report)
             }
@@ -87,6 +88,7 @@ pub fn grow_rois(
                     None => growth.run(volume.view()),
                 }
                 .map_err(roi_err)?;
+                stats.push(*growth.stats());
                 (growth.map(), report)
             }
         };
@@ -108,7 +110,25 @@ pub fn grow_rois(
         "map_bytes".into(),
         maps.iter().map(OpacityMap::bytes).sum::<usize>().into(),
     );
-    Ok(maps)
+    Ok((maps, stats))
+}
+
+/// The `transfer_function` settings of `[render.params]` with the automatic
+/// Gaussian of the `[[roi]]` marked `gaussian_tf` (mean and σ of its seed's
+/// 1-ring), as TOML for `Renderer::configure`; `None` when no ROI asks.
+pub fn gaussian_tf_settings(scene: &Scene, stats: &[SeedStats]) -> Option<String> {
+    let (_, s) = scene.rois.iter().zip(stats).find(|(r, _)| r.gaussian_tf)?;
+    let mut tf = match scene.render.as_ref()?.params.get("transfer_function") {
+        Some(toml::Value::Table(t)) => t.clone(),
+        _ => toml::Table::from_iter([("preset".to_owned(), toml::Value::from("ct-bone"))]),
+    };
+    let mut g = toml::Table::new();
+    g.insert("mean".into(), toml::Value::Float(s.mean as f64));
+    g.insert("sigma".into(), toml::Value::Float(s.sigma as f64));
+    tf.insert("gaussian".into(), toml::Value::Table(g));
+    let mut root = toml::Table::new();
+    root.insert("transfer_function".into(), toml::Value::Table(tf));
+    toml::to_string(&root).ok()
 }
 
 fn roi_err(e: impl std::fmt::Display) -> RunError {
@@ -200,6 +220,11 @@ impl RenderStage {
             unsafe { RendererProxy::create(&plugin.name, vtable, params_toml, services) }?;
         renderer.init(backend)?;
         Ok(Self { renderer })
+    }
+
+    /// Changes renderer settings (TOML of its parameter keys).
+    pub fn configure(&mut self, settings_toml: &str) -> Result<(), RunError> {
+        Ok(self.renderer.configure(settings_toml)?)
     }
 
     /// Renders `volume` with `maps` and writes the image(s); returns the files.

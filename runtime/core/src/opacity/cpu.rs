@@ -22,8 +22,8 @@ use std::sync::atomic::{AtomicU16, AtomicU64, Ordering::Relaxed};
 /// its dims can be checked).
 ///
 /// Working memory: 2 bytes per voxel of the working box (the u16 field) +
-/// 2 bits (candidate and done marks) + 4 bytes per frontier voxel and 8 per
-/// candidate during a step. The working box is the region's box plus a
+/// 2 bits (candidate and done marks) + 8 bytes per frontier voxel (index
+/// and value) and 8 per candidate during a step. The working box is the region's box plus a
 /// margin of `max(8, extent/4)` voxels per side (see
 /// [`super::bounds::grown_working_box`]); [`CpuGrowth::map`] crops to the
 /// region.
@@ -38,7 +38,7 @@ pub struct CpuGrowth {
     /// Two bits per box voxel: candidate, done (see `frontier`).
     marks: Vec<AtomicU64>,
     /// Voxels that changed in the last step, by group (see `frontier`).
-    frontier: Vec<Vec<u32>>,
+    frontier: Vec<Vec<(u32, u16)>>,
     region: VoxelBounds,
     total: GrowthReport,
 }
@@ -66,7 +66,7 @@ impl CpuGrowth {
             work,
             marks: marks_for(&field, ext.q_max),
             field,
-            frontier: group([s as u32], work.dims()),
+            frontier: group([(s as u32, ext.q_max)], work.dims()),
             region,
             total: GrowthReport::default(),
         })
@@ -120,10 +120,9 @@ impl CpuGrowth {
             for b in changes.iter().filter_map(|c| c.bounds) {
                 self.region = self.region.union(&b);
             }
-            self.frontier = apply(&self.field, &changes);
+            self.frontier = apply(&self.field, changes);
             let t4 = std::time::Instant::now();
             tm[3] += (t4 - t3).as_secs_f64();
-            drop(changes);
             drop(found);
             tm[4] += t4.elapsed().as_secs_f64();
             rep.steps += 1;
@@ -207,7 +206,7 @@ impl CpuGrowth {
 
     /// Bytes of working state held between steps (field, bitset, frontier).
     pub fn working_bytes(&self) -> usize {
-        self.field.len() * 2 + self.marks.len() * 8 + self.frontier.iter().map(|g| g.capacity() * 4).sum::<usize>()
+        self.field.len() * 2 + self.marks.len() * 8 + self.frontier.iter().map(|g| g.capacity() * 8).sum::<usize>()
     }
 
     /// Moves the field into a larger working box (`nb ⊇ self.work`).
@@ -233,7 +232,7 @@ impl CpuGrowth {
         });
         self.field = values.into_iter().map(AtomicU16::new).collect();
         self.marks = marks_for(&self.field, self.ext.q_max);
-        let moved = self.frontier.iter().flatten().map(|&l| nb.local_linear(old.voxel_of(l as usize)) as u32);
+        let moved = self.frontier.iter().flatten().map(|&(l, q)| (nb.local_linear(old.voxel_of(l as usize)) as u32, q));
         self.frontier = group(moved.collect::<Vec<_>>(), nb.dims());
         self.work = nb;
     }

@@ -253,7 +253,7 @@ pub(crate) fn enumerate<T: Sample>(
     marks: &[AtomicU64],
     ext: &Extinction,
     values: &[T],
-    frontier: &[Vec<u32>],
+    frontier: &[Vec<(u32, u16)>],
 ) -> Vec<Found> {
     /// Tests neighbour `v` (volume index `vv`, z offset `dz` from the
     /// frontier voxel at slab `z`) of a voxel holding `qu`.
@@ -299,9 +299,8 @@ pub(crate) fn enumerate<T: Sample>(
             .for_each(|(g, out)| {
                 // Slot of a neighbour at slab z + dz: its group minus g, plus 1.
                 let slot = |z: usize, dz: isize| (z as isize + dz) as usize / lat.gs + 1 - g;
-                for &u in &frontier[g] {
+                for &(u, qu) in &frontier[g] {
                     let l = u as usize;
-                    let qu = field[l].load(Relaxed);
                     let c = lat.coords(l);
                     if lat.interior(c) {
                         // The marks of the 27-neighbourhood, three per row.
@@ -406,30 +405,25 @@ pub(crate) fn evaluate<T: Sample>(
     changes
 }
 
-/// Phase 3: stores the new values; returns the next frontier, by group.
-pub(crate) fn apply(field: &[AtomicU16], changes: &[Changes]) -> Vec<Vec<u32>> {
-    changes
-        .par_iter()
-        .map(|c| {
-            for &(v, q) in &c.values {
-                field[v as usize].store(q, Relaxed);
-            }
-            let mut next: Vec<u32> = c.values.iter().map(|&(v, _)| v).collect();
-            if std::env::var_os("VOXFLEX_SORT").is_some() {
-                next.sort_unstable();
-            }
-            next
-        })
-        .collect()
+/// Phase 3: stores the new values; the changes, by group, are the next
+/// frontier.
+pub(crate) fn apply(field: &[AtomicU16], changes: Vec<Changes>) -> Vec<Vec<(u32, u16)>> {
+    changes.par_iter().for_each(|c| {
+        for &(v, q) in &c.values {
+            field[v as usize].store(q, Relaxed);
+        }
+    });
+    changes.into_iter().map(|c| c.values).collect()
 }
 
-/// Buckets box-linear indices into the groups of a box of `dims`.
-pub(crate) fn group(indices: impl IntoIterator<Item = u32>, dims: [usize; 3]) -> Vec<Vec<u32>> {
+/// Buckets frontier entries (box-linear index, value) into the groups of a
+/// box of `dims`.
+pub(crate) fn group(entries: impl IntoIterator<Item = (u32, u16)>, dims: [usize; 3]) -> Vec<Vec<(u32, u16)>> {
     let gs = group_slabs(dims);
     let per_group = dims[0] * dims[1] * gs;
     let mut groups = vec![Vec::new(); dims[2].div_ceil(gs)];
-    for l in indices {
-        groups[l as usize / per_group].push(l);
+    for (l, q) in entries {
+        groups[l as usize / per_group].push((l, q));
     }
     groups
 }
