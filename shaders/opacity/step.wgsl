@@ -57,8 +57,7 @@ fn enumerate(
     }
 }
 
-// Phase 2: one invocation per candidate; the update rule and the pump
-// shortcut, field read-only.
+// Phase 2: one invocation per candidate; the update rule, field read-only.
 @compute @workgroup_size(64)
 fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = flat_index(gid, nwg);
@@ -82,30 +81,7 @@ fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgrou
     }
     let old = field_get(v);
     let e = extinction(values[vol_linear(cu)]);
-    var new_q = max(rise(m, e), old);
-    // The pump shortcut (extinction.rs: Extinction::may_pump, pumps).
-    if (new_q > old && e < 0 && new_q < P.q.y) {
-        var pump = false;
-        for (var dz = -1; dz <= 1; dz++) {
-            for (var dy = -1; dy <= 1; dy++) {
-                for (var dx = -1; dx <= 1; dx++) {
-                    let p = c + vec3<i32>(dx, dy, dz);
-                    if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
-                        continue;
-                    }
-                    let pc = vec3<u32>(p);
-                    let en = extinction(values[vol_linear(pc)]);
-                    let qn = field_get(box_linear(pc));
-                    if (e + en < 0 && (qn > P.q.x || rise(new_q, en) > P.q.x)) {
-                        pump = true;
-                    }
-                }
-            }
-        }
-        if (pump) {
-            new_q = P.q.y;
-        }
-    }
+    let new_q = max(rise(m, e), old);
     newval[i] = new_q;
     // Clear the candidate mark; set the done mark at the ceiling.
     var done = 0u;
@@ -170,5 +146,48 @@ fn apply(
     workgroupBarrier();
     if (changed) {
         next[w_base + local] = v;
+    }
+}
+
+// Phase 4: one invocation per voxel of the next frontier (dispatched for
+// every candidate, at least as many): the pump shortcut on the values after
+// the step (extinction.rs: Extinction::may_pump, pumps). A jump of another
+// voxel to q_max does not change whether it is reached (above q_min), so
+// the order of jumps does not matter.
+@compute @workgroup_size(64)
+fn pump(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat_index(gid, nwg);
+    if (i >= atomicLoad(&counters[2])) {
+        return;
+    }
+    let v = next[i];
+    let q = field_get(v);
+    let cu = box_coords(v);
+    let e = extinction(values[vol_linear(cu)]);
+    if (!(e < 0 && q < P.q.y)) {
+        return;
+    }
+    let c = vec3<i32>(cu);
+    var pumps = false;
+    for (var dz = -1; dz <= 1; dz++) {
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
+                let p = c + vec3<i32>(dx, dy, dz);
+                if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                    continue;
+                }
+                let pc = vec3<u32>(p);
+                let en = extinction(values[vol_linear(pc)]);
+                let qn = field_get(box_linear(pc));
+                if (e + en < 0 && (qn > P.q.x || rise(q, en) > P.q.x)) {
+                    pumps = true;
+                }
+            }
+        }
+    }
+    if (pumps) {
+        // Only this invocation writes this half-word; q_max <= 0xffff: no carry.
+        atomicAdd(&field[v >> 1u], (P.q.y - q) << ((v & 1u) * 16u));
+        atomicOr(&marks[v >> 4u], MARK_DONE << ((v & 15u) * 2u));
     }
 }

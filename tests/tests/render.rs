@@ -13,10 +13,23 @@ use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
 use voxflex_integration_tests::*;
 use voxflex_runtime::gpu_context::testing::test_gpu;
 
-fn raycast(gpu: Option<Arc<dyn GpuService>>, params: &str, backend: ExecutionBackend) -> RendererProxy {
-    let p = voxflex_runtime::plugin_loader::load_by_name("raycast", &[plugin_dir(&["raycast"])]).unwrap();
+fn raycast(
+    gpu: Option<Arc<dyn GpuService>>,
+    params: &str,
+    backend: ExecutionBackend,
+) -> RendererProxy {
+    let p = voxflex_runtime::plugin_loader::load_by_name("raycast", &[plugin_dir(&["raycast"])])
+        .unwrap();
     // SAFETY: checked, never-unloaded library.
-    let mut r = unsafe { RendererProxy::create("raycast", p.renderer.unwrap(), params, HostServices::new(gpu, 2)) }.unwrap();
+    let mut r = unsafe {
+        RendererProxy::create(
+            "raycast",
+            p.renderer.unwrap(),
+            params,
+            HostServices::new(gpu, 2),
+        )
+    }
+    .unwrap();
     r.init(backend).unwrap();
     r
 }
@@ -38,18 +51,28 @@ fn cpu_and_gpu_images_agree_through_the_plugin() {
     let Some(gpu) = test_gpu() else { return };
     let gpu: Arc<dyn GpuService> = gpu;
     let volume = voxflex_core::phantom::phantom("head", [48, 56, 52]).unwrap();
-    let mut growth = CpuGrowth::new(volume.view(), &Seed::World(volume.grid.centre()), GrowthParams::default()).unwrap();
+    let mut growth = CpuGrowth::new(
+        volume.view(),
+        &Seed::World(volume.grid.centre()),
+        GrowthParams::default(),
+    )
+    .unwrap();
     growth.run(volume.view()).unwrap();
     let maps = [growth.map()];
-    for params in ["transfer_function = { preset = \"ct-bone\" }", "mode = \"mip\"\ntransfer_function = { preset = \"ct-soft-tissue\" }"] {
+    for params in [
+        "transfer_function = { preset = \"ct-bone\" }",
+        "mode = \"mip\"\ntransfer_function = { preset = \"ct-soft-tissue\" }",
+    ] {
         for with_maps in [false, true] {
             let cam = camera(&volume.grid);
             let n = (cam.width * cam.height) as usize;
             let mut cpu = raycast(Some(gpu.clone()), params, ExecutionBackend::Cpu);
-            cpu.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All).unwrap();
+            cpu.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All)
+                .unwrap();
             let mut a = vec![0u8; n * 4];
             let mut g = raycast(Some(gpu.clone()), params, ExecutionBackend::Gpu);
-            g.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All).unwrap();
+            g.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All)
+                .unwrap();
             if with_maps {
                 cpu.set_opacity_maps(&maps).unwrap();
                 g.set_opacity_maps(&maps).unwrap();
@@ -63,7 +86,10 @@ fn cpu_and_gpu_images_agree_through_the_plugin() {
             let b: Vec<u8> = packed.iter().flat_map(|p| p.to_le_bytes()).collect();
             let worst = a.iter().zip(&b).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
             assert!(a.iter().any(|&v| v > 0), "{params}: empty image");
-            assert!(worst <= 2, "{params}, maps {with_maps}: CPU and GPU differ by {worst}/255");
+            assert!(
+                worst <= 2,
+                "{params}, maps {with_maps}: CPU and GPU differ by {worst}/255"
+            );
         }
     }
 }
@@ -72,14 +98,25 @@ fn cpu_and_gpu_images_agree_through_the_plugin() {
 fn a_scene_renders_with_its_roi_maps() {
     plugin_dir(&["affine", "raycast"]);
     let tmp = tempfile::tempdir().unwrap();
-    let base = scene("cpu", "head", 40, 1, "affine", "field = \"twist\"\nangle_deg = 20", &tmp.path().join("plain"));
+    let base = scene(
+        "cpu",
+        "head",
+        40,
+        1,
+        "affine",
+        "field = \"twist\"\nangle_deg = 20",
+        &tmp.path().join("plain"),
+    );
     let render = "\n[render]\nwidth = 64\nheight = 64\nfile = \"r.png\"\n[render.params]\ntransfer_function = { preset = \"ct-soft-tissue\" }\n";
     std::fs::write(tmp.path().join("a.toml"), format!("{base}{render}")).unwrap();
     let o = voxflex(&["run", "a.toml"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let plain = image_bytes(&tmp.path().join("plain/r.png"));
 
-    let with_roi = format!("{}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{render}", base.replace("/plain", "/roi"));
+    let with_roi = format!(
+        "{}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{render}",
+        base.replace("/plain", "/roi")
+    );
     std::fs::write(tmp.path().join("b.toml"), with_roi).unwrap();
     let o = voxflex(&["run", "b.toml"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
@@ -90,11 +127,18 @@ fn a_scene_renders_with_its_roi_maps() {
     assert_ne!(plain, roi, "an opacity map must change the rendering");
 
     // The automatic Gaussian transfer function around the seed's intensity.
-    let gauss = format!("{}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\ngaussian_tf = true\n{render}", base.replace("/plain", "/gauss"));
+    let gauss = format!(
+        "{}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\ngaussian_tf = true\n{render}",
+        base.replace("/plain", "/gauss")
+    );
     std::fs::write(tmp.path().join("c.toml"), gauss).unwrap();
     let o = voxflex(&["run", "c.toml"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
-    assert_ne!(image_bytes(&tmp.path().join("gauss/r.png")), roi, "the Gaussian TF must change the rendering");
+    assert_ne!(
+        image_bytes(&tmp.path().join("gauss/r.png")),
+        roi,
+        "the Gaussian TF must change the rendering"
+    );
 }
 
 fn image_bytes(p: &std::path::Path) -> Vec<u8> {
@@ -108,13 +152,41 @@ fn render_command_writes_a_png_and_names_bad_presets() {
     plugin_dir(&["raycast"]);
     let tmp = tempfile::tempdir().unwrap();
     let o = voxflex(
-        &["render", "phantom:head", "--dims", "32,32,32", "--out", "shots/head.png", "--size", "64x48", "--backend", "cpu"],
+        &[
+            "render",
+            "phantom:head",
+            "--dims",
+            "32,32,32",
+            "--out",
+            "shots/head.png",
+            "--size",
+            "64x48",
+            "--backend",
+            "cpu",
+        ],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
     image_bytes(&tmp.path().join("shots/head.png"));
-    let o = voxflex(&["render", "phantom:head", "--dims", "16,16,16", "--out", "x.png", "--preset", "ct-bones", "--backend", "cpu"], tmp.path());
+    let o = voxflex(
+        &[
+            "render",
+            "phantom:head",
+            "--dims",
+            "16,16,16",
+            "--out",
+            "x.png",
+            "--preset",
+            "ct-bones",
+            "--backend",
+            "cpu",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("unknown preset `ct-bones`") && err.lines().count() == 1, "{err}");
+    assert!(
+        err.contains("unknown preset `ct-bones`") && err.lines().count() == 1,
+        "{err}"
+    );
 }

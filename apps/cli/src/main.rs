@@ -214,7 +214,9 @@ fn dispatch(command: Command) -> Result<()> {
                 "mode = \"{}\"\ntransfer_function = {{ preset = \"{preset}\" }}\nbackground = [0, 0, 0]\n",
                 if mip { "mip" } else { "composite" }
             );
-            render(volume, dims, out, params, width, height, camera, turntable, backend)
+            render(
+                volume, dims, out, params, width, height, camera, turntable, backend,
+            )
         }
         Command::Bench(args) => {
             let report = bench::run(&args)?;
@@ -443,14 +445,26 @@ fn render(
     let volume = load_volume(&source, dims)?;
     let resolved = voxflex_runtime::backend::resolve(backend)?;
     let plugin = plugin_loader::load_by_name("raycast", &plugin_loader::search_path(&[]))?;
-    let services = voxflex_abi::host_side::HostServices::new(resolved.gpu_service(), rayon::current_num_threads());
-    let mut stage = voxflex_runtime::visualise::RenderStage::new("voxflex render", &plugin, &params_toml, services, resolved.backend)?;
+    let services = voxflex_abi::host_side::HostServices::new(
+        resolved.gpu_service(),
+        rayon::current_num_threads(),
+    );
+    let mut stage = voxflex_runtime::visualise::RenderStage::new(
+        "voxflex render",
+        &plugin,
+        &params_toml,
+        services,
+        resolved.backend,
+    )?;
     let dir = match out.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let file = out.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or(name);
+    let file = out
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or(name);
     let settings = RenderSettings {
         plugin: "raycast".into(),
         width,
@@ -461,7 +475,14 @@ fn render(
         params: Default::default(),
     };
     let mut metrics = voxflex_runtime::metrics::RunMetrics::default();
-    let written = stage.render(&settings, &volume, voxflex_core::deformation::DirtyRegion::All, &[], &dir, &mut metrics)?;
+    let written = stage.render(
+        &settings,
+        &volume,
+        voxflex_core::deformation::DirtyRegion::All,
+        &[],
+        &dir,
+        &mut metrics,
+    )?;
     let wall = metrics.stages.get("render").map_or(0.0, |s| s.wall_ms);
     for f in written {
         println!("wrote {}", dir.join(f).display());

@@ -283,9 +283,15 @@ mod tests {
         t.gaussian = Some(voxflex_core::opacity::GaussianTf::new(50.0, 5.0));
         let weighted = t.lut((0.0, 0.0), 1.0);
         // At the mean the weight is a + b = 1; four σ away it is ≈ a = 0.01.
-        assert!((weighted.lookup(50.0)[3] - plain.lookup(50.0)[3]).abs() < 1e-3 * plain.lookup(50.0)[3]);
+        assert!(
+            (weighted.lookup(50.0)[3] - plain.lookup(50.0)[3]).abs() < 1e-3 * plain.lookup(50.0)[3]
+        );
         let far = -(1.0 - 0.5 * 0.01f32 - 0.5 * 0.99 * (-8.0f32).exp()).ln();
-        assert!((weighted.lookup(70.0)[3] - far).abs() < 1e-3, "{}", weighted.lookup(70.0)[3]);
+        assert!(
+            (weighted.lookup(70.0)[3] - far).abs() < 1e-3,
+            "{}",
+            weighted.lookup(70.0)[3]
+        );
     }
 
     #[test]

@@ -21,21 +21,6 @@ fn bench(c: &mut Criterion) {
     let seed = Seed::Voxel([128, 128, 128]);
     let params = GrowthParams::default();
 
-    if std::env::var_os("VOXFLEX_PROBE").is_some() {
-        let cpu = || {
-            let s = std::fs::read_to_string("/proc/self/stat").unwrap();
-            let f: Vec<&str> = s.rsplit(')').next().unwrap().split_whitespace().collect();
-            (f[11].parse::<u64>().unwrap() + f[12].parse::<u64>().unwrap()) * 10
-        };
-        let runs: usize = std::env::var("VOXFLEX_PROBE").ok().and_then(|v| v.parse().ok()).unwrap_or(4);
-        for _ in 0..runs {
-            let mut g = CpuGrowth::new(vol.view(), &seed, params).expect("seed");
-            let (t, c) = (std::time::Instant::now(), cpu());
-            g.run(vol.view()).expect("grow");
-            eprintln!("PROBE wall {:?} cpu {} ms", t.elapsed(), cpu() - c);
-        }
-        std::process::exit(0);
-    }
     let mut g = CpuGrowth::new(vol.view(), &seed, params).expect("seed");
     let t = std::time::Instant::now();
     let rep = g.run(vol.view()).expect("grow");

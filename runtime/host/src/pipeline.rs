@@ -393,8 +393,12 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
             let maps = if scene.rois.is_empty() {
                 vec![]
             } else {
-                let (maps, stats) = visualise::grow_rois(scene, volume, gpu.as_ref(), &mut metrics)?;
-                if let (Some(stage), Some(settings)) = (render_stage.as_mut(), visualise::gaussian_tf_settings(scene, &stats)) {
+                let (maps, stats) =
+                    visualise::grow_rois(scene, volume, gpu.as_ref(), &mut metrics)?;
+                if let (Some(stage), Some(settings)) = (
+                    render_stage.as_mut(),
+                    visualise::gaussian_tf_settings(scene, &stats),
+                ) {
                     stage.configure(&settings)?;
                 }
                 if last {

@@ -523,7 +523,10 @@ impl Scene {
             }
         }
         if file.roi.iter().filter(|r| r.gaussian_tf).count() > 1 {
-            return Err(invalid("gaussian_tf", "at most one [[roi]] may set it".into()));
+            return Err(invalid(
+                "gaussian_tf",
+                "at most one [[roi]] may set it".into(),
+            ));
         }
         let mut interactions = vec![];
         for mut table in file.interaction {

@@ -83,18 +83,22 @@ pub const MIN_PAD: usize = 8;
 /// could change next lies within one voxel of the voxels raised so far
 /// (`region`), and the step reads the neighbours of those, so the box must
 /// hold `region` grown by 2 (clipped to the volume). Returns `None` when `current` already does; otherwise a new box:
-/// `region` grown by `max(MIN_PAD, extent/4)` per axis (geometric growth, so
+/// `region` grown by `max(MIN_PAD, extent/2)` per axis (geometric growth, so
 /// a region growing from one voxel to `n` is copied O(log n) times).
-pub fn grown_working_box(current: &VoxelBounds, region: &VoxelBounds, dims: [usize; 3]) -> Option<VoxelBounds> {
+pub fn grown_working_box(
+    current: &VoxelBounds,
+    region: &VoxelBounds,
+    dims: [usize; 3],
+) -> Option<VoxelBounds> {
     if current.contains(&region.dilate([2; 3], dims)) {
         return None;
     }
     Some(initial_working_box(region, dims).union(current))
 }
 
-/// A working box around `region`: grown by `max(MIN_PAD, extent/4)` per
+/// A working box around `region`: grown by `max(MIN_PAD, extent/2)` per
 /// axis, clipped to the volume.
 pub fn initial_working_box(region: &VoxelBounds, dims: [usize; 3]) -> VoxelBounds {
     let e = region.dims();
-    region.dilate([0, 1, 2].map(|a| MIN_PAD.max(e[a] / 4)), dims)
+    region.dilate([0, 1, 2].map(|a| MIN_PAD.max(e[a] / 2)), dims)
 }

@@ -3,7 +3,7 @@
 
 use super::bounds::{VoxelBounds, grown_working_box, initial_working_box};
 use super::extinction::Extinction;
-use super::frontier::{Lattice, apply, count, enumerate, evaluate, group, marks_for};
+use super::frontier::{Lattice, count, finish, group, lift, states_for};
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::{Seed, SeedStats, seed_stats};
@@ -22,9 +22,9 @@ use std::sync::atomic::{AtomicU16, AtomicU64, Ordering::Relaxed};
 /// its dims can be checked).
 ///
 /// Working memory: 2 bytes per voxel of the working box (the u16 field) +
-/// 2 bits (candidate and done marks) + 8 bytes per frontier voxel (index
-/// and value) and 8 per candidate during a step. The working box is the region's box plus a
-/// margin of `max(8, extent/4)` voxels per side (see
+/// 2 bits (the voxel's state) + 8 bytes per frontier voxel (index and
+/// value), and during a step 12 bytes per raised voxel. The working box is
+/// the region's box plus a margin of `max(8, extent/2)` voxels per side (see
 /// [`super::bounds::grown_working_box`]); [`CpuGrowth::map`] crops to the
 /// region.
 #[derive(Debug)]
@@ -35,8 +35,9 @@ pub struct CpuGrowth {
     ext: Extinction,
     work: VoxelBounds,
     field: Vec<AtomicU16>,
-    /// Two bits per box voxel: candidate, done (see `frontier`).
-    marks: Vec<AtomicU64>,
+    /// Two bits per box voxel: unreached, reached, raised, done (see
+    /// `frontier`).
+    states: Vec<AtomicU64>,
     /// Voxels that changed in the last step, by group (see `frontier`).
     frontier: Vec<Vec<(u32, u16)>>,
     region: VoxelBounds,
@@ -46,7 +47,11 @@ pub struct CpuGrowth {
 impl CpuGrowth {
     /// Seeds a growth: the seed voxel at `o_max`, every other voxel at
     /// `o_min`, the seed's 1-ring statistics measured. No step is run.
-    pub fn new(volume: VolumeView<'_>, seed: &Seed, params: GrowthParams) -> Result<Self, OpacityError> {
+    pub fn new(
+        volume: VolumeView<'_>,
+        seed: &Seed,
+        params: GrowthParams,
+    ) -> Result<Self, OpacityError> {
         params.validate()?;
         check_volume(&volume)?;
         let voxel = seed.resolve(&volume.grid)?;
@@ -64,7 +69,7 @@ impl CpuGrowth {
             stats,
             ext,
             work,
-            marks: marks_for(&field, ext.q_max),
+            states: states_for(&field, 0..work.len(), ext.q_min, ext.q_max),
             field,
             frontier: group([(s as u32, ext.q_max)], work.dims()),
             region,
@@ -83,10 +88,7 @@ impl CpuGrowth {
             });
         }
         let mut rep = GrowthReport::default();
-        let mut tm = [0f64; 5];
-        let prof = std::env::var_os("VOXFLEX_PHASES").is_some();
         for _ in 0..n {
-            let t0 = std::time::Instant::now();
             if self.is_converged() {
                 break;
             }
@@ -94,43 +96,30 @@ impl CpuGrowth {
                 self.regrow(nb);
                 rep.regrows += 1;
             }
-            let t1 = std::time::Instant::now();
-            tm[0] += (t1 - t0).as_secs_f64();
             let lat = Lattice::new(&self.work, self.dims);
-            let found = with_voxels!(volume.data, |s| enumerate(
+            let found = with_voxels!(volume.data, |s| lift(
                 &lat,
                 &self.field,
-                &self.marks,
+                &self.states,
                 &self.ext,
                 s,
                 &self.frontier
             ));
-            let t2 = std::time::Instant::now();
-            tm[1] += (t2 - t1).as_secs_f64();
-            let changes = with_voxels!(volume.data, |s| evaluate(
+            let changes = with_voxels!(volume.data, |s| finish(
                 &lat,
                 &self.field,
-                &self.marks,
+                &self.states,
                 &self.ext,
                 s,
                 &found
             ));
-            let t3 = std::time::Instant::now();
-            tm[2] += (t3 - t2).as_secs_f64();
             for b in changes.iter().filter_map(|c| c.bounds) {
                 self.region = self.region.union(&b);
             }
-            self.frontier = apply(&self.field, changes);
-            let t4 = std::time::Instant::now();
-            tm[3] += (t4 - t3).as_secs_f64();
-            drop(found);
-            tm[4] += t4.elapsed().as_secs_f64();
+            self.frontier = changes.into_iter().map(|c| c.values).collect();
             rep.steps += 1;
-            let _ = count;
+            rep.visits += count(&found) as u64;
             rep.useful += self.frontier_len() as u64;
-        }
-        if prof {
-            eprintln!("PHASES regrow {:.0} enum {:.0} eval {:.0} apply {:.0} drop {:.0} ms", tm[0]*1e3, tm[1]*1e3, tm[2]*1e3, tm[3]*1e3, tm[4]*1e3);
         }
         rep.converged = self.is_converged();
         self.total.merge(&rep);
@@ -153,14 +142,17 @@ impl CpuGrowth {
         let r = self.region;
         let d = r.dims();
         let mut values = vec![0u16; r.len()];
-        values.par_chunks_mut(d[0] * d[1]).enumerate().for_each(|(z, slab)| {
-            for (y, row) in slab.chunks_mut(d[0]).enumerate() {
-                let start = self.work.local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
-                for (x, o) in row.iter_mut().enumerate() {
-                    *o = self.field[start + x].load(Relaxed);
+        values
+            .par_chunks_mut(d[0] * d[1])
+            .enumerate()
+            .for_each(|(z, slab)| {
+                for (y, row) in slab.chunks_mut(d[0]).enumerate() {
+                    let start = self.work.local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
+                    for (x, o) in row.iter_mut().enumerate() {
+                        *o = self.field[start + x].load(Relaxed);
+                    }
                 }
-            }
-        });
+            });
         OpacityMap {
             origin: r.lo,
             dims: d,
@@ -204,9 +196,15 @@ impl CpuGrowth {
         self.frontier.iter().map(Vec::len).sum()
     }
 
-    /// Bytes of working state held between steps (field, bitset, frontier).
+    /// Bytes of working state held between steps (field, state bits, frontier).
     pub fn working_bytes(&self) -> usize {
-        self.field.len() * 2 + self.marks.len() * 8 + self.frontier.iter().map(|g| g.capacity() * 8).sum::<usize>()
+        self.field.len() * 2
+            + self.states.len() * 8
+            + self
+                .frontier
+                .iter()
+                .map(|g| g.capacity() * 8)
+                .sum::<usize>()
     }
 
     /// Moves the field into a larger working box (`nb ⊇ self.work`).
@@ -215,24 +213,34 @@ impl CpuGrowth {
         let od = old.dims();
         let nd = nb.dims();
         let q_min = self.ext.q_min;
-        let mut values = vec![q_min; nb.len()];
-        values.par_chunks_mut(nd[0] * nd[1]).enumerate().for_each(|(z, slab)| {
-            let vz = nb.lo[2] + z;
-            if vz < old.lo[2] || vz > old.hi[2] {
-                return;
-            }
-            for y in 0..od[1] {
-                let vy = old.lo[1] + y;
-                let dst = (old.lo[0] - nb.lo[0]) + nd[0] * (vy - nb.lo[1]);
-                let src = old.local_linear([old.lo[0], vy, vz]);
-                for x in 0..od[0] {
-                    slab[dst + x] = self.field[src + x].load(Relaxed);
+        let mut values: Vec<u16> = (0..nb.len()).into_par_iter().map(|_| q_min).collect();
+        values
+            .par_chunks_mut(nd[0] * nd[1])
+            .enumerate()
+            .for_each(|(z, slab)| {
+                let vz = nb.lo[2] + z;
+                if vz < old.lo[2] || vz > old.hi[2] {
+                    return;
                 }
-            }
-        });
+                for y in 0..od[1] {
+                    let vy = old.lo[1] + y;
+                    let dst = (old.lo[0] - nb.lo[0]) + nd[0] * (vy - nb.lo[1]);
+                    let src = old.local_linear([old.lo[0], vy, vz]);
+                    for x in 0..od[0] {
+                        slab[dst + x] = self.field[src + x].load(Relaxed);
+                    }
+                }
+            });
         self.field = values.into_iter().map(AtomicU16::new).collect();
-        self.marks = marks_for(&self.field, self.ext.q_max);
-        let moved = self.frontier.iter().flatten().map(|&(l, q)| (nb.local_linear(old.voxel_of(l as usize)) as u32, q));
+        // Voxels outside the old box's slabs are unreached (state 0).
+        let plane = nd[0] * nd[1];
+        let slabs = (old.lo[2] - nb.lo[2]) * plane..(old.hi[2] + 1 - nb.lo[2]) * plane;
+        self.states = states_for(&self.field, slabs, self.ext.q_min, self.ext.q_max);
+        let moved = self
+            .frontier
+            .iter()
+            .flatten()
+            .map(|&(l, q)| (nb.local_linear(old.voxel_of(l as usize)) as u32, q));
         self.frontier = group(moved.collect::<Vec<_>>(), nb.dims());
         self.work = nb;
     }

@@ -49,7 +49,11 @@ pub fn round_ties_even_small(x: f32) -> f32 {
 /// volumes pass unchanged. The GPU path uploads values through this too.
 #[inline]
 pub fn sanitize(v: f32) -> f32 {
-    if v.is_nan() { SANE_MAX } else { v.clamp(-SANE_MAX, SANE_MAX) }
+    if v.is_nan() {
+        SANE_MAX
+    } else {
+        v.clamp(-SANE_MAX, SANE_MAX)
+    }
 }
 
 /// The extinction of one region growing: the seed's statistics turned into
@@ -138,10 +142,10 @@ impl Extinction {
     /// by `|e_v + e_n|` every two steps until `q_max` — tens of thousands
     /// of steps when the sum is a few fixed-point units. At the fixed point
     /// the one with `e < 0` (both when both are negative) holds `q_max`.
-    /// So a voxel `v` lifted to `new` (`e_v < 0`) whose neighbour `n`
-    /// (extinction `e_n`, value `q_n`) satisfies `e_v + e_n < 0` and is or
-    /// becomes reached (`q_n > q_min` or `rise(new, e_n) > q_min`) jumps to
-    /// `q_max` at once. The jump only sets a value the growth would reach
+    /// So a voxel `v` lifted to `new` (`e_v < 0`) in a step whose neighbour
+    /// `n` (extinction `e_n`, value `q_n` after the step's lift) satisfies
+    /// `e_v + e_n < 0` and is or becomes reached (`q_n > q_min` or
+    /// `rise(new, e_n) > q_min`) jumps to `q_max` at the end of that step. The jump only sets a value the growth would reach
     /// anyway, so the converged map is unchanged (the least fixed point of
     /// the update); only the number of steps drops. Every adjacent cycle of
     /// negative total extinction contains such a pair, so no pump is missed.

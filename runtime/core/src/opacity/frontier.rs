@@ -1,52 +1,52 @@
 //! The sparse frontier step on the CPU (rayon).
 //!
-//! One step, Jacobi style (every value read is the previous step's):
+//! One step, Jacobi style (every value a voxel is lifted from is the
+//! previous step's):
 //!
-//! 1. **Enumerate** (over the frontier, the voxels `u` that changed in the
-//!    previous step): each 26-neighbour `v` is *tested*: it becomes a
-//!    candidate when `u`'s new value lifts it, `rise(q_u, e_v) > q_v`, and it
-//!    is not a candidate yet (a mark, so each voxel is listed once). Voxels
-//!    marked *done* (at their ceiling [`Extinction::ceiling`], e.g. at
-//!    `q_max`) are skipped without reading their value or computing their
-//!    extinction; the marks of a neighbourhood are read three voxels per
-//!    row, so only unmarked neighbours cost a branch. Candidates carry `e_v`.
-//! 2. **Evaluate** (over the candidates, the field read-only): the update
-//!    rule, then the pump shortcut (a lifted voxel that forms a pumping pair
-//!    with a neighbour jumps to `q_max`, its final value — see
-//!    [`Extinction::pumps`]); changed voxels are collected with their new
-//!    value; the candidate mark is cleared and, for a voxel that reached its
-//!    ceiling, the done mark set.
-//! 3. **Apply**: the new values are stored; the changed voxels are the next
-//!    frontier.
+//! 1. **Lift** (over the frontier, the voxels `u` that changed in the
+//!    previous step, each carrying its new value `q_u`): each 26-neighbour
+//!    `v` that is not *done* (at its ceiling [`Extinction::ceiling`], e.g. at
+//!    `q_max`) takes `max(q_v, rise(q_u, e_v))` in place. The frontier
+//!    carries its values, so no lift reads a value written in this step, and
+//!    `max` does not depend on the order: the field after the phase is the
+//!    Jacobi update. A voxel that rises for the first time in the step is
+//!    recorded (once — its state says so) with `e_v` and the value it rose
+//!    to. The states of a neighbourhood are read three voxels per row, so
+//!    only open neighbours cost a branch.
+//! 2. **Finish** (over the raised voxels): the pump shortcut (a lifted voxel
+//!    that forms a pumping pair with a neighbour jumps to `q_max`, its final
+//!    value — see [`Extinction::pumps`]) and the states; the raised voxels
+//!    with their values are the next frontier. A voxel that rose straight to
+//!    its ceiling needs nothing here (its recorded value is final).
 //!
-//! A voxel none of whose neighbours changed cannot change (its value
-//! already dominates `max_n q_n − e_v` for the unchanged `q_n`), and one
-//! that no changed neighbour lifts does not change either, so the test of
-//! phase 1 is exact: every candidate changes in phase 2 (every visit is
-//! useful), and the step equals a dense sweep of the whole volume, bit for
-//! bit (with the pump shortcut, at convergence). What the sparse step still
-//! spends beyond the useful evaluations is the enumeration: 26 neighbour
-//! tests per changed voxel — work proportional to the changes, against the
-//! dense sweep's 27 reads per voxel of the volume per step.
+//! A voxel that no changed neighbour lifts cannot change (its value already
+//! dominates `rise(q_n, e_v)` for the unchanged `q_n`), so the step equals a
+//! dense sweep of the whole volume, bit for bit, and every voxel it visits
+//! (evaluates the update of) changes: every visit is useful. What the step
+//! spends beyond that is the neighbour scan — 26 state reads per changed
+//! voxel, against the dense sweep's 27 reads per voxel of the volume.
+//!
+//! **States.** Two bits per box voxel: *unreached* (at `q_min`, never
+//! raised — its value need not be read), *reached*, *raised* (in this step;
+//! listed), *done*.
 //!
 //! **Parallel schedule without atomic read-modify-writes.** The frontier and
-//! the candidates are kept in **groups** of `G` z-slabs of the working box
-//! ([`group_slabs`], 4 unless a slab holds fewer than 32 voxels), and the
-//! rayon tasks are groups. Enumerating group `g` writes marks only of voxels
-//! in slabs `Gg − 1 ..= Gg + G`, evaluating it only of its own voxels; with
-//! `G` large enough, groups of one parity never touch the same mark word (32
-//! consecutive voxels), so even groups run in parallel, then odd groups, and
-//! the marks are updated with plain loads and stores instead of locked
+//! the raised voxels are kept in **groups** of `G` z-slabs of the working
+//! box ([`group_slabs`], 4 unless a slab holds fewer than 32 voxels), and the
+//! rayon tasks are groups. Lifting from group `g` writes values and states
+//! only of voxels in slabs `Gg − 1 ..= Gg + G`, finishing it only of its own
+//! voxels; with `G` large enough, groups of one parity never touch the same
+//! state word (32 consecutive voxels) or voxel, so even groups run in
+//! parallel, then odd groups, with plain loads and stores instead of locked
 //! instructions (which on x86 serialise the memory accesses and cost more
-//! than the arithmetic here). Applying touches only each voxel's own value,
-//! so all groups run at once. The result is deterministic, order included.
+//! than the arithmetic here). The result is deterministic, order included.
 //! Working in slab groups also keeps each task's accesses to a few slabs,
 //! so they stay in cache.
 //!
 //! Indices are linear (x fastest) in the working box; the box is kept at
-//! least two voxels larger than the region (candidates lie within one voxel
-//! of it, and the pump shortcut reads their neighbours), so a neighbour
-//! outside the box is outside the volume.
+//! least two voxels larger than the region (raised voxels lie within one
+//! voxel of it, and the pump shortcut reads their neighbours), so a
+//! neighbour outside the box is outside the volume.
 
 use super::bounds::VoxelBounds;
 use super::extinction::Extinction;
@@ -54,13 +54,18 @@ use crate::volume::Sample;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU16, AtomicU64, Ordering::Relaxed};
 
-/// Mark of a voxel listed as a candidate in the current step.
-pub(crate) const MARK_CANDIDATE: u64 = 1;
-/// Mark of a voxel at its ceiling ([`Extinction::ceiling`]): it can never
-/// change again, so the enumeration skips it without reading its value.
-pub(crate) const MARK_DONE: u64 = 2;
+/// State of a voxel never raised: its value is `q_min`.
+pub(crate) const UNREACHED: u64 = 0;
+/// State of a voxel raised before, below its ceiling.
+pub(crate) const REACHED: u64 = 1;
+/// State of a voxel raised in the current step and listed, below its
+/// ceiling.
+pub(crate) const RAISED: u64 = 2;
+/// State of a voxel at its ceiling ([`Extinction::ceiling`]): it can never
+/// change again, so the lift skips it without reading its value.
+pub(crate) const DONE: u64 = 3;
 
-/// Word and bit shift of voxel `v`'s two marks (32 voxels per u64 word).
+/// Word and bit shift of voxel `v`'s state (32 voxels per u64 word).
 #[inline]
 pub(crate) fn mark_slot(v: usize) -> (usize, u32) {
     (v >> 5, ((v & 31) * 2) as u32)
@@ -69,7 +74,7 @@ pub(crate) fn mark_slot(v: usize) -> (usize, u32) {
 /// Box z-slabs per group, the unit of parallel work: at least 4, and more
 /// when a slab holds fewer than 32 voxels, so that the mark words two groups
 /// apart never meet (see the module docs). A mark word spans voxels of at
-/// most `k = ⌈32 / (nx·ny)⌉` slabs either side, and a task writes marks up
+/// most `k = ⌈32 / (nx·ny)⌉` slabs either side, and a task writes states up
 /// to one slab beyond its group, so `2k + 2` slabs keep groups `g` and
 /// `g + 2` apart.
 pub(crate) fn group_slabs(dims: [usize; 3]) -> usize {
@@ -77,17 +82,32 @@ pub(crate) fn group_slabs(dims: [usize; 3]) -> usize {
     (2 * k + 2).max(4)
 }
 
-/// Marks for a field: no candidate, done where the value is `q_max`.
-pub(crate) fn marks_for(field: &[AtomicU16], q_max: u16) -> Vec<AtomicU64> {
+/// States for a field: done at `q_max`, reached above `q_min`, unreached
+/// at `q_min`; voxels outside `range` (box-linear) are taken as unreached.
+pub(crate) fn states_for(
+    field: &[AtomicU16],
+    range: std::ops::Range<usize>,
+    q_min: u16,
+    q_max: u16,
+) -> Vec<AtomicU64> {
     (0..field.len().div_ceil(32))
         .into_par_iter()
         .map(|w| {
-            let mut x = 0u64;
-            for (i, q) in field[w * 32..(w * 32 + 32).min(field.len())].iter().enumerate() {
-                if q.load(Relaxed) == q_max {
-                    x |= MARK_DONE << (2 * i);
-                }
-            }
+            let (a, b) = (
+                (w * 32).max(range.start),
+                (w * 32 + 32).min(field.len()).min(range.end),
+            );
+            let x = (a..b).fold(0u64, |x, v| {
+                let q = field[v].load(Relaxed);
+                let st = if q >= q_max {
+                    DONE
+                } else if q > q_min {
+                    REACHED
+                } else {
+                    UNREACHED
+                };
+                x | (st << (2 * (v - w * 32)))
+            });
             AtomicU64::new(x)
         })
         .collect()
@@ -165,8 +185,15 @@ pub(crate) struct Lattice {
 impl Lattice {
     pub(crate) fn new(work: &VoxelBounds, vdim: [usize; 3]) -> Self {
         let bdim = work.dims();
-        let lin = |d: [usize; 3], o: [isize; 3]| o[0] + d[0] as isize * (o[1] + d[1] as isize * o[2]);
-        let cell = |i: usize| [(i % 3) as isize - 1, ((i / 3) % 3) as isize - 1, (i / 9) as isize - 1];
+        let lin =
+            |d: [usize; 3], o: [isize; 3]| o[0] + d[0] as isize * (o[1] + d[1] as isize * o[2]);
+        let cell = |i: usize| {
+            [
+                (i % 3) as isize - 1,
+                ((i / 3) % 3) as isize - 1,
+                (i / 9) as isize - 1,
+            ]
+        };
         Self {
             lo: work.lo,
             bdim,
@@ -198,7 +225,8 @@ impl Lattice {
     /// Volume-linear index of box-local coordinates `c`.
     #[inline(always)]
     fn vol_linear(&self, c: [usize; 3]) -> usize {
-        (self.lo[0] + c[0]) + self.vdim[0] * ((self.lo[1] + c[1]) + self.vdim[1] * (self.lo[2] + c[2]))
+        (self.lo[0] + c[0])
+            + self.vdim[0] * ((self.lo[1] + c[1]) + self.vdim[1] * (self.lo[2] + c[2]))
     }
 
     /// Calls `f(box_linear, volume_linear, dz)` for each 26-neighbour of
@@ -206,19 +234,27 @@ impl Lattice {
     #[inline(always)]
     fn for_each_neighbour(&self, l: usize, c: [usize; 3], mut f: impl FnMut(usize, usize, isize)) {
         let vl = self.vol_linear(c);
-        let interior = self.interior(c);
-        for (n, d) in DIRS.iter().enumerate() {
-            let inside = interior
-                || (0..3).all(|a| {
-                    let p = c[a] as isize + d[a];
-                    p >= 0 && (p as usize) < self.bdim[a]
-                });
-            if inside {
+        if self.interior(c) {
+            for (n, d) in DIRS.iter().enumerate() {
                 f(
                     l.wrapping_add_signed(self.off_box[n]),
                     vl.wrapping_add_signed(self.off_vol[n]),
                     d[2],
                 );
+            }
+        } else {
+            for (n, d) in DIRS.iter().enumerate() {
+                let inside = (0..3).all(|a| {
+                    let p = c[a] as isize + d[a];
+                    p >= 0 && (p as usize) < self.bdim[a]
+                });
+                if inside {
+                    f(
+                        l.wrapping_add_signed(self.off_box[n]),
+                        vl.wrapping_add_signed(self.off_vol[n]),
+                        d[2],
+                    );
+                }
             }
         }
     }
@@ -229,39 +265,44 @@ impl Lattice {
     }
 }
 
-/// Which of the three voxels `r, r+1, r+2` carry a mark (bit i for `r+i`).
+/// Whether the three voxels `r, r+1, r+2` are done, at bits 0, 2, 4.
 #[inline(always)]
-fn marked3(marks: &[AtomicU64], r: usize) -> u64 {
+fn done3(states: &[AtomicU64], r: usize) -> u64 {
     let (w, off) = mark_slot(r);
-    let mut bits = marks[w].load(Relaxed) >> off;
-    if off > 58 {
-        bits |= marks[w + 1].load(Relaxed) << (64 - off);
-    }
-    let any = (bits | (bits >> 1)) & 0b01_0101;
-    (any & 1) | ((any >> 1) & 2) | ((any >> 2) & 4)
+    let lo = states[w].load(Relaxed) as u128;
+    let hi = states.get(w + 1).map_or(0, |m| m.load(Relaxed)) as u128;
+    let bits = (((hi << 64) | lo) >> off) as u64;
+    bits & (bits >> 1) & 0b01_0101
 }
 
-/// Candidates found while enumerating group `g`, by the group they fall
-/// in: `[g − 1, g, g + 1]`.
-pub(crate) type Found = [Vec<(u32, i32)>; 3];
+/// Bits `2i` for the 27 cells `i` of a neighbourhood.
+const CELLS_EVEN: u64 = 0x0015_5555_5555_5555;
 
-/// Phase 1: the candidates of the next step, each with its extinction, from
-/// the frontier's groups (see the module docs for the schedule).
-pub(crate) fn enumerate<T: Sample>(
+/// A voxel raised in a step: box-linear index, extinction, the value it
+/// first rose to (final when it is the voxel's ceiling).
+pub(crate) type Raised = (u32, i32, u16);
+
+/// Voxels raised while lifting from group `g`'s frontier, by the group they
+/// fall in: `[g − 1, g, g + 1]`.
+pub(crate) type Found = [Vec<Raised>; 3];
+
+/// Phase 1: lifts the neighbours of the frontier in place; returns the
+/// raised voxels (see the module docs for the schedule).
+pub(crate) fn lift<T: Sample>(
     lat: &Lattice,
     field: &[AtomicU16],
-    marks: &[AtomicU64],
+    states: &[AtomicU64],
     ext: &Extinction,
     values: &[T],
     frontier: &[Vec<(u32, u16)>],
 ) -> Vec<Found> {
-    /// Tests neighbour `v` (volume index `vv`, z offset `dz` from the
-    /// frontier voxel at slab `z`) of a voxel holding `qu`.
+    /// Lifts neighbour `v` (volume index `vv`) of a frontier voxel that
+    /// holds `qu`; records it in `out[slot]` the first time it rises.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn test<T: Sample>(
+    fn lift_one<T: Sample>(
         field: &[AtomicU16],
-        marks: &[AtomicU64],
+        states: &[AtomicU64],
         ext: &Extinction,
         values: &[T],
         qu: u16,
@@ -270,23 +311,36 @@ pub(crate) fn enumerate<T: Sample>(
         out: &mut Found,
     ) {
         let (w, sh) = mark_slot(v);
-        // Plain load and store: no other task writes this word now.
-        let word = marks[w].load(Relaxed);
-        if (word >> sh) & (MARK_CANDIDATE | MARK_DONE) != 0 {
+        // Plain loads and stores: no other task touches this voxel or state
+        // word now.
+        let word = states[w].load(Relaxed);
+        let st = (word >> sh) & 3;
+        if st == DONE {
             return;
         }
-        let q = field[v].load(Relaxed);
+        let q = if st == UNREACHED {
+            ext.q_min
+        } else {
+            field[v].load(Relaxed)
+        };
         let e = ext.fixed(values[vv].to_f32());
-        if ext.rise(qu, e) <= q {
-            if ext.ceiling(e) <= q {
-                // Never liftable (e.g. a wall around the region): skip it
-                // from now on.
-                marks[w].store(word | (MARK_DONE << sh), Relaxed);
+        let new = ext.rise(qu, e);
+        let ceiling = ext.ceiling(e);
+        let next = if new > q {
+            field[v].store(new, Relaxed);
+            if st != RAISED {
+                out[slot].push((v as u32, e, new));
             }
-            return;
+            if new >= ceiling { DONE } else { RAISED }
+        } else if q >= ceiling {
+            // Never liftable again (e.g. a wall around the region).
+            DONE
+        } else {
+            st
+        };
+        if next != st {
+            states[w].store(word ^ ((st ^ next) << sh), Relaxed);
         }
-        marks[w].store(word | (MARK_CANDIDATE << sh), Relaxed);
-        out[slot].push((v as u32, e));
     }
 
     let (bx, bxy) = (lat.bdim[0], lat.bdim[0] * lat.bdim[1]);
@@ -297,33 +351,51 @@ pub(crate) fn enumerate<T: Sample>(
             .enumerate()
             .filter(|(g, _)| g % 2 == parity)
             .for_each(|(g, out)| {
-                // Slot of a neighbour at slab z + dz: its group minus g, plus 1.
-                let slot = |z: usize, dz: isize| (z as isize + dz) as usize / lat.gs + 1 - g;
+                let g0 = g * lat.gs;
                 for &(u, qu) in &frontier[g] {
                     let l = u as usize;
                     let c = lat.coords(l);
+                    // Slot of a neighbour at slab z + dz: its group − g + 1.
+                    let zr = c[2] - g0;
+                    let slot = |dz: isize| {
+                        if dz < 0 && zr == 0 {
+                            0
+                        } else if dz > 0 && zr + 1 == lat.gs {
+                            2
+                        } else {
+                            1
+                        }
+                    };
                     if lat.interior(c) {
-                        // The marks of the 27-neighbourhood, three per row.
-                        let mut marked = 1u64 << 13;
-                        for dz in 0..3 {
-                            for dy in 0..3 {
-                                let r = (l - 1 + dy * bx + dz * bxy) - bx - bxy;
-                                marked |= marked3(marks, r) << (3 * (dy + 3 * dz));
-                            }
+                        // Which of the 27-neighbourhood are done, three per
+                        // row, at bit 2i for cell i.
+                        let mut done = 1u64 << 26;
+                        for row in 0..9 {
+                            let (dy, dz) = (row % 3, row / 3);
+                            let r = (l - 1 + dy * bx + dz * bxy) - bx - bxy;
+                            done |= done3(states, r) << (6 * row);
                         }
                         let vl = lat.vol_linear(c);
-                        let mut free = !marked & ((1u64 << 27) - 1);
-                        while free != 0 {
-                            let i = free.trailing_zeros() as usize;
-                            free &= free - 1;
+                        let mut open = !done & CELLS_EVEN;
+                        while open != 0 {
+                            let i = (open.trailing_zeros() / 2) as usize;
+                            open &= open - 1;
                             let v = l.wrapping_add_signed(lat.off27_box[i]);
                             let vv = vl.wrapping_add_signed(lat.off27_vol[i]);
-                            let s = slot(c[2], (i / 9) as isize - 1);
-                            test(field, marks, ext, values, qu, (v, vv), s, out);
+                            lift_one(
+                                field,
+                                states,
+                                ext,
+                                values,
+                                qu,
+                                (v, vv),
+                                slot((i / 9) as isize - 1),
+                                out,
+                            );
                         }
                     } else {
                         lat.for_each_neighbour(l, c, |v, vv, dz| {
-                            test(field, marks, ext, values, qu, (v, vv), slot(c[2], dz), out)
+                            lift_one(field, states, ext, values, qu, (v, vv), slot(dz), out)
                         });
                     }
                 }
@@ -335,32 +407,37 @@ pub(crate) fn enumerate<T: Sample>(
 /// What phase 2 found in one group.
 #[derive(Debug, Default)]
 pub(crate) struct Changes {
-    /// `(box-linear index, new value)` of every voxel that rose.
+    /// `(box-linear index, new value)` of every voxel that rose: the next
+    /// frontier.
     pub(crate) values: Vec<(u32, u16)>,
     /// Volume voxel-index box of those voxels (`None` when none rose).
     pub(crate) bounds: Option<VoxelBounds>,
 }
 
-/// The candidates of group `g`: those its own task and its neighbours'
+/// The raised voxels of group `g`: those its own task and its neighbours'
 /// tasks found in it.
-fn candidates_of(found: &[Found], g: usize) -> impl Iterator<Item = &(u32, i32)> {
+fn raised_in(found: &[Found], g: usize) -> impl Iterator<Item = &Raised> {
     let below = g.checked_sub(1).map(|h| &found[h][2]);
     let above = found.get(g + 1).map(|f| &f[0]);
-    below.into_iter().chain([&found[g][1]]).chain(above).flatten()
+    below
+        .into_iter()
+        .chain([&found[g][1]])
+        .chain(above)
+        .flatten()
 }
 
-/// Number of candidates in `found`.
+/// Number of raised voxels in `found`.
 pub(crate) fn count(found: &[Found]) -> usize {
     found.iter().flat_map(|f| f.iter()).map(Vec::len).sum()
 }
 
-/// Phase 2: evaluates the update rule at every candidate (the field is only
-/// read), with the pump shortcut ([`Extinction::pumps`]), and updates the
-/// marks. One task per group, even groups then odd ones.
-pub(crate) fn evaluate<T: Sample>(
+/// Phase 2: the pump shortcut ([`Extinction::pumps`]) on the raised voxels,
+/// their states, and the next frontier. One task per group, even groups
+/// then odd ones.
+pub(crate) fn finish<T: Sample>(
     lat: &Lattice,
     field: &[AtomicU16],
-    marks: &[AtomicU64],
+    states: &[AtomicU64],
     ext: &Extinction,
     values: &[T],
     found: &[Found],
@@ -372,53 +449,65 @@ pub(crate) fn evaluate<T: Sample>(
             .enumerate()
             .filter(|(g, _)| g % 2 == parity)
             .for_each(|(g, out)| {
-            for &(v, e) in candidates_of(found, g) {
-                let l = v as usize;
-                let c = lat.coords(l);
-                let mut m = 0u16;
-                lat.for_each_neighbour(l, c, |n, _, _| m = m.max(field[n].load(Relaxed)));
-                let old = field[l].load(Relaxed);
-                let mut new = ext.rise(m, e).max(old);
-                if new > old && ext.may_pump(new, e) {
-                    let mut pump = false;
-                    lat.for_each_neighbour(l, c, |n, vn, _| {
-                        pump |= ext.pumps(new, e, ext.fixed(values[vn].to_f32()), field[n].load(Relaxed));
-                    });
-                    if pump {
-                        new = ext.q_max;
+                let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+                for &(v, e, first) in raised_in(found, g) {
+                    let l = v as usize;
+                    let c = lat.coords(l);
+                    let ceiling = ext.ceiling(e);
+                    let mut q = first;
+                    if first < ceiling {
+                        // Raised below its ceiling: later lifts of the step may
+                        // have raised it further.
+                        q = field[l].load(Relaxed);
+                        if ext.may_pump(q, e) {
+                            // Neighbours' values after this step's lift: a jump
+                            // of another voxel to q_max does not change whether
+                            // it is reached, so the order of jumps does not
+                            // matter.
+                            let mut pump = false;
+                            lat.for_each_neighbour(l, c, |n, vn, _| {
+                                pump |= ext.pumps(
+                                    q,
+                                    e,
+                                    ext.fixed(values[vn].to_f32()),
+                                    field[n].load(Relaxed),
+                                );
+                            });
+                            if pump {
+                                q = ext.q_max;
+                                field[l].store(q, Relaxed);
+                            }
+                        }
+                        // Plain load and store: no other task writes this word
+                        // now.
+                        let (w, sh) = mark_slot(l);
+                        let st = if q >= ceiling { DONE } else { REACHED };
+                        let word = states[w].load(Relaxed) & !(3 << sh);
+                        states[w].store(word | (st << sh), Relaxed);
+                    }
+                    out.values.push((v, q));
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(c[a]);
+                        hi[a] = hi[a].max(c[a]);
                     }
                 }
-                // Clear the candidate mark; set the done mark at the ceiling.
-                // Plain load and store: no other task writes this word now.
-                let (w, sh) = mark_slot(l);
-                let done = if new == ext.ceiling(e) { MARK_DONE } else { 0 };
-                let word = marks[w].load(Relaxed);
-                marks[w].store(word ^ ((MARK_CANDIDATE | done) << sh), Relaxed);
-                if new > old {
-                    out.values.push((v, new));
-                    let p = VoxelBounds::point(lat.voxel(c));
-                    out.bounds = Some(out.bounds.map_or(p, |b| b.union(&p)));
+                if !out.values.is_empty() {
+                    out.bounds = Some(VoxelBounds {
+                        lo: lat.voxel(lo),
+                        hi: lat.voxel(hi),
+                    });
                 }
-            }
             });
     }
     changes
 }
 
-/// Phase 3: stores the new values; the changes, by group, are the next
-/// frontier.
-pub(crate) fn apply(field: &[AtomicU16], changes: Vec<Changes>) -> Vec<Vec<(u32, u16)>> {
-    changes.par_iter().for_each(|c| {
-        for &(v, q) in &c.values {
-            field[v as usize].store(q, Relaxed);
-        }
-    });
-    changes.into_iter().map(|c| c.values).collect()
-}
-
 /// Buckets frontier entries (box-linear index, value) into the groups of a
 /// box of `dims`.
-pub(crate) fn group(entries: impl IntoIterator<Item = (u32, u16)>, dims: [usize; 3]) -> Vec<Vec<(u32, u16)>> {
+pub(crate) fn group(
+    entries: impl IntoIterator<Item = (u32, u16)>,
+    dims: [usize; 3],
+) -> Vec<Vec<(u32, u16)>> {
     let gs = group_slabs(dims);
     let per_group = dims[0] * dims[1] * gs;
     let mut groups = vec![Vec::new(); dims[2].div_ceil(gs)];

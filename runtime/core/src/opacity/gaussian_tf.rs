@@ -66,7 +66,12 @@ impl GaussianTf {
 /// The transfer function `(value, base opacity t(x)) ↦ t(x) · (a + b · g(x))`
 /// with `g` the Gaussian of mean `d_s` and standard deviation `sigma_s`
 /// (value units).
-pub fn gaussian_tf(d_s: f32, sigma_s: f32, a: f32, b: f32) -> impl Fn(f32, f32) -> f32 + Copy + Send + Sync {
+pub fn gaussian_tf(
+    d_s: f32,
+    sigma_s: f32,
+    a: f32,
+    b: f32,
+) -> impl Fn(f32, f32) -> f32 + Copy + Send + Sync {
     let tf = GaussianTf {
         mean: d_s,
         sigma: sigma_s,

@@ -2,20 +2,27 @@
 //! (`shaders/opacity/*.wgsl`; the CPU twin is [`super::cpu`] with
 //! [`super::frontier`]).
 //!
-//! One Jacobi step is three kernels, each one invocation per list entry
-//! (3-D-folded dispatch, workgroups of 64), the same phases as the CPU:
+//! One Jacobi step is four kernels, each one invocation per list entry
+//! (3-D-folded dispatch, workgroups of 64):
 //!
 //! - `enumerate` — per frontier voxel: the 26-neighbours its new value
 //!   lifts, skipping voxels marked done, deduplicated by `atomicOr` on a
 //!   candidate mark, appended to the candidate list (one `atomicAdd` per
 //!   workgroup on the global counter);
-//! - `evaluate` — per candidate: the update rule and the pump shortcut
-//!   (field read-only), the new value kept per candidate; the candidate mark
-//!   cleared and the done mark set at the ceiling (one `atomicXor`);
+//! - `evaluate` — per candidate: the update rule (field read-only), the new
+//!   value kept per candidate; the candidate mark cleared and the done mark
+//!   set at the ceiling (one `atomicXor`);
 //! - `apply` — per candidate: the risen values stored (an `atomicAdd` on
 //!   the voxel's half of a packed u32 word), appended to the next frontier,
 //!   and the region box grown (workgroup min/max, then one global atomic
-//!   per workgroup).
+//!   per workgroup);
+//! - `pump` — per voxel of the next frontier: the pump shortcut on the
+//!   values after the step ([`super::Extinction::pumps`]).
+//!
+//! The CPU computes the same values in two phases (lift in place, finish);
+//! the kernels split the work differently (the GPU evaluates candidates on
+//! an untouched field instead of lifting in place) but every step yields
+//! the same field, the same set of changed voxels and the same counts.
 //!
 //! **Counts.** Dispatch-indirect is not part of [`GpuService`], so each
 //! step reads back 4 bytes (the candidate count, which sizes `evaluate`
@@ -73,13 +80,14 @@ mod bind {
 }
 
 /// The full WGSL source of each kernel (for tools that validate shaders).
-pub fn kernel_sources() -> [(&'static str, String); 6] {
+pub fn kernel_sources() -> [(&'static str, String); 7] {
     let step = format!("{COMMON}\n{STEP}");
     let regrow = format!("{COMMON}\n{REGROW}");
     [
         ("enumerate", step.clone()),
         ("evaluate", step.clone()),
-        ("apply", step),
+        ("apply", step.clone()),
+        ("pump", step),
         ("regrow", regrow.clone()),
         ("remap", regrow.clone()),
         ("mark", regrow),
@@ -126,7 +134,11 @@ impl GpuOpacityVolume {
     /// not fit one storage binding.
     pub fn upload(gpu: &dyn GpuService, volume: VolumeView<'_>) -> Result<Self, OpacityError> {
         check_volume(&volume)?;
-        check_binding(gpu, "the volume's values (f32)", volume.grid.len() as u64 * 4)?;
+        check_binding(
+            gpu,
+            "the volume's values (f32)",
+            volume.grid.len() as u64 * 4,
+        )?;
         let values: Vec<f32> = volume.data.to_f32_vec().into_iter().map(sanitize).collect();
         let id = gpu.upload(&values, "voxflex.opacity.values")?;
         Ok(Self {
@@ -154,6 +166,7 @@ struct Pipelines {
     enumerate: PipelineId,
     evaluate: PipelineId,
     apply: PipelineId,
+    pump: PipelineId,
     regrow: PipelineId,
     remap: PipelineId,
     mark: PipelineId,
@@ -161,11 +174,12 @@ struct Pipelines {
 
 impl Pipelines {
     fn compile(gpu: &dyn GpuService) -> Result<Self, GpuError> {
-        let [a, b, c, d, e, f] = kernel_sources();
+        let [a, b, c, p, d, e, f] = kernel_sources();
         Ok(Self {
             enumerate: gpu.compile(&a.1, a.0)?,
             evaluate: gpu.compile(&b.1, b.0)?,
             apply: gpu.compile(&c.1, c.0)?,
+            pump: gpu.compile(&p.1, p.0)?,
             regrow: gpu.compile(&d.1, d.0)?,
             remap: gpu.compile(&e.1, e.0)?,
             mark: gpu.compile(&f.1, f.0)?,
@@ -257,7 +271,10 @@ impl GpuGrowth {
         let mut half = vec![ext.q_min; work.len().next_multiple_of(2)];
         let s = work.local_linear(voxel);
         half[s] = ext.q_max;
-        let words: Vec<u32> = half.chunks(2).map(|p| p[0] as u32 | (p[1] as u32) << 16).collect();
+        let words: Vec<u32> = half
+            .chunks(2)
+            .map(|p| p[0] as u32 | (p[1] as u32) << 16)
+            .collect();
         let mut made: Vec<Owned> = Vec::new();
         let mut mk = |bytes: u64, label: &str| -> Result<Owned, GpuError> {
             let o = Owned::new(gpu, bytes, label)?;
@@ -281,8 +298,14 @@ impl GpuGrowth {
                 region,
                 n_front: 1,
                 pipes,
-                params_buf: mk(std::mem::size_of::<Params>() as u64, "voxflex.opacity.params")?,
-                regrow_buf: mk(std::mem::size_of::<Regrow>() as u64, "voxflex.opacity.regrow")?,
+                params_buf: mk(
+                    std::mem::size_of::<Params>() as u64,
+                    "voxflex.opacity.params",
+                )?,
+                regrow_buf: mk(
+                    std::mem::size_of::<Regrow>() as u64,
+                    "voxflex.opacity.regrow",
+                )?,
                 counters: mk(COUNTERS as u64 * 4, "voxflex.opacity.counters")?,
                 marks: mk(marks_bytes(work.len()), "voxflex.opacity.marks")?,
                 field,
@@ -309,7 +332,12 @@ impl GpuGrowth {
 
     /// Runs up to `n` steps (fewer if it converges first) and reports them.
     /// Resumable, like [`super::CpuGrowth::step`].
-    pub fn step(&mut self, gpu: &dyn GpuService, values: &GpuOpacityVolume, n: usize) -> Result<GrowthReport, OpacityError> {
+    pub fn step(
+        &mut self,
+        gpu: &dyn GpuService,
+        values: &GpuOpacityVolume,
+        n: usize,
+    ) -> Result<GrowthReport, OpacityError> {
         if values.grid.dims != self.dims {
             return Err(OpacityError::GpuVolumeMismatch {
                 expected: self.dims,
@@ -340,7 +368,11 @@ impl GpuGrowth {
     }
 
     /// Runs to convergence and reports the steps it took from here.
-    pub fn run(&mut self, gpu: &dyn GpuService, values: &GpuOpacityVolume) -> Result<GrowthReport, OpacityError> {
+    pub fn run(
+        &mut self,
+        gpu: &dyn GpuService,
+        values: &GpuOpacityVolume,
+    ) -> Result<GrowthReport, OpacityError> {
         self.step(gpu, values, usize::MAX)
     }
 
@@ -355,7 +387,11 @@ impl GpuGrowth {
         let mut words = vec![0u32; w.len().div_ceil(2)];
         const CHUNK: usize = 16 << 20;
         for (n, chunk) in words.chunks_mut(CHUNK).enumerate() {
-            gpu.read_buffer(self.field.id, (n * CHUNK * 4) as u64, bytemuck::cast_slice_mut(chunk))?;
+            gpu.read_buffer(
+                self.field.id,
+                (n * CHUNK * 4) as u64,
+                bytemuck::cast_slice_mut(chunk),
+            )?;
         }
         let get = |l: usize| (words[l >> 1] >> ((l & 1) * 16)) as u16;
         let r = self.region;
@@ -434,7 +470,12 @@ impl GpuGrowth {
     fn write_params(&self, gpu: &dyn GpuService) -> Result<(), GpuError> {
         let d = self.work.dims();
         let p = Params {
-            vdim: [self.dims[0] as u32, self.dims[1] as u32, self.dims[2] as u32, 0],
+            vdim: [
+                self.dims[0] as u32,
+                self.dims[1] as u32,
+                self.dims[2] as u32,
+                0,
+            ],
             blo: [
                 self.work.lo[0] as u32,
                 self.work.lo[1] as u32,
@@ -449,12 +490,18 @@ impl GpuGrowth {
     }
 
     /// One step; returns (visits, useful).
-    fn one_step(&mut self, gpu: &dyn GpuService, values: &GpuOpacityVolume) -> Result<(u64, u64), GpuError> {
+    fn one_step(
+        &mut self,
+        gpu: &dyn GpuService,
+        values: &GpuOpacityVolume,
+    ) -> Result<(u64, u64), GpuError> {
         let b = |binding, o: &Owned| BufferBinding::whole(binding, o.id);
         let box_len = self.work.len() as u64;
         let bound = (26 * self.n_front as u64).min(box_len);
-        self.cand.ensure(gpu, bound * 4, "voxflex.opacity.candidates")?;
-        self.newval.ensure(gpu, bound * 4, "voxflex.opacity.newval")?;
+        self.cand
+            .ensure(gpu, bound * 4, "voxflex.opacity.candidates")?;
+        self.newval
+            .ensure(gpu, bound * 4, "voxflex.opacity.newval")?;
         let mut counters = [0u32; COUNTERS];
         counters[0] = self.n_front;
         counters[4..7].fill(u32::MAX);
@@ -478,7 +525,8 @@ impl GpuGrowth {
             self.n_front = 0;
             return Ok((0, 0));
         }
-        self.next.ensure(gpu, n_cand as u64 * 4, "voxflex.opacity.next")?;
+        self.next
+            .ensure(gpu, n_cand as u64 * 4, "voxflex.opacity.next")?;
         let groups = gpu.workgroups_for(n_cand as u64, WORKGROUP)?;
         gpu.dispatch(
             self.pipes.evaluate,
@@ -505,6 +553,18 @@ impl GpuGrowth {
             ],
             groups,
         )?;
+        gpu.dispatch(
+            self.pipes.pump,
+            &[
+                b(bind::PARAMS, &self.params_buf),
+                BufferBinding::whole(bind::VALUES, values.values),
+                b(bind::FIELD, &self.field),
+                b(bind::MARKS, &self.marks),
+                b(bind::NEXT, &self.next),
+                b(bind::COUNTERS, &self.counters),
+            ],
+            groups,
+        )?;
         let mut tail = [0u32; COUNTERS - 2];
         gpu.read_buffer(self.counters.id, 8, bytemuck::cast_slice_mut(&mut tail))?;
         let n_next = tail[0];
@@ -526,10 +586,30 @@ impl GpuGrowth {
         let old = self.work;
         let (od, nd) = (old.dims(), nb.dims());
         let r = Regrow {
-            olo: [old.lo[0] as u32, old.lo[1] as u32, old.lo[2] as u32, self.n_front],
-            odim: [od[0] as u32, od[1] as u32, od[2] as u32, self.ext.q_min as u32],
-            nlo: [nb.lo[0] as u32, nb.lo[1] as u32, nb.lo[2] as u32, nb.len() as u32],
-            ndim: [nd[0] as u32, nd[1] as u32, nd[2] as u32, self.ext.q_max as u32],
+            olo: [
+                old.lo[0] as u32,
+                old.lo[1] as u32,
+                old.lo[2] as u32,
+                self.n_front,
+            ],
+            odim: [
+                od[0] as u32,
+                od[1] as u32,
+                od[2] as u32,
+                self.ext.q_min as u32,
+            ],
+            nlo: [
+                nb.lo[0] as u32,
+                nb.lo[1] as u32,
+                nb.lo[2] as u32,
+                nb.len() as u32,
+            ],
+            ndim: [
+                nd[0] as u32,
+                nd[1] as u32,
+                nd[2] as u32,
+                self.ext.q_max as u32,
+            ],
         };
         gpu.write_buffer(self.regrow_buf.id, 0, bytemuck::bytes_of(&r))?;
         let words = nb.len().div_ceil(2) as u64;
@@ -560,7 +640,8 @@ impl GpuGrowth {
                 ],
                 gpu.workgroups_for(nb.len().div_ceil(16) as u64, WORKGROUP)?,
             )?;
-            self.next.ensure(gpu, self.n_front as u64 * 4, "voxflex.opacity.next")?;
+            self.next
+                .ensure(gpu, self.n_front as u64 * 4, "voxflex.opacity.next")?;
             gpu.dispatch(
                 self.pipes.remap,
                 &[

@@ -35,28 +35,31 @@
 //!
 //! The thesis's kernel swept the whole volume each step, with 0.7–12 % of
 //! the threads doing useful work. Here a step works from the **frontier**,
-//! the voxels that changed in the previous step: each of their
-//! 26-neighbours is tested against the changed voxel's new value
-//! (`rise(q_u, e_v) > q_v`) and listed once (a bitset deduplicates); only
-//! listed voxels are visited (the update rule evaluated). A voxel that no
-//! changed neighbour lifts cannot change, so the test is exact: every visit
-//! changes a value, and the result is the dense sweep's (tested against a
-//! dense reference). Each run reports steps, visits, useful visits and
-//! their fraction ([`GrowthReport`]); the work left is 26 neighbour tests
-//! per change — proportional to the changes, not to the volume (see the
-//! crate's `opacity` benchmark for figures).
+//! the voxels that changed in the previous step (with their new values):
+//! each of their 26-neighbours that is not yet at its ceiling is lifted,
+//! `q_v ← max(q_v, rise(q_u, e_v))`, and a voxel is listed once, when it
+//! first rises in the step. A voxel that no changed neighbour lifts cannot
+//! change, so this is the dense sweep's result, step for step (tested
+//! against a dense reference), and every voxel the step updates changes:
+//! the **useful fraction is 1 by construction**. Each run reports steps,
+//! visits, useful visits and their fraction ([`GrowthReport`]); the work
+//! left is the neighbour scan, at most 26 per change — proportional to the
+//! changes, not to the volume (see the crate's `opacity` benchmark for
+//! figures). CPU details (state bits, the lock-free parallel schedule):
+//! [`cpu`] and the private `frontier` module; GPU: [`gpu`].
 //!
 //! # Storage
 //!
 //! The result is an [`OpacityMap`] over the box of the voxels that ever
 //! rose above `o_min` (plus the seed), 2 bytes per voxel of that box,
 //! `outside = o_min`. While growing, the field lives over a **working box**
-//! that grows with the region (a margin of `max(8, extent/4)` voxels, grown
+//! that grows with the region (a margin of `max(8, extent/2)` voxels, grown
 //! geometrically, [`bounds::grown_working_box`]): CPU state is the u16 field
-//! (2 bytes per working-box voxel) + a 1-bit candidate bitset + the
-//! frontier (4 bytes per frontier voxel) and, during a step, the candidate
-//! list (8 bytes per candidate). GPU state: see [`gpu`].
-//!
+//! (2 bytes per working-box voxel) + 2 state bits per working-box voxel +
+//! the frontier (8 bytes per frontier voxel: index and value) and, during a
+//! step, the raised list (12 bytes per raised voxel) — 2.25 bytes per
+//! working-box voxel plus the lists. GPU state: see [`gpu`].
+
 //! # Seeds and units
 //!
 //! A [`Seed`] is a voxel index, a world point in millimetres, or a click on
@@ -139,7 +142,10 @@ pub(crate) fn check_volume(volume: &VolumeView<'_>) -> Result<(), OpacityError> 
     }
     let voxels = g.dims.iter().map(|&d| d as u64).product::<u64>();
     if voxels > u32::MAX as u64 {
-        return Err(OpacityError::VolumeTooLarge { dims: g.dims, voxels });
+        return Err(OpacityError::VolumeTooLarge {
+            dims: g.dims,
+            voxels,
+        });
     }
     if volume.data.len() != g.len() {
         return Err(OpacityError::DataLength {

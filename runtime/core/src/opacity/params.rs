@@ -43,7 +43,9 @@ impl GrowthParams {
     /// Checks every field; the error names the value at fault.
     pub fn validate(&self) -> Result<(), OpacityError> {
         if !(self.lambda.is_finite() && self.lambda > 0.0) {
-            return Err(OpacityError::BadLambda { lambda: self.lambda });
+            return Err(OpacityError::BadLambda {
+                lambda: self.lambda,
+            });
         }
         let unit = |o: f32| o.is_finite() && (0.0..=1.0).contains(&o);
         if !unit(self.o_min) || !unit(self.o_max) || to_fixed(self.o_min) >= to_fixed(self.o_max) {

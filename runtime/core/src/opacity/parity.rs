@@ -26,7 +26,11 @@ pub struct XorShift(u64);
 impl XorShift {
     /// A generator from a seed (0 is replaced by a fixed non-zero state).
     pub fn new(seed: u64) -> Self {
-        Self(if seed == 0 { 0x9E37_79B9_7F4A_7C15 } else { seed })
+        Self(if seed == 0 {
+            0x9E37_79B9_7F4A_7C15
+        } else {
+            seed
+        })
     }
 
     /// The next 64 random bits.
@@ -132,7 +136,11 @@ pub fn three_spheres_with(n: usize, b_value: f32, noise: f32, seed: u64) -> Phan
         radius: 14.0 * s,
         value: 300.0,
     };
-    let grid = Grid::new([n; 3], DVec3::new(0.8, 1.0, 1.25), DVec3::new(-30.0, -40.0, 10.0));
+    let grid = Grid::new(
+        [n; 3],
+        DVec3::new(0.8, 1.0, 1.25),
+        DVec3::new(-30.0, -40.0, 10.0),
+    );
     let mut rng = XorShift::new(seed);
     let mut p = Phantom {
         volume: Volume {
@@ -172,7 +180,11 @@ pub fn noisy_ball_i16(n: usize, radius: f64, noise: f64, seed: u64) -> Volume {
     let mut rng = XorShift::new(seed);
     let values = (0..grid.len())
         .map(|l| {
-            let base = if ball.contains(grid.unlinear(l)) { 100.0 } else { 0.0 };
+            let base = if ball.contains(grid.unlinear(l)) {
+                100.0
+            } else {
+                0.0
+            };
             (base + noise * rng.normal()).round() as i16
         })
         .collect();
@@ -197,7 +209,11 @@ pub fn dice(map: &OpacityMap, dims: [usize; 3], truth: impl Fn([usize; 3]) -> bo
             }
         }
     }
-    if m + t == 0 { 1.0 } else { 2.0 * both as f64 / (m + t) as f64 }
+    if m + t == 0 {
+        1.0
+    } else {
+        2.0 * both as f64 / (m + t) as f64
+    }
 }
 
 /// A [`GpuService`] that forwards to another but reports a smaller
@@ -235,7 +251,12 @@ impl GpuService for SmallBinding<'_> {
     fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
         self.inner.compile(wgsl, entry_point)
     }
-    fn dispatch(&self, pipeline: PipelineId, bindings: &[BufferBinding], workgroups: [u32; 3]) -> Result<(), GpuError> {
+    fn dispatch(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        workgroups: [u32; 3],
+    ) -> Result<(), GpuError> {
         self.inner.dispatch(pipeline, bindings, workgroups)
     }
 }
@@ -245,7 +266,13 @@ fn e(err: OpacityError) -> String {
 }
 
 /// Compares two maps and two reports; `what` names the case.
-fn same(what: &str, gpu: &OpacityMap, cpu: &OpacityMap, rg: &GrowthReport, rc: &GrowthReport) -> Result<(), String> {
+fn same(
+    what: &str,
+    gpu: &OpacityMap,
+    cpu: &OpacityMap,
+    rg: &GrowthReport,
+    rc: &GrowthReport,
+) -> Result<(), String> {
     if (gpu.origin, gpu.dims, gpu.outside) != (cpu.origin, cpu.dims, cpu.outside) {
         return Err(format!(
             "{what}: GPU map box {:?}+{:?} (outside {}) differs from CPU {:?}+{:?} (outside {})",
@@ -253,9 +280,18 @@ fn same(what: &str, gpu: &OpacityMap, cpu: &OpacityMap, rg: &GrowthReport, rc: &
         ));
     }
     if let Some(i) = (0..cpu.values.len()).find(|&i| gpu.values[i] != cpu.values[i]) {
-        let n = cpu.values.iter().zip(&gpu.values).filter(|(a, b)| a != b).count();
+        let n = cpu
+            .values
+            .iter()
+            .zip(&gpu.values)
+            .filter(|(a, b)| a != b)
+            .count();
         let (x, r) = (i % cpu.dims[0], i / cpu.dims[0]);
-        let v = [cpu.origin[0] + x, cpu.origin[1] + r % cpu.dims[1], cpu.origin[2] + r / cpu.dims[1]];
+        let v = [
+            cpu.origin[0] + x,
+            cpu.origin[1] + r % cpu.dims[1],
+            cpu.origin[2] + r / cpu.dims[1],
+        ];
         return Err(format!(
             "{what}: {n} voxels differ; first at voxel {v:?}: GPU {} CPU {}",
             gpu.values[i], cpu.values[i]
@@ -269,7 +305,13 @@ fn same(what: &str, gpu: &OpacityMap, cpu: &OpacityMap, rg: &GrowthReport, rc: &
 }
 
 /// Grows both paths from `seed` to convergence and compares maps and counts.
-fn converged_case(gpu: &dyn GpuService, volume: &Volume, seed: Seed, params: GrowthParams, what: &str) -> Result<(), String> {
+fn converged_case(
+    gpu: &dyn GpuService,
+    volume: &Volume,
+    seed: Seed,
+    params: GrowthParams,
+    what: &str,
+) -> Result<(), String> {
     let gv = GpuOpacityVolume::upload(gpu, volume.view()).map_err(e)?;
     let out = (|| {
         let mut g = GpuGrowth::new(gpu, &gv, volume.view(), &seed, params).map_err(e)?;
@@ -290,13 +332,34 @@ fn converged_case(gpu: &dyn GpuService, volume: &Volume, seed: Seed, params: Gro
     out
 }
 
-/// The three-sphere phantom (64³, f32, noise σ 3) seeded in sphere A, and
-/// a noisy i16 ball with non-default parameters: identical converged maps,
+/// The three-sphere phantom (64³, f32, noise σ 3) seeded in spheres A and
+/// B, the phantom with B at 110 (absorbed through pumping pairs), and a
+/// noisy i16 ball with non-default parameters: identical converged maps,
 /// identical step / visit / useful counts.
 pub fn check_converged_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
     let p = three_spheres(64, 3.0, 21);
-    converged_case(gpu, &p.volume, Seed::Voxel(p.a.centre_voxel()), GrowthParams::default(), "phantom, seed in A")?;
-    converged_case(gpu, &p.volume, Seed::Voxel(p.b.centre_voxel()), GrowthParams::default(), "phantom, seed in B")?;
+    converged_case(
+        gpu,
+        &p.volume,
+        Seed::Voxel(p.a.centre_voxel()),
+        GrowthParams::default(),
+        "phantom, seed in A",
+    )?;
+    converged_case(
+        gpu,
+        &p.volume,
+        Seed::Voxel(p.b.centre_voxel()),
+        GrowthParams::default(),
+        "phantom, seed in B",
+    )?;
+    let q = three_spheres_with(48, 110.0, 3.0, 25);
+    converged_case(
+        gpu,
+        &q.volume,
+        Seed::Voxel(q.a.centre_voxel()),
+        GrowthParams::default(),
+        "B at 110 (pumps)",
+    )?;
     let ball = noisy_ball_i16(40, 14.0, 4.0, 5);
     let params = GrowthParams {
         o_min: 0.1,
@@ -304,13 +367,21 @@ pub fn check_converged_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
         lambda: 8.0,
         ..Default::default()
     };
-    converged_case(gpu, &ball, Seed::Voxel([20, 20, 20]), params, "i16 ball, λ = 8")
+    converged_case(
+        gpu,
+        &ball,
+        Seed::Voxel([20, 20, 20]),
+        params,
+        "i16 ball, λ = 8",
+    )
 }
 
-/// Step by step (1, 1, …, then 5, then to convergence): the GPU map equals
-/// the CPU map after every call.
+/// Step by step (1, 1, …, then 5, then to convergence) on the phantom with
+/// B at 110 (the pump shortcut fires): the GPU map equals the CPU map after
+/// every call.
 pub fn check_stepwise_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
-    let p = three_spheres(48, 3.0, 22);
+    // B at 110: absorbed through pumping pairs, so the pump shortcut fires.
+    let p = three_spheres_with(48, 110.0, 3.0, 22);
     let seed = Seed::Voxel(p.a.centre_voxel());
     let params = GrowthParams::default();
     let v = p.volume.view();
@@ -319,11 +390,26 @@ pub fn check_stepwise_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
         let mut g = GpuGrowth::new(gpu, &gv, v, &seed, params).map_err(e)?;
         let res = (|| {
             let mut c = CpuGrowth::new(v, &seed, params).map_err(e)?;
-            same("after seeding", &g.map(gpu).map_err(e)?, &c.map(), &g.report(), &c.report())?;
-            for (i, n) in [1, 1, 1, 1, 1, 1, 1, 1, 5, usize::MAX].into_iter().enumerate() {
+            same(
+                "after seeding",
+                &g.map(gpu).map_err(e)?,
+                &c.map(),
+                &g.report(),
+                &c.report(),
+            )?;
+            for (i, n) in [1, 1, 1, 1, 1, 1, 1, 1, 5, usize::MAX]
+                .into_iter()
+                .enumerate()
+            {
                 let rg = g.step(gpu, &gv, n).map_err(e)?;
                 let rc = c.step(v, n).map_err(e)?;
-                same(&format!("call {i} ({n} steps)"), &g.map(gpu).map_err(e)?, &c.map(), &rg, &rc)?;
+                same(
+                    &format!("call {i} ({n} steps)"),
+                    &g.map(gpu).map_err(e)?,
+                    &c.map(),
+                    &rg,
+                    &rc,
+                )?;
             }
             if !g.is_converged() {
                 return Err("GPU growth did not converge".into());
@@ -344,7 +430,10 @@ pub fn check_several_maps(gpu: &dyn GpuService) -> Result<(), String> {
     let v = p.volume.view();
     let params = GrowthParams::default();
     let gv = GpuOpacityVolume::upload(gpu, v).map_err(e)?;
-    let seeds = [Seed::Voxel(p.a.centre_voxel()), Seed::Voxel(p.c.centre_voxel())];
+    let seeds = [
+        Seed::Voxel(p.a.centre_voxel()),
+        Seed::Voxel(p.c.centre_voxel()),
+    ];
     let mut growths = Vec::new();
     let res = (|| {
         for s in &seeds {
@@ -358,7 +447,13 @@ pub fn check_several_maps(gpu: &dyn GpuService) -> Result<(), String> {
         for (g, s) in growths.iter().zip(&seeds) {
             let mut c = CpuGrowth::new(v, s, params).map_err(e)?;
             c.run(v).map_err(e)?;
-            same(&format!("map seeded at {s}"), &g.map(gpu).map_err(e)?, &c.map(), &g.report(), &c.report())?;
+            same(
+                &format!("map seeded at {s}"),
+                &g.map(gpu).map_err(e)?,
+                &c.map(),
+                &g.report(),
+                &c.report(),
+            )?;
         }
         Ok(())
     })();
@@ -374,16 +469,30 @@ pub fn check_several_maps(gpu: &dyn GpuService) -> Result<(), String> {
 /// [`OpacityError::GpuVolumeMismatch`]; nothing panics.
 pub fn check_refusals(gpu: &dyn GpuService) -> Result<(), String> {
     let p = three_spheres(24, 3.0, 24);
-    let small = SmallBinding { inner: gpu, limit: 4096 };
+    let small = SmallBinding {
+        inner: gpu,
+        limit: 4096,
+    };
     match GpuOpacityVolume::upload(&small, p.volume.view()) {
-        Err(OpacityError::BindingTooLarge { bytes, limit, .. }) if bytes == 24 * 24 * 24 * 4 && limit == 4096 => {}
+        Err(OpacityError::BindingTooLarge { bytes, limit, .. })
+            if bytes == 24 * 24 * 24 * 4 && limit == 4096 => {}
         other => return Err(format!("expected BindingTooLarge, got {other:?}")),
     }
     let q = three_spheres(16, 3.0, 24);
     let gv = GpuOpacityVolume::upload(gpu, q.volume.view()).map_err(e)?;
-    let r = GpuGrowth::new(gpu, &gv, p.volume.view(), &Seed::Voxel([8, 8, 8]), GrowthParams::default());
+    let r = GpuGrowth::new(
+        gpu,
+        &gv,
+        p.volume.view(),
+        &Seed::Voxel([8, 8, 8]),
+        GrowthParams::default(),
+    );
     let out = match r {
-        Err(OpacityError::GpuVolumeMismatch { expected, actual }) if expected == [24; 3] && actual == [16; 3] => Ok(()),
+        Err(OpacityError::GpuVolumeMismatch { expected, actual })
+            if expected == [24; 3] && actual == [16; 3] =>
+        {
+            Ok(())
+        }
         Err(other) => Err(format!("expected GpuVolumeMismatch, got {other}")),
         Ok(g) => {
             g.release(gpu);

@@ -24,7 +24,12 @@ impl OpacityMapSet {
     }
 
     /// Seeds one more map; returns its index.
-    pub fn add(&mut self, volume: VolumeView<'_>, seed: &Seed, params: GrowthParams) -> Result<usize, OpacityError> {
+    pub fn add(
+        &mut self,
+        volume: VolumeView<'_>,
+        seed: &Seed,
+        params: GrowthParams,
+    ) -> Result<usize, OpacityError> {
         self.growths.push(CpuGrowth::new(volume, seed, params)?);
         Ok(self.growths.len() - 1)
     }
@@ -51,9 +56,16 @@ impl OpacityMapSet {
 
     /// Runs up to `n` steps of every map (in parallel); the report sums them
     /// (`steps` is the largest count, `converged` true when all are).
-    pub fn step_all(&mut self, volume: VolumeView<'_>, n: usize) -> Result<GrowthReport, OpacityError> {
-        let reps: Vec<Result<GrowthReport, OpacityError>> =
-            self.growths.par_iter_mut().map(|g| g.step(volume, n)).collect();
+    pub fn step_all(
+        &mut self,
+        volume: VolumeView<'_>,
+        n: usize,
+    ) -> Result<GrowthReport, OpacityError> {
+        let reps: Vec<Result<GrowthReport, OpacityError>> = self
+            .growths
+            .par_iter_mut()
+            .map(|g| g.step(volume, n))
+            .collect();
         let mut total = GrowthReport {
             converged: true,
             ..Default::default()
@@ -109,9 +121,13 @@ pub fn combine_max(maps: &[OpacityMap]) -> Option<OpacityMap> {
         let [mx, my, mz] = m.dims;
         for z in 0..mz {
             for y in 0..my {
-                let dst = (m.origin[0] - lo[0]) + dims[0] * ((m.origin[1] + y - lo[1]) + dims[1] * (m.origin[2] + z - lo[2]));
+                let dst = (m.origin[0] - lo[0])
+                    + dims[0] * ((m.origin[1] + y - lo[1]) + dims[1] * (m.origin[2] + z - lo[2]));
                 let src = mx * (y + my * z);
-                for (o, &v) in values[dst..dst + mx].iter_mut().zip(&m.values[src..src + mx]) {
+                for (o, &v) in values[dst..dst + mx]
+                    .iter_mut()
+                    .zip(&m.values[src..src + mx])
+                {
                     *o = (*o).max(v);
                 }
             }

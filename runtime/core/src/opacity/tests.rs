@@ -15,7 +15,8 @@ fn full(map: &OpacityMap, dims: [usize; 3]) -> Vec<u16> {
         for y in 0..map.dims[1] {
             for x in 0..map.dims[0] {
                 let [i, j, k] = [map.origin[0] + x, map.origin[1] + y, map.origin[2] + z];
-                out[i + dims[0] * (j + dims[1] * k)] = map.values[x + map.dims[0] * (y + map.dims[1] * z)];
+                out[i + dims[0] * (j + dims[1] * k)] =
+                    map.values[x + map.dims[0] * (y + map.dims[1] * z)];
             }
         }
     }
@@ -77,31 +78,45 @@ impl Dense {
     fn sweep(&mut self) -> usize {
         let [nx, ny, nz] = self.dims;
         let old = self.field.clone();
-        let mut changed = 0;
+        let mut changed = Vec::new();
         for k in 0..nz {
             for j in 0..ny {
                 for i in 0..nx {
                     let l = i + nx * (j + ny * k);
                     let nb = self.neighbours(i, j, k);
-                    let Some(m) = nb.iter().map(|&n| old[n]).filter(|&q| q > self.ext.q_min).max() else {
+                    let Some(m) = nb
+                        .iter()
+                        .map(|&n| old[n])
+                        .filter(|&q| q > self.ext.q_min)
+                        .max()
+                    else {
                         continue; // no reached neighbour: nothing propagates here
                     };
                     let e = self.ext.fixed(self.values[l]);
-                    let mut new = self.ext.rise(m, e).max(old[l]);
-                    if self.pump
-                        && new > old[l]
-                        && self.ext.may_pump(new, e)
-                        && nb.iter().any(|&n| self.ext.pumps(new, e, self.ext.fixed(self.values[n]), old[n]))
-                    {
-                        new = self.ext.q_max;
-                    }
+                    let new = self.ext.rise(m, e).max(old[l]);
                     if new != old[l] {
                         self.field[l] = new;
-                        changed += 1;
+                        changed.push((l, [i, j, k], e));
                     }
                 }
             }
         }
+        if self.pump {
+            // Pump shortcut, on the neighbours' values after the sweep.
+            let lifted = self.field.clone();
+            for &(l, [i, j, k], e) in &changed {
+                let new = lifted[l];
+                if self.ext.may_pump(new, e)
+                    && self.neighbours(i, j, k).iter().any(|&n| {
+                        self.ext
+                            .pumps(new, e, self.ext.fixed(self.values[n]), lifted[n])
+                    })
+                {
+                    self.field[l] = self.ext.q_max;
+                }
+            }
+        }
+        let changed = changed.len();
         self.sweeps += 1;
         self.visits += self.field.len() as u64;
         self.useful += changed as u64;
@@ -118,7 +133,7 @@ fn census(p: &Phantom, map: &OpacityMap) -> [[u64; 3]; 4] {
         for j in 0..dims[1] {
             for i in 0..dims[0] {
                 let l = p.label([i, j, k]) as usize;
-                let q = map.values.get(0).map(|_| map.get(i, j, k)).unwrap_or(0.0);
+                let q = map.values.first().map(|_| map.get(i, j, k)).unwrap_or(0.0);
                 count[l][0] += 1;
                 count[l][1] += (q >= 0.5) as u64;
                 count[l][2] += (crate::opacity_map::to_fixed(q) > map.outside) as u64;
@@ -137,7 +152,12 @@ fn phantom_grows_sphere_a_and_never_enters_c() {
     // A 100, B 115 (5 σ), C 300, noise σ 3, 96³, default parameters.
     let p = three_spheres(96, 3.0, 7);
     let dims = p.volume.grid.dims;
-    let mut g = CpuGrowth::new(p.volume.view(), &Seed::Voxel(p.a.centre_voxel()), GrowthParams::default()).unwrap();
+    let mut g = CpuGrowth::new(
+        p.volume.view(),
+        &Seed::Voxel(p.a.centre_voxel()),
+        GrowthParams::default(),
+    )
+    .unwrap();
     let rep = g.run(p.volume.view()).unwrap();
     assert!(rep.converged);
     let map = g.map();
@@ -153,7 +173,11 @@ fn phantom_grows_sphere_a_and_never_enters_c() {
         c[0][2]
     );
     assert!(d >= 0.95, "Dice of sphere A = {d}");
-    assert!(frac(&c, 1, 1) >= 0.995, "sphere A is not filled: {}", frac(&c, 1, 1));
+    assert!(
+        frac(&c, 1, 1) >= 0.995,
+        "sphere A is not filled: {}",
+        frac(&c, 1, 1)
+    );
     // Sphere C (contrast 200 ≫ (λ + 1) σ_s) is never entered, not even faintly.
     assert_eq!(c[3][2], 0, "opacity leaked into sphere C");
     // Neither is the background (contrast 100).
@@ -161,7 +185,11 @@ fn phantom_grows_sphere_a_and_never_enters_c() {
     // Sphere B (contrast 15 ≈ 5 σ_s): entered through the contact disc and
     // fading — a cap near the contact above 0.5, most of B below it, and the
     // far side of B never reached.
-    assert!(frac(&c, 2, 1) > 0.01 && frac(&c, 2, 1) < 0.2, "B above 0.5: {}", frac(&c, 2, 1));
+    assert!(
+        frac(&c, 2, 1) > 0.01 && frac(&c, 2, 1) < 0.2,
+        "B above 0.5: {}",
+        frac(&c, 2, 1)
+    );
     assert!(frac(&c, 2, 2) < 0.6, "B reached: {}", frac(&c, 2, 2));
     // The enumeration's test is exact: every visit changes a value.
     assert_eq!(rep.visits, rep.useful);
@@ -177,7 +205,12 @@ fn a_neighbour_within_a_few_sigma_is_absorbed() {
     // λ = 30 (and 15, 10) the whole of B ends above 0.5 — the method cannot
     // separate it. C still stays untouched.
     let p = three_spheres_with(64, 110.0, 3.0, 7);
-    let mut g = CpuGrowth::new(p.volume.view(), &Seed::Voxel(p.a.centre_voxel()), GrowthParams::default()).unwrap();
+    let mut g = CpuGrowth::new(
+        p.volume.view(),
+        &Seed::Voxel(p.a.centre_voxel()),
+        GrowthParams::default(),
+    )
+    .unwrap();
     g.run(p.volume.view()).unwrap();
     let c = census(&p, &g.map());
     assert!(frac(&c, 1, 1) >= 0.995);
@@ -223,7 +256,10 @@ fn opacity_never_decreases_and_stays_in_range() {
     while !g.is_converged() {
         g.step(p.volume.view(), 1).unwrap();
         let now = full(&g.map(), dims);
-        assert!(now.iter().zip(&prev).all(|(n, o)| n >= o), "opacity decreased at step {steps}");
+        assert!(
+            now.iter().zip(&prev).all(|(n, o)| n >= o),
+            "opacity decreased at step {steps}"
+        );
         assert!(now.iter().all(|&q| q >= qmin && q <= qmax));
         prev = now;
         steps += 1;
@@ -247,7 +283,10 @@ fn sparse_equals_dense_at_convergence() {
         let r = sparse.run(p.volume.view()).unwrap();
         let s = full(&sparse.map(), dims);
         let differ = s.iter().zip(&dense.field).filter(|(a, b)| a != b).count();
-        assert_eq!(differ, 0, "B {b}: {differ} voxels differ from the dense reference");
+        assert_eq!(
+            differ, 0,
+            "B {b}: {differ} voxels differ from the dense reference"
+        );
         eprintln!(
             "B {b}: dense {} sweeps, {} visits, useful {:.5}; sparse {r:?}",
             dense.sweeps,
@@ -289,7 +328,9 @@ fn sparse_equals_dense_step_by_step() {
                 dense.field[l],
                 before[l],
                 dense.ext.fixed(dense.values[l]),
-                nb.iter().map(|&n| (before[n], dense.field[n], dense.ext.fixed(dense.values[n]))).collect::<Vec<_>>()
+                nb.iter()
+                    .map(|&n| (before[n], dense.field[n], dense.ext.fixed(dense.values[n])))
+                    .collect::<Vec<_>>()
             );
         }
         assert_eq!(r.useful, changed as u64);
@@ -305,7 +346,12 @@ fn sparse_equals_dense_step_by_step() {
 fn homogeneous_cube_is_filled_exactly() {
     // σ_s = 0 in the cube: the floor (1e-3 of the range) applies.
     let v = crate::phantom::cube([32, 32, 32]);
-    let mut g = CpuGrowth::new(v.view(), &Seed::Voxel([16, 16, 16]), GrowthParams::default()).unwrap();
+    let mut g = CpuGrowth::new(
+        v.view(),
+        &Seed::Voxel([16, 16, 16]),
+        GrowthParams::default(),
+    )
+    .unwrap();
     assert_eq!(g.stats().std, 0.0);
     assert!((g.stats().sigma - 0.1).abs() < 1e-6);
     g.run(v.view()).unwrap();
@@ -367,7 +413,12 @@ fn slice_seed_equals_world_seed() {
     let voxel = [14, 22, 19];
     // A world point a little off the voxel centre (less than half a voxel).
     let world = grid.index_to_world(DVec3::new(14.3, 21.8, 19.4));
-    let mut from_world = CpuGrowth::new(p.volume.view(), &Seed::World(world), GrowthParams::default()).unwrap();
+    let mut from_world = CpuGrowth::new(
+        p.volume.view(),
+        &Seed::World(world),
+        GrowthParams::default(),
+    )
+    .unwrap();
     assert_eq!(from_world.stats().voxel, voxel);
     from_world.run(p.volume.view()).unwrap();
     for axis in [SliceAxis::Axial, SliceAxis::Coronal, SliceAxis::Sagittal] {
@@ -385,8 +436,10 @@ fn several_maps_combine_by_max() {
     let v = p.volume.view();
     let params = GrowthParams::default();
     let mut set = OpacityMapSet::new();
-    set.add(v, &Seed::Voxel(p.a.centre_voxel()), params).unwrap();
-    set.add(v, &Seed::Voxel(p.c.centre_voxel()), params).unwrap();
+    set.add(v, &Seed::Voxel(p.a.centre_voxel()), params)
+        .unwrap();
+    set.add(v, &Seed::Voxel(p.c.centre_voxel()), params)
+        .unwrap();
     let rep = set.run_all(v).unwrap();
     assert!(rep.converged);
     let maps = set.maps();
@@ -398,7 +451,11 @@ fn several_maps_combine_by_max() {
     let all = set.combined().unwrap();
     let dims = p.volume.grid.dims;
     let (fa, fc, fall) = (full(&maps[0], dims), full(&maps[1], dims), full(&all, dims));
-    assert!(fall.iter().zip(fa.iter().zip(&fc)).all(|(x, (a, c))| *x == (*a).max(*c)));
+    assert!(
+        fall.iter()
+            .zip(fa.iter().zip(&fc))
+            .all(|(x, (a, c))| *x == (*a).max(*c))
+    );
     assert!(dice(&all, dims, |x| matches!(p.label(x), 1 | 3)) > 0.9);
     assert!(set.remove(5).is_none());
     assert!(set.remove(0).is_some());
@@ -411,7 +468,8 @@ fn growth_reaches_the_volume_border() {
     // A seed in a corner region touching three faces: the working box is
     // clipped to the volume and the neighbour loops stay inside.
     let v = noisy_ball_i16(24, 30.0, 0.0, 1);
-    let mut g = CpuGrowth::new(v.view(), &Seed::Voxel([0, 0, 23]), GrowthParams::default()).unwrap();
+    let mut g =
+        CpuGrowth::new(v.view(), &Seed::Voxel([0, 0, 23]), GrowthParams::default()).unwrap();
     g.run(v.view()).unwrap();
     let m = g.map();
     let inside = super::parity::Sphere {
@@ -429,7 +487,9 @@ fn bad_input_is_refused_with_the_value() {
     let p = three_spheres(16, 3.0, 1);
     let v = p.volume.view();
     let ok = GrowthParams::default();
-    let err = |seed: Seed, params: GrowthParams| CpuGrowth::new(v, &seed, params).unwrap_err().to_string();
+    let err = |seed: Seed, params: GrowthParams| {
+        CpuGrowth::new(v, &seed, params).unwrap_err().to_string()
+    };
 
     let e = err(Seed::Voxel([3, 16, 2]), ok);
     assert!(e.contains("outside") && e.contains("16"), "{e}");
@@ -461,18 +521,36 @@ fn bad_input_is_refused_with_the_value() {
         let e = err(seed, GrowthParams { lambda, ..ok });
         assert!(e.contains(&format!("lambda = {lambda}")), "{e}");
     }
-    for (o_min, o_max) in [(0.5, 0.5), (0.6, 0.4), (-0.1, 1.0), (0.0, 1.5), (f32::NAN, 1.0)] {
+    for (o_min, o_max) in [
+        (0.5, 0.5),
+        (0.6, 0.4),
+        (-0.1, 1.0),
+        (0.0, 1.5),
+        (f32::NAN, 1.0),
+    ] {
         let e = err(seed, GrowthParams { o_min, o_max, ..ok });
-        assert!(e.contains(&format!("o_min = {o_min}")) && e.contains(&format!("o_max = {o_max}")), "{e}");
+        assert!(
+            e.contains(&format!("o_min = {o_min}")) && e.contains(&format!("o_max = {o_max}")),
+            "{e}"
+        );
     }
-    let e = err(seed, GrowthParams { sigma_floor: 0.0, ..ok });
+    let e = err(
+        seed,
+        GrowthParams {
+            sigma_floor: 0.0,
+            ..ok
+        },
+    );
     assert!(e.contains("sigma_floor = 0"), "{e}");
 
     // A volume of another size, a view whose values do not fit its grid.
     let mut g = CpuGrowth::new(v, &seed, ok).unwrap();
     let other = three_spheres(12, 3.0, 1);
     let e = g.step(other.volume.view(), 1).unwrap_err().to_string();
-    assert!(e.contains("[16, 16, 16]") && e.contains("[12, 12, 12]"), "{e}");
+    assert!(
+        e.contains("[16, 16, 16]") && e.contains("[12, 12, 12]"),
+        "{e}"
+    );
     let short = crate::volume::VolumeView {
         grid: v.grid,
         data: crate::volume::VoxelSlice::F32(&[1.0; 10]),
@@ -484,7 +562,9 @@ fn bad_input_is_refused_with_the_value() {
     if let VoxelData::F32(x) = &mut nan.data {
         x[nan.grid.linear(8, 8, 8)] = f32::NAN;
     }
-    let e = CpuGrowth::new(nan.view(), &seed, ok).unwrap_err().to_string();
+    let e = CpuGrowth::new(nan.view(), &seed, ok)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("non-finite"), "{e}");
     // …but NaN elsewhere is a wall, not a panic.
     let mut g = CpuGrowth::new(nan.view(), &Seed::Voxel([3, 3, 3]), ok).unwrap();
@@ -502,7 +582,18 @@ fn extinction_matches_the_paper_formula() {
         sigma: 3.0,
     };
     let ext = Extinction::new(&stats, &GrowthParams::default()).unwrap();
-    for d in [100.0f32, 101.0, 103.0, 110.0, 130.0, 190.0, 1e20, -1e20, f32::NAN, f32::INFINITY] {
+    for d in [
+        100.0f32,
+        101.0,
+        103.0,
+        110.0,
+        130.0,
+        190.0,
+        1e20,
+        -1e20,
+        f32::NAN,
+        f32::INFINITY,
+    ] {
         let real = ((100.0 - d as f64).abs() - 3.0) / 90.0;
         let q = ext.fixed(d) as f64 / 65535.0;
         if real <= 31.0 / 30.0 {
@@ -521,7 +612,16 @@ fn fast_rounding_is_ties_to_even() {
     let mut rng = super::parity::XorShift::new(3);
     let ties = (-300..300).map(|i| i as f32 + 0.5);
     let random = (0..100_000).map(|_| ((rng.uniform() - 0.5) * 2.0 * 131_072.0) as f32);
-    let edges = [0.0, -0.0, 0.49999997, -0.49999997, 131_072.0, -131_072.0, 131_071.5, -131_071.5];
+    let edges = [
+        0.0,
+        -0.0,
+        0.49999997,
+        -0.49999997,
+        131_072.0,
+        -131_072.0,
+        131_071.5,
+        -131_071.5,
+    ];
     for x in ties.chain(random).chain(edges) {
         assert_eq!(round_ties_even_small(x), x.round_ties_even(), "{x}");
     }
@@ -547,4 +647,3 @@ fn gaussian_transfer_function() {
     };
     assert_eq!(GaussianTf::from_stats(&stats), GaussianTf::new(7.0, 0.5));
 }
-
