@@ -109,3 +109,19 @@ nifti = "deformed.nii.gz"
         out.display()
     )
 }
+
+/// Runs a GPU-vs-CPU parity check (from a `parity` module of voxflex-core)
+/// on the shared test device; prints SKIPPED without an adapter, except
+/// under `CI=true`, where a missing adapter fails.
+pub fn run_parity(check: fn(&dyn voxflex_core::gpu::GpuService) -> Result<(), String>) {
+    let Some(gpu) = voxflex_runtime::gpu_context::testing::test_gpu() else {
+        return;
+    };
+    if let Err(e) = check(gpu.as_ref()) {
+        panic!(
+            "{} on {}",
+            e,
+            voxflex_core::gpu::GpuService::adapter_description(gpu.as_ref())
+        );
+    }
+}

@@ -6,18 +6,7 @@
 //! an adapter these tests print SKIPPED, except under `CI=true`.
 
 use voxflex_core::resample::parity;
-use voxflex_runtime::gpu_context::testing::test_gpu;
-
-fn run(check: fn(&dyn voxflex_core::gpu::GpuService) -> Result<(), String>) {
-    let Some(gpu) = test_gpu() else { return };
-    if let Err(e) = check(gpu.as_ref()) {
-        panic!(
-            "{} on {}",
-            e,
-            voxflex_core::gpu::GpuService::adapter_description(gpu.as_ref())
-        );
-    }
-}
+use voxflex_integration_tests::run_parity as run;
 
 #[test]
 fn identity_is_bitwise() {

@@ -277,6 +277,54 @@ unsafe extern "C" fn host_gpu_dispatch(
     })
 }
 
+/// A plugin kind's `create` entry point.
+pub(crate) type CreateFn =
+    unsafe extern "C" fn(StrRef, *const HostApi, *mut Instance, *mut ErrorBuf) -> i32;
+
+/// Calls a plugin's `create` and returns the instance, or the plugin's
+/// message prefixed with its name.
+///
+/// # Safety
+/// `create` must be a valid entry point of a library that is never unloaded.
+pub(crate) unsafe fn create_proxy_instance(
+    name: &str,
+    create: CreateFn,
+    params_toml: &str,
+    services: &HostServices,
+) -> Result<Instance, ModelError> {
+    let mut sink = ErrorSink::new();
+    let mut instance: Instance = std::ptr::null_mut();
+    // SAFETY: valid entry point; arguments live during the call.
+    let status = unsafe {
+        create(
+            StrRef::new(params_toml),
+            services.api(),
+            &mut instance,
+            sink.as_ffi(),
+        )
+    };
+    sink.check(status).map_err(|m| plugin_error(name, &m))?;
+    if instance.is_null() {
+        return Err(plugin_error(name, "create returned no instance"));
+    }
+    Ok(instance)
+}
+
+/// An error reported by (or about) plugin `name`.
+pub(crate) fn plugin_error(name: &str, message: &str) -> ModelError {
+    ModelError(format!("plugin `{name}`: {message}"))
+}
+
+/// Runs one vtable call with a fresh error sink; errors name the plugin.
+pub(crate) fn checked_call(
+    name: &str,
+    f: impl FnOnce(*mut ErrorBuf) -> i32,
+) -> Result<(), ModelError> {
+    let mut sink = ErrorSink::new();
+    let status = f(sink.as_ffi());
+    sink.check(status).map_err(|m| plugin_error(name, &m))
+}
+
 /// A plugin instance seen as a [`DeformationModel`]: every call goes through
 /// the plugin's C vtable, and errors come back prefixed with the plugin name.
 pub struct DeformationProxy {
@@ -302,24 +350,9 @@ impl DeformationProxy {
         params_toml: &str,
         services: Arc<HostServices>,
     ) -> Result<Self, ModelError> {
-        let mut sink = ErrorSink::new();
-        let mut instance: Instance = std::ptr::null_mut();
-        // SAFETY: valid vtable; arguments live during the call.
-        let status = unsafe {
-            (vtable.create)(
-                StrRef::new(params_toml),
-                services.api(),
-                &mut instance,
-                sink.as_ffi(),
-            )
-        };
-        sink.check(status)
-            .map_err(|m| ModelError(format!("plugin `{name}`: {m}")))?;
-        if instance.is_null() {
-            return Err(ModelError(format!(
-                "plugin `{name}`: create returned no instance"
-            )));
-        }
+        // SAFETY: a valid vtable (caller contract).
+        let instance =
+            unsafe { create_proxy_instance(name, vtable.create, params_toml, &services) }?;
         Ok(Self {
             name: name.to_owned(),
             vtable,
@@ -334,10 +367,7 @@ impl DeformationProxy {
     }
 
     fn call(&self, f: impl FnOnce(*mut ErrorBuf) -> i32) -> Result<(), ModelError> {
-        let mut sink = ErrorSink::new();
-        let status = f(sink.as_ffi());
-        sink.check(status)
-            .map_err(|m| ModelError(format!("plugin `{}`: {m}", self.name)))
+        checked_call(&self.name, f)
     }
 }
 

@@ -3,8 +3,8 @@
 //! ([`RendererProxy`]), mirroring `voxflex_core::render::Renderer`.
 
 use crate::ffi::*;
-use crate::guard::{ErrorSink, guard};
-use crate::host_side::HostServices;
+use crate::guard::guard;
+use crate::host_side::{HostServices, checked_call, create_proxy_instance};
 use crate::plugin::{HostContext, create_instance, destroy_instance, state};
 use std::sync::Arc;
 use voxflex_core::camera::Camera;
@@ -230,24 +230,9 @@ impl RendererProxy {
         params_toml: &str,
         services: Arc<HostServices>,
     ) -> Result<Self, ModelError> {
-        let mut sink = ErrorSink::new();
-        let mut instance: Instance = std::ptr::null_mut();
-        // SAFETY: valid vtable; arguments live during the call.
-        let status = unsafe {
-            (vtable.create)(
-                StrRef::new(params_toml),
-                services.api(),
-                &mut instance,
-                sink.as_ffi(),
-            )
-        };
-        sink.check(status)
-            .map_err(|m| ModelError(format!("plugin `{name}`: {m}")))?;
-        if instance.is_null() {
-            return Err(ModelError(format!(
-                "plugin `{name}`: create returned no instance"
-            )));
-        }
+        // SAFETY: a valid vtable (caller contract).
+        let instance =
+            unsafe { create_proxy_instance(name, vtable.create, params_toml, &services) }?;
         Ok(Self {
             name: name.to_owned(),
             vtable,
@@ -257,10 +242,7 @@ impl RendererProxy {
     }
 
     fn call(&self, f: impl FnOnce(*mut ErrorBuf) -> i32) -> Result<(), ModelError> {
-        let mut sink = ErrorSink::new();
-        let status = f(sink.as_ffi());
-        sink.check(status)
-            .map_err(|m| ModelError(format!("plugin `{}`: {m}", self.name)))
+        checked_call(&self.name, f)
     }
 }
 
