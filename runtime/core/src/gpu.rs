@@ -143,6 +143,55 @@ pub fn workgroups_1d(n: u64, workgroup_size: u32, max_per_dim: u32) -> Result<[u
     Ok([x as u32, y as u32, z as u32])
 }
 
+/// A [`GpuService`] that forwards to another but reports a smaller
+/// `max_storage_buffer_binding_size`, so tests exercise the slab splitting
+/// every GPU algorithm needs on devices with small bindings.
+#[doc(hidden)]
+pub struct LimitedBinding<'a> {
+    /// The real service.
+    pub inner: &'a dyn GpuService,
+    /// The storage binding limit to report, bytes.
+    pub max_storage_buffer_binding_size: u64,
+}
+
+impl GpuService for LimitedBinding<'_> {
+    fn adapter_description(&self) -> String {
+        self.inner.adapter_description()
+    }
+    fn limits(&self) -> GpuLimits {
+        GpuLimits {
+            max_storage_buffer_binding_size: self.max_storage_buffer_binding_size,
+            ..self.inner.limits()
+        }
+    }
+    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
+        self.inner.create_buffer(size_bytes, label)
+    }
+    fn destroy_buffer(&self, id: BufferId) {
+        self.inner.destroy_buffer(id)
+    }
+    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
+        self.inner.buffer_size(id)
+    }
+    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
+        self.inner.write_buffer(id, offset, bytes)
+    }
+    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
+        self.inner.read_buffer(id, offset, out)
+    }
+    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
+        self.inner.compile(wgsl, entry_point)
+    }
+    fn dispatch(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        workgroups: [u32; 3],
+    ) -> Result<(), GpuError> {
+        self.inner.dispatch(pipeline, bindings, workgroups)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,8 +13,8 @@ use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::Seed;
 use super::{OpacityError, OpacityMap};
-use crate::error::GpuError;
-use crate::gpu::{BufferBinding, BufferId, GpuLimits, GpuService, PipelineId};
+use crate::gpu::GpuService;
+use crate::gpu::LimitedBinding;
 use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
@@ -213,51 +213,6 @@ pub fn dice(map: &OpacityMap, dims: [usize; 3], truth: impl Fn([usize; 3]) -> bo
         1.0
     } else {
         2.0 * both as f64 / (m + t) as f64
-    }
-}
-
-/// A [`GpuService`] that forwards to another but reports a smaller
-/// `max_storage_buffer_binding_size`.
-struct SmallBinding<'a> {
-    inner: &'a dyn GpuService,
-    limit: u64,
-}
-
-impl GpuService for SmallBinding<'_> {
-    fn adapter_description(&self) -> String {
-        self.inner.adapter_description()
-    }
-    fn limits(&self) -> GpuLimits {
-        GpuLimits {
-            max_storage_buffer_binding_size: self.limit,
-            ..self.inner.limits()
-        }
-    }
-    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
-        self.inner.create_buffer(size_bytes, label)
-    }
-    fn destroy_buffer(&self, id: BufferId) {
-        self.inner.destroy_buffer(id)
-    }
-    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
-        self.inner.buffer_size(id)
-    }
-    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
-        self.inner.write_buffer(id, offset, bytes)
-    }
-    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
-        self.inner.read_buffer(id, offset, out)
-    }
-    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
-        self.inner.compile(wgsl, entry_point)
-    }
-    fn dispatch(
-        &self,
-        pipeline: PipelineId,
-        bindings: &[BufferBinding],
-        workgroups: [u32; 3],
-    ) -> Result<(), GpuError> {
-        self.inner.dispatch(pipeline, bindings, workgroups)
     }
 }
 
@@ -469,9 +424,9 @@ pub fn check_several_maps(gpu: &dyn GpuService) -> Result<(), String> {
 /// [`OpacityError::GpuVolumeMismatch`]; nothing panics.
 pub fn check_refusals(gpu: &dyn GpuService) -> Result<(), String> {
     let p = three_spheres(24, 3.0, 24);
-    let small = SmallBinding {
+    let small = LimitedBinding {
         inner: gpu,
-        limit: 4096,
+        max_storage_buffer_binding_size: 4096,
     };
     match GpuOpacityVolume::upload(&small, p.volume.view()) {
         Err(OpacityError::BindingTooLarge { bytes, limit, .. })

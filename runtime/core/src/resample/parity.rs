@@ -11,8 +11,8 @@
 use super::gpu::GpuSource;
 use super::{DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, Resampler, TetMask};
 use crate::deformation::DirtyRegion;
-use crate::error::GpuError;
-use crate::gpu::{BufferId, GpuLimits, GpuService, GpuServiceExt, PipelineId};
+use crate::gpu::LimitedBinding;
+use crate::gpu::{BufferId, GpuService, GpuServiceExt};
 use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
 use glam::{DMat3, DVec3};
@@ -159,53 +159,6 @@ pub fn head_i16(grid: &Grid) -> Volume {
         })
         .collect();
     Volume::new(*grid, VoxelData::I16(v)).expect("sizes match")
-}
-
-/// A [`GpuService`] that forwards to another but reports a smaller
-/// `max_storage_buffer_binding_size`, to exercise output slabs.
-pub struct LimitedBinding<'a> {
-    /// The real service.
-    pub inner: &'a dyn GpuService,
-    /// The storage binding limit to report, bytes.
-    pub max_storage_buffer_binding_size: u64,
-}
-
-impl GpuService for LimitedBinding<'_> {
-    fn adapter_description(&self) -> String {
-        self.inner.adapter_description()
-    }
-    fn limits(&self) -> GpuLimits {
-        GpuLimits {
-            max_storage_buffer_binding_size: self.max_storage_buffer_binding_size,
-            ..self.inner.limits()
-        }
-    }
-    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
-        self.inner.create_buffer(size_bytes, label)
-    }
-    fn destroy_buffer(&self, id: BufferId) {
-        self.inner.destroy_buffer(id)
-    }
-    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
-        self.inner.buffer_size(id)
-    }
-    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
-        self.inner.write_buffer(id, offset, bytes)
-    }
-    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
-        self.inner.read_buffer(id, offset, out)
-    }
-    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
-        self.inner.compile(wgsl, entry_point)
-    }
-    fn dispatch(
-        &self,
-        pipeline: PipelineId,
-        bindings: &[crate::gpu::BufferBinding],
-        workgroups: [u32; 3],
-    ) -> Result<(), GpuError> {
-        self.inner.dispatch(pipeline, bindings, workgroups)
-    }
 }
 
 fn e(err: ResampleError) -> String {
