@@ -13,6 +13,7 @@
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
+use voxflex_core::opacity::Growth;
 use voxflex_core::opacity::parity::noisy_ball_i16;
 use voxflex_core::opacity::{CpuGrowth, GrowthParams, Seed};
 

@@ -19,6 +19,7 @@ use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
 use voxflex_core::io::png::SliceAxis;
 use voxflex_core::io::{write_atomically, write_volume};
+use voxflex_core::opacity::Growth;
 use voxflex_core::opacity::{
     CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed, SeedStats,
 };

@@ -1,12 +1,12 @@
 //! [`CpuGrowth`]: one opacity map grown on the CPU (rayon), stepwise or to
 //! convergence.
 
-use super::bounds::{VoxelBounds, grown_working_box, initial_working_box};
-use super::extinction::Extinction;
+use super::bounds::{VoxelBounds, grown_working_box};
 use super::frontier::{Lattice, count, finish, group, lift, states_for};
 use super::params::GrowthParams;
 use super::report::GrowthReport;
-use super::seed::{Seed, SeedStats, seed_stats};
+use super::seed::Seed;
+use super::state::{Growth, GrowthState};
 use super::{OpacityError, check_volume};
 use crate::opacity_map::OpacityMap;
 use crate::volume::VolumeView;
@@ -29,19 +29,13 @@ use std::sync::atomic::{AtomicU16, AtomicU64, Ordering::Relaxed};
 /// region.
 #[derive(Debug)]
 pub struct CpuGrowth {
-    dims: [usize; 3],
-    params: GrowthParams,
-    stats: SeedStats,
-    ext: Extinction,
-    work: VoxelBounds,
+    state: GrowthState,
     field: Vec<AtomicU16>,
     /// Two bits per box voxel: unreached, reached, raised, done (see
     /// `frontier`).
     states: Vec<AtomicU64>,
     /// Voxels that changed in the last step, by group (see `frontier`).
     frontier: Vec<Vec<(u32, u16)>>,
-    region: VoxelBounds,
-    total: GrowthReport,
 }
 
 impl CpuGrowth {
@@ -54,26 +48,15 @@ impl CpuGrowth {
     ) -> Result<Self, OpacityError> {
         params.validate()?;
         check_volume(&volume)?;
-        let voxel = seed.resolve(&volume.grid)?;
-        let stats = seed_stats(volume, voxel, &params)?;
-        let ext = Extinction::new(&stats, &params)?;
-        let dims = volume.grid.dims;
-        let region = VoxelBounds::point(voxel);
-        let work = initial_working_box(&region, dims);
+        let (state, s) = GrowthState::seed(volume, seed, params)?;
+        let (ext, work) = (state.ext, state.work);
         let field: Vec<AtomicU16> = (0..work.len()).map(|_| AtomicU16::new(ext.q_min)).collect();
-        let s = work.local_linear(voxel);
         field[s].store(ext.q_max, Relaxed);
         Ok(Self {
-            dims,
-            params,
-            stats,
-            ext,
-            work,
+            state,
             states: states_for(&field, 0..work.len(), ext.q_min, ext.q_max),
             field,
             frontier: group([(s as u32, ext.q_max)], work.dims()),
-            region,
-            total: GrowthReport::default(),
         })
     }
 
@@ -81,9 +64,9 @@ impl CpuGrowth {
     /// Resumable: `step(a)` then `step(b)` equals `step(a + b)`.
     pub fn step(&mut self, volume: VolumeView<'_>, n: usize) -> Result<GrowthReport, OpacityError> {
         check_volume(&volume)?;
-        if volume.grid.dims != self.dims {
+        if volume.grid.dims != self.state.dims {
             return Err(OpacityError::VolumeMismatch {
-                expected: self.dims,
+                expected: self.state.dims,
                 actual: volume.grid.dims,
             });
         }
@@ -92,16 +75,18 @@ impl CpuGrowth {
             if self.is_converged() {
                 break;
             }
-            if let Some(nb) = grown_working_box(&self.work, &self.region, self.dims) {
+            if let Some(nb) =
+                grown_working_box(&self.state.work, &self.state.region, self.state.dims)
+            {
                 self.regrow(nb);
                 rep.regrows += 1;
             }
-            let lat = Lattice::new(&self.work, self.dims);
+            let lat = Lattice::new(&self.state.work, self.state.dims);
             let found = with_voxels!(volume.data, |s| lift(
                 &lat,
                 &self.field,
                 &self.states,
-                &self.ext,
+                &self.state.ext,
                 s,
                 &self.frontier
             ));
@@ -109,12 +94,12 @@ impl CpuGrowth {
                 &lat,
                 &self.field,
                 &self.states,
-                &self.ext,
+                &self.state.ext,
                 s,
                 &found
             ));
             for b in changes.iter().filter_map(|c| c.bounds) {
-                self.region = self.region.union(&b);
+                self.state.region = self.state.region.union(&b);
             }
             self.frontier = changes.into_iter().map(|c| c.values).collect();
             rep.steps += 1;
@@ -122,7 +107,7 @@ impl CpuGrowth {
             rep.useful += self.frontier_len() as u64;
         }
         rep.converged = self.is_converged();
-        self.total.merge(&rep);
+        self.state.total.merge(&rep);
         Ok(rep)
     }
 
@@ -139,7 +124,7 @@ impl CpuGrowth {
     /// The map as it stands, over the region's box (voxels that ever rose
     /// above `o_min`, plus the seed); `outside` is `o_min`.
     pub fn map(&self) -> OpacityMap {
-        let r = self.region;
+        let r = self.state.region;
         let d = r.dims();
         let mut values = vec![0u16; r.len()];
         values
@@ -147,7 +132,10 @@ impl CpuGrowth {
             .enumerate()
             .for_each(|(z, slab)| {
                 for (y, row) in slab.chunks_mut(d[0]).enumerate() {
-                    let start = self.work.local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
+                    let start = self
+                        .state
+                        .work
+                        .local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
                     for (x, o) in row.iter_mut().enumerate() {
                         *o = self.field[start + x].load(Relaxed);
                     }
@@ -156,39 +144,9 @@ impl CpuGrowth {
         OpacityMap {
             origin: r.lo,
             dims: d,
-            outside: self.ext.q_min,
+            outside: self.state.ext.q_min,
             values,
         }
-    }
-
-    /// Counts of every step run so far.
-    pub fn report(&self) -> GrowthReport {
-        self.total
-    }
-
-    /// The seed's statistics (`d_s`, σ_s).
-    pub fn stats(&self) -> &SeedStats {
-        &self.stats
-    }
-
-    /// The constants of the update rule.
-    pub fn extinction(&self) -> &Extinction {
-        &self.ext
-    }
-
-    /// The parameters the growth was seeded with.
-    pub fn params(&self) -> &GrowthParams {
-        &self.params
-    }
-
-    /// Box (voxel indices) of the voxels raised so far, seed included.
-    pub fn region(&self) -> VoxelBounds {
-        self.region
-    }
-
-    /// Box (voxel indices) the working field covers.
-    pub fn working_box(&self) -> VoxelBounds {
-        self.work
     }
 
     /// Voxels that changed in the last step (the next step's sources).
@@ -207,12 +165,12 @@ impl CpuGrowth {
                 .sum::<usize>()
     }
 
-    /// Moves the field into a larger working box (`nb ⊇ self.work`).
+    /// Moves the field into a larger working box (`nb ⊇ self.state.work`).
     fn regrow(&mut self, nb: VoxelBounds) {
-        let old = self.work;
+        let old = self.state.work;
         let od = old.dims();
         let nd = nb.dims();
-        let q_min = self.ext.q_min;
+        let q_min = self.state.ext.q_min;
         let mut values: Vec<u16> = (0..nb.len()).into_par_iter().map(|_| q_min).collect();
         values
             .par_chunks_mut(nd[0] * nd[1])
@@ -235,13 +193,24 @@ impl CpuGrowth {
         // Voxels outside the old box's slabs are unreached (state 0).
         let plane = nd[0] * nd[1];
         let slabs = (old.lo[2] - nb.lo[2]) * plane..(old.hi[2] + 1 - nb.lo[2]) * plane;
-        self.states = states_for(&self.field, slabs, self.ext.q_min, self.ext.q_max);
+        self.states = states_for(
+            &self.field,
+            slabs,
+            self.state.ext.q_min,
+            self.state.ext.q_max,
+        );
         let moved = self
             .frontier
             .iter()
             .flatten()
             .map(|&(l, q)| (nb.local_linear(old.voxel_of(l as usize)) as u32, q));
         self.frontier = group(moved.collect::<Vec<_>>(), nb.dims());
-        self.work = nb;
+        self.state.work = nb;
+    }
+}
+
+impl Growth for CpuGrowth {
+    fn state(&self) -> &GrowthState {
+        &self.state
     }
 }

@@ -45,11 +45,12 @@
 //! Buffers are not freed on drop (the growth holds no GPU handle): call
 //! [`GpuGrowth::release`] and [`GpuOpacityVolume::release`].
 
-use super::bounds::{VoxelBounds, grown_working_box, initial_working_box};
-use super::extinction::{Extinction, sanitize};
+use super::bounds::{VoxelBounds, grown_working_box};
+use super::extinction::sanitize;
 use super::params::GrowthParams;
 use super::report::GrowthReport;
-use super::seed::{Seed, SeedStats, seed_stats};
+use super::seed::Seed;
+use super::state::{Growth, GrowthState};
 use super::{OpacityError, check_volume};
 use crate::error::GpuError;
 use crate::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
@@ -220,12 +221,7 @@ impl Owned {
 /// as [`super::CpuGrowth`], bit for bit.
 #[derive(Debug)]
 pub struct GpuGrowth {
-    dims: [usize; 3],
-    params: GrowthParams,
-    stats: SeedStats,
-    ext: Extinction,
-    work: VoxelBounds,
-    region: VoxelBounds,
+    state: GrowthState,
     n_front: u32,
     pipes: Pipelines,
     params_buf: Owned,
@@ -237,7 +233,6 @@ pub struct GpuGrowth {
     next: Owned,
     cand: Owned,
     newval: Owned,
-    total: GrowthReport,
 }
 
 impl GpuGrowth {
@@ -259,17 +254,12 @@ impl GpuGrowth {
                 actual: values.grid.dims,
             });
         }
-        let voxel = seed.resolve(&volume.grid)?;
-        let stats = seed_stats(volume, voxel, &params)?;
-        let ext = Extinction::new(&stats, &params)?;
-        let dims = volume.grid.dims;
-        let region = VoxelBounds::point(voxel);
-        let work = initial_working_box(&region, dims);
+        let (state, s) = GrowthState::seed(volume, seed, params)?;
+        let (ext, work) = (state.ext, state.work);
         let pipes = Pipelines::compile(gpu)?;
 
         // Initial field: q_min everywhere, q_max at the seed.
         let mut half = vec![ext.q_min; work.len().next_multiple_of(2)];
-        let s = work.local_linear(voxel);
         half[s] = ext.q_max;
         let words: Vec<u32> = half
             .chunks(2)
@@ -290,12 +280,7 @@ impl GpuGrowth {
             marks0[s >> 4] = 2 << ((s & 15) * 2);
             gpu.write_buffer(front.id, 0, bytemuck::bytes_of(&(s as u32)))?;
             let g = Self {
-                dims,
-                params,
-                stats,
-                ext,
-                work,
-                region,
+                state,
                 n_front: 1,
                 pipes,
                 params_buf: mk(
@@ -313,7 +298,6 @@ impl GpuGrowth {
                 next: mk(1024, "voxflex.opacity.next")?,
                 cand: mk(1024, "voxflex.opacity.candidates")?,
                 newval: mk(1024, "voxflex.opacity.newval")?,
-                total: GrowthReport::default(),
             };
             gpu.write_buffer(g.marks.id, 0, bytemuck::cast_slice(&marks0))?;
             g.write_params(gpu)?;
@@ -338,9 +322,9 @@ impl GpuGrowth {
         values: &GpuOpacityVolume,
         n: usize,
     ) -> Result<GrowthReport, OpacityError> {
-        if values.grid.dims != self.dims {
+        if values.grid.dims != self.state.dims {
             return Err(OpacityError::GpuVolumeMismatch {
-                expected: self.dims,
+                expected: self.state.dims,
                 actual: values.grid.dims,
             });
         }
@@ -350,7 +334,9 @@ impl GpuGrowth {
                 if self.n_front == 0 {
                     break;
                 }
-                if let Some(nb) = grown_working_box(&self.work, &self.region, self.dims) {
+                if let Some(nb) =
+                    grown_working_box(&self.state.work, &self.state.region, self.state.dims)
+                {
                     self.regrow(gpu, nb)?;
                     rep.regrows += 1;
                 }
@@ -362,7 +348,7 @@ impl GpuGrowth {
             Ok(())
         })();
         rep.converged = self.n_front == 0;
-        self.total.merge(&rep);
+        self.state.total.merge(&rep);
         result?;
         Ok(rep)
     }
@@ -383,7 +369,7 @@ impl GpuGrowth {
 
     /// Reads the map back: the region's box, `outside = o_min`.
     pub fn map(&self, gpu: &dyn GpuService) -> Result<OpacityMap, OpacityError> {
-        let w = self.work;
+        let w = self.state.work;
         let mut words = vec![0u32; w.len().div_ceil(2)];
         const CHUNK: usize = 16 << 20;
         for (n, chunk) in words.chunks_mut(CHUNK).enumerate() {
@@ -394,7 +380,7 @@ impl GpuGrowth {
             )?;
         }
         let get = |l: usize| (words[l >> 1] >> ((l & 1) * 16)) as u16;
-        let r = self.region;
+        let r = self.state.region;
         let d = r.dims();
         let mut values = Vec::with_capacity(r.len());
         for z in 0..d[2] {
@@ -406,39 +392,9 @@ impl GpuGrowth {
         Ok(OpacityMap {
             origin: r.lo,
             dims: d,
-            outside: self.ext.q_min,
+            outside: self.state.ext.q_min,
             values,
         })
-    }
-
-    /// Counts of every step run so far.
-    pub fn report(&self) -> GrowthReport {
-        self.total
-    }
-
-    /// The seed's statistics (`d_s`, σ_s).
-    pub fn stats(&self) -> &SeedStats {
-        &self.stats
-    }
-
-    /// The constants of the update rule.
-    pub fn extinction(&self) -> &Extinction {
-        &self.ext
-    }
-
-    /// The parameters the growth was seeded with.
-    pub fn params(&self) -> &GrowthParams {
-        &self.params
-    }
-
-    /// Box (voxel indices) of the voxels raised so far, seed included.
-    pub fn region(&self) -> VoxelBounds {
-        self.region
-    }
-
-    /// Box (voxel indices) the working field covers.
-    pub fn working_box(&self) -> VoxelBounds {
-        self.work
     }
 
     /// GPU bytes this growth holds (the shared volume not included).
@@ -468,23 +424,33 @@ impl GpuGrowth {
     }
 
     fn write_params(&self, gpu: &dyn GpuService) -> Result<(), GpuError> {
-        let d = self.work.dims();
+        let d = self.state.work.dims();
         let p = Params {
             vdim: [
-                self.dims[0] as u32,
-                self.dims[1] as u32,
-                self.dims[2] as u32,
+                self.state.dims[0] as u32,
+                self.state.dims[1] as u32,
+                self.state.dims[2] as u32,
                 0,
             ],
             blo: [
-                self.work.lo[0] as u32,
-                self.work.lo[1] as u32,
-                self.work.lo[2] as u32,
-                self.work.len() as u32,
+                self.state.work.lo[0] as u32,
+                self.state.work.lo[1] as u32,
+                self.state.work.lo[2] as u32,
+                self.state.work.len() as u32,
             ],
             bdim: [d[0] as u32, d[1] as u32, d[2] as u32, 0],
-            ext: [self.ext.mean, self.ext.sigma, self.ext.scale, self.ext.cap],
-            q: [self.ext.q_min as u32, self.ext.q_max as u32, 0, 0],
+            ext: [
+                self.state.ext.mean,
+                self.state.ext.sigma,
+                self.state.ext.scale,
+                self.state.ext.cap,
+            ],
+            q: [
+                self.state.ext.q_min as u32,
+                self.state.ext.q_max as u32,
+                0,
+                0,
+            ],
         };
         gpu.write_buffer(self.params_buf.id, 0, bytemuck::bytes_of(&p))
     }
@@ -496,7 +462,7 @@ impl GpuGrowth {
         values: &GpuOpacityVolume,
     ) -> Result<(u64, u64), GpuError> {
         let b = |binding, o: &Owned| BufferBinding::whole(binding, o.id);
-        let box_len = self.work.len() as u64;
+        let box_len = self.state.work.len() as u64;
         let bound = (26 * self.n_front as u64).min(box_len);
         self.cand
             .ensure(gpu, bound * 4, "voxflex.opacity.candidates")?;
@@ -574,16 +540,16 @@ impl GpuGrowth {
                 lo: [lo[0] as usize, lo[1] as usize, lo[2] as usize],
                 hi: [hi[0] as usize, hi[1] as usize, hi[2] as usize],
             };
-            self.region = self.region.union(&grown);
+            self.state.region = self.state.region.union(&grown);
         }
         std::mem::swap(&mut self.front, &mut self.next);
         self.n_front = n_next;
         Ok((n_cand as u64, n_next as u64))
     }
 
-    /// Moves the field into a larger working box (`nb ⊇ self.work`).
+    /// Moves the field into a larger working box (`nb ⊇ self.state.work`).
     fn regrow(&mut self, gpu: &dyn GpuService, nb: VoxelBounds) -> Result<(), GpuError> {
-        let old = self.work;
+        let old = self.state.work;
         let (od, nd) = (old.dims(), nb.dims());
         let r = Regrow {
             olo: [
@@ -596,7 +562,7 @@ impl GpuGrowth {
                 od[0] as u32,
                 od[1] as u32,
                 od[2] as u32,
-                self.ext.q_min as u32,
+                self.state.ext.q_min as u32,
             ],
             nlo: [
                 nb.lo[0] as u32,
@@ -608,7 +574,7 @@ impl GpuGrowth {
                 nd[0] as u32,
                 nd[1] as u32,
                 nd[2] as u32,
-                self.ext.q_max as u32,
+                self.state.ext.q_max as u32,
             ],
         };
         gpu.write_buffer(self.regrow_buf.id, 0, bytemuck::bytes_of(&r))?;
@@ -662,7 +628,7 @@ impl GpuGrowth {
         self.field = field;
         self.marks = marks;
         std::mem::swap(&mut self.front, &mut self.next);
-        self.work = nb;
+        self.state.work = nb;
         self.write_params(gpu)
     }
 }
@@ -670,4 +636,10 @@ impl GpuGrowth {
 /// Bytes of the marks of `n` voxels (2 bits each, in u32 words).
 fn marks_bytes(n: usize) -> u64 {
     n.div_ceil(16) as u64 * 4
+}
+
+impl Growth for GpuGrowth {
+    fn state(&self) -> &GrowthState {
+        &self.state
+    }
 }

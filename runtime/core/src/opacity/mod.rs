@@ -114,6 +114,7 @@ pub mod parity;
 pub mod report;
 pub mod seed;
 pub mod set;
+pub mod state;
 
 #[cfg(test)]
 mod tests;
@@ -128,6 +129,7 @@ pub use params::GrowthParams;
 pub use report::GrowthReport;
 pub use seed::{Seed, SeedStats, seed_stats};
 pub use set::{OpacityMapSet, combine_max};
+pub use state::{Growth, GrowthState};
 
 pub use crate::opacity_map::OpacityMap;
 

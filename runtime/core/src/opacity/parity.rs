@@ -12,6 +12,7 @@ use super::gpu::{GpuGrowth, GpuOpacityVolume};
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::Seed;
+use super::state::Growth;
 use super::{OpacityError, OpacityMap};
 use crate::gpu::GpuService;
 use crate::gpu::LimitedBinding;

@@ -2,6 +2,7 @@
 //! monotonicity, seeds, sparse = dense, several maps, bad input.
 
 use super::parity::{Phantom, dice, noisy_ball_i16, three_spheres, three_spheres_with};
+use super::state::Growth;
 use super::*;
 use crate::grid::Grid;
 use crate::io::png::{SliceAxis, Window, render_slice};
