@@ -1,7 +1,8 @@
 //! The rayon kernels of the resampler (the CPU twin of
 //! `shaders/resample/*.wgsl`).
 //!
-//! - block bounds: one task per block, min/max of its vertices' positions;
+//! - block bounds: one task per block, min/max of its vertices' positions
+//!   (four vertices of a row per SIMD operation);
 //! - clear: the region's output words set to `u32::MAX` ("no owner");
 //! - pass 1: one task per cell block; its cells go four at a time, by
 //!   parity, through [`super::lanes`] (per cell the eight deformed corners,
@@ -9,14 +10,15 @@
 //!   box, the smallest containing tetrahedron), then `fetch_min(tet id)`
 //!   after a relaxed load, so voxels that already hold a smaller id cost no
 //!   atomic read-modify-write;
-//! - pass 2: one task per output row; owner → barycentric weights → value.
+//! - pass 2: one task per output row; owner → barycentric weights → value,
+//!   four voxels per SIMD operation through [`super::fill_lanes`].
 //!
 //! The output `Vec<f32>` is viewed as `[AtomicU32]` during a call; no other
 //! per-voxel memory is used.
 
 use super::blocks::BlockBounds;
+use super::fill_lanes::{FILL_LANES, FillGroup, interpolate_group};
 use super::lanes::{LANES, LaneCtx, raster_group};
-use super::raster::{barycentric, interpolate};
 use super::sampling_mesh::{
     CELL_TETS, TetDecoder, cell_parity, corner_offset, deformed_coordinate,
 };
@@ -26,6 +28,7 @@ use super::{
 use crate::volume::{Sample, VoxelSlice};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+use wide::f32x4;
 
 /// The CPU half of a resampling call.
 pub(crate) struct CpuKernels<'a> {
@@ -64,16 +67,34 @@ impl Kernels for CpuKernels<'_> {
 
     fn allocate_output(&mut self, output: &OutputGrid) -> Result<(), ResampleError> {
         let n = output.len();
-        if self.out.len() != n {
+        if self.out.len() == n {
+            return Ok(());
+        }
+        if self.out.capacity() < n {
+            // A grid that grew once tends to grow again while a deformation
+            // ramps up: keep a quarter in hand so the next growth reuses the
+            // pages instead of faulting in a fresh block (the old one goes
+            // first, to keep the peak low).
             *self.out = Vec::new();
+            let want = n.saturating_add(n / 4);
             let mut v = Vec::new();
-            v.try_reserve_exact(n)
-                .map_err(|_| ResampleError::OutOfMemory {
-                    voxels: n,
-                    bytes: n * 4,
-                })?;
-            v.resize(n, 0.0);
+            if v.try_reserve_exact(want).is_err() {
+                v.try_reserve_exact(n)
+                    .map_err(|_| ResampleError::OutOfMemory {
+                        voxels: n,
+                        bytes: n * 4,
+                    })?;
+            }
             *self.out = v;
+        }
+        // Every word of the output is cleared and rewritten by the passes;
+        // new words are written in parallel so that both cores share the
+        // first-touch page faults.
+        let len = self.out.len();
+        if n < len {
+            self.out.truncate(n);
+        } else {
+            self.out.par_extend(rayon::iter::repeat_n(0.0, n - len));
         }
         Ok(())
     }
@@ -120,46 +141,62 @@ impl Kernels for CpuKernels<'_> {
     }
 }
 
-/// Deformed bounds of one block's vertices.
+/// Deformed bounds of one block's vertices, four vertices of a row at a
+/// time (same expressions as `deformed_coordinate`; NaN-propagating min/max:
+/// a NaN displacement must show).
 fn block_bounds(c: &KernelConsts, disp: &DisplacementsRef<'_>, b: usize) -> BlockBounds {
+    const W: usize = 4;
     let (lo, hi) = c.layout.vertices(b);
     let [nx, ny, _] = c.mesh.vertex_dims();
-    let inv = c.inv_spacing;
-    let mut mn = [f32::INFINITY; 3];
-    let mut mx = [f32::NEG_INFINITY; 3];
+    let inv = c.inv_spacing.map(f32x4::splat);
+    let mut mn = [f32x4::splat(f32::INFINITY); 3];
+    let mut mx = [f32x4::splat(f32::NEG_INFINITY); 3];
+    let mut fold = |p: [f32x4; 3]| {
+        for a in 0..3 {
+            mn[a] = (p[a].simd_lt(mn[a]) | p[a].is_nan()).select(p[a], mn[a]);
+            mx[a] = (p[a].simd_gt(mx[a]) | p[a].is_nan()).select(p[a], mx[a]);
+        }
+    };
+    let width = hi[0] - lo[0] + 1;
     for k in lo[2]..=hi[2] {
-        let z0 = k as f32;
+        let z0 = f32x4::splat(k as f32);
         for j in lo[1]..=hi[1] {
-            let y0 = j as f32;
-            let row = nx * (j + ny * k);
+            let y0 = f32x4::splat(j as f32);
+            let row = lo[0] + nx * (j + ny * k);
             let (dx, dy, dz) = (
-                &disp.x[row + lo[0]..=row + hi[0]],
-                &disp.y[row + lo[0]..=row + hi[0]],
-                &disp.z[row + lo[0]..=row + hi[0]],
+                &disp.x[row..row + width],
+                &disp.y[row..row + width],
+                &disp.z[row..row + width],
             );
-            for (n, i) in (lo[0]..=hi[0]).enumerate() {
-                let p = [
-                    deformed_coordinate(i, dx[n], inv[0]),
-                    y0 + dy[n] * inv[1],
-                    z0 + dz[n] * inv[2],
-                ];
-                for a in 0..3 {
-                    // NaN-propagating min/max: a NaN displacement must show.
-                    mn[a] = if p[a] < mn[a] || p[a].is_nan() {
-                        p[a]
-                    } else {
-                        mn[a]
-                    };
-                    mx[a] = if p[a] > mx[a] || p[a].is_nan() {
-                        p[a]
-                    } else {
-                        mx[a]
-                    };
+            // Chunks of four; the last one is padded by repeating its final
+            // vertex, which changes neither minimum nor maximum.
+            let mut n = 0;
+            while n < width {
+                let mut i = [0usize; W];
+                for (l, v) in i.iter_mut().enumerate() {
+                    *v = (n + l).min(width - 1);
                 }
+                let x0 = f32x4::new(i.map(|v| (lo[0] + v) as i32 as f32));
+                let d = |s: &[f32]| f32x4::new([s[i[0]], s[i[1]], s[i[2]], s[i[3]]]);
+                fold([
+                    x0 + d(dx) * inv[0],
+                    y0 + d(dy) * inv[1],
+                    z0 + d(dz) * inv[2],
+                ]);
+                n += W;
             }
         }
     }
-    BlockBounds { min: mn, max: mx }
+    let reduce = |v: f32x4, take: fn(f32, f32) -> bool| {
+        v.to_array()
+            .into_iter()
+            .reduce(|acc, p| if take(p, acc) || p.is_nan() { p } else { acc })
+            .expect("four lanes")
+    };
+    BlockBounds {
+        min: [0, 1, 2].map(|a| reduce(mn[a], |p, acc| p < acc)),
+        max: [0, 1, 2].map(|a| reduce(mx[a], |p, acc| p > acc)),
+    }
 }
 
 fn clear(job: &Job<'_>, out: &[AtomicU32]) {
@@ -184,19 +221,6 @@ struct RasterCtx<'a> {
     /// Voxels that may be written, source index units.
     clip: VoxelBox,
     decoder: TetDecoder,
-}
-
-impl RasterCtx<'_> {
-    /// Deformed position of vertex `v` (source voxel indices), linear `g`.
-    #[inline(always)]
-    fn position(&self, v: [usize; 3], g: usize) -> [f32; 3] {
-        let inv = self.c.inv_spacing;
-        [
-            deformed_coordinate(v[0], self.disp.x[g], inv[0]),
-            deformed_coordinate(v[1], self.disp.y[g], inv[1]),
-            deformed_coordinate(v[2], self.disp.z[g], inv[2]),
-        ]
-    }
 }
 
 fn raster_block(ctx: &RasterCtx<'_>, lanes: &LaneCtx<'_>, b: usize, out: &[AtomicU32]) {
@@ -245,7 +269,8 @@ fn flush(
     g.2 = 0;
 }
 
-/// Pass 2 over the region: owner id → interpolated value (f32 bits).
+/// Pass 2 over the region: owner id → interpolated value (f32 bits), four
+/// voxels of a row at a time ([`super::fill_lanes`]).
 fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
     let r = ctx.clip;
     let d = r.dims();
@@ -254,35 +279,82 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
         let y = r.lo[1] + (row % d[1]) as i32;
         let z = r.lo[2] + (row / d[1]) as i32;
         let base = ctx.output.linear([r.lo[0], y, z]);
-        for (n, o) in out[base..base + d[0]].iter().enumerate() {
-            let owner = o.load(Relaxed);
-            let v = if owner == u32::MAX {
-                bg
-            } else {
-                let q = [(r.lo[0] + n as i32) as f32, y as f32, z as f32];
-                value_at(ctx, src, owner, q).to_bits()
-            };
-            o.store(v, Relaxed);
+        for (c, chunk) in out[base..base + d[0]].chunks(FILL_LANES).enumerate() {
+            let mut owners = [u32::MAX; FILL_LANES];
+            for (o, a) in owners.iter_mut().zip(chunk) {
+                *o = a.load(Relaxed);
+            }
+            if owners.iter().all(|&o| o == u32::MAX) {
+                for a in chunk {
+                    a.store(bg, Relaxed);
+                }
+                continue;
+            }
+            let mut g = FillGroup::default();
+            let x0 = r.lo[0] + (c * FILL_LANES) as i32;
+            for (l, &owner) in owners.iter().enumerate() {
+                g.q[0][l] = (x0 + l as i32) as f32;
+                g.q[1][l] = y as f32;
+                g.q[2][l] = z as f32;
+                if owner == u32::MAX {
+                    continue;
+                }
+                if l > 0 && owners[l - 1] == owner {
+                    // Same tetrahedron as the previous voxel: same corners.
+                    for a in 0..4 {
+                        for axis in 0..3 {
+                            g.p[a][axis][l] = g.p[a][axis][l - 1];
+                        }
+                        g.v[a][l] = g.v[a][l - 1];
+                    }
+                } else {
+                    gather(ctx, src, owner, l, &mut g);
+                }
+            }
+            let v = interpolate_group(&g);
+            for (l, a) in chunk.iter().enumerate() {
+                a.store(
+                    if owners[l] == u32::MAX {
+                        bg
+                    } else {
+                        v[l].to_bits()
+                    },
+                    Relaxed,
+                );
+            }
         }
     });
 }
 
-/// The value at voxel centre `q` (source index units) interpolated in
+/// Lane `l` of `g`: the corners (source index units) and source values of
 /// tetrahedron `owner`.
 #[inline(always)]
-fn value_at<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, q: [f32; 3]) -> f32 {
+fn gather<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, l: usize, g: &mut FillGroup) {
     let mesh = &ctx.c.mesh;
     let (cell, t) = ctx.decoder.decode(owner);
     let [nx, ny, _] = mesh.vertex_dims();
     let corners = CELL_TETS[cell_parity(cell)][t];
-    let mut p = [[0f32; 3]; 4];
-    let mut v = [0f32; 4];
-    for a in 0..4 {
-        let o = corner_offset(corners[a]);
-        let vi = [cell[0] + o[0], cell[1] + o[1], cell[2] + o[2]];
-        let g = vi[0] + nx * (vi[1] + ny * vi[2]);
-        p[a] = ctx.position(vi, g);
-        v[a] = src[g].to_f32();
+    let base = cell[0] + nx * (cell[1] + ny * cell[2]);
+    // The cell's farthest corner bounds every load below.
+    let last = base + 1 + nx * (1 + ny);
+    let d = &ctx.disp;
+    assert!(last < src.len() && last < d.x.len() && last < d.y.len() && last < d.z.len());
+    let inv = ctx.c.inv_spacing;
+    for (a, &corner) in corners.iter().enumerate() {
+        let o = corner_offset(corner);
+        let gi = base + o[0] + nx * (o[1] + ny * o[2]);
+        // SAFETY: `gi <= last`, which is in bounds of all four slices.
+        let (dx, dy, dz, v) = unsafe {
+            (
+                *d.x.get_unchecked(gi),
+                *d.y.get_unchecked(gi),
+                *d.z.get_unchecked(gi),
+                *src.get_unchecked(gi),
+            )
+        };
+        g.p[a][0][l] = deformed_coordinate(cell[0] + o[0], dx, inv[0]);
+        g.p[a][1][l] = deformed_coordinate(cell[1] + o[1], dy, inv[1]);
+        g.p[a][2][l] = deformed_coordinate(cell[2] + o[2], dz, inv[2]);
+        g.v[a][l] = v.to_f32();
     }
-    interpolate(barycentric(&p, q), v)
 }

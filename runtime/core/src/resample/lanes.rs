@@ -1,122 +1,118 @@
 //! Pass 1 on four cells at once: the CPU's fast form of
-//! [`super::raster::CellRaster`].
+//! `raster::CellRaster`.
 //!
 //! Four cells of the same parity are the four lanes of every operation, so
 //! the corner, face and tetrahedron tables are compile-time constants and
-//! every plane, orientation and inclusion test is one 4-wide operation with
-//! no shuffles and no data-dependent branches. Each lane computes exactly the
-//! scalar expressions of [`super::raster`] (same operations, same order), so
-//! the owners are those of [`super::raster::CellRaster`] and of the WGSL
-//! kernel, bit for bit.
+//! every plane, orientation and inclusion test is one 4-wide SIMD operation
+//! ([`wide::f32x4`]: SSE2 on x86-64, NEON on aarch64) with no shuffles and
+//! no data-dependent branches; the lanes' candidate cursors advance with
+//! vector selects. Each lane computes exactly the scalar expressions of
+//! [`super::raster`] (same IEEE operations, same order, no fused
+//! multiply-add), so the owners are those of
+//! `raster::CellRaster` and of the WGSL kernel, bit for bit.
 
-// Lane loops index several arrays by the lane number: that is the SIMD idiom.
-#![allow(clippy::needless_range_loop)]
-
-use super::raster::{ceil_i32, floor_i32};
-use super::sampling_mesh::{CORNER_TABLES, FACE_TABLES, corner_offset, deformed_coordinate};
+use super::sampling_mesh::{CORNER_TABLES, FACE_TABLES, corner_offset};
 use super::{DisplacementsRef, OutputGrid, VoxelBox};
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+use wide::{f32x4, i32x4};
 
 /// Lanes (cells) per group.
 pub(crate) const LANES: usize = 4;
 
-type V = [f32; LANES];
+type F = f32x4;
+type I = i32x4;
 
 /// A face plane per lane: `t(q) = n · (q − b)`.
 #[derive(Clone, Copy)]
 struct PlaneV {
-    n: [V; 3],
-    b: [V; 3],
+    n: [F; 3],
+    b: [F; 3],
 }
 
-impl PlaneV {
-    const ZERO: PlaneV = PlaneV {
-        n: [[0.0; LANES]; 3],
-        b: [[0.0; LANES]; 3],
-    };
-}
-
-/// [`super::raster::FacePlane::new`] per lane.
+/// `raster::FacePlane::new` per lane.
 #[inline(always)]
-fn plane(p: &[[V; 3]; 8], u: u8, v: u8, w: u8) -> PlaneV {
+fn plane(p: &[[F; 3]; 8], u: u8, v: u8, w: u8) -> PlaneV {
     let (pu, pv, pw) = (&p[u as usize], &p[v as usize], &p[w as usize]);
-    let mut n = [[0.0; LANES]; 3];
-    for l in 0..LANES {
-        let a = [
-            pv[0][l] - pu[0][l],
-            pv[1][l] - pu[1][l],
-            pv[2][l] - pu[2][l],
-        ];
-        let c = [
-            pw[0][l] - pu[0][l],
-            pw[1][l] - pu[1][l],
-            pw[2][l] - pu[2][l],
-        ];
-        n[0][l] = a[1] * c[2] - a[2] * c[1];
-        n[1][l] = a[2] * c[0] - a[0] * c[2];
-        n[2][l] = a[0] * c[1] - a[1] * c[0];
+    let a = [pv[0] - pu[0], pv[1] - pu[1], pv[2] - pu[2]];
+    let c = [pw[0] - pu[0], pw[1] - pu[1], pw[2] - pu[2]];
+    PlaneV {
+        n: [
+            a[1] * c[2] - a[2] * c[1],
+            a[2] * c[0] - a[0] * c[2],
+            a[0] * c[1] - a[1] * c[0],
+        ],
+        b: *pu,
     }
-    PlaneV { n, b: *pu }
 }
 
-/// [`super::raster::FacePlane::eval`] per lane.
+/// `raster::FacePlane::eval` per lane.
 #[inline(always)]
-fn eval(pl: &PlaneV, q: &[V; 3]) -> V {
-    let mut t = [0.0; LANES];
-    for l in 0..LANES {
-        t[l] = pl.n[0][l] * (q[0][l] - pl.b[0][l])
-            + (pl.n[1][l] * (q[1][l] - pl.b[1][l]) + pl.n[2][l] * (q[2][l] - pl.b[2][l]));
-    }
-    t
+fn eval(pl: &PlaneV, q: &[F; 3]) -> F {
+    pl.n[0] * (q[0] - pl.b[0]) + (pl.n[1] * (q[1] - pl.b[1]) + pl.n[2] * (q[2] - pl.b[2]))
 }
 
 /// One face test of one tetrahedron per lane: `sign(D) · t ≥ −ε |D|`, with
 /// lanes whose `D` is zero or not finite never passing.
 #[derive(Clone, Copy)]
 struct Test {
-    sign: V,
-    thr: V,
-    /// Lanes with a usable `D`.
+    sign: F,
+    thr: F,
+    /// Lanes with a usable `D` (bit per lane).
     ok: u32,
 }
 
-impl Test {
-    const NONE: Test = Test {
-        sign: [0.0; LANES],
-        thr: [0.0; LANES],
-        ok: 0,
-    };
+#[inline(always)]
+fn test(d: F, eps: f32) -> Test {
+    let abs = d.abs();
+    let usable = d.simd_ne(F::ZERO) & abs.simd_lt(F::splat(f32::INFINITY));
+    Test {
+        sign: d.simd_gt(F::ZERO).select(F::ONE, F::splat(-1.0)),
+        thr: F::splat(-eps) * abs,
+        ok: usable.to_bitmask(),
+    }
+}
+
+/// Lanes passing test `t` with plane value `v` (bit per lane).
+#[inline(always)]
+fn pass(t: &Test, v: F) -> u32 {
+    (t.sign * v).simd_ge(t.thr).to_bitmask() & t.ok
+}
+
+/// Corner tetrahedron `k` of a cell, per lane: its interior face (shared
+/// with the central tetrahedron) and its three boundary faces, with the
+/// orientation tests of each.
+struct CornerTet {
+    interior: PlaneV,
+    /// Interior face, oriented towards the corner vertex.
+    t_corner: Test,
+    /// Interior face, oriented towards the central tetrahedron's vertex.
+    t_central: Test,
+    boundary: [PlaneV; 3],
+    t_boundary: [Test; 3],
 }
 
 #[inline(always)]
-fn test(d: &V, eps: f32) -> Test {
-    let mut t = Test {
-        sign: [0.0; LANES],
-        thr: [0.0; LANES],
-        ok: 0,
+fn corner<const P: usize>(p: &[[F; 3]; 8], k: usize, eps: f32) -> CornerTet {
+    let faces = &FACE_TABLES.faces[P];
+    let it = &CORNER_TABLES.interior[P][k];
+    let bt = &CORNER_TABLES.boundary[P][k];
+    let face = |f: u8| {
+        let [u, v, w] = faces[f as usize];
+        plane(p, u, v, w)
     };
-    // The two halves of "usable" are separate lane masks so that each is
-    // one vector compare (as one condition LLVM tests it lane by lane).
-    let (mut nonzero, mut finite) = (0u32, 0u32);
-    for l in 0..LANES {
-        t.sign[l] = if d[l] > 0.0 { 1.0 } else { -1.0 };
-        t.thr[l] = -eps * d[l].abs();
-        nonzero |= ((d[l] != 0.0) as u32) << l;
+    let interior = face(it[0]);
+    let boundary = [face(bt[0][0]), face(bt[1][0]), face(bt[2][0])];
+    CornerTet {
+        t_corner: test(eval(&interior, &p[it[1] as usize]), eps),
+        t_central: test(eval(&interior, &p[it[2] as usize]), eps),
+        t_boundary: [
+            test(eval(&boundary[0], &p[bt[0][1] as usize]), eps),
+            test(eval(&boundary[1], &p[bt[1][1] as usize]), eps),
+            test(eval(&boundary[2], &p[bt[2][1] as usize]), eps),
+        ],
+        interior,
+        boundary,
     }
-    for l in 0..LANES {
-        finite |= ((d[l].abs() < f32::INFINITY) as u32) << l;
-    }
-    t.ok = nonzero & finite;
-    t
-}
-
-#[inline(always)]
-fn pass(t: &Test, v: &V) -> u32 {
-    let mut m = 0;
-    for l in 0..LANES {
-        m |= ((t.sign[l] * v[l] >= t.thr[l]) as u32) << l;
-    }
-    m & t.ok
 }
 
 /// What every group needs.
@@ -141,48 +137,69 @@ pub(crate) fn raster_group<const P: usize>(
     out: &[AtomicU32],
 ) {
     let [nx, ny, _] = ctx.vertex_dims;
-    let inv = ctx.inv_spacing;
-    // Corner positions, per lane first, then as p[corner][axis][lane].
-    let mut pos = [[[0f32; 3]; 8]; LANES];
-    for (l, cell) in cells.iter().enumerate() {
-        let base = cell[0] + nx * (cell[1] + ny * cell[2]);
-        for c in 0..8u8 {
-            let o = corner_offset(c);
-            let g = base + o[0] + nx * (o[1] + ny * o[2]);
-            pos[l][c as usize] = [
-                deformed_coordinate(cell[0] + o[0], ctx.disp.x[g], inv[0]),
-                deformed_coordinate(cell[1] + o[1], ctx.disp.y[g], inv[1]),
-                deformed_coordinate(cell[2] + o[2], ctx.disp.z[g], inv[2]),
-            ];
-        }
-    }
-    let mut p = [[[0f32; LANES]; 3]; 8];
-    for c in 0..8 {
+    // Corner positions p[corner][axis] (lanes = cells), source index units:
+    // `index + displacement · (1 / spacing)`, as `deformed_coordinate`
+    // (indices are far below 2^24, so `(i + o) as f32 = i as f32 + o as f32`
+    // exactly, and the i32 conversion is the branch-free one).
+    let disp = [ctx.disp.x, ctx.disp.y, ctx.disp.z];
+    let mut base = [0usize; LANES];
+    let mut cell_f = [[0f32; LANES]; 3];
+    for l in 0..LANES {
+        let c = cells[l];
+        base[l] = c[0] + nx * (c[1] + ny * c[2]);
         for a in 0..3 {
-            p[c][a] = [pos[0][c][a], pos[1][c][a], pos[2][c][a], pos[3][c][a]];
+            cell_f[a][l] = c[a] as i32 as f32;
         }
     }
-    // Candidate boxes.
-    let mut lo = [[0i32; LANES]; 3];
-    let mut hi = [[0i32; LANES]; 3];
-    let mut active = (1u32 << n) - 1;
+    // The farthest corner is the last one: one bounds check per lane.
+    let last = 1 + nx * (1 + ny);
+    let n_vertices = disp[0].len().min(disp[1].len()).min(disp[2].len());
+    assert!(base.iter().all(|&b| b + last < n_vertices));
+    let cell_f = [F::new(cell_f[0]), F::new(cell_f[1]), F::new(cell_f[2])];
+    let inv = [
+        F::splat(ctx.inv_spacing[0]),
+        F::splat(ctx.inv_spacing[1]),
+        F::splat(ctx.inv_spacing[2]),
+    ];
+    let mut p = [[F::ZERO; 3]; 8];
+    for c in 0..8u8 {
+        let o = corner_offset(c);
+        let off = o[0] + nx * (o[1] + ny * o[2]);
+        for a in 0..3 {
+            let d = &disp[a];
+            // SAFETY: `off <= last` and every `base[l] + last` is in bounds
+            // (asserted above).
+            let v = unsafe {
+                [
+                    *d.get_unchecked(base[0] + off),
+                    *d.get_unchecked(base[1] + off),
+                    *d.get_unchecked(base[2] + off),
+                    *d.get_unchecked(base[3] + off),
+                ]
+            };
+            p[c as usize][a] = (cell_f[a] + F::splat(o[a] as f32)) + F::new(v) * inv[a];
+        }
+    }
+    // Candidate boxes: ⌈min⌉ ..= ⌊max⌋ of the corners per axis, clipped
+    // (`ceil_i32` / `floor_i32` per lane: saturating truncation, then ±1).
+    let mut lo = [I::ZERO; 3];
+    let mut hi = [I::ZERO; 3];
+    let mut empty = I::ZERO;
     for a in 0..3 {
         let mut mn = p[0][a];
         let mut mx = p[0][a];
         for pc in &p[1..] {
-            for l in 0..LANES {
-                mn[l] = mn[l].min(pc[a][l]);
-                mx[l] = mx[l].max(pc[a][l]);
-            }
+            mn = mn.min(pc[a]);
+            mx = mx.max(pc[a]);
         }
-        for l in 0..LANES {
-            lo[a][l] = ceil_i32(mn[l]).max(ctx.clip.lo[a]);
-            hi[a][l] = floor_i32(mx[l]).min(ctx.clip.hi[a]);
-            if lo[a][l] > hi[a][l] {
-                active &= !(1 << l);
-            }
-        }
+        let (tn, tx) = (mn.trunc_int(), mx.trunc_int());
+        let up: I = bytemuck::cast(F::from_i32x4(tn).simd_lt(mn));
+        let down: I = bytemuck::cast(F::from_i32x4(tx).simd_gt(mx));
+        lo[a] = tn.saturating_sub(up).max(I::splat(ctx.clip.lo[a]));
+        hi[a] = tx.saturating_add(down).min(I::splat(ctx.clip.hi[a]));
+        empty |= lo[a].simd_gt(hi[a]);
     }
+    let mut active = ((1u32 << n) - 1) & !empty.to_bitmask();
     for (l, r) in removed.iter().enumerate() {
         if r & 0x1f == 0x1f {
             active &= !(1 << l);
@@ -191,35 +208,26 @@ pub(crate) fn raster_group<const P: usize>(
     if active == 0 {
         return;
     }
-    // Planes and orientation tests.
-    let faces = &FACE_TABLES.faces[P];
-    let it = &CORNER_TABLES.interior[P];
-    let bt = &CORNER_TABLES.boundary[P];
+    // Planes and orientation tests, built in place (no zeroed scratch).
     let eps = ctx.eps;
-    let mut interior = [PlaneV::ZERO; 4];
-    let mut t_corner = [Test::NONE; 4];
-    let mut t_central = [Test::NONE; 4];
-    let mut boundary = [[PlaneV::ZERO; 3]; 4];
-    let mut t_boundary = [[Test::NONE; 3]; 4];
-    for k in 0..4 {
-        let [u, v, w] = faces[it[k][0] as usize];
-        interior[k] = plane(&p, u, v, w);
-        t_corner[k] = test(&eval(&interior[k], &p[it[k][1] as usize]), eps);
-        t_central[k] = test(&eval(&interior[k], &p[it[k][2] as usize]), eps);
-        for m in 0..3 {
-            let [u, v, w] = faces[bt[k][m][0] as usize];
-            boundary[k][m] = plane(&p, u, v, w);
-            t_boundary[k][m] = test(&eval(&boundary[k][m], &p[bt[k][m][1] as usize]), eps);
+    let cs = [
+        corner::<P>(&p, 0, eps),
+        corner::<P>(&p, 1, eps),
+        corner::<P>(&p, 2, eps),
+        corner::<P>(&p, 3, eps),
+    ];
+    // Live tetrahedra per lane (bit per lane).
+    let mut live = [(1u32 << LANES) - 1; 5];
+    if *removed != [0; LANES] {
+        for (t, lv) in live.iter_mut().enumerate() {
+            *lv = 0;
+            for (l, r) in removed.iter().enumerate() {
+                *lv |= (((r >> t) & 1 == 0) as u32) << l;
+            }
         }
     }
-    // Live tetrahedra per lane.
-    let mut live = [0u32; 5];
-    for (t, lv) in live.iter_mut().enumerate() {
-        for (l, r) in removed.iter().enumerate() {
-            *lv |= (((r >> t) & 1 == 0) as u32) << l;
-        }
-    }
-    // Walk every lane's box in step; lanes that run out drop out.
+    // Walk every lane's box in step; lanes that run out drop out. Cursors
+    // stay inside their box (they wrap), so "at the end" is equality.
     let mut q = lo;
     let mut base_id = [0u32; LANES];
     for l in 0..LANES {
@@ -227,69 +235,71 @@ pub(crate) fn raster_group<const P: usize>(
         base_id[l] = (5 * (c[0] + ctx.cell_dims[0] * (c[1] + ctx.cell_dims[1] * c[2]))) as u32;
     }
     while active != 0 {
-        let mut qf = [[0f32; LANES]; 3];
-        for a in 0..3 {
-            for l in 0..LANES {
-                qf[a][l] = q[a][l] as f32;
-            }
-        }
-        let mut ti = [[0f32; LANES]; 4];
+        let qf = [
+            F::from_i32x4(q[0]),
+            F::from_i32x4(q[1]),
+            F::from_i32x4(q[2]),
+        ];
+        let ti = [
+            eval(&cs[0].interior, &qf),
+            eval(&cs[1].interior, &qf),
+            eval(&cs[2].interior, &qf),
+            eval(&cs[3].interior, &qf),
+        ];
+        // Corner tetrahedron k takes the lanes that pass its four faces and
+        // no smaller one; the owner's bits are (k & 1, k >> 1, central).
+        let (mut found, mut bit0, mut bit1) = (0u32, 0u32, 0u32);
         for k in 0..4 {
-            ti[k] = eval(&interior[k], &qf);
-        }
-        let mut found = 0u32;
-        let mut owner = [4u32; LANES];
-        for k in 0..4 {
-            let mut m = pass(&t_corner[k], &ti[k]) & live[k] & !found;
+            let c = &cs[k];
+            let mut m = pass(&c.t_corner, ti[k]) & live[k] & !found;
             if m != 0 {
                 for mm in 0..3 {
-                    m &= pass(&t_boundary[k][mm], &eval(&boundary[k][mm], &qf));
-                }
-                for (l, o) in owner.iter_mut().enumerate() {
-                    if m & (1 << l) != 0 {
-                        *o = k as u32;
-                    }
+                    m &= pass(&c.t_boundary[mm], eval(&c.boundary[mm], &qf));
                 }
                 found |= m;
-            }
-        }
-        let central = live[4] & (0..4).fold(u32::MAX, |acc, k| acc & pass(&t_central[k], &ti[k]));
-        found |= central;
-        found &= active;
-        while found != 0 {
-            let l = found.trailing_zeros() as usize;
-            found &= found - 1;
-            let id = base_id[l] + owner[l];
-            let o = &out[ctx.output.linear([q[0][l], q[1][l], q[2][l]])];
-            if o.load(Relaxed) > id {
-                o.fetch_min(id, Relaxed);
-            }
-        }
-        // Advance each active lane's cursor.
-        let mut m = active;
-        while m != 0 {
-            let l = m.trailing_zeros() as usize;
-            m &= m - 1;
-            q[0][l] += 1;
-            if q[0][l] > hi[0][l] {
-                q[0][l] = lo[0][l];
-                q[1][l] += 1;
-                if q[1][l] > hi[1][l] {
-                    q[1][l] = lo[1][l];
-                    q[2][l] += 1;
-                    if q[2][l] > hi[2][l] {
-                        active &= !(1 << l);
-                    }
+                if k & 1 != 0 {
+                    bit0 |= m;
+                }
+                if k & 2 != 0 {
+                    bit1 |= m;
                 }
             }
         }
+        let central = live[4]
+            & pass(&cs[0].t_central, ti[0])
+            & pass(&cs[1].t_central, ti[1])
+            & pass(&cs[2].t_central, ti[2])
+            & pass(&cs[3].t_central, ti[3])
+            & !found;
+        found = (found | central) & active;
+        if found != 0 {
+            let (qx, qy, qz) = (q[0].to_array(), q[1].to_array(), q[2].to_array());
+            while found != 0 {
+                let l = found.trailing_zeros() as usize;
+                found &= found - 1;
+                let owner = ((bit0 >> l) & 1) | ((bit1 >> l) & 1) << 1 | ((central >> l) & 1) << 2;
+                let id = base_id[l] + owner;
+                let o = &out[ctx.output.linear([qx[l], qy[l], qz[l]])];
+                if o.load(Relaxed) > id {
+                    o.fetch_min(id, Relaxed);
+                }
+            }
+        }
+        // Advance every lane's cursor: x, then y on wrap, then z.
+        let wx = q[0].simd_eq(hi[0]);
+        q[0] = wx.select(lo[0], q[0] + I::ONE);
+        let wy = wx & q[1].simd_eq(hi[1]);
+        q[1] = wy.select(lo[1], q[1] - wx);
+        let wz = wy & q[2].simd_eq(hi[2]);
+        q[2] = wz.select(lo[2], q[2] - wy);
+        active &= !(wz.to_bitmask());
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::raster::{CellCorners, CellRaster};
-    use super::super::sampling_mesh::{SamplingMesh, cell_parity};
+    use super::super::sampling_mesh::{SamplingMesh, cell_parity, deformed_coordinate};
     use super::*;
     use crate::grid::Grid;
     use glam::DVec3;

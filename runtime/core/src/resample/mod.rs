@@ -58,6 +58,7 @@
 
 pub mod blocks;
 pub mod cpu;
+mod fill_lanes;
 pub mod gpu;
 mod lanes;
 pub mod output_grid;

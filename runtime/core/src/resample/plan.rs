@@ -108,6 +108,7 @@ pub(crate) fn drive<K: Kernels>(
     mask: Option<&TetMask>,
     dirty: DirtyRegion,
 ) -> Result<ResampleReport, ResampleError> {
+    let t_start = std::time::Instant::now();
     let mesh = super::SamplingMesh::new(grid)?;
     let sp = grid.spacing;
     if !(sp.x > 0.0 && sp.y > 0.0 && sp.z > 0.0 && sp.is_finite()) {
@@ -255,6 +256,7 @@ pub(crate) fn drive<K: Kernels>(
         blocks: &selected,
         bounds: &s.bounds,
     };
+    tracing::trace!(elapsed = ?t_start.elapsed(), "resample: planned (bounds, output grid, blocks)");
     k.rasterise(&job)?;
     report.voxels_touched = region.count();
     report.cells_rasterised = selected

@@ -1,5 +1,8 @@
-//! Tetrahedron geometry shared by the two passes: face planes, the inclusion
-//! test of pass 1 and the barycentric weights of pass 2.
+//! The scalar statement of the tetrahedron geometry of both passes: face
+//! planes, the inclusion test of pass 1 and the barycentric weights of
+//! pass 2. The CPU kernels run it four lanes at a time ([`super::lanes`],
+//! [`super::fill_lanes`]) and the GPU in WGSL; this file is the reference
+//! they are tested against, bit for bit, so it is compiled for tests only.
 //!
 //! All coordinates here are **source voxel index** units (see
 //! [`super::sampling_mesh::deformed_coordinate`]); a voxel centre of the
@@ -55,6 +58,7 @@ impl CellCorners {
     }
 }
 
+#[cfg(test)]
 /// The plane function of one triangular face: `t(q) = n · (q − b)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct FacePlane {
@@ -62,6 +66,7 @@ pub(crate) struct FacePlane {
     pub b: [f32; 3],
 }
 
+#[cfg(test)]
 impl FacePlane {
     /// The plane through `pu`, `pv`, `pw` (ascending vertex order).
     #[inline(always)]
@@ -97,6 +102,7 @@ impl FacePlane {
     }
 }
 
+#[cfg(test)]
 /// `⌈v⌉` as `i32` (saturating; no libm call on baseline x86-64).
 #[inline(always)]
 pub(crate) fn ceil_i32(v: f32) -> i32 {
@@ -108,6 +114,7 @@ pub(crate) fn ceil_i32(v: f32) -> i32 {
     }
 }
 
+#[cfg(test)]
 /// `⌊v⌋` as `i32` (saturating; no libm call on baseline x86-64).
 #[inline(always)]
 pub(crate) fn floor_i32(v: f32) -> i32 {
@@ -306,6 +313,7 @@ fn plane_of<const P: usize>(c: &CellCorners, f: u8) -> FacePlane {
     )
 }
 
+#[cfg(test)]
 /// Barycentric weights of `q` in the tetrahedron with corner positions `p`
 /// (ascending corner order), `λ_a = t_a(q) / D_a` (0 for a degenerate face).
 #[inline(always)]
@@ -321,6 +329,7 @@ pub(crate) fn barycentric(p: &[[f32; 3]; 4], q: [f32; 3]) -> [f32; 4] {
     w
 }
 
+#[cfg(test)]
 /// `Σ λ_a v_a`, or exactly `v_a` when `λ_a == 1` (a voxel centre on a
 /// vertex: copies the value even when a neighbour is NaN or the value is −0).
 #[inline(always)]
