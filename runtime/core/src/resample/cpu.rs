@@ -4,14 +4,14 @@
 //! - block bounds: one task per block, min/max of its vertices' positions
 //!   (four vertices of a row per SIMD operation);
 //! - clear: the region's output words set to `u32::MAX` ("no owner");
-//! - pass 1: one task per cell block; its cells go four at a time, by
+//! - pass 1: one task per cell block; its cells go eight at a time, by
 //!   parity, through [`super::lanes`] (per cell the eight deformed corners,
 //!   the face planes and, per candidate voxel centre of the cell's clipped
 //!   box, the smallest containing tetrahedron), then `fetch_min(tet id)`
 //!   after a relaxed load, so voxels that already hold a smaller id cost no
 //!   atomic read-modify-write;
 //! - pass 2: one task per output row; owner → barycentric weights → value,
-//!   four voxels per SIMD operation through [`super::fill_lanes`].
+//!   eight voxels per SIMD operation through [`super::fill_lanes`].
 //!
 //! The output `Vec<f32>` is viewed as `[AtomicU32]` during a call; no other
 //! per-voxel memory is used.
@@ -226,7 +226,7 @@ struct RasterCtx<'a> {
 fn raster_block(ctx: &RasterCtx<'_>, lanes: &LaneCtx<'_>, b: usize, out: &[AtomicU32]) {
     let (lo, hi) = ctx.c.layout.cells(b);
     let mesh = &ctx.c.mesh;
-    // Same-parity cells of the block, four at a time.
+    // Same-parity cells of the block, `LANES` at a time.
     let mut groups = [([[0usize; 3]; LANES], [0u8; LANES], 0usize); 2];
     for k in lo[2]..hi[2] {
         for j in lo[1]..hi[1] {
@@ -269,7 +269,7 @@ fn flush(
     g.2 = 0;
 }
 
-/// Pass 2 over the region: owner id → interpolated value (f32 bits), four
+/// Pass 2 over the region: owner id → interpolated value (f32 bits), eight
 /// voxels of a row at a time ([`super::fill_lanes`]).
 fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
     let r = ctx.clip;
@@ -279,6 +279,11 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
         let y = r.lo[1] + (row % d[1]) as i32;
         let z = r.lo[2] + (row / d[1]) as i32;
         let base = ctx.output.linear([r.lo[0], y, z]);
+        // One group per row: lanes without an owner keep stale corners, and
+        // their results are discarded.
+        let mut g = FillGroup::default();
+        g.q[1] = [y as f32; FILL_LANES];
+        g.q[2] = [z as f32; FILL_LANES];
         for (c, chunk) in out[base..base + d[0]].chunks(FILL_LANES).enumerate() {
             let mut owners = [u32::MAX; FILL_LANES];
             for (o, a) in owners.iter_mut().zip(chunk) {
@@ -290,12 +295,9 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
                 }
                 continue;
             }
-            let mut g = FillGroup::default();
             let x0 = r.lo[0] + (c * FILL_LANES) as i32;
             for (l, &owner) in owners.iter().enumerate() {
                 g.q[0][l] = (x0 + l as i32) as f32;
-                g.q[1][l] = y as f32;
-                g.q[2][l] = z as f32;
                 if owner == u32::MAX {
                     continue;
                 }

@@ -1,22 +1,22 @@
-//! Pass 2 on four voxels at once: the CPU's fast form of
+//! Pass 2 on eight voxels at once: the CPU's fast form of
 //! `raster::barycentric` + `raster::interpolate`.
 //!
-//! Four consecutive voxels of an output row are the four lanes. Each lane
+//! Eight consecutive voxels of an output row are the lanes. Each lane
 //! gathers its owner tetrahedron's corners and values (scalar loads), then
-//! the face planes, orientations, weights and the interpolation run as 4-wide
-//! SIMD ([`wide::f32x4`]) with exactly the scalar expressions (same IEEE
+//! the face planes, orientations, weights and the interpolation run as 8-wide
+//! SIMD ([`wide::f32x8`]) with exactly the scalar expressions (same IEEE
 //! operations, same order, no fused multiply-add), so every value is the
 //! scalar reference's bit for bit (checked by a test below).
 
 // Lane loops index several arrays by the lane or corner number.
 #![allow(clippy::needless_range_loop)]
 
-use wide::f32x4;
+use wide::f32x8;
 
-type F = f32x4;
+type F = f32x8;
 
 /// Voxels per group.
-pub(crate) const FILL_LANES: usize = 4;
+pub(crate) const FILL_LANES: usize = 8;
 
 /// Per lane: the four corners of the owner tetrahedron (source index units,
 /// as `p[corner][axis]`), their source values and the voxel centre `q`.
@@ -104,7 +104,7 @@ mod tests {
         /// Every lane equals the scalar barycentric + interpolate, bit for
         /// bit (NaN lanes compare as NaN).
         #[test]
-        fn lanes_equal_scalar_reference(lanes in prop::array::uniform4(lane_strategy())) {
+        fn lanes_equal_scalar_reference(lanes in prop::array::uniform8(lane_strategy())) {
             let mut g = FillGroup::default();
             for (l, (p, v, q)) in lanes.iter().enumerate() {
                 for c in 0..4 {

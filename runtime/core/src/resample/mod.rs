@@ -19,7 +19,7 @@
 //!    cell, gives every output voxel centre in the cell's deformed bounding
 //!    box to the smallest tetrahedron of the cell that contains it and
 //!    `atomic-min`s that tetrahedron's id into the output, viewed as `u32`
-//!    (the CPU evaluates four cells per SIMD lane group); pass 2 runs per
+//!    (the CPU evaluates eight cells per SIMD lane group); pass 2 runs per
 //!    output voxel and replaces
 //!    the owner id by the value interpolated with the owner's barycentric
 //!    weights (f32 bits, in place). The smallest id wins shared faces and
