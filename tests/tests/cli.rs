@@ -90,6 +90,34 @@ fn converged_frames_skip_downstream_stages_and_a_second_run_reruns_nothing() {
 }
 
 #[test]
+fn chainmail_head_scene_runs_and_swaps_to_affine_with_one_edit() {
+    plugin_dir(&["chainmail", "affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_text =
+        std::fs::read_to_string(repo_root().join("configs/chainmail-head.toml")).unwrap();
+    std::fs::write(tmp.path().join("s.toml"), &scene_text).unwrap();
+    let o = voxflex(&["run", "s.toml", "--out", "cm"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&tmp.path().join("cm"));
+    assert_eq!(m["plugin"]["name"], "chainmail");
+    assert!(m["stages"]["resample"]["runs"].as_u64().unwrap() >= 2);
+    let cm = std::fs::read(tmp.path().join("cm/deformed.nii.gz")).unwrap();
+
+    // The same scene, one line changed.
+    let swapped = scene_text.replacen("plugin = \"chainmail\"", "plugin = \"affine\"", 1);
+    assert_ne!(swapped, scene_text);
+    std::fs::write(tmp.path().join("s.toml"), &swapped).unwrap();
+    let o = voxflex(&["run", "s.toml", "--out", "af"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(metrics(&tmp.path().join("af"))["plugin"]["name"], "affine");
+    assert_ne!(
+        std::fs::read(tmp.path().join("af/deformed.nii.gz")).unwrap(),
+        cm,
+        "a different model must give a different volume"
+    );
+}
+
+#[test]
 fn swap_plugins_by_editing_only_the_scene() {
     plugin_dir(&["affine", "ripple"]);
     let tmp = tempfile::tempdir().unwrap();

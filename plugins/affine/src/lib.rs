@@ -274,10 +274,15 @@ impl DeformationModel for AffineField {
     }
 
     fn interact(&mut self, interaction_toml: &str) -> Result<(), ModelError> {
-        Err(ModelError(format!(
-            "the affine field takes no interactions (got `{}`); animate it with `ramp_frames`",
-            interaction_toml.lines().next().unwrap_or("").trim()
-        )))
+        // A scene written for a simulated model (grabs, fixes, cuts) must
+        // still run when its `plugin =` line is swapped to this analytic
+        // field: the interactions have nothing to act on, so they are
+        // ignored, loudly.
+        tracing::warn!(
+            interaction = interaction_toml.lines().next().unwrap_or("").trim(),
+            "the affine field takes no interactions; ignored (animate it with `ramp_frames`)"
+        );
+        Ok(())
     }
 
     fn step(&mut self, frame: FrameInfo) -> Result<StepOutcome, ModelError> {

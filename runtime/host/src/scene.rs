@@ -125,7 +125,8 @@ fn default_max_voxels() -> usize {
 pub struct ModelSettings {
     /// Plugin name (`affine`, `chainmail`, …).
     pub plugin: String,
-    /// The plugin's own table, passed to it as TOML text.
+    /// The plugin's own table, passed to it as TOML text (or, per plugin,
+    /// `[model.params.<plugin>]`; see [`Scene::model_params_toml`]).
     #[serde(default)]
     pub params: toml::Table,
 }
@@ -607,11 +608,20 @@ impl Scene {
             .unwrap_or_default()
     }
 
-    /// The model's parameters as TOML text.
+    /// The model's parameters as TOML text: the sub-table named after the
+    /// plugin when `[model.params]` has one (`[model.params.chainmail]`,
+    /// `[model.params.affine]`, …, so swapping models is a one-line edit of
+    /// `plugin =`), else the whole table.
     pub fn model_params_toml(&self) -> String {
         self.model
             .as_ref()
-            .map(|m| toml::to_string(&m.params).unwrap_or_default())
+            .map(|m| {
+                let own = match m.params.get(&m.plugin) {
+                    Some(toml::Value::Table(t)) => t,
+                    _ => &m.params,
+                };
+                toml::to_string(own).unwrap_or_default()
+            })
             .unwrap_or_default()
     }
 }
@@ -733,6 +743,22 @@ kind = "grab"
             }]
         );
         assert!(s.resample.is_some(), "a model implies the resample stage");
+    }
+
+    #[test]
+    fn per_plugin_params_tables_make_a_one_line_swap() {
+        let text = GOOD.replace(
+            "[model.params]\nfield = \"twist\"\nangle_deg = 10",
+            "[model.params.affine]\nfield = \"twist\"\n[model.params.chainmail]\nmaterials = []",
+        );
+        let s = Scene::parse(&text, Path::new("t.toml")).unwrap();
+        assert_eq!(s.model_params_toml().trim(), "field = \"twist\"");
+        let s = Scene::parse(
+            &text.replace("plugin = \"affine\"", "plugin = \"chainmail\""),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        assert_eq!(s.model_params_toml().trim(), "materials = []");
     }
 
     #[test]

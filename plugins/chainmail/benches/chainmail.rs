@@ -1,0 +1,146 @@
+//! ChainMail benchmarks (`cargo bench -p voxflex-chainmail`), after the
+//! papers' test: a homogeneous 126³ model (2 M elements), one deformation
+//! that reaches every element, run to rest without rendering in between.
+//!
+//! Prints, on this machine:
+//! - sequential Gibson vs parallel (timestamps + active blocks): time to
+//!   rest, propagation and relaxation iterations, speed-up;
+//! - the parallel algorithm with several block sizes: time and element
+//!   visits per useful update;
+//! - a local grab (~5 % of the model) on two model sizes: time per frame;
+//! - memory per element.
+//!
+//! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`).
+
+use std::time::Instant;
+use voxflex_chainmail::model::ChainMail;
+use voxflex_chainmail::params::{ChainMailParams, InteractionSpec};
+use voxflex_core::phantom::phantom;
+
+fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
+    ChainMailParams::from_toml(&format!(
+        "algorithm = \"{algorithm}\"\nblock = {block:?}\n\
+         materials = [{{ range = [-1e9, 1e9], constraint = 0.1, elastic = 1.0 }}]"
+    ))
+    .expect("bench parameters")
+}
+
+/// A cube model of `n³` elements with one corner grabbed and pulled far
+/// enough to move every element.
+fn setup(n: usize, algorithm: &str, block: [usize; 3]) -> (ChainMail, f64) {
+    let v = phantom("cube", [n, n, n]).expect("cube phantom");
+    let mut m = ChainMail::new(v.view(), params(algorithm, block)).expect("model");
+    let lat = m.lattice();
+    let corner = lat.world([0, 0, 0]);
+    let pull = lat.spacing[0] * 0.1 * (3 * n) as f64 * 1.5;
+    m.interact(&InteractionSpec::Grab {
+        point: corner.to_array(),
+        by: Some([-pull, -pull, -pull]),
+        to: None,
+        frames: 1,
+    })
+    .expect("grab");
+    (m, pull)
+}
+
+/// Relaxation sweeps the papers report for this test; both algorithms run
+/// at most this many (both stop earlier if they come to rest).
+const RELAX_SWEEPS: u64 = 619;
+
+fn main() {
+    let n: usize = std::env::args()
+        .skip(1)
+        .find_map(|a| a.parse().ok())
+        .unwrap_or(126);
+    println!(
+        "voxflex-chainmail bench: {n}³ elements, threads: {}",
+        rayon::current_num_threads()
+    );
+
+    let run = |algorithm: &str, block: [usize; 3], sweeps: u64| {
+        let (mut m, _) = setup(n, algorithm, block);
+        let t = Instant::now();
+        m.start_deformation();
+        let prop_iters = m.propagate(u64::MAX);
+        let t_prop = t.elapsed();
+        let t = Instant::now();
+        let relax_iters = m.relax(sweeps);
+        let t_relax = t.elapsed();
+        let c = m.counts();
+        (t_prop, prop_iters, t_relax, relax_iters, c, m)
+    };
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+
+    let (sp, _, sr, sri, sc, sm) = run("sequential", [16, 4, 4], RELAX_SWEEPS);
+    println!(
+        "sequential Gibson: propagation {:9.1} ms (one pass, {} elements moved)   relaxation {:9.1} ms ({} dense sweeps)",
+        ms(sp),
+        sc.updates,
+        ms(sr),
+        sri
+    );
+    let (pp, ppi, pr, pri, pc, pm) = run("parallel", [16, 4, 4], RELAX_SWEEPS);
+    println!(
+        "parallel 16×4×4:   propagation {:9.1} ms ({ppi} iterations)          relaxation {:9.1} ms ({pri} sweeps over active blocks)",
+        ms(pp),
+        ms(pr),
+    );
+    println!(
+        "speed-up over the sequential baseline: propagation {:.2}×, relaxation {:.2}×, total {:.2}× ({:.1} ms vs {:.1} ms)",
+        ms(sp) / ms(pp),
+        ms(sr) / ms(pr),
+        ms(sp + sr) / ms(pp + pr),
+        ms(pp + pr),
+        ms(sp + sr)
+    );
+    println!(
+        "elements: {}; memory: {} bytes per element (both Jacobi copies, keys, material byte); propagation visits per useful update: {:.2}",
+        pm.lattice().element_count(),
+        pm.bytes_per_element(),
+        pc.visits as f64 / pc.updates.max(1) as f64
+    );
+    drop((sm, pm));
+
+    println!("block size    propagation (ms)   visits per useful update");
+    for block in [[32, 32, 32], [16, 16, 16], [8, 8, 8], [16, 4, 4], [8, 4, 4]] {
+        let (t, _, _, _, c, _) = run("parallel", block, 0);
+        println!(
+            "{:>10}   {:16.1}   {:.2}",
+            format!("{}×{}×{}", block[0], block[1], block[2]),
+            ms(t),
+            c.visits as f64 / c.updates.max(1) as f64
+        );
+    }
+
+    println!("local grab (same 16-link reach on two model sizes), to rest:");
+    for size in [n / 2, n] {
+        let v = phantom("cube", [size, size, size]).expect("cube phantom");
+        let mut m = ChainMail::new(v.view(), params("parallel", [16, 4, 4])).expect("model");
+        let lat = m.lattice();
+        let centre = lat.world([size / 2, size / 2, size / 2]);
+        let reach = 16.0 * 0.1 * lat.spacing[2];
+        m.interact(&InteractionSpec::Grab {
+            point: centre.to_array(),
+            by: Some([0.0, 0.0, reach]),
+            to: None,
+            frames: 1,
+        })
+        .expect("grab");
+        let t = Instant::now();
+        let mut frames = 0;
+        while frames < 10_000 {
+            frames += 1;
+            m.step();
+            if m.at_rest() {
+                break;
+            }
+        }
+        let dt = t.elapsed();
+        let c = m.counts();
+        println!(
+            "  {size}³ model: {frames} frames (10 + 10 iterations each), {:7.2} ms per frame, {:.0} element visits per frame",
+            ms(dt) / frames as f64,
+            c.visits as f64 / frames as f64
+        );
+    }
+}

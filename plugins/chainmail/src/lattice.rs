@@ -1,0 +1,301 @@
+//! The element lattice: one element per (down-sampled, cropped) voxel,
+//! linked to its six face neighbours, with its material.
+//!
+//! Coordinates: element indices `[i, j, k]` (x fastest); world positions in
+//! millimetres through [`ElementLattice::world`]. Displacements are stored
+//! per element in mm; the constraint of a link is an axis-aligned box of
+//! half-size `D` (mm, per axis) around the rest offset, i.e.
+//! `|u_n − u_e|_a ≤ D_a` on every axis `a` (eqs. (4)–(6) of the
+//! heterogeneous ChainMail paper written in displacements).
+
+use crate::params::{ChainMailParams, Material};
+use voxflex_core::error::ModelError;
+use voxflex_core::glam::DVec3;
+use voxflex_core::grid::Grid;
+use voxflex_core::volume::{Sample, VolumeView};
+use voxflex_core::with_voxels;
+
+/// Element flags and material in one byte: bits 0–5 the material index
+/// ([`ABSENT`] for no element), bit 6 held by a grab, bit 7 fixed.
+pub type Cell = u8;
+/// Material index of a lattice site that holds no element.
+pub const ABSENT: u8 = 0x3f;
+/// Bit set on an element a grab holds at its target.
+pub const HELD: u8 = 0x40;
+/// Bit set on a fixed element.
+pub const FIXED: u8 = 0x80;
+
+/// The six link directions, `(axis, sign)`, in the order every algorithm
+/// visits neighbours: +x, −x, +y, −y, +z, −z.
+pub const LINKS: [(usize, isize); 6] = [(0, 1), (0, -1), (1, 1), (1, -1), (2, 1), (2, -1)];
+
+/// Arrival-time quanta per unit of constraint fraction (see [`MaterialEntry::tau`]).
+pub const TIME_SCALE: f64 = 64.0;
+
+/// A material as the kernels use it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaterialEntry {
+    /// Constraint half-size per axis, mm.
+    pub d: [f32; 3],
+    /// Mean constraint fraction (dimensionless), for propagation times and
+    /// relaxation weights.
+    pub frac: f32,
+    /// Relaxation step fraction (1 elastic … 0 plastic).
+    pub elastic: f32,
+}
+
+impl MaterialEntry {
+    fn new(m: &Material, spacing: [f64; 3]) -> Self {
+        let c = if m.rigid {
+            [0.0; 3]
+        } else {
+            m.constraint.per_axis()
+        };
+        Self {
+            d: [0, 1, 2].map(|a| (c[a] * spacing[a]) as f32),
+            frac: ((c[0] + c[1] + c[2]) / 3.0) as f32,
+            elastic: m.elastic as f32,
+        }
+    }
+}
+
+/// A link between two elements, as the kernels use it.
+#[derive(Clone, Copy, Debug)]
+pub struct Link {
+    /// Half-size of the constraint box, mm per axis (mean of the two ends).
+    pub d: [f32; 3],
+    /// Propagation time in integer quanta: `round(64 · c)` for the link's
+    /// mean constraint fraction `c` (0 for rigid links, which propagate
+    /// instantly). Arrival times are sums of these, so the earliest arrival
+    /// follows the path of least total slack — the order in which the
+    /// sequential algorithm must move elements of a heterogeneous model.
+    pub tau: u32,
+    /// Relaxation weight `1 / (c + ε)`.
+    pub weight: f32,
+}
+
+/// Relaxation weight regulariser: rigid links (c = 0) weigh 1/ε.
+pub const WEIGHT_EPS: f32 = 1e-3;
+
+impl Link {
+    /// The link between materials `a` and `b`.
+    #[inline]
+    pub fn between(a: &MaterialEntry, b: &MaterialEntry) -> Self {
+        let frac = 0.5 * (a.frac + b.frac);
+        Self {
+            d: [0, 1, 2].map(|k| 0.5 * (a.d[k] + b.d[k])),
+            tau: (frac as f64 * TIME_SCALE).round() as u32,
+            weight: 1.0 / (frac + WEIGHT_EPS),
+        }
+    }
+
+    /// True when `un` lies outside the box around `ue` (per axis).
+    #[inline]
+    pub fn violated(&self, un: [f32; 3], ue: [f32; 3]) -> bool {
+        (0..3).any(|a| un[a] < ue[a] - self.d[a] || un[a] > ue[a] + self.d[a])
+    }
+
+    /// `un` moved to the nearest point of the box around `ue`.
+    #[inline]
+    pub fn clamp(&self, un: [f32; 3], ue: [f32; 3]) -> [f32; 3] {
+        [0, 1, 2].map(|a| un[a].max(ue[a] - self.d[a]).min(ue[a] + self.d[a]))
+    }
+}
+
+/// Element geometry and materials.
+#[derive(Clone, Debug)]
+pub struct ElementLattice {
+    /// Elements per axis.
+    pub dims: [usize; 3],
+    /// Element spacing, mm.
+    pub spacing: [f64; 3],
+    /// World position (mm) of element `[0, 0, 0]`.
+    pub origin: DVec3,
+    /// Source voxel index of element `[0, 0, 0]`.
+    pub first_voxel: [usize; 3],
+    /// Source voxels per element along each axis.
+    pub downsample: usize,
+    /// The source grid.
+    pub source: Grid,
+    /// Material table (index = material byte).
+    pub materials: Vec<MaterialEntry>,
+    /// Link table: `links[a * materials.len() + b]` for materials `a`, `b`.
+    pub links: Vec<Link>,
+    /// Per element: material index and flags.
+    pub cells: Vec<Cell>,
+}
+
+impl ElementLattice {
+    /// Builds the lattice of a volume: crop, down-sample, and keep the sites
+    /// whose intensity matches a material (the first match wins).
+    pub fn new(volume: VolumeView<'_>, params: &ChainMailParams) -> Result<Self, ModelError> {
+        let g = volume.grid;
+        let (lo, hi) = match params.crop {
+            Some(c) => {
+                if (0..3).any(|a| c.max[a] >= g.dims[a]) {
+                    return Err(ModelError(format!(
+                        "chainmail `crop`: max {:?} lies outside the volume (dims {:?})",
+                        c.max, g.dims
+                    )));
+                }
+                (c.min, c.max)
+            }
+            None => ([0; 3], g.dims.map(|d| d.saturating_sub(1))),
+        };
+        if g.is_empty() {
+            return Err(ModelError::new("chainmail: the volume is empty"));
+        }
+        let k = params.downsample;
+        let dims = [0, 1, 2].map(|a| (hi[a] - lo[a]) / k + 1);
+        let n = dims[0] * dims[1] * dims[2];
+        if n > u32::MAX as usize / 2 {
+            return Err(ModelError(format!(
+                "chainmail: {dims:?} elements is too many; crop or raise `downsample`"
+            )));
+        }
+        let sp = g.spacing.to_array();
+        let spacing = sp.map(|s| s * k as f64);
+        let materials: Vec<MaterialEntry> = params
+            .materials
+            .iter()
+            .map(|m| MaterialEntry::new(m, spacing))
+            .collect();
+        let ranges: Vec<[f64; 2]> = params.materials.iter().map(|m| m.range).collect();
+        let classify = |v: f64| -> Cell {
+            ranges
+                .iter()
+                .position(|r| v >= r[0] && v < r[1])
+                .map_or(ABSENT, |m| m as u8)
+        };
+        let mut cells = vec![ABSENT; n];
+        with_voxels!(volume.data, |s| fill_cells(
+            s, &g, lo, k, dims, &classify, &mut cells
+        ));
+        let origin = g.index_to_world(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64));
+        let links = materials
+            .iter()
+            .flat_map(|a| materials.iter().map(move |b| Link::between(a, b)))
+            .collect();
+        Ok(Self {
+            links,
+            dims,
+            spacing,
+            origin,
+            first_voxel: lo,
+            downsample: k,
+            source: g,
+            materials,
+            cells,
+        })
+    }
+
+    /// Number of lattice sites (elements and absent sites).
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// True when the lattice has no site.
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+
+    /// Linear index of element `[i, j, k]`.
+    #[inline]
+    pub fn linear(&self, c: [usize; 3]) -> usize {
+        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+    }
+
+    /// Element indices of linear index `n`.
+    #[inline]
+    pub fn coords(&self, n: usize) -> [usize; 3] {
+        let (nx, ny) = (self.dims[0], self.dims[1]);
+        [n % nx, (n / nx) % ny, n / (nx * ny)]
+    }
+
+    /// The neighbour of `n` (coordinates `c`) along link `l`, if inside.
+    #[inline]
+    pub fn neighbour(&self, n: usize, c: [usize; 3], l: usize) -> Option<usize> {
+        let (a, s) = LINKS[l];
+        let p = c[a] as isize + s;
+        if p < 0 || p as usize >= self.dims[a] {
+            return None;
+        }
+        let stride = match a {
+            0 => 1,
+            1 => self.dims[0],
+            _ => self.dims[0] * self.dims[1],
+        } as isize;
+        Some((n as isize + s * stride) as usize)
+    }
+
+    /// True when site `n` holds an element.
+    #[inline]
+    pub fn present(&self, n: usize) -> bool {
+        self.cells[n] & ABSENT != ABSENT
+    }
+
+    /// The material of a present element.
+    #[inline]
+    pub fn material(&self, n: usize) -> &MaterialEntry {
+        &self.materials[(self.cells[n] & ABSENT) as usize]
+    }
+
+    /// The link between present elements `n` and `e`.
+    #[inline]
+    pub fn link(&self, n: usize, e: usize) -> &Link {
+        let (a, b) = (
+            (self.cells[n] & ABSENT) as usize,
+            (self.cells[e] & ABSENT) as usize,
+        );
+        &self.links[a * self.materials.len() + b]
+    }
+
+    /// World position (mm) at rest of element `[i, j, k]`.
+    pub fn world(&self, c: [usize; 3]) -> DVec3 {
+        self.origin + DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * DVec3::from(self.spacing)
+    }
+
+    /// The present element nearest a world point (mm), by rest position.
+    pub fn nearest(&self, p: DVec3) -> Option<usize> {
+        let f = (p - self.origin) / DVec3::from(self.spacing);
+        let c0 = [0, 1, 2].map(|a| f[a].round().clamp(0.0, (self.dims[a] - 1) as f64) as usize);
+        let n0 = self.linear(c0);
+        if self.present(n0) {
+            return Some(n0);
+        }
+        // Widen the search shell by shell; the lattice is small enough for
+        // a scan in the worst case.
+        (0..self.len())
+            .filter(|&n| self.present(n))
+            .min_by(|&a, &b| {
+                let da = (self.world(self.coords(a)) - p).length_squared();
+                let db = (self.world(self.coords(b)) - p).length_squared();
+                da.total_cmp(&db)
+            })
+    }
+
+    /// Number of present elements.
+    pub fn element_count(&self) -> usize {
+        self.cells.iter().filter(|&&c| c & ABSENT != ABSENT).count()
+    }
+}
+
+fn fill_cells<T: Sample>(
+    src: &[T],
+    g: &Grid,
+    lo: [usize; 3],
+    k: usize,
+    dims: [usize; 3],
+    classify: &dyn Fn(f64) -> Cell,
+    cells: &mut [Cell],
+) {
+    for ek in 0..dims[2] {
+        for ej in 0..dims[1] {
+            for ei in 0..dims[0] {
+                let v = [lo[0] + ei * k, lo[1] + ej * k, lo[2] + ek * k];
+                let value = src[g.linear(v[0], v[1], v[2])].to_f32() as f64;
+                cells[ei + dims[0] * (ej + dims[1] * ek)] = classify(value);
+            }
+        }
+    }
+}

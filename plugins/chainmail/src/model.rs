@@ -1,0 +1,439 @@
+//! [`ChainMail`]: the lattice, the state, the interactions and the per-frame
+//! schedule (interleaved propagation and relaxation).
+
+use crate::blocks::{Blocks, FaceMask};
+use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
+use crate::params::{Algorithm, ChainMailParams, InteractionSpec};
+use crate::propagate::{gibson, jacobi_iteration};
+use crate::relax::sweep;
+use crate::state::{MAX_WAVE, State, key};
+use voxflex_core::error::ModelError;
+use voxflex_core::glam::DVec3;
+use voxflex_core::volume::VolumeView;
+
+/// A grab in progress: an element moved along a straight path.
+#[derive(Clone, Debug)]
+struct Grab {
+    element: usize,
+    /// Displacement when grabbed, mm.
+    start: [f32; 3],
+    /// Total offset, mm.
+    offset: [f64; 3],
+    frames: u64,
+    done: u64,
+}
+
+/// Counts since the model was built (or the last [`ChainMail::reset_counts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Counts {
+    /// Propagation iterations (parallel) or deformations (sequential).
+    pub propagation_iterations: u64,
+    /// Relaxation sweeps.
+    pub relaxation_iterations: u64,
+    /// Element evaluations in propagation.
+    pub visits: u64,
+    /// Element moves in propagation.
+    pub updates: u64,
+}
+
+/// What [`ChainMail::settle`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SettleReport {
+    /// Propagation iterations until no block was active.
+    pub propagation_iterations: u64,
+    /// Relaxation sweeps until no element moved by the tolerance.
+    pub relaxation_iterations: u64,
+    /// True when both stages converged within the caps.
+    pub at_rest: bool,
+}
+
+/// A heterogeneous ChainMail model over a volume.
+pub struct ChainMail {
+    params: ChainMailParams,
+    lat: ElementLattice,
+    state: State,
+    blocks: Blocks,
+    /// Blocks the next propagation iteration visits.
+    active: Vec<u32>,
+    /// Blocks the next relaxation sweep visits.
+    relax: Vec<u32>,
+    /// Scratch flags for building block lists.
+    seen: Vec<bool>,
+    /// Blocks changed since the last `take_dirty`.
+    dirty: Vec<bool>,
+    wave: u32,
+    grabs: Vec<Grab>,
+    counts: Counts,
+}
+
+impl ChainMail {
+    /// Builds the model of a volume (all elements at rest).
+    pub fn new(volume: VolumeView<'_>, params: ChainMailParams) -> Result<Self, ModelError> {
+        let lat = ElementLattice::new(volume, &params)?;
+        let blocks = Blocks::new(lat.dims, params.block);
+        let n = lat.len();
+        tracing::debug!(
+            dims = ?lat.dims,
+            elements = lat.element_count(),
+            blocks = blocks.len(),
+            "chainmail model built"
+        );
+        Ok(Self {
+            state: State::new(n),
+            seen: vec![false; blocks.len()],
+            dirty: vec![false; blocks.len()],
+            blocks,
+            lat,
+            params,
+            active: Vec::new(),
+            relax: Vec::new(),
+            wave: 0,
+            grabs: Vec::new(),
+            counts: Counts::default(),
+        })
+    }
+
+    /// The element lattice.
+    pub fn lattice(&self) -> &ElementLattice {
+        &self.lat
+    }
+
+    /// The state (both copies; [`State::cur`] is current).
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &ChainMailParams {
+        &self.params
+    }
+
+    /// Counts so far.
+    pub fn counts(&self) -> Counts {
+        self.counts
+    }
+
+    /// Zeroes the counts.
+    pub fn reset_counts(&mut self) {
+        self.counts = Counts::default();
+    }
+
+    /// Current displacement of element `n`, mm.
+    pub fn displacement(&self, n: usize) -> [f32; 3] {
+        self.state.get(self.state.cur, n)
+    }
+
+    /// Bytes of model state per lattice site (both Jacobi copies, keys, the
+    /// material byte; block lists excluded).
+    pub fn bytes_per_element(&self) -> usize {
+        State::BYTES_PER_ELEMENT + 1
+    }
+
+    /// Applies one interaction.
+    pub fn interact(&mut self, spec: &InteractionSpec) -> Result<(), ModelError> {
+        match *spec {
+            InteractionSpec::Grab {
+                point,
+                by,
+                to,
+                frames,
+            } => {
+                let p = DVec3::from_array(point);
+                let element = self.lat.nearest(p).ok_or_else(|| {
+                    ModelError::new("chainmail grab: the model has no element to grab")
+                })?;
+                let rest = self.lat.world(self.lat.coords(element));
+                let start = self.displacement(element);
+                let offset = match (by, to) {
+                    (Some(b), _) => b,
+                    (None, Some(t)) => {
+                        let now =
+                            rest + DVec3::new(start[0] as f64, start[1] as f64, start[2] as f64);
+                        (DVec3::from_array(t) - now).to_array()
+                    }
+                    (None, None) => unreachable!("validated by InteractionSpec::from_toml"),
+                };
+                self.grabs.retain(|g| g.element != element);
+                self.lat.cells[element] |= HELD;
+                self.grabs.push(Grab {
+                    element,
+                    start,
+                    offset,
+                    frames,
+                    done: 0,
+                });
+            }
+            InteractionSpec::Fix {
+                min,
+                max,
+                ref material,
+            } => {
+                let boxed = min
+                    .zip(max)
+                    .map(|(a, b)| (DVec3::from_array(a), DVec3::from_array(b)));
+                let mat = match material {
+                    Some(name) => Some(
+                        self.params
+                            .materials
+                            .iter()
+                            .position(|m| m.name.as_deref() == Some(name.as_str()))
+                            .ok_or_else(|| {
+                                ModelError(format!("chainmail fix: no material is named `{name}`"))
+                            })? as u8,
+                    ),
+                    None => None,
+                };
+                let mut fixed = 0usize;
+                for n in 0..self.lat.len() {
+                    let m = self.lat.cells[n] & ABSENT;
+                    if m == ABSENT || mat.is_some_and(|k| k != m) {
+                        continue;
+                    }
+                    if let Some((lo, hi)) = boxed {
+                        let p = self.lat.world(self.lat.coords(n));
+                        if !(p.cmpge(lo).all() && p.cmple(hi).all()) {
+                            continue;
+                        }
+                    }
+                    self.lat.cells[n] |= FIXED;
+                    fixed += 1;
+                }
+                tracing::debug!(fixed, "chainmail: elements fixed");
+            }
+            InteractionSpec::Release => {
+                for g in self.grabs.drain(..) {
+                    self.lat.cells[g.element] &= !HELD;
+                    let b = self.blocks.of(self.lat.coords(g.element));
+                    push_unique(&mut self.relax, b as u32);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Moves the grabs one frame along their paths; starts one wave for all
+    /// grabs that moved. Returns the moved elements.
+    fn advance_grabs(&mut self) -> Vec<usize> {
+        let mut moved = Vec::new();
+        let mut targets = Vec::new();
+        for g in &mut self.grabs {
+            if g.done >= g.frames {
+                continue;
+            }
+            g.done += 1;
+            let f = g.done as f64 / g.frames as f64;
+            targets.push((
+                g.element,
+                [0, 1, 2].map(|a| (g.start[a] as f64 + f * g.offset[a]) as f32),
+            ));
+        }
+        if targets.is_empty() {
+            return moved;
+        }
+        if self.wave >= MAX_WAVE {
+            self.wave = self.state.rebase(self.wave, 16);
+        }
+        self.wave += 1;
+        let k = key(self.wave, 0);
+        for (e, u) in targets {
+            self.state.set_both(e, u, k);
+            let b = self.blocks.of(self.lat.coords(e));
+            push_unique(&mut self.active, b as u32);
+            push_unique(&mut self.relax, b as u32);
+            self.dirty[b] = true;
+            moved.push(e);
+        }
+        moved
+    }
+
+    /// One frame: the grabs move, then (parallel) up to
+    /// `propagation_iterations` propagation iterations and
+    /// `relaxation_iterations` relaxation sweeps, or (sequential) one full
+    /// Gibson pass and the sweeps. Returns true when anything moved.
+    pub fn step(&mut self) -> bool {
+        let moved = self.advance_grabs();
+        let mut changed = !moved.is_empty();
+        match self.params.algorithm {
+            Algorithm::Parallel => {
+                for _ in 0..self.params.propagation_iterations {
+                    if self.active.is_empty() {
+                        break;
+                    }
+                    changed |= self.propagate_once();
+                }
+            }
+            Algorithm::Sequential => {
+                if !moved.is_empty() {
+                    self.sequential_pass(&moved);
+                }
+            }
+        }
+        for _ in 0..self.params.relaxation_iterations {
+            if self.relax.is_empty() {
+                break;
+            }
+            changed |= self.relax_once();
+        }
+        changed
+    }
+
+    /// Runs propagation, then relaxation, until nothing moves (or the caps
+    /// are hit), without rendering in between: the papers' benchmark.
+    pub fn settle(&mut self, max_propagation: u64, max_relaxation: u64) -> SettleReport {
+        let mut r = SettleReport::default();
+        if let Algorithm::Sequential = self.params.algorithm {
+            // Gibson runs to completion inside `step`; nothing is pending.
+            self.active.clear();
+        }
+        while !self.active.is_empty() && r.propagation_iterations < max_propagation {
+            self.propagate_once();
+            r.propagation_iterations += 1;
+        }
+        while !self.relax.is_empty() && r.relaxation_iterations < max_relaxation {
+            self.relax_once();
+            r.relaxation_iterations += 1;
+        }
+        r.at_rest = self.active.is_empty() && self.relax.is_empty();
+        r
+    }
+
+    /// Applies the grabs' next positions and settles: a deformation run to
+    /// rest. Returns the settle report.
+    pub fn deform_to_rest(&mut self, max_propagation: u64, max_relaxation: u64) -> SettleReport {
+        self.start_deformation();
+        self.settle(max_propagation, max_relaxation)
+    }
+
+    fn sequential_pass(&mut self, moved: &[usize]) {
+        let updates = gibson(&self.lat, &self.state, moved, self.wave);
+        self.counts.propagation_iterations += 1;
+        self.counts.updates += updates;
+        self.counts.visits += updates;
+        self.active.clear();
+        // Relax wherever the pass reached: every block is a candidate.
+        self.relax = (0..self.blocks.len() as u32).collect();
+        self.dirty.iter_mut().for_each(|d| *d = true);
+    }
+
+    /// Relaxation only, until at rest (or `max` sweeps); returns the sweeps.
+    pub fn relax(&mut self, max: u64) -> u64 {
+        let mut it = 0;
+        while !self.relax.is_empty() && it < max {
+            self.relax_once();
+            it += 1;
+        }
+        it
+    }
+
+    /// Moves the grabs to their next positions and, for the sequential
+    /// algorithm, runs its propagation pass (the parallel one propagates in
+    /// [`Self::propagate`]).
+    pub fn start_deformation(&mut self) {
+        let moved = self.advance_grabs();
+        if let Algorithm::Sequential = self.params.algorithm
+            && !moved.is_empty()
+        {
+            self.sequential_pass(&moved);
+        }
+    }
+
+    /// Propagation only, until no block is active (or `max` iterations).
+    pub fn propagate(&mut self, max: u64) -> u64 {
+        let mut it = 0;
+        while !self.active.is_empty() && it < max {
+            self.propagate_once();
+            it += 1;
+        }
+        it
+    }
+
+    fn propagate_once(&mut self) -> bool {
+        let rep = jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active);
+        self.counts.propagation_iterations += 1;
+        self.counts.visits += rep.visits;
+        self.counts.updates += rep.updates;
+        self.note_changes(&rep.blocks);
+        self.active = self.blocks.next_active(&rep.blocks, &mut self.seen);
+        self.relax.extend_from_slice(&self.active);
+        self.relax.sort_unstable();
+        self.relax.dedup();
+        rep.updates > 0
+    }
+
+    fn relax_once(&mut self) -> bool {
+        // The sequential baseline sweeps every element, as Gibson's
+        // relaxation does; the parallel model only the active blocks.
+        let sequential = self.params.algorithm == Algorithm::Sequential;
+        let all: Vec<u32>;
+        let set = if sequential {
+            all = (0..self.blocks.len() as u32).collect();
+            &all
+        } else {
+            self.relax.sort_unstable();
+            self.relax.dedup();
+            &self.relax
+        };
+        let rep = sweep(
+            &self.lat,
+            &self.state,
+            &self.blocks,
+            set,
+            self.params.rest_tolerance,
+            !sequential,
+        );
+        self.counts.relaxation_iterations += 1;
+        self.note_changes(&rep.blocks);
+        self.relax = if sequential {
+            if rep.max_move >= self.params.rest_tolerance {
+                (0..self.blocks.len() as u32).collect()
+            } else {
+                Vec::new()
+            }
+        } else {
+            self.blocks.next_active(&rep.blocks, &mut self.seen)
+        };
+        rep.max_move > 0.0
+    }
+
+    fn note_changes(&mut self, results: &[(u32, FaceMask)]) {
+        for &(b, m) in results {
+            if m != 0 {
+                self.dirty[b as usize] = true;
+            }
+        }
+    }
+
+    /// The rest-space box (mm) of the blocks changed since the last call,
+    /// grown by one element spacing; `None` when nothing changed.
+    pub fn take_dirty(&mut self) -> Option<(DVec3, DVec3)> {
+        let mut lo = [usize::MAX; 3];
+        let mut hi = [0usize; 3];
+        let mut any = false;
+        for (b, d) in self.dirty.iter_mut().enumerate() {
+            if std::mem::take(d) {
+                any = true;
+                let (l, h) = self.blocks.range(b);
+                for a in 0..3 {
+                    lo[a] = lo[a].min(l[a]);
+                    hi[a] = hi[a].max(h[a] - 1);
+                }
+            }
+        }
+        any.then(|| {
+            let sp = DVec3::from(self.lat.spacing);
+            (self.lat.world(lo) - sp, self.lat.world(hi) + sp)
+        })
+    }
+
+    /// True when no propagation or relaxation work is pending.
+    pub fn at_rest(&self) -> bool {
+        self.active.is_empty() && self.relax.is_empty()
+    }
+}
+
+/// Adds a block to a short list (the grabbed elements' blocks).
+fn push_unique(v: &mut Vec<u32>, b: u32) {
+    if !v.contains(&b) {
+        v.push(b);
+    }
+}

@@ -1,0 +1,390 @@
+//! Model tests: each checks a property the papers claim, and can fail.
+
+use crate::lattice::LINKS;
+use crate::model::ChainMail;
+use crate::params::{ChainMailParams, InteractionSpec};
+use crate::relax::energy;
+use proptest::prelude::*;
+use std::collections::BinaryHeap;
+use voxflex_core::glam::DVec3;
+use voxflex_core::grid::Grid;
+use voxflex_core::phantom::phantom;
+use voxflex_core::volume::{Volume, VoxelData};
+
+/// A u8 volume of `dims` with 1 mm voxels, values from `f(i, j, k)`.
+fn volume(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
+    let grid = Grid::new(dims, DVec3::ONE, DVec3::ZERO);
+    let mut data = Vec::with_capacity(grid.len());
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                data.push(f(i, j, k));
+            }
+        }
+    }
+    Volume {
+        grid,
+        data: VoxelData::U8(data),
+    }
+}
+
+fn params(extra: &str, materials: &str) -> ChainMailParams {
+    ChainMailParams::from_toml(&format!("{extra}\nmaterials = [{materials}]")).unwrap()
+}
+
+fn grab(m: &mut ChainMail, at: [usize; 3], by: [f64; 3]) {
+    let p = m.lattice().world(at).to_array();
+    m.interact(&InteractionSpec::Grab {
+        point: p,
+        by: Some(by),
+        to: None,
+        frames: 1,
+    })
+    .unwrap();
+}
+
+/// Largest violation of any link constraint (mm; ≤ 0 when all hold).
+fn worst_violation(m: &ChainMail) -> f32 {
+    let lat = m.lattice();
+    let mut worst = f32::NEG_INFINITY;
+    for n in 0..lat.len() {
+        if !lat.present(n) {
+            continue;
+        }
+        let c = lat.coords(n);
+        for l in 0..LINKS.len() {
+            if let Some(e) = lat.neighbour(n, c, l).filter(|&e| lat.present(e)) {
+                let link = lat.link(n, e);
+                let (un, ue) = (m.displacement(n), m.displacement(e));
+                for a in 0..3 {
+                    worst = worst.max((un[a] - ue[a]).abs() - link.d[a]);
+                }
+            }
+        }
+    }
+    worst
+}
+
+/// The configuration every correct propagation reaches from rest after one
+/// grab of element `g` by `by` (isotropic constraints): on each axis, every
+/// element moves by `max(0, |by| − s)` towards `by`, where `s` is the least
+/// total slack (sum of link constraints, mm) of a path from `g` — Dijkstra.
+fn expected(m: &ChainMail, g: usize, by: [f64; 3]) -> Vec<[f64; 3]> {
+    let lat = m.lattice();
+    let mut dist = vec![f64::INFINITY; lat.len()];
+    let mut heap = BinaryHeap::new();
+    dist[g] = 0.0;
+    heap.push((std::cmp::Reverse(0u64), g));
+    // Slack sums are multiples of 1/64 mm here, so integer keys are exact.
+    while let Some((std::cmp::Reverse(dq), n)) = heap.pop() {
+        let d = dq as f64 / 4096.0;
+        if d > dist[n] {
+            continue;
+        }
+        let c = lat.coords(n);
+        for l in 0..LINKS.len() {
+            if let Some(e) = lat.neighbour(n, c, l).filter(|&e| lat.present(e)) {
+                let nd = d + lat.link(n, e).d[0] as f64;
+                if nd < dist[e] {
+                    dist[e] = nd;
+                    heap.push((std::cmp::Reverse((nd * 4096.0).round() as u64), e));
+                }
+            }
+        }
+    }
+    dist.iter()
+        .map(|&s| by.map(|b| b.signum() * (b.abs() - s).max(0.0)))
+        .collect()
+}
+
+fn max_error(m: &ChainMail, want: &[[f64; 3]]) -> f64 {
+    let lat = m.lattice();
+    (0..lat.len())
+        .filter(|&n| lat.present(n))
+        .map(|n| {
+            let u = m.displacement(n);
+            (0..3)
+                .map(|a| (u[a] as f64 - want[n][a]).abs())
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn homogeneous_cube_parallel_equals_sequential() {
+    let v = volume([12, 10, 9], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.25 }";
+    let by = [9.0, -8.0, 8.5];
+    let mut results = vec![];
+    for algorithm in ["parallel", "sequential"] {
+        let mut m = ChainMail::new(
+            v.view(),
+            params(
+                &format!("algorithm = \"{algorithm}\"\nblock = [4, 4, 4]"),
+                mats,
+            ),
+        )
+        .unwrap();
+        grab(&mut m, [0, 0, 0], by);
+        let r = m.deform_to_rest(10_000, 0);
+        assert!(m.at_rest() || r.relaxation_iterations == 0);
+        // The pull reaches every element.
+        let lat = m.lattice();
+        let far = lat.linear([11, 9, 8]);
+        assert!(m.displacement(far)[0] > 0.0, "{:?}", m.displacement(far));
+        results.push(
+            (0..lat.len())
+                .map(|n| m.displacement(n))
+                .collect::<Vec<_>>(),
+        );
+    }
+    let worst = results[0]
+        .iter()
+        .zip(&results[1])
+        .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+        .fold(0f32, f32::max);
+    // 1 mm voxels: 1e-5 voxel = 1e-5 mm.
+    assert!(
+        worst <= 1e-5,
+        "parallel and sequential differ by {worst} mm"
+    );
+}
+
+#[test]
+fn heterogeneous_ring_needs_timestamps() {
+    // The ring of the heterogeneous paper's Fig. 5: a soft half and a hard
+    // half. Constraints are multiples of 1/64 of a spacing so that link
+    // times are exact.
+    let v = phantom("rings", [50, 50, 50]).unwrap();
+    let mats = "{ name = \"soft\", range = [50, 150], constraint = 0.25 },\n\
+                { name = \"hard\", range = [150, 256], constraint = 0.0625 }";
+    // Grab the hard half next to the interface (x = 0, y = 30 mm) and pull
+    // along z, so the shortest path in links and the path of least slack
+    // part ways.
+    let point = [1.0, 30.0, 0.0];
+    let by = [0.0, 0.0, 12.0];
+    let mut errors = vec![];
+    for algorithm in ["parallel", "sequential"] {
+        let mut m = ChainMail::new(
+            v.view(),
+            params(
+                &format!("algorithm = \"{algorithm}\"\nblock = [8, 8, 8]"),
+                mats,
+            ),
+        )
+        .unwrap();
+        m.interact(&InteractionSpec::Grab {
+            point,
+            by: Some(by),
+            to: None,
+            frames: 1,
+        })
+        .unwrap();
+        m.deform_to_rest(100_000, 0);
+        let g = m.lattice().nearest(DVec3::from_array(point)).unwrap();
+        let want = expected(&m, g, by);
+        errors.push((max_error(&m, &want), worst_violation(&m)));
+    }
+    let (par, seq) = (errors[0], errors[1]);
+    assert!(
+        par.0 <= 1e-4 && par.1 <= 1e-5,
+        "timestamps: max error {} mm, worst violation {} mm",
+        par.0,
+        par.1
+    );
+    assert!(
+        seq.0 > 0.05,
+        "plain breadth-first propagation reached the expected configuration (error {} mm); the test shows nothing",
+        seq.0
+    );
+}
+
+#[test]
+fn rigid_material_moves_rigidly() {
+    // A rigid 4³ block inside soft tissue.
+    let inside = |i: usize, j: usize, k: usize| {
+        (4..8).contains(&i) && (4..8).contains(&j) && (3..7).contains(&k)
+    };
+    let v = volume(
+        [12, 12, 10],
+        |i, j, k| if inside(i, j, k) { 200 } else { 100 },
+    );
+    let mats = "{ range = [50, 150], constraint = 0.3, elastic = 0.7 },\n\
+                { range = [150, 256], constraint = 0.3, rigid = true }";
+    let mut m = ChainMail::new(v.view(), params("block = [4, 4, 4]", mats)).unwrap();
+    m.interact(&InteractionSpec::Fix {
+        min: Some([0.0, 0.0, 0.0]),
+        max: Some([11.0, 11.0, 0.0]),
+        material: None,
+    })
+    .unwrap();
+    grab(&mut m, [5, 5, 5], [2.0, 3.0, 4.0]);
+    let r = m.deform_to_rest(10_000, 2_000);
+    assert!(r.propagation_iterations > 0 && r.relaxation_iterations > 0);
+    let lat = m.lattice();
+    let block: Vec<usize> = (0..lat.len())
+        .filter(|&n| {
+            let c = lat.coords(n);
+            inside(c[0], c[1], c[2])
+        })
+        .collect();
+    let u0 = m.displacement(block[0]);
+    assert!(u0[2] > 3.9, "the block moved with the grab: {u0:?}");
+    for &n in &block {
+        let u = m.displacement(n);
+        for a in 0..3 {
+            assert!((u[a] - u0[a]).abs() <= 1e-5, "element {n}: {u:?} vs {u0:?}");
+        }
+    }
+    // The fixed floor did not move (the pull is larger than the soft
+    // layer's slack, so those links cannot all hold: fixed and grabbed
+    // elements win).
+    assert_eq!(m.displacement(lat.linear([6, 6, 0])), [0.0; 3]);
+}
+
+#[test]
+fn relaxation_never_raises_the_energy() {
+    let v = volume([14, 12, 10], |i, _, _| if i < 7 { 100 } else { 200 });
+    let mats = "{ range = [50, 150], constraint = 0.4, elastic = 1.0 },\n\
+                { range = [150, 256], constraint = 0.1, elastic = 0.6 }";
+    let mut m = ChainMail::new(v.view(), params("block = [4, 4, 4]", mats)).unwrap();
+    m.interact(&InteractionSpec::Fix {
+        min: Some([0.0, 0.0, 0.0]),
+        max: Some([0.0, 11.0, 9.0]),
+        material: None,
+    })
+    .unwrap();
+    // Less than the slack to the fixed wall, so every constraint can hold.
+    grab(&mut m, [13, 6, 5], [2.0, 1.5, -1.5]);
+    m.deform_to_rest(10_000, 0);
+    assert!(worst_violation(&m) <= 1e-5);
+    let mut e = energy(m.lattice(), m.state());
+    let e0 = e;
+    for _ in 0..200 {
+        m.settle(0, 1);
+        let next = energy(m.lattice(), m.state());
+        assert!(next <= e * (1.0 + 1e-6), "energy rose from {e} to {next}");
+        assert!(worst_violation(&m) <= 1e-5, "relaxation broke a constraint");
+        e = next;
+    }
+    assert!(
+        e < 0.9 * e0,
+        "relaxation did not lower the energy: {e0} → {e}"
+    );
+}
+
+#[test]
+fn two_grabs_in_one_frame_both_propagate() {
+    let v = volume([30, 6, 6], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.2 }";
+    let mut m = ChainMail::new(
+        v.view(),
+        params(
+            "block = [8, 4, 4]\nrelaxation_iterations = 0\npropagation_iterations = 100",
+            mats,
+        ),
+    )
+    .unwrap();
+    grab(&mut m, [0, 3, 3], [-2.0, 0.0, 0.0]);
+    grab(&mut m, [29, 3, 3], [2.0, 0.0, 0.0]);
+    assert!(m.step());
+    let lat = m.lattice();
+    let left = m.displacement(lat.linear([3, 3, 3]))[0];
+    let right = m.displacement(lat.linear([26, 3, 3]))[0];
+    // 2 mm pulls, 0.2 mm of slack per link: 1.4 mm three links in.
+    assert!(
+        (left + 1.4).abs() < 1e-5 && (right - 1.4).abs() < 1e-5,
+        "left {left}, right {right}"
+    );
+    // The middle is out of both waves' reach (ten links each).
+    assert_eq!(m.displacement(lat.linear([15, 3, 3])), [0.0; 3]);
+}
+
+#[test]
+fn a_moving_grab_starts_a_new_wave_each_frame() {
+    let v = volume([16, 4, 4], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.1 }";
+    let mut m = ChainMail::new(
+        v.view(),
+        params(
+            "relaxation_iterations = 0\npropagation_iterations = 50",
+            mats,
+        ),
+    )
+    .unwrap();
+    let p = m.lattice().world([0, 2, 2]).to_array();
+    m.interact(&InteractionSpec::Grab {
+        point: p,
+        by: Some([-4.0, 0.0, 0.0]),
+        to: None,
+        frames: 4,
+    })
+    .unwrap();
+    let lat_far = m.lattice().linear([10, 2, 2]);
+    let mut last = 0.0;
+    for _ in 0..4 {
+        assert!(m.step());
+        let u = m.displacement(lat_far)[0];
+        assert!(u <= last, "the pull only grows: {u} after {last}");
+        last = u;
+    }
+    // 4 mm pull, 0.1 mm slack per link, 10 links: 3 mm.
+    assert!((last + 3.0).abs() < 1e-5, "{last}");
+    assert!(worst_violation(&m) <= 1e-5);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    /// After propagation converges, every link constraint holds, for random
+    /// heterogeneous (isotropic) materials and random grabs.
+    #[test]
+    fn propagation_restores_every_constraint(
+        labels in proptest::collection::vec(0u8..3, 9 * 8 * 7),
+        at in (0usize..9, 0usize..8, 0usize..7),
+        by in prop::array::uniform3(-6.0f64..6.0),
+        second in proptest::option::of(((0usize..9, 0usize..8, 0usize..7), prop::array::uniform3(-4.0f64..4.0))),
+    ) {
+        let dims = [9, 8, 7];
+        let v = volume(dims, |i, j, k| 10 + 100 * labels[i + 9 * (j + 8 * k)]);
+        let mats = "{ range = [0, 50], constraint = 0.05 },\n\
+                    { range = [50, 150], constraint = 0.2 },\n\
+                    { range = [150, 256], constraint = 0.5 }";
+        let mut m = ChainMail::new(v.view(), params("block = [4, 4, 4]", mats)).unwrap();
+        grab(&mut m, [at.0, at.1, at.2], by);
+        if let Some((p, b)) = second {
+            // A second deformation from the deformed state (a newer wave);
+            // the first element is let go so no two held elements conflict.
+            m.deform_to_rest(100_000, 0);
+            m.interact(&InteractionSpec::Release).unwrap();
+            grab(&mut m, [p.0, p.1, p.2], b);
+        }
+        m.deform_to_rest(100_000, 0);
+        let w = worst_violation(&m);
+        prop_assert!(w <= 1e-5, "worst violation {w} mm");
+    }
+}
+
+#[test]
+fn fixing_a_material_holds_every_element_of_it() {
+    let v = volume([12, 6, 6], |i, _, _| if i < 6 { 200 } else { 100 });
+    let mats = "{ name = \"bone\", range = [150, 256], constraint = 0, rigid = true },\n\
+                { name = \"soft\", range = [50, 150], constraint = 0.5 }";
+    let mut m = ChainMail::new(v.view(), params("", mats)).unwrap();
+    m.interact(&InteractionSpec::from_toml("kind = \"fix\"\nmaterial = \"bone\"").unwrap())
+        .unwrap();
+    assert!(
+        m.interact(&InteractionSpec::from_toml("kind = \"fix\"\nmaterial = \"bon\"").unwrap())
+            .unwrap_err()
+            .0
+            .contains("`bon`")
+    );
+    grab(&mut m, [11, 3, 3], [4.0, 0.0, 0.0]);
+    m.deform_to_rest(10_000, 100);
+    let lat = m.lattice();
+    for n in 0..lat.len() {
+        if lat.coords(n)[0] < 6 {
+            assert_eq!(m.displacement(n), [0.0; 3]);
+        }
+    }
+    assert!(m.displacement(lat.linear([8, 3, 3]))[0] > 0.0);
+}
