@@ -18,8 +18,13 @@ use voxflex_chainmail::params::{ChainMailParams, InteractionSpec};
 use voxflex_core::phantom::phantom;
 
 fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
+    // "frontier" selects the parallel algorithm with the element work-list.
+    let (algorithm, schedule) = match algorithm {
+        "frontier" => ("parallel", "frontier"),
+        a => (a, "blocks"),
+    };
     ChainMailParams::from_toml(&format!(
-        "algorithm = \"{algorithm}\"\nblock = {block:?}\n\
+        "algorithm = \"{algorithm}\"\nschedule = \"{schedule}\"\nblock = {block:?}\n\
          materials = [{{ range = [-1e9, 1e9], constraint = 0.1, elastic = 1.0 }}]"
     ))
     .expect("bench parameters")
@@ -71,7 +76,7 @@ fn main() {
     };
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
 
-    let (sp, _, sr, sri, sc, sm) = run("sequential", [16, 4, 4], RELAX_SWEEPS);
+    let (sp, _, sr, sri, sc, sm) = run("sequential", [8, 4, 4], RELAX_SWEEPS);
     println!(
         "sequential Gibson: propagation {:9.1} ms (one pass, {} elements moved)   relaxation {:9.1} ms ({} dense sweeps)",
         ms(sp),
@@ -79,9 +84,9 @@ fn main() {
         ms(sr),
         sri
     );
-    let (pp, ppi, pr, pri, pc, pm) = run("parallel", [16, 4, 4], RELAX_SWEEPS);
+    let (pp, ppi, pr, pri, pc, pm) = run("parallel", [8, 4, 4], RELAX_SWEEPS);
     println!(
-        "parallel 16×4×4:   propagation {:9.1} ms ({ppi} iterations)          relaxation {:9.1} ms ({pri} sweeps over active blocks)",
+        "parallel 8×4×4:    propagation {:9.1} ms ({ppi} iterations)          relaxation {:9.1} ms ({pri} sweeps over active blocks)",
         ms(pp),
         ms(pr),
     );
@@ -101,21 +106,26 @@ fn main() {
     );
     drop((sm, pm));
 
-    println!("block size    propagation (ms)   visits per useful update");
-    for block in [[32, 32, 32], [16, 16, 16], [8, 8, 8], [16, 4, 4], [8, 4, 4]] {
-        let (t, _, _, _, c, _) = run("parallel", block, 0);
+    println!("schedule            propagation (ms)   visits per useful update");
+    let mut rows: Vec<(String, &str, [usize; 3])> =
+        [[32, 32, 32], [16, 16, 16], [8, 8, 8], [16, 4, 4], [8, 4, 4]]
+            .into_iter()
+            .map(|b| (format!("blocks {}×{}×{}", b[0], b[1], b[2]), "parallel", b))
+            .collect();
+    rows.push(("frontier list".into(), "frontier", [16, 4, 4]));
+    for (name, algorithm, block) in rows {
+        let (t, _, _, _, c, _) = run(algorithm, block, 0);
         println!(
-            "{:>10}   {:16.1}   {:.2}",
-            format!("{}×{}×{}", block[0], block[1], block[2]),
+            "{name:>18}   {:16.1}   {:.2}",
             ms(t),
             c.visits as f64 / c.updates.max(1) as f64
         );
     }
 
-    println!("local grab (same 16-link reach on two model sizes), to rest:");
+    println!("local grab (same 16-link reach on two model sizes; up to 60 frames or rest):");
     for size in [n / 2, n] {
         let v = phantom("cube", [size, size, size]).expect("cube phantom");
-        let mut m = ChainMail::new(v.view(), params("parallel", [16, 4, 4])).expect("model");
+        let mut m = ChainMail::new(v.view(), params("parallel", [8, 4, 4])).expect("model");
         let lat = m.lattice();
         let centre = lat.world([size / 2, size / 2, size / 2]);
         let reach = 16.0 * 0.1 * lat.spacing[2];
@@ -128,7 +138,7 @@ fn main() {
         .expect("grab");
         let t = Instant::now();
         let mut frames = 0;
-        while frames < 10_000 {
+        while frames < 60 {
             frames += 1;
             m.step();
             if m.at_rest() {

@@ -3,8 +3,8 @@
 
 use crate::blocks::{Blocks, FaceMask};
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
-use crate::params::{Algorithm, ChainMailParams, InteractionSpec};
-use crate::propagate::{gibson, jacobi_iteration};
+use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
+use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
 use crate::relax::sweep;
 use crate::state::{MAX_WAVE, State, key};
 use voxflex_core::error::ModelError;
@@ -53,8 +53,10 @@ pub struct ChainMail {
     lat: ElementLattice,
     state: State,
     blocks: Blocks,
-    /// Blocks the next propagation iteration visits.
+    /// Blocks the next propagation iteration visits (block schedule).
     active: Vec<u32>,
+    /// Elements the next propagation iteration visits (frontier schedule).
+    frontier: Vec<u32>,
     /// Blocks the next relaxation sweep visits.
     relax: Vec<u32>,
     /// Scratch flags for building block lists.
@@ -86,6 +88,7 @@ impl ChainMail {
             lat,
             params,
             active: Vec::new(),
+            frontier: Vec::new(),
             relax: Vec::new(),
             wave: 0,
             grabs: Vec::new(),
@@ -230,6 +233,11 @@ impl ChainMail {
         if targets.is_empty() {
             return moved;
         }
+        if self.params.schedule == Schedule::Frontier {
+            // Seed the work-list with the moved elements' neighbours.
+            let seeds: Vec<u32> = targets.iter().map(|t| t.0 as u32).collect();
+            self.frontier.extend(next_frontier(&self.lat, &seeds));
+        }
         if self.wave >= MAX_WAVE {
             self.wave = self.state.rebase(self.wave, 16);
         }
@@ -256,7 +264,7 @@ impl ChainMail {
         match self.params.algorithm {
             Algorithm::Parallel => {
                 for _ in 0..self.params.propagation_iterations {
-                    if self.active.is_empty() {
+                    if !self.propagating() {
                         break;
                     }
                     changed |= self.propagate_once();
@@ -284,8 +292,9 @@ impl ChainMail {
         if let Algorithm::Sequential = self.params.algorithm {
             // Gibson runs to completion inside `step`; nothing is pending.
             self.active.clear();
+            self.frontier.clear();
         }
-        while !self.active.is_empty() && r.propagation_iterations < max_propagation {
+        while self.propagating() && r.propagation_iterations < max_propagation {
             self.propagate_once();
             r.propagation_iterations += 1;
         }
@@ -293,7 +302,7 @@ impl ChainMail {
             self.relax_once();
             r.relaxation_iterations += 1;
         }
-        r.at_rest = self.active.is_empty() && self.relax.is_empty();
+        r.at_rest = !self.propagating() && self.relax.is_empty();
         r
     }
 
@@ -310,6 +319,7 @@ impl ChainMail {
         self.counts.updates += updates;
         self.counts.visits += updates;
         self.active.clear();
+        self.frontier.clear();
         // Relax wherever the pass reached: every block is a candidate.
         self.relax = (0..self.blocks.len() as u32).collect();
         self.dirty.iter_mut().for_each(|d| *d = true);
@@ -340,14 +350,25 @@ impl ChainMail {
     /// Propagation only, until no block is active (or `max` iterations).
     pub fn propagate(&mut self, max: u64) -> u64 {
         let mut it = 0;
-        while !self.active.is_empty() && it < max {
+        while self.propagating() && it < max {
             self.propagate_once();
             it += 1;
         }
         it
     }
 
+    /// True when propagation has work left.
+    fn propagating(&self) -> bool {
+        match self.params.schedule {
+            Schedule::Blocks => !self.active.is_empty(),
+            Schedule::Frontier => !self.frontier.is_empty(),
+        }
+    }
+
     fn propagate_once(&mut self) -> bool {
+        if self.params.schedule == Schedule::Frontier {
+            return self.propagate_frontier_once();
+        }
         let rep = jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active);
         self.counts.propagation_iterations += 1;
         self.counts.visits += rep.visits;
@@ -358,6 +379,29 @@ impl ChainMail {
         self.relax.sort_unstable();
         self.relax.dedup();
         rep.updates > 0
+    }
+
+    fn propagate_frontier_once(&mut self) -> bool {
+        self.frontier.sort_unstable();
+        self.frontier.dedup();
+        let rep = frontier_iteration(&self.lat, &mut self.state, &self.frontier);
+        self.counts.propagation_iterations += 1;
+        self.counts.visits += rep.visits;
+        self.counts.updates += rep.updated.len() as u64;
+        let mut touched: Vec<u32> = rep
+            .updated
+            .iter()
+            .map(|&n| self.blocks.of(self.lat.coords(n as usize)) as u32)
+            .collect();
+        touched.dedup();
+        for &b in &touched {
+            self.dirty[b as usize] = true;
+        }
+        self.relax.extend_from_slice(&touched);
+        self.relax.sort_unstable();
+        self.relax.dedup();
+        self.frontier = next_frontier(&self.lat, &rep.updated);
+        !rep.updated.is_empty()
     }
 
     fn relax_once(&mut self) -> bool {
@@ -427,7 +471,7 @@ impl ChainMail {
 
     /// True when no propagation or relaxation work is pending.
     pub fn at_rest(&self) -> bool {
-        self.active.is_empty() && self.relax.is_empty()
+        !self.propagating() && self.relax.is_empty()
     }
 }
 

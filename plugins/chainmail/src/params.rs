@@ -22,6 +22,17 @@ pub enum Algorithm {
     Sequential,
 }
 
+/// How the parallel propagation finds its work.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Schedule {
+    /// Active blocks (`block` elements each) in one launch per iteration.
+    #[default]
+    Blocks,
+    /// An element work-list: the elements that moved and their neighbours.
+    Frontier,
+}
+
 /// A link constraint: the half-size of the box a neighbour may occupy around
 /// its rest offset, as a fraction of the element spacing, on all axes or per
 /// axis.
@@ -102,7 +113,11 @@ pub struct ChainMailParams {
     /// Relaxation iterations per frame (default 10).
     #[serde(default = "default_iterations")]
     pub relaxation_iterations: usize,
-    /// Elements per scheduling block `[x, y, z]` (default `[16, 4, 4]`).
+    /// `"blocks"` (default) or `"frontier"` (see [`Schedule`]).
+    #[serde(default)]
+    pub schedule: Schedule,
+    /// Elements per scheduling block `[x, y, z]` (default `[8, 4, 4]`, the
+    /// fastest in `benches/chainmail.rs` on 2 cores).
     #[serde(default = "default_block")]
     pub block: [usize; 3],
     /// Relaxation stops when no element moves more than this fraction of
@@ -118,7 +133,7 @@ fn default_iterations() -> usize {
     10
 }
 fn default_block() -> [usize; 3] {
-    [16, 4, 4]
+    [8, 4, 4]
 }
 fn default_rest_tolerance() -> f64 {
     1e-4
@@ -322,7 +337,7 @@ mod tests {
         )
         .unwrap();
         assert_eq!(p.algorithm, Algorithm::Parallel);
-        assert_eq!(p.block, [16, 4, 4]);
+        assert_eq!(p.block, [8, 4, 4]);
         assert_eq!(p.materials[1].constraint.per_axis(), [0.1, 0.2, 0.3]);
         assert!(p.materials[2].rigid);
     }

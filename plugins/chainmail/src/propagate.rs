@@ -157,3 +157,74 @@ pub fn gibson(lat: &ElementLattice, state: &State, sources: &[usize], w: u32) ->
     }
     moved
 }
+
+/// What one frontier iteration did.
+#[derive(Clone, Debug, Default)]
+pub struct FrontierReport {
+    /// Elements that moved (ascending).
+    pub updated: Vec<u32>,
+    /// Elements evaluated.
+    pub visits: u64,
+}
+
+/// One Jacobi iteration over an element work-list instead of blocks:
+/// `candidates` (ascending, unique) are the elements that moved in the last
+/// iteration and their neighbours — the only ones whose sponsor can change.
+/// Every candidate writes the write copy (its move, or a copy of its
+/// value), so elements outside the list hold equal copies; swaps the
+/// state's copies.
+pub fn frontier_iteration(
+    lat: &ElementLattice,
+    state: &mut State,
+    candidates: &[u32],
+) -> FrontierReport {
+    let rd = state.cur;
+    let wr = 1 - rd;
+    let st = &*state;
+    let updated: Vec<u32> = candidates
+        .par_chunks(2048)
+        .flat_map_iter(|chunk| {
+            let mut out = Vec::new();
+            for &n in chunk {
+                let n = n as usize;
+                if !pinned(lat.cells[n])
+                    && let Some((e, a)) = sponsor(lat, st, rd, n, lat.coords(n))
+                {
+                    let link = lat.link(n, e);
+                    st.set(wr, n, link.clamp(st.get(rd, n), st.get(rd, e)));
+                    st.set_key(wr, n, a);
+                    out.push(n as u32);
+                } else {
+                    st.carry(rd, n);
+                }
+            }
+            out
+        })
+        .collect();
+    state.cur = wr;
+    FrontierReport {
+        visits: candidates.len() as u64,
+        updated,
+    }
+}
+
+/// The next work-list: `updated` and their present neighbours, ascending,
+/// each once.
+pub fn next_frontier(lat: &ElementLattice, updated: &[u32]) -> Vec<u32> {
+    let mut next: Vec<u32> = updated
+        .par_iter()
+        .flat_map_iter(|&n| {
+            let n = n as usize;
+            let c = lat.coords(n);
+            std::iter::once(n as u32).chain(
+                (0..LINKS.len())
+                    .filter_map(move |l| lat.neighbour(n, c, l))
+                    .filter(|&e| lat.present(e))
+                    .map(|e| e as u32),
+            )
+        })
+        .collect();
+    next.par_sort_unstable();
+    next.dedup();
+    next
+}

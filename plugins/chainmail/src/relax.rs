@@ -18,7 +18,7 @@
 //! copies are written, so propagation can resume from either.
 
 use crate::blocks::{Blocks, CHANGED, FaceMask};
-use crate::lattice::{ElementLattice, FIXED, HELD, LINKS};
+use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::state::State;
 use rayon::prelude::*;
 
@@ -48,16 +48,39 @@ pub fn sweep(
         let run = |(slot, &b): (&mut (u32, FaceMask, f64), &u32)| {
             let (lo, hi) = blocks.range(b as usize);
             slot.0 = b;
+            let [nx, ny, nz] = lat.dims;
+            let (sx, sxy) = (nx, nx * ny);
             for k in lo[2]..hi[2] {
                 for j in lo[1]..hi[1] {
+                    let inner_row = j > 0 && j + 1 < ny && k > 0 && k + 1 < nz;
                     let start = lo[0] + (lo[0] + j + k + colour) % 2;
                     for i in (start..hi[0]).step_by(2) {
                         let c = [i, j, k];
                         let n = lat.linear(c);
-                        if !lat.present(n) || lat.cells[n] & (FIXED | HELD) != 0 {
+                        let cell = lat.cells[n];
+                        if cell & ABSENT == ABSENT || cell & (FIXED | HELD) != 0 {
                             continue;
                         }
-                        let mv = relax_one(lat, state, n, c, inv);
+                        let nb = if inner_row && i > 0 && i + 1 < nx {
+                            [
+                                Some(n + 1),
+                                Some(n - 1),
+                                Some(n + sx),
+                                Some(n - sx),
+                                Some(n + sxy),
+                                Some(n - sxy),
+                            ]
+                        } else {
+                            [
+                                lat.neighbour(n, c, 0),
+                                lat.neighbour(n, c, 1),
+                                lat.neighbour(n, c, 2),
+                                lat.neighbour(n, c, 3),
+                                lat.neighbour(n, c, 4),
+                                lat.neighbour(n, c, 5),
+                            ]
+                        };
+                        let mv = relax_one(lat, state, n, nb, inv);
                         if mv > 0.0 {
                             if mv >= tol {
                                 slot.1 |= CHANGED | Blocks::border(c, lo, hi);
@@ -80,20 +103,23 @@ pub fn sweep(
     }
 }
 
-/// Relaxes element `n`; returns how far it moved (largest axis, fraction
+/// Relaxes element `n` with neighbour sites `nb` (in `LINKS` order; `None`
+/// outside the lattice); returns how far it moved (largest axis, fraction
 /// of the spacing).
 #[inline]
-fn relax_one(lat: &ElementLattice, state: &State, n: usize, c: [usize; 3], inv: [f64; 3]) -> f64 {
+fn relax_one(
+    lat: &ElementLattice,
+    state: &State,
+    n: usize,
+    nb: [Option<usize>; 6],
+    inv: [f64; 3],
+) -> f64 {
     let cur = state.cur;
-    let u = state.get(cur, n);
     let mut sum = [0f32; 3];
     let mut wsum = 0f32;
     let mut lo = [f32::NEG_INFINITY; 3];
     let mut hi = [f32::INFINITY; 3];
-    for l in 0..LINKS.len() {
-        let Some(e) = lat.neighbour(n, c, l) else {
-            continue;
-        };
+    for e in nb.into_iter().flatten() {
         if !lat.present(e) {
             continue;
         }
@@ -109,6 +135,7 @@ fn relax_one(lat: &ElementLattice, state: &State, n: usize, c: [usize; 3], inv: 
     if wsum == 0.0 {
         return 0.0;
     }
+    let u = state.get(cur, n);
     let alpha = lat.material(n).elastic;
     let mut v = u;
     for a in 0..3 {
@@ -121,14 +148,14 @@ fn relax_one(lat: &ElementLattice, state: &State, n: usize, c: [usize; 3], inv: 
     if v == u {
         return 0.0;
     }
-    let k = state.key(cur, n);
     for copy in 0..2 {
         state.set(copy, n, v);
-        state.set_key(copy, n, k);
     }
-    (0..3)
-        .map(|a| ((v[a] - u[a]).abs() as f64) * inv[a])
-        .fold(0.0, f64::max)
+    let mut mv = 0f64;
+    for a in 0..3 {
+        mv = mv.max((v[a] - u[a]).abs() as f64 * inv[a]);
+    }
+    mv
 }
 
 /// The relaxation energy `Σ_links w_l |u_n − u_e|²` of the current state

@@ -116,13 +116,14 @@ fn homogeneous_cube_parallel_equals_sequential() {
     let mats = "{ range = [0, 256], constraint = 0.25 }";
     let by = [9.0, -8.0, 8.5];
     let mut results = vec![];
-    for algorithm in ["parallel", "sequential"] {
+    for config in [
+        "algorithm = \"sequential\"",
+        "algorithm = \"parallel\"",
+        "schedule = \"frontier\"",
+    ] {
         let mut m = ChainMail::new(
             v.view(),
-            params(
-                &format!("algorithm = \"{algorithm}\"\nblock = [4, 4, 4]"),
-                mats,
-            ),
+            params(&format!("{config}\nblock = [4, 4, 4]"), mats),
         )
         .unwrap();
         grab(&mut m, [0, 0, 0], by);
@@ -138,16 +139,18 @@ fn homogeneous_cube_parallel_equals_sequential() {
                 .collect::<Vec<_>>(),
         );
     }
-    let worst = results[0]
-        .iter()
-        .zip(&results[1])
-        .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
-        .fold(0f32, f32::max);
-    // 1 mm voxels: 1e-5 voxel = 1e-5 mm.
-    assert!(
-        worst <= 1e-5,
-        "parallel and sequential differ by {worst} mm"
-    );
+    for (name, r) in [("blocks", &results[1]), ("frontier", &results[2])] {
+        let worst = results[0]
+            .iter()
+            .zip(r)
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0f32, f32::max);
+        // 1 mm voxels: 1e-5 voxel = 1e-5 mm.
+        assert!(
+            worst <= 1e-5,
+            "parallel ({name}) and sequential differ by {worst} mm"
+        );
+    }
 }
 
 #[test]
@@ -164,13 +167,14 @@ fn heterogeneous_ring_needs_timestamps() {
     let point = [1.0, 30.0, 0.0];
     let by = [0.0, 0.0, 12.0];
     let mut errors = vec![];
-    for algorithm in ["parallel", "sequential"] {
+    for config in [
+        "algorithm = \"parallel\"",
+        "algorithm = \"sequential\"",
+        "schedule = \"frontier\"",
+    ] {
         let mut m = ChainMail::new(
             v.view(),
-            params(
-                &format!("algorithm = \"{algorithm}\"\nblock = [8, 8, 8]"),
-                mats,
-            ),
+            params(&format!("{config}\nblock = [8, 8, 8]"), mats),
         )
         .unwrap();
         m.interact(&InteractionSpec::Grab {
@@ -186,12 +190,14 @@ fn heterogeneous_ring_needs_timestamps() {
         errors.push((max_error(&m, &want), worst_violation(&m)));
     }
     let (par, seq) = (errors[0], errors[1]);
-    assert!(
-        par.0 <= 1e-4 && par.1 <= 1e-5,
-        "timestamps: max error {} mm, worst violation {} mm",
-        par.0,
-        par.1
-    );
+    for (name, p) in [("blocks", par), ("frontier", errors[2])] {
+        assert!(
+            p.0 <= 1e-4 && p.1 <= 1e-5,
+            "timestamps ({name}): max error {} mm, worst violation {} mm",
+            p.0,
+            p.1
+        );
+    }
     assert!(
         seq.0 > 0.05,
         "plain breadth-first propagation reached the expected configuration (error {} mm); the test shows nothing",
@@ -343,13 +349,16 @@ proptest! {
         at in (0usize..9, 0usize..8, 0usize..7),
         by in prop::array::uniform3(-6.0f64..6.0),
         second in proptest::option::of(((0usize..9, 0usize..8, 0usize..7), prop::array::uniform3(-4.0f64..4.0))),
+        frontier in any::<bool>(),
     ) {
         let dims = [9, 8, 7];
         let v = volume(dims, |i, j, k| 10 + 100 * labels[i + 9 * (j + 8 * k)]);
         let mats = "{ range = [0, 50], constraint = 0.05 },\n\
                     { range = [50, 150], constraint = 0.2 },\n\
                     { range = [150, 256], constraint = 0.5 }";
-        let mut m = ChainMail::new(v.view(), params("block = [4, 4, 4]", mats)).unwrap();
+        let schedule = if frontier { "frontier" } else { "blocks" };
+        let extra = format!("block = [4, 4, 4]\nschedule = \"{schedule}\"");
+        let mut m = ChainMail::new(v.view(), params(&extra, mats)).unwrap();
         grab(&mut m, [at.0, at.1, at.2], by);
         if let Some((p, b)) = second {
             // A second deformation from the deformed state (a newer wave);
