@@ -103,6 +103,26 @@ fn chainmail_head_scene_runs_and_swaps_to_affine_with_one_edit() {
     assert!(m["stages"]["resample"]["runs"].as_u64().unwrap() >= 2);
     let cm = std::fs::read(tmp.path().join("cm/deformed.nii.gz")).unwrap();
 
+    // A CPU-only model refuses an explicit GPU backend, before any GPU work.
+    let gpu = scene_text.replacen("backend = \"auto\"", "backend = \"gpu\"", 1);
+    assert_ne!(gpu, scene_text);
+    std::fs::write(tmp.path().join("s.toml"), &gpu).unwrap();
+    let o = voxflex(&["run", "s.toml", "--out", "g"], tmp.path());
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("plugin `chainmail` has no GPU path; use backend = \"cpu\" or \"auto\""),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        m["backend_reason"]
+            .as_str()
+            .unwrap()
+            .contains("computes on the CPU only"),
+        "{}",
+        m["backend_reason"]
+    );
+
     // The same scene, one line changed.
     let swapped = scene_text.replacen("plugin = \"chainmail\"", "plugin = \"affine\"", 1);
     assert_ne!(swapped, scene_text);

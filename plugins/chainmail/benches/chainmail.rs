@@ -99,7 +99,7 @@ fn main() {
         ms(sp + sr)
     );
     println!(
-        "elements: {}; memory: {} bytes per element (both Jacobi copies, keys, material byte); propagation visits per useful update: {:.2}",
+        "elements: {}; memory: {} bytes per element (both Jacobi copies, keys, material and cut-link bytes); propagation visits per useful update: {:.2}",
         pm.lattice().element_count(),
         pm.bytes_per_element(),
         pc.visits as f64 / pc.updates.max(1) as f64

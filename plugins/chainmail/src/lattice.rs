@@ -6,7 +6,9 @@
 //! per element in mm; the constraint of a link is an axis-aligned box of
 //! half-size `D` (mm, per axis) around the rest offset, i.e.
 //! `|u_n − u_e|_a ≤ D_a` on every axis `a` (eqs. (4)–(6) of the
-//! heterogeneous ChainMail paper written in displacements).
+//! heterogeneous ChainMail paper written in displacements). Cut links and
+//! carved elements are topology changes: [`ElementLattice::neighbour`]
+//! skips cut links and absent sites are not elements.
 
 use crate::params::{ChainMailParams, Material};
 use voxflex_core::error::ModelError;
@@ -123,6 +125,8 @@ pub struct ElementLattice {
     pub links: Vec<Link>,
     /// Per element: material index and flags.
     pub cells: Vec<Cell>,
+    /// Per element: bit `l` set when link `l` (in [`LINKS`] order) was cut.
+    pub cut: Vec<u8>,
 }
 
 impl ElementLattice {
@@ -185,6 +189,7 @@ impl ElementLattice {
             downsample: k,
             source: g,
             materials,
+            cut: vec![0; cells.len()],
             cells,
         })
     }
@@ -215,6 +220,9 @@ impl ElementLattice {
     /// The neighbour of `n` (coordinates `c`) along link `l`, if inside.
     #[inline]
     pub fn neighbour(&self, n: usize, c: [usize; 3], l: usize) -> Option<usize> {
+        if self.cut[n] & (1 << l) != 0 {
+            return None;
+        }
         let (a, s) = LINKS[l];
         let p = c[a] as isize + s;
         if p < 0 || p as usize >= self.dims[a] {
@@ -272,6 +280,21 @@ impl ElementLattice {
                 let db = (self.world(self.coords(b)) - p).length_squared();
                 da.total_cmp(&db)
             })
+    }
+
+    /// Cuts link `l` of element `n` (both directions).
+    pub fn cut_link(&mut self, n: usize, l: usize) {
+        let c = self.coords(n);
+        if let Some(e) = self.neighbour(n, c, l) {
+            self.cut[n] |= 1 << l;
+            // The opposite link of the neighbour: +x ↔ −x, …
+            self.cut[e] |= 1 << (l ^ 1);
+        }
+    }
+
+    /// Removes element `n` from the model (carving).
+    pub fn remove(&mut self, n: usize) {
+        self.cells[n] = ABSENT;
     }
 
     /// Number of present elements.

@@ -127,9 +127,9 @@ impl ChainMail {
     }
 
     /// Bytes of model state per lattice site (both Jacobi copies, keys, the
-    /// material byte; block lists excluded).
+    /// material byte and the cut-link byte; block lists excluded).
     pub fn bytes_per_element(&self) -> usize {
-        State::BYTES_PER_ELEMENT + 1
+        State::BYTES_PER_ELEMENT + 2
     }
 
     /// Applies one interaction.
@@ -203,6 +203,34 @@ impl ChainMail {
                 }
                 tracing::debug!(fixed, "chainmail: elements fixed");
             }
+            InteractionSpec::Cut { ref polygon } => {
+                let cut = self.cut(polygon);
+                tracing::debug!(links = cut, "chainmail: links cut");
+            }
+            InteractionSpec::Carve {
+                centre,
+                radius,
+                min,
+                max,
+            } => {
+                let inside = |p: DVec3| match (centre, radius, min, max) {
+                    (Some(c), Some(r), _, _) => (p - DVec3::from_array(c)).length() <= r,
+                    (_, _, Some(a), Some(b)) => {
+                        p.cmpge(DVec3::from_array(a)).all() && p.cmple(DVec3::from_array(b)).all()
+                    }
+                    _ => false,
+                };
+                let mut removed = 0usize;
+                for n in 0..self.lat.len() {
+                    if self.lat.present(n) && inside(self.position(n)) {
+                        self.lat.remove(n);
+                        self.grabs.retain(|g| g.element != n);
+                        self.touch(n);
+                        removed += 1;
+                    }
+                }
+                tracing::debug!(removed, "chainmail: elements carved");
+            }
             InteractionSpec::Release => {
                 for g in self.grabs.drain(..) {
                     self.lat.cells[g.element] &= !HELD;
@@ -212,6 +240,62 @@ impl ChainMail {
             }
         }
         Ok(())
+    }
+
+    /// Current world position (mm) of element `n`.
+    pub fn position(&self, n: usize) -> DVec3 {
+        let u = self.displacement(n);
+        self.lat.world(self.lat.coords(n)) + DVec3::new(u[0] as f64, u[1] as f64, u[2] as f64)
+    }
+
+    /// Marks element `n`'s block dirty and due for relaxation.
+    fn touch(&mut self, n: usize) {
+        let b = self.blocks.of(self.lat.coords(n));
+        self.dirty[b] = true;
+        self.relax.push(b as u32);
+    }
+
+    /// Cuts the links crossing `polygon` (fanned from its first corner);
+    /// returns how many.
+    fn cut(&mut self, polygon: &[[f64; 3]]) -> usize {
+        let p: Vec<DVec3> = polygon.iter().map(|c| DVec3::from_array(*c)).collect();
+        let tris: Vec<[DVec3; 3]> = (1..p.len() - 1).map(|i| [p[0], p[i], p[i + 1]]).collect();
+        // Only links near the polygon can cross it.
+        let (mut lo, mut hi) = (p[0], p[0]);
+        for q in &p {
+            lo = lo.min(*q);
+            hi = hi.max(*q);
+        }
+        let reach = DVec3::from(self.lat.spacing) * 2.0;
+        let (lo, hi) = (lo - reach, hi + reach);
+        let mut count = 0;
+        for n in 0..self.lat.len() {
+            if !self.lat.present(n) {
+                continue;
+            }
+            let a = self.position(n);
+            if !(a.cmpge(lo).all() && a.cmple(hi).all()) {
+                continue;
+            }
+            let c = self.lat.coords(n);
+            // +x, +y, +z links: each link once.
+            for l in [0, 2, 4] {
+                let Some(e) = self.lat.neighbour(n, c, l) else {
+                    continue;
+                };
+                if !self.lat.present(e) {
+                    continue;
+                }
+                let b = self.position(e);
+                if tris.iter().any(|t| segment_crosses_triangle(a, b, t)) {
+                    self.lat.cut_link(n, l);
+                    self.touch(n);
+                    self.touch(e);
+                    count += 1;
+                }
+            }
+        }
+        count
     }
 
     /// Moves the grabs one frame along their paths; starts one wave for all
@@ -473,6 +557,31 @@ impl ChainMail {
     pub fn at_rest(&self) -> bool {
         !self.propagating() && self.relax.is_empty()
     }
+}
+
+/// True when segment `a → b` crosses triangle `t` (Möller–Trumbore; the
+/// segment's ends and the triangle's edges count as crossing).
+fn segment_crosses_triangle(a: DVec3, b: DVec3, t: &[DVec3; 3]) -> bool {
+    let d = b - a;
+    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-12 {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = a - t[0];
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let h = e2.dot(q) * inv;
+    (0.0..=1.0).contains(&h)
 }
 
 /// Adds a block to a short list (the grabbed elements' blocks).

@@ -254,6 +254,29 @@ pub enum InteractionSpec {
     },
     /// Let go of every grabbed element (elastic materials recover).
     Release,
+    /// Cut every link whose segment (between the two elements' current
+    /// positions) crosses a planar polygon (mm, ≥ 3 corners, fanned into
+    /// triangles from the first).
+    Cut {
+        /// Polygon corners, world mm.
+        polygon: Vec<[f64; 3]>,
+    },
+    /// Remove the elements whose current positions lie inside a ball
+    /// (`centre`, `radius`, mm) or a box (`min`, `max`, mm).
+    Carve {
+        /// Ball centre, mm.
+        #[serde(default)]
+        centre: Option<[f64; 3]>,
+        /// Ball radius, mm.
+        #[serde(default)]
+        radius: Option<f64>,
+        /// Box lower corner, mm.
+        #[serde(default)]
+        min: Option<[f64; 3]>,
+        /// Box upper corner, mm.
+        #[serde(default)]
+        max: Option<[f64; 3]>,
+    },
 }
 
 fn one_frame() -> u64 {
@@ -265,7 +288,7 @@ impl InteractionSpec {
     pub fn from_toml(text: &str) -> Result<Self, ModelError> {
         let spec: InteractionSpec = toml::from_str(text).map_err(|e| {
             ModelError(format!(
-                "chainmail [[interaction]]: {} (kinds: grab, fix, release)",
+                "chainmail [[interaction]]: {} (kinds: grab, fix, release, cut, carve)",
                 e.message()
             ))
         })?;
@@ -317,6 +340,30 @@ impl InteractionSpec {
                 _ => {}
             },
             InteractionSpec::Release => {}
+            InteractionSpec::Cut { polygon } => {
+                if polygon.len() < 3 || polygon.iter().flatten().any(|v| !v.is_finite()) {
+                    return Err(ModelError::new(
+                        "chainmail cut: `polygon` needs at least 3 finite corners [x, y, z] (mm)",
+                    ));
+                }
+            }
+            InteractionSpec::Carve {
+                centre,
+                radius,
+                min,
+                max,
+            } => {
+                let ball = centre.is_some() && radius.is_some_and(|r| r > 0.0 && r.is_finite());
+                let boxed = min.is_some() && max.is_some();
+                if ball == boxed
+                    || centre.is_some() != radius.is_some()
+                    || min.is_some() != max.is_some()
+                {
+                    return Err(ModelError::new(
+                        "chainmail carve: give a ball (`centre`, `radius` > 0, mm) or a box (`min`, `max`, mm)",
+                    ));
+                }
+            }
         }
         Ok(spec)
     }

@@ -61,7 +61,7 @@ pub fn sweep(
                         if cell & ABSENT == ABSENT || cell & (FIXED | HELD) != 0 {
                             continue;
                         }
-                        let nb = if inner_row && i > 0 && i + 1 < nx {
+                        let nb = if inner_row && i > 0 && i + 1 < nx && lat.cut[n] == 0 {
                             [
                                 Some(n + 1),
                                 Some(n - 1),

@@ -2,7 +2,8 @@
 //!
 //! Per element: displacement `u` (mm, x/y/z f32) and an arrival key (u32),
 //! each twice (read and write copies of a Jacobi iteration), plus the
-//! lattice's material byte: 2 × (12 + 4) + 1 = **33 bytes**.
+//! lattice's material byte and cut-link byte: 2 × (12 + 4) + 2 = **34
+//! bytes**.
 //!
 //! **Arrival keys** (Algorithm 1's timestamps with Algorithm 2's wavefront
 //! counters in one word): the top [`WAVE_BITS`] bits are the wave (the

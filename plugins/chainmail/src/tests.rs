@@ -397,3 +397,52 @@ fn fixing_a_material_holds_every_element_of_it() {
     }
     assert!(m.displacement(lat.linear([8, 3, 3]))[0] > 0.0);
 }
+
+#[test]
+fn a_cut_stops_propagation_and_a_partial_cut_is_gone_around() {
+    let v = volume([20, 8, 8], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.1 }";
+    let build = || ChainMail::new(v.view(), params("relaxation_iterations = 0", mats)).unwrap();
+    // A plane between x = 9 and x = 10 (element centres at integer mm).
+    let through =
+        "kind = \"cut\"\npolygon = [[9.5, -1, -1], [9.5, 9, -1], [9.5, 9, 9], [9.5, -1, 9]]";
+    // The same plane, but only for y ≥ 3: links below stay.
+    let partial =
+        "kind = \"cut\"\npolygon = [[9.5, 3, -1], [9.5, 9, -1], [9.5, 9, 9], [9.5, 3, 9]]";
+    let far = |m: &ChainMail| m.displacement(m.lattice().linear([5, 7, 4]))[0];
+    let pulled = |cut: Option<&str>| {
+        let mut m = build();
+        if let Some(c) = cut {
+            m.interact(&InteractionSpec::from_toml(c).unwrap()).unwrap();
+        }
+        grab(&mut m, [19, 7, 4], [4.0, 0.0, 0.0]);
+        m.deform_to_rest(10_000, 0);
+        assert!(m.displacement(m.lattice().linear([15, 7, 4]))[0] > 0.0);
+        far(&m)
+    };
+    let (uncut, cut, around) = (pulled(None), pulled(Some(through)), pulled(Some(partial)));
+    assert!(uncut > 2.0, "without a cut the far side follows: {uncut}");
+    assert_eq!(cut, 0.0, "a cut through the bar leaves the far side still");
+    assert!(
+        around > 0.0 && around < uncut - 0.3,
+        "a partial cut is gone around (a longer path, less pull): {around} vs {uncut}"
+    );
+}
+
+#[test]
+fn carving_removes_elements_from_the_model() {
+    let v = volume([10, 10, 10], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.1 }";
+    let mut m = ChainMail::new(v.view(), params("", mats)).unwrap();
+    let before = m.lattice().element_count();
+    m.interact(
+        &InteractionSpec::from_toml("kind = \"carve\"\ncentre = [5, 5, 5]\nradius = 2.5").unwrap(),
+    )
+    .unwrap();
+    let lat = m.lattice();
+    assert!(!lat.present(lat.linear([5, 5, 5])));
+    assert!(lat.present(lat.linear([5, 5, 8])));
+    // 81 lattice points lie within 2.5 of a lattice point.
+    assert_eq!(before - lat.element_count(), 81);
+    assert!(InteractionSpec::from_toml("kind = \"carve\"\ncentre = [5, 5, 5]").is_err());
+}

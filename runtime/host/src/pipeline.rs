@@ -14,7 +14,7 @@
 //! text, the plugin library and the source file: a second run of an
 //! unchanged, converged scene re-runs no stage (unless `force`).
 
-use crate::backend::{self, BackendError, ResolvedBackend};
+use crate::backend::{self, BackendChoice, BackendError, ResolvedBackend};
 use crate::metrics::{PluginReport, RunMetrics};
 use crate::plugin_loader::{self, PluginError};
 use crate::scene::{Scene, SceneError, SliceName};
@@ -199,13 +199,35 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     let _ = std::fs::remove_file(out_dir.join(STAMP_FILE));
 
     configure_threads(scene.settings.threads);
-    let resolved: ResolvedBackend =
+    // A deformation plugin without a GPU path runs the scene on the CPU
+    // under `auto`, and refuses an explicit `gpu`.
+    let cpu_only_model = plugin.as_ref().filter(|p| {
+        p.deformation.is_some() && p.capabilities & voxflex_abi::ffi::CAPABILITY_GPU == 0
+    });
+    let choice = match (scene.settings.backend, cpu_only_model) {
+        (BackendChoice::Gpu, Some(p)) => {
+            return Err(RunError::Other(format!(
+                "{}: backend = \"gpu\", but plugin `{}` has no GPU path; use backend = \"cpu\" or \"auto\"",
+                scene.path.display(),
+                p.name
+            )));
+        }
+        (BackendChoice::Auto, Some(_)) => BackendChoice::Cpu,
+        (c, _) => c,
+    };
+    let mut resolved: ResolvedBackend =
         if scene.model.is_some() || scene.render.is_some() || !scene.rois.is_empty() {
-            backend::resolve(scene.settings.backend)?
+            backend::resolve(choice)?
         } else {
             // Nothing to compute: never initialise a GPU.
-            backend::resolve(crate::backend::BackendChoice::Cpu)?
+            backend::resolve(BackendChoice::Cpu)?
         };
+    if let (BackendChoice::Auto, Some(p)) = (scene.settings.backend, cpu_only_model) {
+        resolved.reason = format!(
+            "backend = \"auto\": plugin `{}` computes on the CPU only, so rayon on the CPU",
+            p.name
+        );
+    }
     metrics.backend = match resolved.backend {
         ExecutionBackend::Cpu => "cpu".into(),
         ExecutionBackend::Gpu => "gpu".into(),
