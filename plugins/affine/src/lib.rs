@@ -256,19 +256,13 @@ impl DeformationModel for AffineField {
     }
 
     fn bind(&mut self, rest: RestPoints<'_>) -> Result<BindingId, ModelError> {
+        rest.check_finite()?;
         self.bindings.push(match rest {
             RestPoints::Lattice(g) => Binding::Lattice(g),
-            RestPoints::Points(p) => {
-                if p.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err(ModelError::new(
-                        "a rest point is not finite (NaN or infinite)",
-                    ));
-                }
-                Binding::List {
-                    points: p.to_vec(),
-                    gpu: None,
-                }
-            }
+            RestPoints::Points(p) => Binding::List {
+                points: p.to_vec(),
+                gpu: None,
+            },
         });
         Ok(BindingId(self.bindings.len() as u64 - 1))
     }

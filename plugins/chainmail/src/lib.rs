@@ -119,16 +119,10 @@ impl DeformationModel for ChainMailPlugin {
     }
 
     fn bind(&mut self, rest: RestPoints<'_>) -> Result<BindingId, ModelError> {
+        rest.check_finite()?;
         self.bindings.push(match rest {
             RestPoints::Lattice(g) => Binding::Lattice(g),
-            RestPoints::Points(p) => {
-                if p.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err(ModelError::new(
-                        "chainmail: a rest point is not finite (NaN or infinite)",
-                    ));
-                }
-                Binding::Points(p.to_vec())
-            }
+            RestPoints::Points(p) => Binding::Points(p.to_vec()),
         });
         Ok(BindingId(self.bindings.len() as u64 - 1))
     }

@@ -57,6 +57,19 @@ impl RestPoints<'_> {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+    /// Checks that every explicit point is finite (a lattice always is):
+    /// the one validation every `bind` needs.
+    pub fn check_finite(&self) -> Result<(), ModelError> {
+        if let RestPoints::Points(p) = self
+            && p.iter().flatten().any(|v| !v.is_finite())
+        {
+            return Err(ModelError::new(
+                "a rest point is not finite (NaN or infinite)",
+            ));
+        }
+        Ok(())
+    }
+
     /// World position (mm) of point `n`.
     #[inline]
     pub fn point(&self, n: usize) -> DVec3 {
@@ -168,4 +181,24 @@ pub trait DeformationModel: Send {
     fn dirty_region(&self) -> DirtyRegion;
     /// Writes the current displacements (mm) of a binding's points.
     fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rest_points_must_be_finite() {
+        let grid = Grid::new([2, 2, 2], DVec3::ONE, DVec3::ZERO);
+        assert!(RestPoints::Lattice(grid).check_finite().is_ok());
+        assert!(
+            RestPoints::Points(&[[0.0, 1.0, 2.0]])
+                .check_finite()
+                .is_ok()
+        );
+        let e = RestPoints::Points(&[[0.0, f32::NAN, 2.0]])
+            .check_finite()
+            .unwrap_err();
+        assert!(e.0.contains("not finite"), "{e}");
+    }
 }
