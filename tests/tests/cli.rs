@@ -425,3 +425,49 @@ fn roi_maps_grow_from_a_seed_and_stages_nobody_asked_for_are_not_built() {
         .collect();
     assert!(nb.contains(&"render") && nb.contains(&"roi"), "{m}");
 }
+
+/// A ChainMail cut reaches the resampler: pulled apart, the two halves of
+/// a cube leave background in the gap, where the uncut cube stays solid.
+#[test]
+fn a_chainmail_cut_opens_a_gap_in_the_resampled_volume() {
+    plugin_dir(&["chainmail"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let value_in_gap = |cut: bool| {
+        let cut_table = if cut {
+            "[[interaction]]\nframe = 0\nkind = \"cut\"\n\
+             polygon = [[0, -60, -60], [0, 60, -60], [0, 60, 60], [0, -60, 60]]\n"
+        } else {
+            ""
+        };
+        let scene_text = format!(
+            "[scene]\nname = \"cut\"\nbackend = \"cpu\"\nframes = 3\n\
+             [volume]\nsource = \"phantom:cube\"\ndims = [20, 20, 20]\n\
+             [model]\nplugin = \"chainmail\"\n\
+             [model.params]\nmaterials = [{{ range = [50, 200], constraint = 0.01 }}]\n\
+             propagation_iterations = 40\n\
+             {cut_table}\
+             [[interaction]]\nframe = 0\nkind = \"grab\"\npoint = [22.5, 2.5, 2.5]\nby = [15, 0, 0]\n\
+             [resample]\nbackground = 0\n\
+             [output]\ndir = \"out\"\nnifti = \"deformed.nii.gz\"\n"
+        );
+        std::fs::write(tmp.path().join("s.toml"), &scene_text).unwrap();
+        let o = voxflex(&["run", "s.toml", "--out", "o", "--force"], tmp.path());
+        assert!(o.status.success(), "{}", text(&o));
+        let v = voxflex_core::io::read_volume(
+            &tmp.path().join("o/deformed.nii.gz"),
+            &Default::default(),
+        )
+        .unwrap();
+        let i = v
+            .grid
+            .world_to_index(voxflex_core::glam::DVec3::new(7.5, 2.5, 2.5))
+            .round();
+        let l = v.grid.linear(i.x as usize, i.y as usize, i.z as usize);
+        match v.data.as_slice() {
+            voxflex_core::volume::VoxelSlice::F32(s) => s[l],
+            other => panic!("unexpected output type {other:?}"),
+        }
+    };
+    assert_eq!(value_in_gap(false), 100.0, "the uncut cube moves as one");
+    assert_eq!(value_in_gap(true), 0.0, "the cut opens a gap of background");
+}

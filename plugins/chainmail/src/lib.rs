@@ -201,6 +201,31 @@ impl DeformationModel for ChainMailPlugin {
         self.dirty = None;
         Ok(())
     }
+
+    fn removed_tetrahedra(
+        &mut self,
+        binding: BindingId,
+        cell_bits: &mut [u8],
+    ) -> Result<bool, ModelError> {
+        self.removed(binding, cell_bits)
+    }
+}
+
+impl ChainMailPlugin {
+    fn removed(&self, binding: BindingId, cell_bits: &mut [u8]) -> Result<bool, ModelError> {
+        let model = self
+            .model
+            .as_ref()
+            .ok_or_else(|| ModelError::new("chainmail: removed_tetrahedra before init"))?;
+        match self.bindings.get(binding.0 as usize) {
+            // Only the identity binding's mesh is the one the cuts refer to.
+            Some(Binding::Lattice(g)) if mapping::is_identity(model.lattice(), g) => {
+                Ok(model.removed_tetrahedra(cell_bits))
+            }
+            Some(_) => Ok(false),
+            None => Err(ModelError(format!("unknown binding id {}", binding.0))),
+        }
+    }
 }
 
 impl DeformationPlugin for ChainMailPlugin {

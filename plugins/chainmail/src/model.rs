@@ -9,6 +9,7 @@ use crate::relax::sweep;
 use crate::state::{MAX_WAVE, State, key};
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
+use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
 use voxflex_core::volume::VolumeView;
 
 /// A grab in progress: an element moved along a straight path.
@@ -66,6 +67,12 @@ pub struct ChainMail {
     wave: u32,
     grabs: Vec<Grab>,
     counts: Counts,
+    /// Sampling-mesh tetrahedra the cuts and carving removed (one byte per
+    /// cell of the source's mesh, 5 bits), for a full-resolution, uncropped
+    /// model whose elements are the mesh vertices; empty until the first.
+    removed_tets: Vec<u8>,
+    /// A cut or carve since the last step: the next step reports a change.
+    topology_changed: bool,
 }
 
 impl ChainMail {
@@ -93,6 +100,8 @@ impl ChainMail {
             wave: 0,
             grabs: Vec::new(),
             counts: Counts::default(),
+            removed_tets: Vec::new(),
+            topology_changed: false,
         })
     }
 
@@ -205,6 +214,7 @@ impl ChainMail {
             }
             InteractionSpec::Cut { ref polygon } => {
                 let cut = self.cut(polygon);
+                self.topology_changed |= cut > 0;
                 tracing::debug!(links = cut, "chainmail: links cut");
             }
             InteractionSpec::Carve {
@@ -224,11 +234,14 @@ impl ChainMail {
                 for n in 0..self.lat.len() {
                     if self.lat.present(n) && inside(self.position(n)) {
                         self.lat.remove(n);
+                        let v = self.lat.coords(n);
+                        self.remove_tets(tets_at_vertex(self.mesh_cell_dims(), v));
                         self.grabs.retain(|g| g.element != n);
                         self.touch(n);
                         removed += 1;
                     }
                 }
+                self.topology_changed |= removed > 0;
                 tracing::debug!(removed, "chainmail: elements carved");
             }
             InteractionSpec::Release => {
@@ -246,6 +259,50 @@ impl ChainMail {
     pub fn position(&self, n: usize) -> DVec3 {
         let u = self.displacement(n);
         self.lat.world(self.lat.coords(n)) + DVec3::new(u[0] as f64, u[1] as f64, u[2] as f64)
+    }
+
+    /// Cells of the sampling mesh whose vertices are the elements (one
+    /// fewer than elements per axis).
+    fn mesh_cell_dims(&self) -> [usize; 3] {
+        self.lat.dims.map(|d| d.saturating_sub(1))
+    }
+
+    /// True when the elements are the source's voxels one for one, so
+    /// removed links and elements map onto sampling-mesh tetrahedra.
+    fn elements_are_voxels(&self) -> bool {
+        self.lat.downsample == 1
+            && self.lat.first_voxel == [0; 3]
+            && self.lat.dims == self.lat.source.dims
+    }
+
+    fn remove_tets(&mut self, tets: Vec<(usize, u8)>) {
+        if !self.elements_are_voxels() {
+            return;
+        }
+        if self.removed_tets.is_empty() {
+            let [cx, cy, cz] = self.mesh_cell_dims();
+            self.removed_tets = vec![0; cx * cy * cz];
+        }
+        for (cell, bits) in tets {
+            self.removed_tets[cell] |= bits;
+        }
+    }
+
+    /// ORs the removed tetrahedra into `cell_bits` (the source mesh's cells);
+    /// returns true when a new bit was set. An empty `cell_bits` asks
+    /// whether any were removed.
+    pub fn removed_tetrahedra(&self, cell_bits: &mut [u8]) -> bool {
+        if cell_bits.is_empty() || self.removed_tets.len() != cell_bits.len() {
+            return !self.removed_tets.is_empty() && cell_bits.is_empty();
+        }
+        let mut changed = false;
+        for (o, &b) in cell_bits.iter_mut().zip(&self.removed_tets) {
+            if *o | b != *o {
+                *o |= b;
+                changed = true;
+            }
+        }
+        changed
     }
 
     /// Marks element `n`'s block dirty and due for relaxation.
@@ -289,6 +346,8 @@ impl ChainMail {
                 let b = self.position(e);
                 if tris.iter().any(|t| segment_crosses_triangle(a, b, t)) {
                     self.lat.cut_link(n, l);
+                    // +x/+y/+z links start at `n`.
+                    self.remove_tets(tets_on_edge(self.mesh_cell_dims(), c, l / 2));
                     self.touch(n);
                     self.touch(e);
                     count += 1;
@@ -344,7 +403,7 @@ impl ChainMail {
     /// Gibson pass and the sweeps. Returns true when anything moved.
     pub fn step(&mut self) -> bool {
         let moved = self.advance_grabs();
-        let mut changed = !moved.is_empty();
+        let mut changed = !moved.is_empty() || std::mem::take(&mut self.topology_changed);
         match self.params.algorithm {
             Algorithm::Parallel => {
                 for _ in 0..self.params.propagation_iterations {

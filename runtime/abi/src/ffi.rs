@@ -315,6 +315,16 @@ pub struct DeformationVTable {
         z: u64,
         err: *mut ErrorBuf,
     ) -> i32,
+    /// `DeformationModel::removed_tetrahedra` on a host-owned array of
+    /// `len` cell bytes; writes 1 to `out_changed` when it set new bits.
+    pub removed_tetrahedra: unsafe extern "C" fn(
+        instance: Instance,
+        binding: u64,
+        cell_bits: *mut u8,
+        len: u64,
+        out_changed: *mut u32,
+        err: *mut ErrorBuf,
+    ) -> i32,
 }
 
 /// Log levels for [`HostApi::log`].

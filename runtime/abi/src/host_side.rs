@@ -456,4 +456,26 @@ impl DeformationModel for DeformationProxy {
             }
         }
     }
+
+    fn removed_tetrahedra(
+        &mut self,
+        binding: BindingId,
+        cell_bits: &mut [u8],
+    ) -> Result<bool, ModelError> {
+        let (vt, inst) = (self.vtable, self.instance);
+        let mut changed = 0u32;
+        let len = cell_bits.len() as u64;
+        // SAFETY: one array of `len` bytes and one u32, alive during the call.
+        self.call(|err| unsafe {
+            (vt.removed_tetrahedra)(
+                inst,
+                binding.0,
+                cell_bits.as_mut_ptr(),
+                len,
+                &mut changed,
+                err,
+            )
+        })?;
+        Ok(changed != 0)
+    }
 }

@@ -116,7 +116,8 @@ pub const fn compute() -> u64 {
             step,
             dirty_region,
             map_cpu,
-            map_gpu
+            map_gpu,
+            removed_tetrahedra
         }
     );
     hash_type!(

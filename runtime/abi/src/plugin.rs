@@ -439,6 +439,37 @@ unsafe extern "C" fn map_gpu<P: DeformationPlugin>(
     })
 }
 
+unsafe extern "C" fn removed_tetrahedra<P: DeformationPlugin>(
+    instance: Instance,
+    binding: u64,
+    cell_bits: *mut u8,
+    len: u64,
+    out_changed: *mut u32,
+    err: *mut ErrorBuf,
+) -> i32 {
+    guard(err, || {
+        // SAFETY: host contract.
+        let s = unsafe { state::<P>(instance) }?;
+        let len = usize::try_from(len).map_err(|_| "too many cells".to_owned())?;
+        if out_changed.is_null() || (len > 0 && cell_bits.is_null()) {
+            return Err("null cell array or output pointer".into());
+        }
+        let bits: &mut [u8] = if len == 0 {
+            &mut []
+        } else {
+            // SAFETY: the host passes an array of `len` bytes for the call.
+            unsafe { std::slice::from_raw_parts_mut(cell_bits, len) }
+        };
+        let changed = s
+            .model
+            .removed_tetrahedra(voxflex_core::deformation::BindingId(binding), bits)
+            .map_err(|e| e.to_string())?;
+        // SAFETY: checked non-null above.
+        unsafe { *out_changed = changed as u32 };
+        Ok(())
+    })
+}
+
 /// The vtable of plugin type `P` (used by [`crate::export_deformation_plugin!`]).
 pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
     DeformationVTable {
@@ -451,6 +482,7 @@ pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
         dirty_region: dirty_region::<P>,
         map_cpu: map_cpu::<P>,
         map_gpu: map_gpu::<P>,
+        removed_tetrahedra: removed_tetrahedra::<P>,
     }
 }
 

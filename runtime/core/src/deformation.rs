@@ -181,6 +181,22 @@ pub trait DeformationModel: Send {
     fn dirty_region(&self) -> DirtyRegion;
     /// Writes the current displacements (mm) of a binding's points.
     fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError>;
+    /// Topology changes for the resampler: sets the bits of the sampling-mesh
+    /// tetrahedra the model removed (cuts, carving) in `cell_bits` — one byte
+    /// per cell of a lattice binding's mesh, x fastest, 5 bits as in
+    /// `resample::TetMask` — and returns true when it set any that were not
+    /// set. An empty `cell_bits` asks only whether the model has removed
+    /// any tetrahedron (the host then allocates the array and asks again),
+    /// so scenes without cuts never hold a mask. Models without topology
+    /// changes keep the default (nothing).
+    fn removed_tetrahedra(
+        &mut self,
+        binding: BindingId,
+        cell_bits: &mut [u8],
+    ) -> Result<bool, ModelError> {
+        let _ = (binding, cell_bits);
+        Ok(false)
+    }
 }
 
 #[cfg(test)]

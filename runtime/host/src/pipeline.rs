@@ -37,6 +37,7 @@ use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
 use voxflex_core::resample::gpu::GpuSource;
 use voxflex_core::resample::{
     DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, ResampleReport, Resampler,
+    TetMask,
 };
 use voxflex_core::volume::{Volume, VoxelData};
 
@@ -142,6 +143,31 @@ struct DeformStages {
     binding: BindingId,
     displacements: Displacements,
     resampler: Resampler,
+    /// Tetrahedra the model removed (cuts, carving); allocated when the
+    /// model first reports one, with the cell bytes it writes into.
+    mask: Option<(TetMask, Vec<u8>)>,
+    source_grid: Grid,
+}
+
+impl DeformStages {
+    /// Asks the model for removed tetrahedra (after a map); returns true
+    /// when the mask changed. An empty array asks only whether there are
+    /// any, so scenes without topology changes never allocate a mask.
+    fn update_mask(&mut self) -> Result<bool, RunError> {
+        if self.mask.is_none() {
+            if !self.model.removed_tetrahedra(self.binding, &mut [])? {
+                return Ok(false);
+            }
+            let mask = TetMask::new(&self.source_grid)?;
+            let bytes = vec![0u8; mask.cell_count()];
+            self.mask = Some((mask, bytes));
+        }
+        let (mask, bytes) = self.mask.as_mut().expect("allocated above");
+        if !self.model.removed_tetrahedra(self.binding, bytes)? {
+            return Ok(false);
+        }
+        Ok(mask.replace_bits(bytes)?)
+    }
 }
 
 /// Runs a scene to completion and writes its outputs and `metrics.json`.
@@ -288,6 +314,8 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
                 binding,
                 displacements,
                 resampler,
+                mask: None,
+                source_grid: source.grid,
             })
         }
         _ => {
@@ -358,6 +386,7 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
                     },
                 };
                 d.model.map(d.binding, target)?;
+                d.update_mask()?;
                 map_input = model_version;
                 map_version += 1;
                 metrics
@@ -481,14 +510,15 @@ fn resample_stage(
     gpu: &Option<Arc<dyn GpuService>>,
     dirty: DirtyRegion,
 ) -> Result<ResampleReport, RunError> {
+    let mask = d.mask.as_ref().map(|(m, _)| m);
     let report = match (&d.displacements, &gpu) {
         (Displacements::Cpu([x, y, z]), _) => {
             d.resampler
-                .resample_cpu(source.view(), DisplacementsRef { x, y, z }, None, dirty)?
+                .resample_cpu(source.view(), DisplacementsRef { x, y, z }, mask, dirty)?
         }
         (Displacements::Gpu { disp, source }, Some(gpu)) => {
             d.resampler
-                .resample_gpu(gpu.as_ref(), source, *disp, None, dirty)?
+                .resample_gpu(gpu.as_ref(), source, *disp, mask, dirty)?
         }
         (Displacements::Gpu { .. }, None) => {
             return Err(RunError::Other("GPU displacements without a GPU".into()));

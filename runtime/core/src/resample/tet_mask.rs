@@ -3,7 +3,7 @@
 //! the voxels they covered get the background value.
 
 use super::ResampleError;
-use super::sampling_mesh::{SamplingMesh, TETS_PER_CELL};
+use super::sampling_mesh::{CELL_TETS, SamplingMesh, TETS_PER_CELL};
 use crate::grid::Grid;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -128,12 +128,123 @@ impl TetMask {
     pub fn changed_cells(&self) -> Option<([usize; 3], [usize; 3])> {
         self.changed
     }
+
+    /// Number of cells (bytes of a full mask).
+    pub fn cell_count(&self) -> usize {
+        self.mesh.cell_count()
+    }
+
+    /// Sets every cell's bits from `bits` (one byte per cell, x fastest, as
+    /// [`Self::bytes`] of a full mask; bits above the fifth are ignored);
+    /// returns whether anything changed.
+    pub fn replace_bits(&mut self, bits: &[u8]) -> Result<bool, ResampleError> {
+        let cd = self.mesh.cell_dims();
+        if bits.len() != self.mesh.cell_count() {
+            return Err(ResampleError::MaskMismatch {
+                mask: [bits.len(), 1, 1],
+                mesh: cd,
+            });
+        }
+        let mut changed = false;
+        for (l, &b) in bits.iter().enumerate() {
+            let (old, new) = (self.cell_bits(l), b & 0x1f);
+            if old != new {
+                let cell = [l % cd[0], (l / cd[0]) % cd[1], l / (cd[0] * cd[1])];
+                for t in 0..TETS_PER_CELL {
+                    if (old ^ new) & (1 << t) != 0 {
+                        self.set(cell, t, new & (1 << t) != 0)?;
+                    }
+                }
+                changed = true;
+            }
+        }
+        Ok(changed)
+    }
+}
+
+/// The tetrahedra that have sampling-mesh vertex `v` (voxel indices) as a
+/// corner: `(linear cell index, tetrahedron bits)` for each of the up to 8
+/// cells around it. A model that removes the vertex (carving) removes these.
+pub fn tets_at_vertex(cell_dims: [usize; 3], v: [usize; 3]) -> Vec<(usize, u8)> {
+    tets_touching(cell_dims, v, &[0, 0, 0])
+}
+
+/// The tetrahedra that hold the mesh edge from vertex `a` to `a + e_axis`
+/// (voxel indices): `(linear cell index, tetrahedron bits)` for each of the
+/// up to 4 cells around it. A model that cuts that link removes these, so
+/// the cut opens in the resampled volume.
+pub fn tets_on_edge(cell_dims: [usize; 3], a: [usize; 3], axis: usize) -> Vec<(usize, u8)> {
+    let mut e = [0usize; 3];
+    e[axis] = 1;
+    tets_touching(cell_dims, a, &e)
+}
+
+/// Tetrahedra of the cells around vertex `v` holding both `v` and `v + e`
+/// (`e` = 0 for the vertex alone).
+fn tets_touching(cell_dims: [usize; 3], v: [usize; 3], e: &[usize; 3]) -> Vec<(usize, u8)> {
+    let mut out = Vec::new();
+    // Cells whose corner set holds v (and v + e): cell = v − o, o ∈ {0,1}³.
+    for o in 0..8usize {
+        let off = [o & 1, (o >> 1) & 1, o >> 2];
+        if (0..3).any(|a| v[a] < off[a] || off[a] + e[a] > 1) {
+            continue;
+        }
+        let cell = [v[0] - off[0], v[1] - off[1], v[2] - off[2]];
+        if (0..3).any(|a| cell[a] >= cell_dims[a]) {
+            continue;
+        }
+        let ca = (off[0] + 2 * off[1] + 4 * off[2]) as u8;
+        let cb = ((off[0] + e[0]) + 2 * (off[1] + e[1]) + 4 * (off[2] + e[2])) as u8;
+        let parity = (cell[0] + cell[1] + cell[2]) & 1;
+        let mut bits = 0u8;
+        for (t, corners) in CELL_TETS[parity].iter().enumerate() {
+            if corners.contains(&ca) && corners.contains(&cb) {
+                bits |= 1 << t;
+            }
+        }
+        if bits != 0 {
+            out.push((
+                cell[0] + cell_dims[0] * (cell[1] + cell_dims[1] * cell[2]),
+                bits,
+            ));
+        }
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use glam::DVec3;
+
+    #[test]
+    fn vertex_and_edge_neighbourhoods() {
+        let cd = [3, 3, 3];
+        // An interior vertex has 8 cells around it; each holds ≥ 1 tet with it.
+        let v = tets_at_vertex(cd, [1, 1, 1]);
+        assert_eq!(v.len(), 8);
+        // Every tet holds 4 corners, so the 8 cells list each tet with the
+        // vertex once: 1 (a corner tet) or 4 (central + 3 corner tets).
+        let count: u32 = v.iter().map(|(_, b)| b.count_ones()).sum();
+        assert!(count >= 8, "{count}");
+        // A cube edge in the middle of 4 cells belongs to one tet per cell.
+        let e = tets_on_edge(cd, [1, 1, 0], 2);
+        assert_eq!(e.len(), 4);
+        assert!(e.iter().all(|(_, b)| b.count_ones() == 1), "{e:?}");
+        // A corner vertex of the mesh has one cell.
+        assert_eq!(tets_at_vertex(cd, [0, 0, 0]).len(), 1);
+        // Replace round-trips.
+        let g = Grid::new([4, 4, 4], DVec3::ONE, DVec3::ZERO);
+        let mut m = TetMask::new(&g).unwrap();
+        let mut bits = vec![0u8; m.cell_count()];
+        for (l, b) in &e {
+            bits[*l] |= b;
+        }
+        assert!(m.replace_bits(&bits).unwrap());
+        assert!(!m.replace_bits(&bits).unwrap());
+        assert_eq!(m.bytes(), &bits[..]);
+        assert!(m.replace_bits(&[0; 3]).is_err());
+    }
 
     #[test]
     fn lazy_allocation_and_generation() {
