@@ -93,7 +93,18 @@ pub fn grown_working_box(
     if current.contains(&region.dilate([2; 3], dims)) {
         return None;
     }
-    Some(initial_working_box(region, dims).union(current))
+    let grown = initial_working_box(region, dims).union(current);
+    // Past half the volume, the next growth would cover (nearly) all of it:
+    // take the whole volume now and save one copy of the field.
+    let whole = VoxelBounds {
+        lo: [0; 3],
+        hi: dims.map(|d| d - 1),
+    };
+    Some(if 2 * grown.len() > whole.len() {
+        whole
+    } else {
+        grown
+    })
 }
 
 /// A working box around `region`: grown by `max(MIN_PAD, extent/2)` per

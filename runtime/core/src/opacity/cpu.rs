@@ -50,11 +50,12 @@ impl CpuGrowth {
         check_volume(&volume)?;
         let (state, s) = GrowthState::seed(volume, seed, params)?;
         let (ext, work) = (state.ext, state.work);
-        let field: Vec<AtomicU16> = (0..work.len()).map(|_| AtomicU16::new(ext.q_min)).collect();
+        let mut field: Vec<AtomicU16> =
+            (0..work.len()).map(|_| AtomicU16::new(ext.q_min)).collect();
         field[s].store(ext.q_max, Relaxed);
         Ok(Self {
             state,
-            states: states_for(&field, 0..work.len(), ext.q_min, ext.q_max),
+            states: states_for(&mut field, 0..work.len(), ext.q_min, ext.q_max),
             field,
             frontier: group([(s as u32, ext.q_max)], work.dims()),
         })
@@ -171,9 +172,14 @@ impl CpuGrowth {
         let od = old.dims();
         let nd = nb.dims();
         let q_min = self.state.ext.q_min;
-        let mut values: Vec<u16> = (0..nb.len()).into_par_iter().map(|_| q_min).collect();
-        values
-            .par_chunks_mut(nd[0] * nd[1])
+        // Built in place, in parallel (a sequential map into atomics costs
+        // more than the copy when the box becomes the whole volume).
+        let field: Vec<AtomicU16> = (0..nb.len())
+            .into_par_iter()
+            .map(|_| AtomicU16::new(q_min))
+            .collect();
+        field
+            .par_chunks(nd[0] * nd[1])
             .enumerate()
             .for_each(|(z, slab)| {
                 let vz = nb.lo[2] + z;
@@ -185,16 +191,16 @@ impl CpuGrowth {
                     let dst = (old.lo[0] - nb.lo[0]) + nd[0] * (vy - nb.lo[1]);
                     let src = old.local_linear([old.lo[0], vy, vz]);
                     for x in 0..od[0] {
-                        slab[dst + x] = self.field[src + x].load(Relaxed);
+                        slab[dst + x].store(self.field[src + x].load(Relaxed), Relaxed);
                     }
                 }
             });
-        self.field = values.into_iter().map(AtomicU16::new).collect();
+        self.field = field;
         // Voxels outside the old box's slabs are unreached (state 0).
         let plane = nd[0] * nd[1];
         let slabs = (old.lo[2] - nb.lo[2]) * plane..(old.hi[2] + 1 - nb.lo[2]) * plane;
         self.states = states_for(
-            &self.field,
+            &mut self.field,
             slabs,
             self.state.ext.q_min,
             self.state.ext.q_max,

@@ -84,30 +84,31 @@ pub(crate) fn group_slabs(dims: [usize; 3]) -> usize {
 
 /// States for a field: done at `q_max`, reached above `q_min`, unreached
 /// at `q_min`; voxels outside `range` (box-linear) are taken as unreached.
+/// Takes the field exclusively, so the values are read with plain loads
+/// and each word's 32 states are computed without branches.
 pub(crate) fn states_for(
-    field: &[AtomicU16],
+    field: &mut [AtomicU16],
     range: std::ops::Range<usize>,
     q_min: u16,
     q_max: u16,
 ) -> Vec<AtomicU64> {
-    (0..field.len().div_ceil(32))
-        .into_par_iter()
-        .map(|w| {
-            let (a, b) = (
-                (w * 32).max(range.start),
-                (w * 32 + 32).min(field.len()).min(range.end),
-            );
-            let x = (a..b).fold(0u64, |x, v| {
-                let q = field[v].load(Relaxed);
-                let st = if q >= q_max {
-                    DONE
-                } else if q > q_min {
-                    REACHED
-                } else {
-                    UNREACHED
-                };
-                x | (st << (2 * (v - w * 32)))
-            });
+    field
+        .par_chunks_mut(32)
+        .enumerate()
+        .map(|(w, chunk)| {
+            let base = w * 32;
+            if base + chunk.len() <= range.start || base >= range.end {
+                return AtomicU64::new(UNREACHED);
+            }
+            let mut x = 0u64;
+            for (i, q) in chunk.iter_mut().enumerate() {
+                let v = base + i;
+                let q = *q.get_mut();
+                // UNREACHED 0, REACHED 1, DONE 3 (q ≥ q_max > q_min).
+                let st = (q > q_min) as u64 | (((q >= q_max) as u64) << 1);
+                let inside = (v >= range.start && v < range.end) as u64;
+                x |= (st * inside) << (2 * i);
+            }
             AtomicU64::new(x)
         })
         .collect()
@@ -269,9 +270,14 @@ impl Lattice {
 #[inline(always)]
 fn done3(states: &[AtomicU64], r: usize) -> u64 {
     let (w, off) = mark_slot(r);
-    let lo = states[w].load(Relaxed) as u128;
-    let hi = states.get(w + 1).map_or(0, |m| m.load(Relaxed)) as u128;
-    let bits = (((hi << 64) | lo) >> off) as u64;
+    let lo = states[w].load(Relaxed);
+    // Three voxels (6 bits) straddle two words only from bit 60 on.
+    let bits = if off <= 58 {
+        lo >> off
+    } else {
+        let hi = states.get(w + 1).map_or(0, |m| m.load(Relaxed));
+        (lo >> off) | (hi << (64 - off))
+    };
     bits & (bits >> 1) & 0b01_0101
 }
 
