@@ -84,7 +84,8 @@ pub const MIN_PAD: usize = 8;
 /// (`region`), and the step reads the neighbours of those, so the box must
 /// hold `region` grown by 2 (clipped to the volume). Returns `None` when `current` already does; otherwise a new box:
 /// `region` grown by `max(MIN_PAD, extent/2)` per axis (geometric growth, so
-/// a region growing from one voxel to `n` is copied O(log n) times).
+/// a region growing from one voxel to `n` is copied O(log n) times), or the
+/// whole volume once that box would hold more than half of it.
 pub fn grown_working_box(
     current: &VoxelBounds,
     region: &VoxelBounds,
