@@ -29,8 +29,8 @@
 //! frames = 4
 //! ```
 //!
-//! This session's plugin runs on the CPU (rayon); the WGSL path is future
-//! work (see the README).
+//! The plugin runs on the CPU (rayon) for now; its WGSL path is future
+//! work (see the README's known gaps).
 
 pub mod blocks;
 pub mod lattice;
