@@ -100,7 +100,12 @@ impl Link {
     /// `un` moved to the nearest point of the box around `ue`.
     #[inline]
     pub fn clamp(&self, un: [f32; 3], ue: [f32; 3]) -> [f32; 3] {
-        [0, 1, 2].map(|a| un[a].max(ue[a] - self.d[a]).min(ue[a] + self.d[a]))
+        let d = &self.d;
+        [
+            un[0].max(ue[0] - d[0]).min(ue[0] + d[0]),
+            un[1].max(ue[1] - d[1]).min(ue[1] + d[1]),
+            un[2].max(ue[2] - d[2]).min(ue[2] + d[2]),
+        ]
     }
 }
 

@@ -86,7 +86,14 @@ impl State {
     /// Displacement of element `n` in copy `c`, mm.
     #[inline]
     pub fn get(&self, c: usize, n: usize) -> [f32; 3] {
-        [0, 1, 2].map(|a| f32::from_bits(self.u[c][a][n].load(Relaxed)))
+        // Written out: array `map` closures are not reliably inlined in
+        // the kernels' hot loops.
+        let u = &self.u[c];
+        [
+            f32::from_bits(u[0][n].load(Relaxed)),
+            f32::from_bits(u[1][n].load(Relaxed)),
+            f32::from_bits(u[2][n].load(Relaxed)),
+        ]
     }
 
     /// Sets element `n`'s displacement in copy `c`, mm.
