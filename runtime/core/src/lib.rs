@@ -15,6 +15,7 @@
 pub mod camera;
 pub mod deformation;
 pub mod error;
+mod fast_div;
 pub mod gpu;
 pub mod grid;
 pub mod io;

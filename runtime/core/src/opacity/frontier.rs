@@ -50,6 +50,7 @@
 
 use super::bounds::VoxelBounds;
 use super::extinction::Extinction;
+use crate::fast_div::FastDiv;
 use crate::volume::Sample;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU16, AtomicU64, Ordering::Relaxed};
@@ -136,35 +137,6 @@ const DIRS: [[isize; 3]; 26] = {
     }
     d
 };
-
-/// Division by a fixed `u32` with one 64×64→128-bit multiplication
-/// (Lemire, Kaser & Kurz 2019: exact for every 32-bit dividend).
-#[derive(Clone, Copy, Debug)]
-struct FastDiv {
-    d: u32,
-    m: u64,
-}
-
-impl FastDiv {
-    fn new(d: u32) -> Self {
-        let d = d.max(1);
-        Self {
-            d,
-            m: if d == 1 { 0 } else { u64::MAX / d as u64 + 1 },
-        }
-    }
-
-    /// `(n / d, n % d)`.
-    #[inline(always)]
-    fn div_rem(&self, n: u32) -> (u32, u32) {
-        let q = if self.d == 1 {
-            n
-        } else {
-            ((self.m as u128 * n as u128) >> 64) as u32
-        };
-        (q, n - q * self.d)
-    }
-}
 
 /// The working box inside the volume: index arithmetic of the kernels.
 #[derive(Clone, Copy, Debug)]
