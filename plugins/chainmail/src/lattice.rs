@@ -31,7 +31,7 @@ pub const FIXED: u8 = 0x80;
 /// visits neighbours: +x, −x, +y, −y, +z, −z.
 pub const LINKS: [(usize, isize); 6] = [(0, 1), (0, -1), (1, 1), (1, -1), (2, 1), (2, -1)];
 
-/// Arrival-time quanta per unit of constraint fraction (see [`MaterialEntry::tau`]).
+/// Arrival-time quanta per unit of constraint fraction (see [`Link::tau`]).
 pub const TIME_SCALE: f64 = 64.0;
 
 /// A material as the kernels use it.

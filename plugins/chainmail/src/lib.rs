@@ -67,7 +67,7 @@ pub struct ChainMailPlugin {
     params: ChainMailParams,
     model: Option<ChainMail>,
     bindings: Vec<Binding>,
-    /// Interactions received before `init` (none in practice) are refused.
+    /// Rest-space box (mm) changed since the last `map`.
     dirty: Option<(DVec3, DVec3)>,
     /// Everything must be mapped once after `init`.
     mapped_once: bool,
@@ -212,10 +212,10 @@ impl DeformationModel for ChainMailPlugin {
 }
 
 impl ChainMailPlugin {
-    fn removed(&self, binding: BindingId, cell_bits: &mut [u8]) -> Result<bool, ModelError> {
+    fn removed(&mut self, binding: BindingId, cell_bits: &mut [u8]) -> Result<bool, ModelError> {
         let model = self
             .model
-            .as_ref()
+            .as_mut()
             .ok_or_else(|| ModelError::new("chainmail: removed_tetrahedra before init"))?;
         match self.bindings.get(binding.0 as usize) {
             // Only the identity binding's mesh is the one the cuts refer to.

@@ -71,6 +71,8 @@ pub struct ChainMail {
     /// cell of the source's mesh, 5 bits), for a full-resolution, uncropped
     /// model whose elements are the mesh vertices; empty until the first.
     removed_tets: Vec<u8>,
+    /// `removed_tets` gained bits since they were last reported.
+    removed_unreported: bool,
     /// A cut or carve since the last step: the next step reports a change.
     topology_changed: bool,
 }
@@ -101,6 +103,7 @@ impl ChainMail {
             grabs: Vec::new(),
             counts: Counts::default(),
             removed_tets: Vec::new(),
+            removed_unreported: false,
             topology_changed: false,
         })
     }
@@ -284,17 +287,24 @@ impl ChainMail {
             self.removed_tets = vec![0; cx * cy * cz];
         }
         for (cell, bits) in tets {
+            self.removed_unreported |= self.removed_tets[cell] | bits != self.removed_tets[cell];
             self.removed_tets[cell] |= bits;
         }
     }
 
-    /// ORs the removed tetrahedra into `cell_bits` (the source mesh's cells);
-    /// returns true when a new bit was set. An empty `cell_bits` asks
-    /// whether any were removed.
-    pub fn removed_tetrahedra(&self, cell_bits: &mut [u8]) -> bool {
-        if cell_bits.is_empty() || self.removed_tets.len() != cell_bits.len() {
-            return !self.removed_tets.is_empty() && cell_bits.is_empty();
+    /// ORs the removed tetrahedra into `cell_bits` (the source mesh's cells)
+    /// when some were removed since the last report; returns true when a
+    /// new bit was set. An empty `cell_bits` asks whether any were removed.
+    /// The host keeps its array between calls, so a frame without a new cut
+    /// costs nothing here.
+    pub fn removed_tetrahedra(&mut self, cell_bits: &mut [u8]) -> bool {
+        if cell_bits.is_empty() {
+            return !self.removed_tets.is_empty();
         }
+        if !self.removed_unreported || self.removed_tets.len() != cell_bits.len() {
+            return false;
+        }
+        self.removed_unreported = false;
         let mut changed = false;
         for (o, &b) in cell_bits.iter_mut().zip(&self.removed_tets) {
             if *o | b != *o {
@@ -376,8 +386,10 @@ impl ChainMail {
         if targets.is_empty() {
             return moved;
         }
-        if self.params.schedule == Schedule::Frontier {
-            // Seed the work-list with the moved elements' neighbours.
+        // Seed the parallel propagation's work (the sequential algorithm
+        // propagates in one pass from `moved` instead).
+        let parallel = self.params.algorithm == Algorithm::Parallel;
+        if parallel && self.params.schedule == Schedule::Frontier {
             let seeds: Vec<u32> = targets.iter().map(|t| t.0 as u32).collect();
             self.frontier.extend(next_frontier(&self.lat, &seeds));
         }
@@ -389,7 +401,9 @@ impl ChainMail {
         for (e, u) in targets {
             self.state.set_both(e, u, k);
             let b = self.blocks.of(self.lat.coords(e));
-            push_unique(&mut self.active, b as u32);
+            if parallel && self.params.schedule == Schedule::Blocks {
+                push_unique(&mut self.active, b as u32);
+            }
             push_unique(&mut self.relax, b as u32);
             self.dirty[b] = true;
             moved.push(e);
@@ -431,22 +445,13 @@ impl ChainMail {
     /// Runs propagation, then relaxation, until nothing moves (or the caps
     /// are hit), without rendering in between: the papers' benchmark.
     pub fn settle(&mut self, max_propagation: u64, max_relaxation: u64) -> SettleReport {
-        let mut r = SettleReport::default();
-        if let Algorithm::Sequential = self.params.algorithm {
-            // Gibson runs to completion inside `step`; nothing is pending.
-            self.active.clear();
-            self.frontier.clear();
+        let propagation_iterations = self.propagate(max_propagation);
+        let relaxation_iterations = self.relax(max_relaxation);
+        SettleReport {
+            propagation_iterations,
+            relaxation_iterations,
+            at_rest: self.at_rest(),
         }
-        while self.propagating() && r.propagation_iterations < max_propagation {
-            self.propagate_once();
-            r.propagation_iterations += 1;
-        }
-        while !self.relax.is_empty() && r.relaxation_iterations < max_relaxation {
-            self.relax_once();
-            r.relaxation_iterations += 1;
-        }
-        r.at_rest = !self.propagating() && self.relax.is_empty();
-        r
     }
 
     /// Applies the grabs' next positions and settles: a deformation run to
@@ -461,8 +466,6 @@ impl ChainMail {
         self.counts.propagation_iterations += 1;
         self.counts.updates += updates;
         self.counts.visits += updates;
-        self.active.clear();
-        self.frontier.clear();
         // Relax wherever the pass reached: every block is a candidate.
         self.relax = (0..self.blocks.len() as u32).collect();
         self.dirty.iter_mut().for_each(|d| *d = true);
