@@ -1,8 +1,19 @@
 //! The element lattice: one element per (down-sampled, cropped) voxel,
 //! linked to its six face neighbours, with its material.
 //!
-//! Coordinates: element indices `[i, j, k]` (x fastest); world positions in
-//! millimetres through [`ElementLattice::world`]. Displacements are stored
+//! Coordinates: element indices `[i, j, k]`; world positions in
+//! millimetres through [`ElementLattice::world`].
+//!
+//! **Storage order is red-black** ([`ElementLattice::linear`]): the
+//! elements with even `i + j + k` ("red", colour 0) come first, then the
+//! odd ones; within a colour, rows run x-fastest with `i / 2` as the slot
+//! (`hx = ⌈nx / 2⌉` slots per row; when `nx` is odd one slot of every other
+//! row is padding, an absent site). Every neighbour of an element has the
+//! other colour, and the neighbours of `8` consecutive slots are `8`
+//! consecutive slots of the other colour (same slot on the ±y and ±z rows,
+//! slot − 1 + p and slot + p on the same row for row parity `p`), so the
+//! relaxation's half-sweeps load and store whole vectors. The GPU kernels
+//! index the same way. Displacements are stored
 //! per element in mm; the constraint of a link is an axis-aligned box of
 //! half-size `D` (mm, per axis) around the rest offset, i.e.
 //! `|u_n − u_e|_a ≤ D_a` on every axis `a` (eqs. (4)–(6) of the
@@ -128,9 +139,13 @@ pub struct ElementLattice {
     pub materials: Vec<MaterialEntry>,
     /// Link table: `links[a * materials.len() + b]` for materials `a`, `b`.
     pub links: Vec<Link>,
-    /// Per element: material index and flags.
+    /// Slots per colour row, `⌈nx / 2⌉`.
+    pub hx: usize,
+    /// Sites per colour, `hx · ny · nz` (black sites start here).
+    pub half: usize,
+    /// Per site (red-black order): material index and flags.
     pub cells: Vec<Cell>,
-    /// Per element: bit `l` set when link `l` (in [`LINKS`] order) was cut.
+    /// Per site: bit `l` set when link `l` (in [`LINKS`] order) was cut.
     pub cut: Vec<u8>,
 }
 
@@ -156,7 +171,9 @@ impl ElementLattice {
         }
         let k = params.downsample;
         let dims = [0, 1, 2].map(|a| (hi[a] - lo[a]) / k + 1);
-        let n = dims[0] * dims[1] * dims[2];
+        let hx = dims[0].div_ceil(2);
+        let half = hx * dims[1] * dims[2];
+        let n = 2 * half;
         if n > u32::MAX as usize / 2 {
             return Err(ModelError(format!(
                 "chainmail: {dims:?} elements is too many; crop or raise `downsample`"
@@ -177,8 +194,9 @@ impl ElementLattice {
                 .map_or(ABSENT, |m| m as u8)
         };
         let mut cells = vec![ABSENT; n];
+        let order = Order { dims, hx, half };
         with_voxels!(volume.data, |s| fill_cells(
-            s, &g, lo, k, dims, &classify, &mut cells
+            s, &g, lo, k, order, &classify, &mut cells
         ));
         let origin = g.index_to_world(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64));
         let links = materials
@@ -188,6 +206,8 @@ impl ElementLattice {
         Ok(Self {
             links,
             dims,
+            hx,
+            half,
             spacing,
             origin,
             first_voxel: lo,
@@ -209,36 +229,69 @@ impl ElementLattice {
         self.cells.is_empty()
     }
 
-    /// Linear index of element `[i, j, k]`.
+    /// Storage index of element `[i, j, k]` (red-black order).
     #[inline]
     pub fn linear(&self, c: [usize; 3]) -> usize {
-        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+        self.order().linear(c)
     }
 
-    /// Element indices of linear index `n`.
+    /// Element indices of storage index `n` (of a padding site: `i = nx`).
     #[inline]
     pub fn coords(&self, n: usize) -> [usize; 3] {
-        let (nx, ny) = (self.dims[0], self.dims[1]);
-        [n % nx, (n / nx) % ny, n / (nx * ny)]
+        let colour = usize::from(n >= self.half);
+        let r = n - colour * self.half;
+        let (q, row) = (r % self.hx, r / self.hx);
+        let (j, k) = (row % self.dims[1], row / self.dims[1]);
+        [2 * q + ((colour + j + k) & 1), j, k]
     }
 
-    /// The neighbour of `n` (coordinates `c`) along link `l`, if inside.
+    /// The storage order's parameters.
+    #[inline]
+    pub fn order(&self) -> Order {
+        Order {
+            dims: self.dims,
+            hx: self.hx,
+            half: self.half,
+        }
+    }
+
+    /// The neighbour of `n` (coordinates `c`) along link `l`, if inside and
+    /// not cut.
     #[inline]
     pub fn neighbour(&self, n: usize, c: [usize; 3], l: usize) -> Option<usize> {
         if self.cut[n] & (1 << l) != 0 {
             return None;
         }
         let (a, s) = LINKS[l];
-        let p = c[a] as isize + s;
-        if p < 0 || p as usize >= self.dims[a] {
+        if (s < 0 && c[a] == 0) || (s > 0 && c[a] + 1 == self.dims[a]) {
             return None;
         }
-        let stride = match a {
-            0 => 1,
-            1 => self.dims[0],
-            _ => self.dims[0] * self.dims[1],
-        } as isize;
-        Some((n as isize + s * stride) as usize)
+        Some(self.offsets(c)[l].wrapping_add(n))
+    }
+
+    /// Storage offsets from the element at `c` to its six neighbours, in
+    /// [`LINKS`] order (wrapping arithmetic; only meaningful for neighbours
+    /// inside the lattice). The neighbours have the other colour, so every
+    /// offset crosses `±half`; along x the slot moves by `p` or `p − 1`
+    /// for the row parity `p = i mod 2`.
+    #[inline]
+    pub fn offsets(&self, c: [usize; 3]) -> [usize; 6] {
+        let colour = (c[0] + c[1] + c[2]) & 1;
+        let to_other = if colour == 0 {
+            self.half
+        } else {
+            self.half.wrapping_neg()
+        };
+        let p = c[0] & 1;
+        let sz = self.hx * self.dims[1];
+        [
+            to_other.wrapping_add(p),
+            to_other.wrapping_add(p).wrapping_sub(1),
+            to_other.wrapping_add(self.hx),
+            to_other.wrapping_sub(self.hx),
+            to_other.wrapping_add(sz),
+            to_other.wrapping_sub(sz),
+        ]
     }
 
     /// True when site `n` holds an element.
@@ -308,21 +361,52 @@ impl ElementLattice {
     }
 }
 
+/// The red-black storage order of a lattice (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Order {
+    /// Elements per axis.
+    pub dims: [usize; 3],
+    /// Slots per colour row, `⌈nx / 2⌉`.
+    pub hx: usize,
+    /// Sites per colour.
+    pub half: usize,
+}
+
+impl Order {
+    /// Storage index of element `[i, j, k]`.
+    #[inline]
+    pub fn linear(&self, c: [usize; 3]) -> usize {
+        let colour = (c[0] + c[1] + c[2]) & 1;
+        colour * self.half + (c[2] * self.dims[1] + c[1]) * self.hx + c[0] / 2
+    }
+
+    /// Storage index of slot 0 of colour `colour`'s row `(j, k)`, and the
+    /// row's parity `p` (its slot `q` holds element `i = 2q + p`).
+    #[inline]
+    pub fn row(&self, colour: usize, j: usize, k: usize) -> (usize, usize) {
+        (
+            colour * self.half + (k * self.dims[1] + j) * self.hx,
+            (colour + j + k) & 1,
+        )
+    }
+}
+
 fn fill_cells<T: Sample>(
     src: &[T],
     g: &Grid,
     lo: [usize; 3],
     k: usize,
-    dims: [usize; 3],
+    order: Order,
     classify: &dyn Fn(f64) -> Cell,
     cells: &mut [Cell],
 ) {
+    let dims = order.dims;
     for ek in 0..dims[2] {
         for ej in 0..dims[1] {
             for ei in 0..dims[0] {
                 let v = [lo[0] + ei * k, lo[1] + ej * k, lo[2] + ek * k];
                 let value = src[g.linear(v[0], v[1], v[2])].to_f32() as f64;
-                cells[ei + dims[0] * (ej + dims[1] * ek)] = classify(value);
+                cells[order.linear([ei, ej, ek])] = classify(value);
             }
         }
     }

@@ -183,7 +183,7 @@ impl DeformationModel for ChainMailPlugin {
         let (lat, state) = (model.lattice(), model.state());
         match b {
             Binding::Lattice(g) if mapping::is_identity(lat, g) => {
-                mapping::copy_identity(state, [x, y, z])
+                mapping::copy_identity(lat, state, [x, y, z])
             }
             Binding::Lattice(g) => mapping::sample_lattice(lat, state, g, [x, y, z]),
             Binding::Points(p) => {

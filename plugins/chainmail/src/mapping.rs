@@ -2,7 +2,8 @@
 //!
 //! Elements sit on voxels, so the sampling mesh of the full-resolution,
 //! uncropped model is bound by identity: voxel `v` takes element `v`'s
-//! displacement, copied straight from the model's arrays. With
+//! displacement, copied from the model's arrays (red-black order) into
+//! voxel order. With
 //! `downsample > 1`, a crop, or an explicit point list, a point takes the
 //! trilinear interpolation of the 8 surrounding elements (absent elements
 //! and sites outside the lattice count as still, displacement 0).
@@ -19,17 +20,25 @@ pub fn is_identity(lat: &ElementLattice, grid: &Grid) -> bool {
     *grid == lat.source && lat.downsample == 1 && lat.first_voxel == [0; 3] && lat.dims == grid.dims
 }
 
-/// Copies the current displacements (identity binding).
-pub fn copy_identity(state: &State, out: [&mut [f32]; 3]) {
+/// Copies the current displacements (identity binding) into voxel order
+/// (x fastest), interleaving each row's red and black slots.
+pub fn copy_identity(lat: &ElementLattice, state: &State, out: [&mut [f32]; 3]) {
     let cur = state.cur;
+    let order = lat.order();
+    let [nx, ny, _] = lat.dims;
     for (a, o) in out.into_iter().enumerate() {
-        o.par_chunks_mut(1 << 14)
-            .zip(state.u[cur][a].par_chunks(1 << 14))
-            .for_each(|(o, s)| {
-                for (o, s) in o.iter_mut().zip(s) {
-                    *o = f32::from_bits(s.load(Relaxed));
+        let u = &state.u[cur][a];
+        o.par_chunks_mut(nx).enumerate().for_each(|(row, o)| {
+            let (j, k) = (row % ny, row / ny);
+            for colour in 0..2 {
+                let (start, p) = order.row(colour, j, k);
+                for (q, s) in u[start..start + lat.hx].iter().enumerate() {
+                    if let Some(o) = o.get_mut(2 * q + p) {
+                        *o = f32::from_bits(s.load(Relaxed));
+                    }
                 }
-            });
+            }
+        });
     }
 }
 

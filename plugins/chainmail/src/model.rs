@@ -5,8 +5,9 @@ use crate::blocks::{Blocks, FaceMask};
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
 use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
-use crate::relax::sweep;
+use crate::relax::{sweep, sweep_scalar};
 use crate::state::{MAX_WAVE, State, key};
+use rayon::prelude::*;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
@@ -64,6 +65,10 @@ pub struct ChainMail {
     seen: Vec<bool>,
     /// Blocks changed since the last `take_dirty`.
     dirty: Vec<bool>,
+    /// Blocks relaxed since the Jacobi copies were last made equal
+    /// (relaxation writes only the current copy), with their flags.
+    unsynced: Vec<u32>,
+    unsynced_flag: Vec<bool>,
     wave: u32,
     grabs: Vec<Grab>,
     counts: Counts,
@@ -93,6 +98,8 @@ impl ChainMail {
             state: State::new(n),
             seen: vec![false; blocks.len()],
             dirty: vec![false; blocks.len()],
+            unsynced: Vec::new(),
+            unsynced_flag: vec![false; blocks.len()],
             blocks,
             lat,
             params,
@@ -462,6 +469,7 @@ impl ChainMail {
     }
 
     fn sequential_pass(&mut self, moved: &[usize]) {
+        self.sync_copies();
         let updates = gibson(&self.lat, &self.state, moved, self.wave);
         self.counts.propagation_iterations += 1;
         self.counts.updates += updates;
@@ -512,6 +520,7 @@ impl ChainMail {
     }
 
     fn propagate_once(&mut self) -> bool {
+        self.sync_copies();
         if self.params.schedule == Schedule::Frontier {
             return self.propagate_frontier_once();
         }
@@ -551,30 +560,28 @@ impl ChainMail {
     }
 
     fn relax_once(&mut self) -> bool {
-        // The sequential baseline sweeps every element, as Gibson's
-        // relaxation does; the parallel model only the active blocks.
+        // The sequential baseline sweeps every element, one by one, as
+        // Gibson's relaxation does; the parallel model only the active
+        // blocks, in parallel and 8 at a time.
         let sequential = self.params.algorithm == Algorithm::Sequential;
-        let all: Vec<u32>;
-        let set = if sequential {
-            all = (0..self.blocks.len() as u32).collect();
-            &all
+        let tol = self.params.rest_tolerance;
+        let rep = if sequential {
+            let all: Vec<u32> = (0..self.blocks.len() as u32).collect();
+            sweep_scalar(&self.lat, &self.state, &self.blocks, &all, tol)
         } else {
             self.relax.sort_unstable();
             self.relax.dedup();
-            &self.relax
+            sweep(&self.lat, &self.state, &self.blocks, &self.relax, tol)
         };
-        let rep = sweep(
-            &self.lat,
-            &self.state,
-            &self.blocks,
-            set,
-            self.params.rest_tolerance,
-            !sequential,
-        );
         self.counts.relaxation_iterations += 1;
+        for &(b, _) in &rep.blocks {
+            if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {
+                self.unsynced.push(b);
+            }
+        }
         self.note_changes(&rep.blocks);
         self.relax = if sequential {
-            if rep.max_move >= self.params.rest_tolerance {
+            if rep.max_move >= tol {
                 (0..self.blocks.len() as u32).collect()
             } else {
                 Vec::new()
@@ -583,6 +590,29 @@ impl ChainMail {
             self.blocks.next_active(&rep.blocks, &mut self.seen)
         };
         rep.max_move > 0.0
+    }
+
+    /// Copies the relaxed blocks' displacements into the other Jacobi
+    /// copy, so that both copies agree outside the blocks propagation
+    /// visits (its invariant).
+    fn sync_copies(&mut self) {
+        if self.unsynced.is_empty() {
+            return;
+        }
+        let (lat, state, blocks) = (&self.lat, &self.state, &self.blocks);
+        self.unsynced.par_iter().for_each(|&b| {
+            let (lo, hi) = blocks.range(b as usize);
+            for k in lo[2]..hi[2] {
+                for j in lo[1]..hi[1] {
+                    for i in lo[0]..hi[0] {
+                        state.copy_u(state.cur, lat.linear([i, j, k]));
+                    }
+                }
+            }
+        });
+        for b in self.unsynced.drain(..) {
+            self.unsynced_flag[b as usize] = false;
+        }
     }
 
     fn note_changes(&mut self, results: &[(u32, FaceMask)]) {

@@ -128,11 +128,17 @@ impl State {
     /// Copies element `n` from copy `from` to the other.
     #[inline]
     pub fn carry(&self, from: usize, n: usize) {
+        self.copy_u(from, n);
+        self.key[1 - from][n].store(self.key[from][n].load(Relaxed), Relaxed);
+    }
+
+    /// Copies element `n`'s displacement from copy `from` to the other.
+    #[inline]
+    pub fn copy_u(&self, from: usize, n: usize) {
         let to = 1 - from;
         for a in 0..3 {
             self.u[to][a][n].store(self.u[from][a][n].load(Relaxed), Relaxed);
         }
-        self.key[to][n].store(self.key[from][n].load(Relaxed), Relaxed);
     }
 
     /// Renumbers the waves so that the newest `keep` stay distinct and older
