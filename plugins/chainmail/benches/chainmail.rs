@@ -10,7 +10,9 @@
 //! - a local grab (~5 % of the model) on two model sizes: time per frame;
 //! - memory per element.
 //!
-//! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`).
+//! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`);
+//! `-- parallel` runs only the parallel model to rest, `-- kernels` times
+//! only the relaxation kernels.
 
 use std::time::Instant;
 use voxflex_chainmail::model::ChainMail;
@@ -76,6 +78,23 @@ fn main() {
     };
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
 
+    if std::env::args().any(|a| a == "kernels") {
+        // Only the relaxation kernels (for profiling).
+        let (.., pm) = run("parallel", [8, 4, 4], 20);
+        relaxation_kernels(&pm, ms);
+        return;
+    }
+    if std::env::args().any(|a| a == "parallel") {
+        // Only the parallel run to rest (for profiling).
+        let (pp, ppi, pr, pri, ..) = run("parallel", [8, 4, 4], RELAX_SWEEPS);
+        println!(
+            "parallel 8×4×4: propagation {:.1} ms ({ppi} iterations), relaxation {:.1} ms ({pri} sweeps), total {:.1} ms",
+            ms(pp),
+            ms(pr),
+            ms(pp + pr)
+        );
+        return;
+    }
     let (sp, _, sr, sri, sc, sm) = run("sequential", [8, 4, 4], RELAX_SWEEPS);
     println!(
         "sequential Gibson: propagation {:9.1} ms (one pass, {} elements moved)   relaxation {:9.1} ms ({} dense sweeps)",
@@ -104,7 +123,10 @@ fn main() {
         pm.bytes_per_element(),
         pc.visits as f64 / pc.updates.max(1) as f64
     );
-    drop((sm, pm));
+    drop(sm);
+
+    relaxation_kernels(&pm, ms);
+    drop(pm);
 
     println!("schedule            propagation (ms)   visits per useful update");
     let mut rows: Vec<(String, &str, [usize; 3])> =
@@ -151,6 +173,33 @@ fn main() {
             "  {size}³ model: {frames} frames (10 + 10 iterations each), {:7.2} ms per frame, {:.0} element visits per frame",
             ms(dt) / frames as f64,
             c.visits as f64 / frames as f64
+        );
+    }
+}
+
+/// Times the relaxation kernels on a deformed model, 40 sweeps each.
+fn relaxation_kernels(pm: &ChainMail, ms: impl Fn(std::time::Duration) -> f64) {
+    use voxflex_chainmail::blocks::Blocks;
+    use voxflex_chainmail::relax_passes::{sweep_dense, sweep_runs};
+    let (lat, st) = (pm.lattice(), pm.state());
+    let blocks = Blocks::new(lat.dims, [8, 4, 4]);
+    let all: Vec<u32> = (0..blocks.len() as u32).collect();
+    let t = Instant::now();
+    for _ in 0..40 {
+        sweep_runs(lat, st, &blocks, &all, 1e-4);
+    }
+    println!(
+        "relaxation over runs of blocks: {:.2} ms per sweep",
+        ms(t.elapsed()) / 40.0
+    );
+    for s in [1, 2, 4, 8] {
+        let t = Instant::now();
+        for _ in 0..40 / s {
+            sweep_dense(lat, st, &blocks, 1e-4, s);
+        }
+        println!(
+            "relaxation, whole lattice, {s} sweeps per pass: {:.2} ms per sweep",
+            ms(t.elapsed()) / (40 / s * s) as f64
         );
     }
 }

@@ -39,6 +39,8 @@ pub mod model;
 pub mod params;
 pub mod propagate;
 pub mod relax;
+pub mod relax_lanes;
+pub mod relax_passes;
 pub mod state;
 
 #[cfg(test)]

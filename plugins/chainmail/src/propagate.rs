@@ -98,10 +98,21 @@ fn sponsor(
     let kn = st.key(rd, n);
     let mut best: Option<(usize, u32)> = None;
     let mut un = None;
-    for l in 0..LINKS.len() {
-        let Some(e) = lat.neighbour(n, c, l) else {
+    let off = lat.offsets(c);
+    let [nx, ny, nz] = lat.dims;
+    // Links that leave the lattice or were cut, as a bit mask.
+    let closed = lat.cut[n]
+        | u8::from(c[0] + 1 == nx)
+        | u8::from(c[0] == 0) << 1
+        | u8::from(c[1] + 1 == ny) << 2
+        | u8::from(c[1] == 0) << 3
+        | u8::from(c[2] + 1 == nz) << 4
+        | u8::from(c[2] == 0) << 5;
+    for (l, off) in off.into_iter().enumerate() {
+        if closed & (1 << l) != 0 {
             continue;
-        };
+        }
+        let e = off.wrapping_add(n);
         if !lat.present(e) {
             continue;
         }

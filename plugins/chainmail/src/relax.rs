@@ -20,25 +20,19 @@
 //! blocks into the other copy once, before propagation next runs
 //! ([`crate::model::ChainMail`]), instead of writing both on every sweep.
 //!
-//! Two sweeps share [`relax_one`]:
+//! Two kinds of sweep share [`relax_one`]:
 //! - [`sweep_scalar`], element by element in block order on one thread:
 //!   the sequential baseline's relaxation.
-//! - [`sweep`], the parallel model's: the active blocks are grouped into
-//!   runs along x per block row (one rayon task per block row, so a row of
-//!   elements has one writer), and each colour row of a run is relaxed 8
-//!   slots at a time ([`wide::f32x8`]; the red-black storage order makes
-//!   the neighbours of 8 slots 8 consecutive slots). A window whose 8
-//!   elements and their 48 neighbours share one material and no cut link
-//!   takes the uniform-link kernel (equal weights, so the weighted mean is
-//!   the plain mean); any other window, and the elements on the lattice's
-//!   faces, take [`relax_one`].
+//! - [`sweep`], the parallel model's: 8 elements at a time
+//!   ([`crate::relax_lanes`]) over the runs of active blocks, or over the
+//!   whole lattice in one pass when most blocks are active
+//!   ([`crate::relax_passes`]).
 
 use crate::blocks::{Blocks, CHANGED, FaceMask};
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
+use crate::relax_passes::{sweep_dense, sweep_runs};
 use crate::state::State;
 use rayon::prelude::*;
-use std::sync::atomic::AtomicU32;
-use wide::f32x8;
 
 /// What one relaxation sweep did.
 #[derive(Clone, Debug, Default)]
@@ -52,7 +46,7 @@ pub struct SweepReport {
 
 /// True when site `cell` is an element that relaxation may move.
 #[inline]
-fn movable(cell: u8) -> bool {
+pub(crate) fn movable(cell: u8) -> bool {
     cell & ABSENT != ABSENT && cell & (FIXED | HELD) == 0
 }
 
@@ -96,37 +90,11 @@ pub fn sweep_scalar(
     }
 }
 
-/// A run of active blocks along x in one block row: blocks
-/// `first .. first + len` (block indices, consecutive in x).
-#[derive(Clone, Copy, Debug)]
-struct Run {
-    first: u32,
-    len: u32,
-}
-
-/// The runs of `set` (ascending block indices), grouped by block row.
-fn runs_by_row(blocks: &Blocks, set: &[u32]) -> Vec<Vec<Run>> {
-    let cx = blocks.count[0] as u32;
-    let mut rows: Vec<Vec<Run>> = Vec::new();
-    let mut last_row = u32::MAX;
-    for &b in set {
-        let row = b / cx;
-        if row != last_row {
-            rows.push(Vec::new());
-            last_row = row;
-        }
-        let runs = rows.last_mut().expect("pushed above");
-        match runs.last_mut() {
-            Some(r) if r.first + r.len == b => r.len += 1,
-            _ => runs.push(Run { first: b, len: 1 }),
-        }
-    }
-    rows
-}
-
 /// One red-black sweep over `set` (blocks, ascending), in parallel and 8
 /// slots at a time; moves smaller than `tol` (fraction of the element
-/// spacing) do not keep a block active.
+/// spacing) do not keep a block active. When at least three blocks in four
+/// are in the set, the whole lattice is swept in one pass instead
+/// ([`sweep_dense`]), and every block is reported.
 pub fn sweep(
     lat: &ElementLattice,
     state: &State,
@@ -134,284 +102,26 @@ pub fn sweep(
     set: &[u32],
     tol: f64,
 ) -> SweepReport {
-    debug_assert!(set.windows(2).all(|w| w[0] < w[1]), "set must be ascending");
-    let rows = runs_by_row(blocks, set);
-    let mut results: Vec<Vec<(u32, FaceMask, f32)>> = rows
-        .iter()
-        .map(|runs| {
-            runs.iter()
-                .flat_map(|r| (r.first..r.first + r.len).map(|b| (b, 0, 0.0)))
-                .collect()
-        })
-        .collect();
-    let tol = tol as f32;
-    for colour in 0..2 {
-        rows.par_iter().zip(results.par_iter_mut()).for_each_init(
-            Vec::new,
-            |scratch, (runs, out)| {
-                relax_block_row(lat, state, blocks, runs, colour, tol, scratch, out)
-            },
-        );
+    if set.len() * 4 >= blocks.len() * 3 {
+        // Mostly active: one pass over the whole lattice costs less than
+        // the runs (see `sweep_dense`).
+        sweep_dense(lat, state, blocks, tol, 1)
+    } else {
+        sweep_runs(lat, state, blocks, set, tol)
     }
-    let results: Vec<(u32, FaceMask, f32)> = results.into_iter().flatten().collect();
-    SweepReport {
-        max_move: results.iter().map(|p| p.2 as f64).fold(0.0, f64::max),
-        blocks: results.into_iter().map(|p| (p.0, p.1)).collect(),
-    }
-}
-
-/// Relaxes colour `colour` of the runs of one block row; `out` holds
-/// `(block, mask, max move)` for the runs' blocks in order.
-#[allow(clippy::too_many_arguments)]
-fn relax_block_row(
-    lat: &ElementLattice,
-    state: &State,
-    blocks: &Blocks,
-    runs: &[Run],
-    colour: usize,
-    tol: f32,
-    scratch: &mut Vec<f32>,
-    out: &mut [(u32, FaceMask, f32)],
-) {
-    let order = lat.order();
-    let [nx, ny, nz] = lat.dims;
-    let sx = blocks.size[0];
-    let inv = lat.spacing.map(|s| (1.0 / s) as f32);
-    let (lo, hi) = blocks.range(runs[0].first as usize);
-    scratch.clear();
-    scratch.resize(lat.hx, 0.0);
-    for k in lo[2]..hi[2] {
-        for j in lo[1]..hi[1] {
-            let (row, p) = order.row(colour, j, k);
-            let inner = j > 0 && j + 1 < ny && k > 0 && k + 1 < nz;
-            // Slots whose element has both x neighbours: 1 ≤ 2q + p ≤ nx − 2.
-            let (vlo, vhi) = (1 - p, (nx - p) / 2);
-            // Inner rows only: the neighbour rows exist.
-            let bases = (inner && vhi >= vlo + 8).then(|| RowBases::new(order, colour, j, k));
-            let yz_faces = face_bits(j, lo[1], hi[1], 1 << 2) | face_bits(k, lo[2], hi[2], 1 << 4);
-            let mut slot = 0;
-            for run in runs {
-                let x0 = blocks.range(run.first as usize).0[0];
-                let x1 = (x0 + run.len as usize * sx).min(nx);
-                // Slots of this colour row in [x0, x1).
-                let (qa, qb) = ((x0 + 1 - p) / 2, (x1 + 1 - p) / 2);
-                scratch[qa..qb].fill(0.0);
-                let (mut q, mut q_end) = (qa, qb);
-                if let Some(bases) = &bases {
-                    // Slots outside [vlo, vhi) go one by one.
-                    while q < qb && q < vlo {
-                        scratch[q] = relax_slot(lat, state, row, q, p, [j, k], inv);
-                        q += 1;
-                    }
-                    while q_end > q && q_end > vhi {
-                        q_end -= 1;
-                        scratch[q_end] = relax_slot(lat, state, row, q_end, p, [j, k], inv);
-                    }
-                    while q < q_end {
-                        // The last window may start earlier and overlap
-                        // slots already relaxed: those lanes are masked.
-                        let w = q.min(vhi - 8);
-                        let lanes = (q - w, (q_end - w).min(8));
-                        relax_window(lat, state, bases, w, lanes, scratch, inv);
-                        q = w + 8;
-                    }
-                } else {
-                    for (q, m) in scratch.iter_mut().enumerate().take(qb).skip(qa) {
-                        *m = relax_slot(lat, state, row, q, p, [j, k], inv);
-                    }
-                }
-                // Fold the row's moves into the run's blocks.
-                for b in 0..run.len as usize {
-                    let bx0 = x0 + b * sx;
-                    let bx1 = (bx0 + sx).min(nx);
-                    let (sa, sb) = ((bx0 + 1 - p) / 2, (bx1 + 1 - p) / 2);
-                    let m = scratch[sa..sb].iter().fold(0f32, |m, &v| m.max(v));
-                    let entry = &mut out[slot + b];
-                    entry.2 = entry.2.max(m);
-                    if m >= tol {
-                        let mut bits = CHANGED | yz_faces;
-                        if (bx0 + p).is_multiple_of(2) && scratch[(bx0 - p) / 2] >= tol {
-                            bits |= 1;
-                        }
-                        if (bx1 - 1 + p).is_multiple_of(2) && scratch[(bx1 - 1 - p) / 2] >= tol {
-                            bits |= 2;
-                        }
-                        entry.1 |= bits;
-                    }
-                }
-                slot += run.len as usize;
-            }
-        }
-    }
-}
-
-/// Face bits (`first` for the low face, `first << 1` for the high) of
-/// coordinate `c` in the block range `[lo, hi)`.
-#[inline]
-fn face_bits(c: usize, lo: usize, hi: usize, first: u8) -> FaceMask {
-    (if c == lo { first } else { 0 }) | (if c + 1 == hi { first << 1 } else { 0 })
-}
-
-/// Relaxes the element in slot `q` of the colour row starting at `row`
-/// (parity `p`, row `(j, k)`), if it is movable; returns its move.
-#[inline]
-fn relax_slot(
-    lat: &ElementLattice,
-    state: &State,
-    row: usize,
-    q: usize,
-    p: usize,
-    jk: [usize; 2],
-    inv: [f32; 3],
-) -> f32 {
-    let n = row + q;
-    let i = 2 * q + p;
-    if i >= lat.dims[0] || !movable(lat.cells[n]) {
-        return 0.0;
-    }
-    relax_one(lat, state, n, [i, jk[0], jk[1]], inv)
-}
-
-/// Loads 8 consecutive values of a state array as f32.
-#[inline(always)]
-fn load8(s: &[AtomicU32], at: usize) -> f32x8 {
-    let w = &s[at..at + 8];
-    // SAFETY: `AtomicU32` has the size, alignment and bit validity of
-    // `u32`, so 8 of them read as `[f32; 8]`. During a half-sweep no thread
-    // writes these slots except the one reading them (a colour row has one
-    // writer, and the other colour is only read), so the plain read does not
-    // race.
-    f32x8::from(unsafe { std::ptr::read_unaligned(w.as_ptr() as *const [f32; 8]) })
-}
-
-/// Stores 8 consecutive values of a state array.
-#[inline(always)]
-fn store8(s: &[AtomicU32], at: usize, v: f32x8) {
-    let w = &s[at..at + 8];
-    // SAFETY: as in `load8`; `AtomicU32` is an `UnsafeCell`, so writing
-    // through a pointer from a shared slice is allowed, and this thread is
-    // the only one accessing these slots in this half-sweep.
-    unsafe { std::ptr::write_unaligned(w.as_ptr() as *mut [f32; 8], v.to_array()) }
-}
-
-/// Loads 8 consecutive site bytes as one word.
-#[inline(always)]
-fn bytes8(s: &[u8], at: usize) -> u64 {
-    u64::from_le_bytes(s[at..at + 8].try_into().expect("8 bytes"))
-}
-
-/// Every byte of a word set to `b`.
-const fn splat_byte(b: u8) -> u64 {
-    b as u64 * 0x0101_0101_0101_0101
-}
-
-/// Storage indices of slot 0 of a colour row `(j, k)` and of its six
-/// neighbour rows (in [`crate::lattice::LINKS`] order, shifted so that
-/// slot `q`'s neighbour is at `base + q`; wrapping).
-struct RowBases {
-    own: usize,
-    nb: [usize; 6],
-    p: usize,
-    jk: [usize; 2],
-}
-
-impl RowBases {
-    fn new(order: crate::lattice::Order, colour: usize, j: usize, k: usize) -> Self {
-        let (own, p) = order.row(colour, j, k);
-        let other = 1 - colour;
-        let same = order.row(other, j, k).0;
-        let up = |j: usize, k: usize| order.row(other, j, k).0;
-        Self {
-            own,
-            nb: [
-                same + p,
-                (same + p).wrapping_sub(1),
-                up(j + 1, k),
-                up(j - 1, k),
-                up(j, k + 1),
-                up(j, k - 1),
-            ],
-            p,
-            jk: [j, k],
-        }
-    }
-}
-
-/// Relaxes lanes `from..to` of the 8-slot window at slot `w` of a colour
-/// row (an inner row; every slot of the window has all six neighbours);
-/// writes the lanes' moves into `moves[w..w + 8]`.
-#[allow(clippy::too_many_arguments)]
-#[inline]
-fn relax_window(
-    lat: &ElementLattice,
-    state: &State,
-    rows: &RowBases,
-    w: usize,
-    (from, to): (usize, usize),
-    moves: &mut [f32],
-    inv: [f32; 3],
-) {
-    let own = rows.own + w;
-    let nb = rows.nb.map(|r| r.wrapping_add(w));
-    let cells = &lat.cells;
-    let own_cells = bytes8(cells, own);
-    let m = (own_cells & 0x3f) as u8;
-    const MAT: u64 = splat_byte(ABSENT);
-    let uniform = m != ABSENT
-        && own_cells & MAT == splat_byte(m)
-        && bytes8(&lat.cut, own) == 0
-        && nb.iter().all(|&e| bytes8(cells, e) & MAT == splat_byte(m));
-    if !uniform {
-        for lane in from..to {
-            moves[w + lane] = relax_slot(lat, state, rows.own, w + lane, rows.p, rows.jk, inv);
-        }
-        return;
-    }
-    let link = lat.links[m as usize * lat.materials.len() + m as usize];
-    let alpha = f32x8::splat(lat.materials[m as usize].elastic);
-    // Lanes to write: inside `from..to` and neither held nor fixed.
-    let mut lanes = [0f32; 8];
-    for (lane, v) in lanes.iter_mut().enumerate() {
-        let flags = (own_cells >> (8 * lane)) as u8 & (FIXED | HELD);
-        if lane >= from && lane < to && flags == 0 {
-            *v = f32::from_bits(u32::MAX);
-        }
-    }
-    let write = f32x8::from(lanes);
-    let sixth = f32x8::splat(1.0 / 6.0);
-    let cur = &state.u[state.cur];
-    let mut mv = f32x8::ZERO;
-    for a in 0..3 {
-        let arr = &cur[a];
-        let u = load8(arr, own);
-        let n0 = load8(arr, nb[0]);
-        let (mut sum, mut lo, mut hi) = (n0, n0, n0);
-        for &e in &nb[1..] {
-            let v = load8(arr, e);
-            sum += v;
-            lo = lo.max(v);
-            hi = hi.min(v);
-        }
-        let d = f32x8::splat(link.d[a]);
-        let (lo, hi) = (lo - d, hi + d);
-        let cand = u + alpha * (sum * sixth - u);
-        let clamped = cand.max(lo).min(hi);
-        let ok = lo.simd_le(hi) & write;
-        let v = ok.select(clamped, u);
-        store8(arr, own, v);
-        mv = mv.max((v - u).abs() * f32x8::splat(inv[a]));
-    }
-    // Keep the lanes outside `from..to` as they were.
-    let prev = f32x8::from(<[f32; 8]>::try_from(&moves[w..w + 8]).expect("8 slots"));
-    let mv = write.select(mv, prev);
-    moves[w..w + 8].copy_from_slice(&mv.to_array());
 }
 
 /// Relaxes element `n` (coordinates `c`) towards the weighted mean of its
 /// neighbours, clamped into their constraint boxes, in the current copy;
 /// returns how far it moved (largest axis, fraction of the spacing).
 #[inline]
-fn relax_one(lat: &ElementLattice, state: &State, n: usize, c: [usize; 3], inv: [f32; 3]) -> f32 {
+pub(crate) fn relax_one(
+    lat: &ElementLattice,
+    state: &State,
+    n: usize,
+    c: [usize; 3],
+    inv: [f32; 3],
+) -> f32 {
     let cur = state.cur;
     let mut sum = [0f32; 3];
     let mut wsum = 0f32;
@@ -493,6 +203,7 @@ pub fn energy(lat: &ElementLattice, state: &State) -> f64 {
 mod tests {
     use super::*;
     use crate::params::ChainMailParams;
+    use crate::relax_passes::{runs_by_row, sweep_dense, sweep_runs};
     use voxflex_core::glam::DVec3;
     use voxflex_core::grid::Grid;
     use voxflex_core::volume::{Volume, VoxelData};
@@ -557,8 +268,9 @@ mod tests {
     #[test]
     fn vector_sweep_matches_the_scalar_sweep() {
         let (lat, blocks) = setup();
-        // Every block but a few, so runs have gaps and windows overlap them.
-        let set: Vec<u32> = (0..blocks.len() as u32).filter(|b| b % 7 != 3).collect();
+        // Two blocks in three, so runs have gaps and windows overlap them
+        // (and the set is sparse enough not to take the dense pass).
+        let set: Vec<u32> = (0..blocks.len() as u32).filter(|b| b % 3 != 1).collect();
         let (a, b) = (random_state(&lat), random_state(&lat));
         for it in 0..6 {
             let ra = sweep(&lat, &a, &blocks, &set, 1e-3);
@@ -582,6 +294,33 @@ mod tests {
         assert!(moved.clone().count() > lat.len() / 2);
         assert!(moved.clone().all(|n| movable(lat.cells[n])));
         assert!(moved.into_iter().all(|n| lat.coords(n)[0] < lat.dims[0]));
+    }
+
+    #[test]
+    fn dense_pipelined_sweeps_equal_sweeps_one_after_another() {
+        let (lat, blocks) = setup();
+        let all: Vec<u32> = (0..blocks.len() as u32).collect();
+        for (threads, sweeps) in [(1, 1), (2, 1), (2, 3), (3, 2), (4, 4)] {
+            let (a, b) = (random_state(&lat), random_state(&lat));
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let ra = pool.install(|| sweep_dense(&lat, &a, &blocks, 1e-3, sweeps));
+            let mut rb = SweepReport::default();
+            for _ in 0..sweeps {
+                rb = sweep_runs(&lat, &b, &blocks, &all, 1e-3);
+            }
+            assert_eq!(ra.blocks, rb.blocks, "{threads} threads, {sweeps} sweeps");
+            assert_eq!(ra.max_move, rb.max_move);
+            for n in 0..lat.len() {
+                assert_eq!(
+                    a.get(0, n),
+                    b.get(0, n),
+                    "{threads} threads, {sweeps} sweeps"
+                );
+            }
+        }
     }
 
     #[test]

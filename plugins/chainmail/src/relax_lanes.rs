@@ -1,0 +1,561 @@
+//! The relaxation of one colour row, 8 slots at a time ([`wide::f32x8`]).
+//!
+//! In the red-black storage order the six neighbours of 8 consecutive slots
+//! are 8 consecutive slots of the other colour (see
+//! [`crate::lattice`]), so a window of 8 elements loads its neighbours as
+//! 6 vectors per axis. A window takes one of three kernels:
+//! - **uniform**: the 8 elements and their 48 neighbours exist, share one
+//!   material and no link is cut. Every link has the same weight, so the
+//!   weighted mean of [`relax_one`] is the plain mean of the six.
+//! - **masked**: the present elements and neighbours share one material,
+//!   but some links are missing (the lattice's faces, absent sites, cut
+//!   links). A lane mask per direction drops them from the mean and from the
+//!   constraint box; per-lane masks are built from the site bytes with word
+//!   arithmetic (no per-lane branches).
+//! - **scalar** ([`relax_one`] per element): materials differ inside the
+//!   window, or a neighbour window would leave the arrays.
+//!
+//! Every kernel writes only the current Jacobi copy and records, per slot,
+//! whether the element moved by at least the tolerance ([`RowMoves`]).
+
+use crate::blocks::{CHANGED, FaceMask};
+use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD, Order};
+use crate::relax::{movable, relax_one};
+use crate::state::State;
+use std::sync::atomic::AtomicU32;
+use wide::f32x8;
+
+/// Per slot of a colour row: moved by at least the tolerance (a bit set),
+/// and the largest move seen (fraction of the spacing).
+#[derive(Clone, Debug, Default)]
+pub struct RowMoves {
+    bits: Vec<u64>,
+    max: f32x8,
+}
+
+impl RowMoves {
+    /// Empty flags for rows of `hx` slots.
+    pub fn new(hx: usize) -> Self {
+        Self {
+            bits: vec![0; hx / 64 + 2],
+            max: f32x8::ZERO,
+        }
+    }
+
+    /// Clears every flag (the largest move is kept).
+    #[inline]
+    pub fn clear(&mut self) {
+        self.bits.fill(0);
+    }
+
+    /// Largest move recorded since the last call (or creation); restarts.
+    pub fn take_max(&mut self) -> f32 {
+        std::mem::take(&mut self.max)
+            .to_array()
+            .into_iter()
+            .fold(0.0, f32::max)
+    }
+
+    #[inline]
+    fn record(&mut self, q: usize, mv: f32, tol: f32) {
+        if mv >= tol {
+            self.bits[q / 64] |= 1 << (q % 64);
+        }
+        self.max = self.max.fast_max(f32x8::splat(mv));
+    }
+
+    #[inline]
+    fn record8(&mut self, w: usize, lanes: u8, mv: f32x8) {
+        let (word, shift) = (w / 64, w % 64);
+        self.bits[word] |= (lanes as u64) << shift;
+        if shift > 56 {
+            self.bits[word + 1] |= (lanes as u64) >> (64 - shift);
+        }
+        self.max = self.max.fast_max(mv);
+    }
+
+    /// True when slot `q` moved by at least the tolerance.
+    #[inline]
+    pub fn get(&self, q: usize) -> bool {
+        self.bits[q / 64] >> (q % 64) & 1 != 0
+    }
+
+    /// True when a slot in `a..b` moved by at least the tolerance.
+    #[inline]
+    pub fn any(&self, a: usize, b: usize) -> bool {
+        (a / 64..b.div_ceil(64)).any(|word| {
+            let lo = (word * 64).max(a) - word * 64;
+            let hi = ((word + 1) * 64).min(b) - word * 64;
+            let mask = if hi - lo == 64 {
+                u64::MAX
+            } else {
+                ((1u64 << (hi - lo)) - 1) << lo
+            };
+            self.bits[word] & mask != 0
+        })
+    }
+}
+
+/// Relaxes slots `qa..qb` of colour `colour`'s row `(j, k)`, recording
+/// their moves (fraction of the spacing) against `tol` in `moves`.
+pub fn relax_row(
+    lat: &ElementLattice,
+    state: &State,
+    colour: usize,
+    [j, k]: [usize; 2],
+    (qa, qb): (usize, usize),
+    tol: f32,
+    moves: &mut RowMoves,
+) {
+    let rows = RowBases::new(lat, colour, j, k);
+    let inv = lat.spacing.map(|s| (1.0 / s) as f32);
+    if lat.hx < 8 {
+        for q in qa..qb {
+            relax_slot(lat, state, &rows, q, inv, tol, moves);
+        }
+        return;
+    }
+    let mut q = qa;
+    while q < qb {
+        // The last window may start earlier and overlap slots already
+        // relaxed: those lanes are masked.
+        let w = q.min(lat.hx - 8);
+        let lanes = (q - w, (qb - w).min(8));
+        relax_window(lat, state, &rows, w, lanes, inv, tol, moves);
+        q = w + 8;
+    }
+}
+
+/// Folds one colour row's moves (parity `p`) into the blocks of x size `sx`
+/// that tile `x0..x_end`: calls `add(block offset from x0's block, face
+/// mask)` for each of them (mask 0 when nothing moved by the tolerance).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub fn fold_row(
+    moves: &RowMoves,
+    p: usize,
+    x0: usize,
+    sx: usize,
+    x_end: usize,
+    yz_faces: FaceMask,
+    mut add: impl FnMut(usize, FaceMask),
+) {
+    let mut b = 0;
+    let mut bx0 = x0;
+    while bx0 < x_end {
+        let bx1 = (bx0 + sx).min(x_end);
+        let (sa, sb) = ((bx0 + 1 - p) / 2, (bx1 + 1 - p) / 2);
+        let mut bits = 0;
+        if moves.any(sa, sb) {
+            bits = CHANGED | yz_faces;
+            if (bx0 + p).is_multiple_of(2) && moves.get((bx0 - p) / 2) {
+                bits |= 1;
+            }
+            if (bx1 - 1 + p).is_multiple_of(2) && moves.get((bx1 - 1 - p) / 2) {
+                bits |= 2;
+            }
+        }
+        add(b, bits);
+        b += 1;
+        bx0 = bx1;
+    }
+}
+
+/// Face bits (`first` for the low face, `first << 1` for the high) of
+/// coordinate `c` in the block range `[lo, hi)`.
+#[inline]
+pub fn face_bits(c: usize, lo: usize, hi: usize, first: u8) -> FaceMask {
+    (if c == lo { first } else { 0 }) | (if c + 1 == hi { first << 1 } else { 0 })
+}
+
+/// A colour row `(j, k)`: storage index of its slot 0, the storage indices
+/// of its six neighbour rows shifted so that slot `q`'s neighbour is at
+/// `base + q` (in [`crate::lattice::LINKS`] order; wrapping), and the
+/// directions with no neighbour row (the lattice's faces).
+struct RowBases {
+    own: usize,
+    nb: [usize; 6],
+    /// Bit `l`: no element of this row has a neighbour along link `l`
+    /// (for ±x: set only when the lattice is one element wide).
+    missing: u8,
+    /// Row parity: slot `q` holds element `i = 2q + p`.
+    p: usize,
+    jk: [usize; 2],
+}
+
+impl RowBases {
+    fn new(lat: &ElementLattice, colour: usize, j: usize, k: usize) -> Self {
+        let order: Order = lat.order();
+        let [nx, ny, nz] = lat.dims;
+        let (own, p) = order.row(colour, j, k);
+        let other = 1 - colour;
+        let same = order.row(other, j, k).0;
+        let row = |j: usize, k: usize| order.row(other, j, k).0;
+        let missing = (u8::from(nx == 1) * 0b11)
+            | (u8::from(j + 1 == ny) << 2)
+            | (u8::from(j == 0) << 3)
+            | (u8::from(k + 1 == nz) << 4)
+            | (u8::from(k == 0) << 5);
+        Self {
+            own,
+            nb: [
+                same + p,
+                (same + p).wrapping_sub(1),
+                if j + 1 < ny { row(j + 1, k) } else { own },
+                if j > 0 { row(j - 1, k) } else { own },
+                if k + 1 < nz { row(j, k + 1) } else { own },
+                if k > 0 { row(j, k - 1) } else { own },
+            ],
+            missing,
+            p,
+            jk: [j, k],
+        }
+    }
+}
+
+/// Relaxes slot `q` of a row one element at a time, if it holds a movable
+/// element.
+#[inline]
+fn relax_slot(
+    lat: &ElementLattice,
+    state: &State,
+    rows: &RowBases,
+    q: usize,
+    inv: [f32; 3],
+    tol: f32,
+    moves: &mut RowMoves,
+) {
+    let n = rows.own + q;
+    let i = 2 * q + rows.p;
+    if i >= lat.dims[0] || !movable(lat.cells[n]) {
+        return;
+    }
+    let mv = relax_one(lat, state, n, [i, rows.jk[0], rows.jk[1]], inv);
+    moves.record(q, mv, tol);
+}
+
+/// The 8-slot windows `at .. at + 8` of one state array, bounds-checked
+/// once for all of them (the kernels then load and store without checks).
+struct Windows<'a> {
+    ptr: *const AtomicU32,
+    _array: &'a [AtomicU32],
+}
+
+impl<'a> Windows<'a> {
+    /// `array`, whose windows at every index of `starts` must lie inside it.
+    #[inline(always)]
+    fn new(array: &'a [AtomicU32], starts: &[usize]) -> Self {
+        let end = starts.iter().fold(0, |m, &s| m.max(s.wrapping_add(8)));
+        assert!(
+            end <= array.len() && starts.iter().all(|&s| s < end),
+            "relaxation window outside the state"
+        );
+        Self {
+            ptr: array.as_ptr(),
+            _array: array,
+        }
+    }
+
+    /// Loads the window at `at`, one of the checked starts.
+    #[inline(always)]
+    fn load(&self, at: usize) -> f32x8 {
+        // SAFETY: `at + 8 <= len` was checked in `new`; `AtomicU32` has the
+        // size, alignment and bit validity of `u32`, so 8 of them read as
+        // `[f32; 8]`. While a colour is relaxed no thread writes these
+        // slots except the one reading them (a colour row has one writer,
+        // the other colour is only read, and the dense pass orders its
+        // stages with release/acquire counters), so the plain read does not
+        // race.
+        f32x8::from(unsafe { std::ptr::read_unaligned(self.ptr.add(at) as *const [f32; 8]) })
+    }
+
+    /// Stores the window at `at`, one of the checked starts.
+    #[inline(always)]
+    fn store(&self, at: usize, v: f32x8) {
+        // SAFETY: as in `load`; `AtomicU32` is an `UnsafeCell`, so writing
+        // through a pointer from a shared slice is allowed, and this thread
+        // is the only one accessing these slots while it relaxes them.
+        unsafe { std::ptr::write_unaligned(self.ptr.add(at) as *mut [f32; 8], v.to_array()) }
+    }
+}
+
+/// Loads 8 consecutive site bytes as one word (lane `l` in byte `l`).
+#[inline(always)]
+fn bytes8(s: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(s[at..at + 8].try_into().expect("8 bytes"))
+}
+
+/// Every byte of a word set to `b`.
+const fn splat_byte(b: u8) -> u64 {
+    b as u64 * 0x0101_0101_0101_0101
+}
+
+/// Material bits of every byte.
+const MAT: u64 = splat_byte(ABSENT);
+
+/// Lane bits (bit `l` for byte `l`) of the non-zero bytes of `x`.
+#[inline(always)]
+fn nonzero_lanes(x: u64) -> u8 {
+    const LOW7: u64 = splat_byte(0x7f);
+    let high = (((x & LOW7) + LOW7) | x) & splat_byte(0x80);
+    pack_lanes(high >> 7)
+}
+
+/// Lane bits of a word whose bytes are each 0 or 1.
+#[inline(always)]
+fn pack_lanes(ones: u64) -> u8 {
+    (ones.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u8
+}
+
+/// An all-ones lane.
+const ON: f32 = f32::from_bits(u32::MAX);
+
+/// `LANES[m]`: lane `l` all ones where bit `l` of `m` is set.
+static LANES: [[f32; 8]; 256] = {
+    let mut t = [[0f32; 8]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut l = 0;
+        while l < 8 {
+            if m >> l & 1 == 1 {
+                t[m][l] = ON;
+            }
+            l += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
+/// The lane mask of bits `m`, loaded from [`LANES`] (building it lane by
+/// lane and reading it back as a vector would stall store forwarding).
+#[inline(always)]
+fn lanes(m: u8) -> f32x8 {
+    f32x8::from(LANES[m as usize])
+}
+
+/// Relaxes lanes `from..to` of the 8-slot window at slot `w` of a row;
+/// records their moves.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn relax_window(
+    lat: &ElementLattice,
+    state: &State,
+    rows: &RowBases,
+    w: usize,
+    (from, to): (usize, usize),
+    inv: [f32; 3],
+    tol: f32,
+    moves: &mut RowMoves,
+) {
+    let cells = &lat.cells;
+    let own = rows.own + w;
+    let nb = rows.nb.map(|r| r.wrapping_add(w));
+    let range = (((1u16 << to) - 1) & !((1u16 << from) - 1)) as u8;
+    let own_cells = bytes8(cells, own);
+    let (p, nx) = (rows.p, lat.dims[0]);
+    // Lanes at the lattice's x faces: element 0 has no −x neighbour and
+    // element nx − 1 no +x neighbour.
+    let minus_x_edge = u8::from(w == 0 && p == 0);
+    let last = (nx - 1 - p) / 2; // slot of the last element of this parity
+    let plus_x_edge = if (nx - 1 - p).is_multiple_of(2) && last >= w && last < w + 8 {
+        1u8 << (last - w)
+    } else {
+        0
+    };
+    let cut = bytes8(&lat.cut, own);
+    // The common case first, with the fewest checks: 8 free elements of
+    // one material, all 48 neighbours there, of that material, uncut.
+    let m0 = (own_cells & 0x3f) as u8;
+    if own_cells == splat_byte(m0)
+        && m0 != ABSENT
+        && rows.missing | minus_x_edge | plus_x_edge == 0
+        && cut == 0
+        && nb.iter().all(|&e| bytes8(cells, e) & MAT == splat_byte(m0))
+    {
+        uniform_window(lat, state, own, &nb, m0, range, inv, tol, moves, w);
+        return;
+    }
+    // Lanes holding an element (padding slots past the row are absent).
+    let present = nonzero_lanes((own_cells & MAT) ^ MAT) & range;
+    if present == 0 {
+        return;
+    }
+    let m = (own_cells >> (8 * present.trailing_zeros()) & 0x3f) as u8;
+    let same_material = nonzero_lanes((own_cells & MAT) ^ splat_byte(m)) & present == 0;
+    let free = !nonzero_lanes(own_cells & splat_byte(FIXED | HELD));
+    let write = present & free;
+    // Per direction: lanes whose link exists, is not cut and reaches a
+    // present element of the same material.
+    let mut link_lanes = [0u8; 6];
+    let mut masked = same_material;
+    for (l, ll) in link_lanes.iter_mut().enumerate() {
+        if !masked || rows.missing >> l & 1 == 1 {
+            continue;
+        }
+        let e = nb[l];
+        if e > lat.len() - 8 {
+            // The window would leave the arrays (first and last rows).
+            masked = false;
+            continue;
+        }
+        let nbytes = bytes8(cells, e);
+        let there = nonzero_lanes((nbytes & MAT) ^ MAT);
+        let uncut = !pack_lanes(cut >> l & splat_byte(1));
+        let edge = match l {
+            0 => plus_x_edge,
+            1 => minus_x_edge,
+            _ => 0,
+        };
+        *ll = there & uncut & !edge;
+        masked &= nonzero_lanes((nbytes & MAT) ^ splat_byte(m)) & *ll & present == 0;
+    }
+    if masked {
+        masked_window(
+            lat,
+            state,
+            own,
+            &nb,
+            &link_lanes,
+            m,
+            write,
+            inv,
+            tol,
+            moves,
+            w,
+        );
+    } else {
+        for lane in from..to {
+            relax_slot(lat, state, rows, w + lane, inv, tol, moves);
+        }
+    }
+}
+
+/// The uniform kernel: all six neighbours of every lane exist, share
+/// material `m` with it, and no link is cut.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn uniform_window(
+    lat: &ElementLattice,
+    state: &State,
+    own: usize,
+    nb: &[usize; 6],
+    m: u8,
+    write: u8,
+    inv: [f32; 3],
+    tol: f32,
+    moves: &mut RowMoves,
+    w: usize,
+) {
+    let link = lat.links[m as usize * lat.materials.len() + m as usize];
+    let alpha = f32x8::splat(lat.materials[m as usize].elastic);
+    let write_mask = lanes(write);
+    let sixth = f32x8::splat(1.0 / 6.0);
+    let cur = &state.u[state.cur];
+    let mut mv = f32x8::ZERO;
+    let starts = [own, nb[0], nb[1], nb[2], nb[3], nb[4], nb[5]];
+    for a in 0..3 {
+        let arr = Windows::new(&cur[a], &starts);
+        let u = arr.load(own);
+        let n0 = arr.load(nb[0]);
+        let (mut sum, mut lo, mut hi) = (n0, n0, n0);
+        for &e in &nb[1..] {
+            let v = arr.load(e);
+            sum += v;
+            lo = lo.fast_max(v);
+            hi = hi.fast_min(v);
+        }
+        let d = f32x8::splat(link.d[a]);
+        let (lo, hi) = (lo - d, hi + d);
+        let cand = u + alpha * (sum * sixth - u);
+        let clamped = cand.fast_max(lo).fast_min(hi);
+        let v = (lo.simd_le(hi) & write_mask).select(clamped, u);
+        arr.store(own, v);
+        mv = mv.fast_max((v - u).abs() * f32x8::splat(inv[a]));
+    }
+    let moved = mv.simd_ge(f32x8::splat(tol)).to_bitmask() as u8 & write;
+    moves.record8(w, moved, write_mask & mv);
+}
+
+/// The masked kernel: lane `i` of direction `l` takes part where bit `i`
+/// of `link_lanes[l]` is set; every present element and neighbour has
+/// material `m`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn masked_window(
+    lat: &ElementLattice,
+    state: &State,
+    own: usize,
+    nb: &[usize; 6],
+    link_lanes: &[u8; 6],
+    m: u8,
+    write: u8,
+    inv: [f32; 3],
+    tol: f32,
+    moves: &mut RowMoves,
+    w: usize,
+) {
+    let link = lat.links[m as usize * lat.materials.len() + m as usize];
+    let alpha = f32x8::splat(lat.materials[m as usize].elastic);
+    let masks = link_lanes.map(lanes);
+    let count = masks.iter().fold(f32x8::ZERO, |c, &k| c + (k & f32x8::ONE));
+    let write_mask = lanes(write) & count.simd_gt(f32x8::ZERO);
+    let inv_count = f32x8::ONE / count.fast_max(f32x8::ONE);
+    let cur = &state.u[state.cur];
+    let mut mv = f32x8::ZERO;
+    // Only the directions some lane uses are loaded (and checked).
+    let mut starts = [own; 7];
+    for l in 0..6 {
+        if link_lanes[l] != 0 {
+            starts[l + 1] = nb[l];
+        }
+    }
+    for a in 0..3 {
+        let arr = Windows::new(&cur[a], &starts);
+        let u = arr.load(own);
+        let (mut sum, mut lo, mut hi) = (
+            f32x8::ZERO,
+            f32x8::splat(f32::NEG_INFINITY),
+            f32x8::splat(f32::INFINITY),
+        );
+        for l in 0..6 {
+            if link_lanes[l] == 0 {
+                continue;
+            }
+            let v = arr.load(nb[l]);
+            sum += masks[l] & v;
+            lo = lo.fast_max(masks[l].select(v, f32x8::splat(f32::NEG_INFINITY)));
+            hi = hi.fast_min(masks[l].select(v, f32x8::splat(f32::INFINITY)));
+        }
+        let d = f32x8::splat(link.d[a]);
+        let (lo, hi) = (lo - d, hi + d);
+        let cand = u + alpha * (sum * inv_count - u);
+        let clamped = cand.fast_max(lo).fast_min(hi);
+        let v = (lo.simd_le(hi) & write_mask).select(clamped, u);
+        arr.store(own, v);
+        mv = mv.fast_max((v - u).abs() * f32x8::splat(inv[a]));
+    }
+    let moved = mv.simd_ge(f32x8::splat(tol)).to_bitmask() as u8 & write;
+    moves.record8(w, moved, write_mask & mv);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lane_bits_from_bytes() {
+        assert_eq!(nonzero_lanes(0), 0);
+        assert_eq!(nonzero_lanes(0x0100_00ff_0000_8000), 0b1001_0010);
+        assert_eq!(nonzero_lanes(u64::MAX), 0xff);
+        assert_eq!(pack_lanes(0x0100_0001_0000_0001), 0b1001_0001);
+        let mut r = RowMoves::new(130);
+        r.record8(60, 0b1000_0001, f32x8::ZERO);
+        assert!(r.get(60) && r.get(67) && !r.get(61));
+        assert!(r.any(61, 68) && !r.any(61, 67) && !r.any(0, 60));
+        r.record(129, 1.0, 0.5);
+        assert!(r.any(100, 130));
+        assert_eq!(r.take_max(), 1.0);
+        assert_eq!(r.take_max(), 0.0);
+    }
+}
