@@ -84,6 +84,14 @@ fn main() {
         relaxation_kernels(&pm, ms);
         return;
     }
+    if std::env::args().any(|a| a == "propagation") {
+        // Only the parallel propagation, ten times (for profiling).
+        for _ in 0..10 {
+            let (pp, ppi, ..) = run("parallel", [8, 4, 4], 0);
+            println!("propagation {:.1} ms ({ppi} iterations)", ms(pp));
+        }
+        return;
+    }
     if std::env::args().any(|a| a == "parallel") {
         // Only the parallel run to rest (for profiling).
         let (pp, ppi, pr, pri, ..) = run("parallel", [8, 4, 4], RELAX_SWEEPS);

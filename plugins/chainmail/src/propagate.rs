@@ -13,11 +13,17 @@
 //!   from the moved elements, neighbours in [`LINKS`] order, each element
 //!   moved at most once per deformation. The baseline.
 
-use crate::blocks::{Blocks, CHANGED, FaceMask};
-use crate::lattice::{ElementLattice, FIXED, HELD, LINKS};
-use crate::state::{State, arrival, earlier, wave};
+use crate::blocks::{Blocks, FaceMask};
+use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD, LINKS};
+use crate::relax_lanes::{
+    MAT, RowBases, RowMoves, bytes8, face_bits, fold_row, nonzero_lanes, splat_byte,
+};
+use crate::relax_passes::runs_by_row;
+use crate::state::{MAX_TIME, State, arrival, earlier, wave};
 use rayon::prelude::*;
 use std::collections::VecDeque;
+use std::sync::atomic::AtomicU32;
+use wide::{f32x8, u32x8};
 
 /// What one propagation iteration did.
 #[derive(Clone, Debug, Default)]
@@ -36,7 +42,17 @@ fn pinned(cell: u8) -> bool {
     cell & (FIXED | HELD) != 0
 }
 
-/// One Jacobi iteration over `active` blocks; swaps the state's copies.
+/// One Jacobi iteration over `active` blocks (ascending); swaps the state's
+/// copies.
+///
+/// The blocks are grouped into runs along x per block row (one rayon task
+/// per block row, so a row of elements has one writer), and each colour
+/// row of a run is scanned 8 slots at a time: a window whose elements and
+/// neighbours share one material with no cut link first tests, in vector
+/// arithmetic, whether any neighbour's arrival beats an element's key. Far
+/// from a wavefront none does, and the window is carried to the write copy
+/// as whole vectors; otherwise, and in mixed windows, each element runs
+/// [`sponsor`].
 pub fn jacobi_iteration(
     lat: &ElementLattice,
     state: &mut State,
@@ -44,46 +60,275 @@ pub fn jacobi_iteration(
     active: &[u32],
 ) -> IterationReport {
     let rd = state.cur;
-    let wr = 1 - rd;
     let st = &*state;
-    let results: Vec<(u32, FaceMask, u64, u64)> = active
+    let rows = runs_by_row(blocks, active);
+    let results: Vec<BlockRowReport> = rows
         .par_iter()
-        .map(|&b| {
-            let (lo, hi) = blocks.range(b as usize);
-            let (mut mask, mut visits, mut updates) = (0u8, 0u64, 0u64);
+        .map(|runs| {
+            let mut out: Vec<(u32, FaceMask)> = runs
+                .iter()
+                .flat_map(|r| (r.first..r.first + r.len).map(|b| (b, 0)))
+                .collect();
+            let mut counts = (0u64, 0u64);
+            let mut moves = RowMoves::new(lat.hx);
+            let (lo, hi) = blocks.range(runs[0].first as usize);
+            let (nx, sx) = (lat.dims[0], blocks.size[0]);
             for k in lo[2]..hi[2] {
                 for j in lo[1]..hi[1] {
-                    for i in lo[0]..hi[0] {
-                        let c = [i, j, k];
-                        let n = lat.linear(c);
-                        let cell = lat.cells[n];
-                        if !lat.present(n) {
-                            continue;
+                    let yz =
+                        face_bits(j, lo[1], hi[1], 1 << 2) | face_bits(k, lo[2], hi[2], 1 << 4);
+                    for colour in 0..2 {
+                        let p = (colour + j + k) & 1;
+                        let rows = RowBases::new(lat, colour, j, k);
+                        moves.clear();
+                        let mut slot = 0;
+                        for run in runs {
+                            let x0 = blocks.range(run.first as usize).0[0];
+                            let x1 = (x0 + run.len as usize * sx).min(nx);
+                            let (qa, qb) = ((x0 + 1 - p) / 2, (x1 + 1 - p) / 2);
+                            propagate_row(lat, st, rd, &rows, (qa, qb), &mut moves, &mut counts);
+                            let entries = &mut out[slot..slot + run.len as usize];
+                            fold_row(&moves, p, x0, sx, x1, yz, |b, bits| entries[b].1 |= bits);
+                            slot += run.len as usize;
                         }
-                        visits += 1;
-                        if !pinned(cell)
-                            && let Some((e, a)) = sponsor(lat, st, rd, n, c)
-                        {
-                            let link = lat.link(n, e);
-                            st.set(wr, n, link.clamp(st.get(rd, n), st.get(rd, e)));
-                            st.set_key(wr, n, a);
-                            updates += 1;
-                            mask |= CHANGED | Blocks::border(c, lo, hi);
-                            continue;
-                        }
-                        st.carry(rd, n);
                     }
                 }
             }
-            (b, mask, visits, updates)
+            (out, counts.0, counts.1)
         })
         .collect();
-    state.cur = wr;
+    state.cur = 1 - rd;
     IterationReport {
-        visits: results.iter().map(|r| r.2).sum(),
-        updates: results.iter().map(|r| r.3).sum(),
-        blocks: results.into_iter().map(|r| (r.0, r.1)).collect(),
+        visits: results.iter().map(|r| r.1).sum(),
+        updates: results.iter().map(|r| r.2).sum(),
+        blocks: results.into_iter().flat_map(|r| r.0).collect(),
     }
+}
+
+/// One block row's `(block, face mask)` list, visits and updates.
+type BlockRowReport = (Vec<(u32, FaceMask)>, u64, u64);
+
+/// Propagates into slots `qa..qb` of one colour row: flags the updated
+/// slots in `moves` and adds `(visits, updates)` to `counts`.
+fn propagate_row(
+    lat: &ElementLattice,
+    st: &State,
+    rd: usize,
+    rows: &RowBases,
+    (qa, qb): (usize, usize),
+    moves: &mut RowMoves,
+    counts: &mut (u64, u64),
+) {
+    if lat.hx < 8 {
+        for q in qa..qb {
+            propagate_slot(lat, st, rd, rows, q, moves, counts);
+        }
+        return;
+    }
+    let mut q = qa;
+    while q < qb {
+        // The last window may start earlier and overlap slots already
+        // done: those lanes are left alone.
+        let w = q.min(lat.hx - 8);
+        let (from, to) = (q - w, (qb - w).min(8));
+        let range = (((1u16 << to) - 1) & !((1u16 << from) - 1)) as u8;
+        if !uniform_window(lat, st, rd, rows, w, range, moves, counts) {
+            for lane in from..to {
+                propagate_slot(lat, st, rd, rows, w + lane, moves, counts);
+            }
+        }
+        q = w + 8;
+    }
+}
+
+/// One Jacobi step of the 8 lanes of the window at slot `w`, in vector
+/// arithmetic, when the window is uniform: one material, every element
+/// and every link there and uncut. Writes the lanes in `range` to the
+/// write copy (their move, or their carried value), flags the moved ones in
+/// `moves`, adds the counts, and returns true; returns false, writing
+/// nothing, for any other window.
+///
+/// The choice is [`sponsor`]'s, lane-wise: with `rank(k) = k ^ MAX_TIME`
+/// (wave in the high bits, reversed time in the low), arrival `a` is
+/// [`earlier`] than key `b` exactly when `rank(a) > rank(b)`, so the
+/// sponsor is the violated neighbour of largest rank, the first in
+/// [`LINKS`] order on ties.
+#[allow(clippy::too_many_arguments)]
+fn uniform_window(
+    lat: &ElementLattice,
+    st: &State,
+    rd: usize,
+    rows: &RowBases,
+    w: usize,
+    range: u8,
+    moves: &mut RowMoves,
+    counts: &mut (u64, u64),
+) -> bool {
+    let cells = &lat.cells;
+    let own = rows.own + w;
+    let own_cells = bytes8(cells, own);
+    let m = (own_cells & 0x3f) as u8;
+    let (minus, plus) = rows.x_edges(w, lat.dims[0]);
+    let r = &rows.nb;
+    let nb = [
+        r[0].wrapping_add(w),
+        r[1].wrapping_add(w),
+        r[2].wrapping_add(w),
+        r[3].wrapping_add(w),
+        r[4].wrapping_add(w),
+        r[5].wrapping_add(w),
+    ];
+    let uniform = own_cells & MAT == splat_byte(m)
+        && m != ABSENT
+        && rows.missing | minus | plus == 0
+        && bytes8(&lat.cut, own) == 0
+        && nb.iter().all(|&e| bytes8(cells, e) & MAT == splat_byte(m));
+    if !uniform {
+        return false;
+    }
+    let link = lat.links[m as usize * lat.materials.len() + m as usize];
+    let tau = u32x8::splat(link.tau);
+    let time = u32x8::splat(MAX_TIME);
+    let (keys, u) = (&st.key[rd], &st.u[rd]);
+    let kn = load_u32(keys, own);
+    let rank_n = kn ^ time;
+    // Written out: array `map` closures are not reliably inlined here.
+    let un = [
+        load_f32(&u[0], own),
+        load_f32(&u[1], own),
+        load_f32(&u[2], own),
+    ];
+    let d = [
+        f32x8::splat(link.d[0]),
+        f32x8::splat(link.d[1]),
+        f32x8::splat(link.d[2]),
+    ];
+    let mut best_rank = u32x8::ZERO;
+    let mut best_u = un;
+    let mut found = u32x8::ZERO;
+    for &e in &nb {
+        let ke = load_u32(keys, e);
+        // `arrival`: reached, and the time does not overflow.
+        let reached = !ke.simd_eq(u32x8::ZERO) & ((ke & time) + tau).simd_le(time);
+        let rank = (ke + tau) ^ time;
+        let ue = [load_f32(&u[0], e), load_f32(&u[1], e), load_f32(&u[2], e)];
+        let mut violated = f32x8::ZERO;
+        for a in 0..3 {
+            violated |= un[a].simd_lt(ue[a] - d[a]) | un[a].simd_gt(ue[a] + d[a]);
+        }
+        let violated: u32x8 = bytemuck::cast(violated);
+        let better = reached & rank.simd_gt(rank_n) & rank.simd_gt(best_rank) & violated;
+        best_rank = better.select(rank, best_rank);
+        let better_f: f32x8 = bytemuck::cast(better);
+        for a in 0..3 {
+            best_u[a] = better_f.select(ue[a], best_u[a]);
+        }
+        found |= better;
+    }
+    let pinned = nonzero_lanes(own_cells & splat_byte(FIXED | HELD));
+    let moved = found.to_bitmask() as u8 & range & !pinned;
+    let moved_w = u32x8::from(LANE_WORDS[moved as usize]);
+    let moved_f: f32x8 = bytemuck::cast(moved_w);
+    let keep = u32x8::from(LANE_WORDS[range as usize]);
+    let keep_f: f32x8 = bytemuck::cast(keep);
+    let wr = 1 - rd;
+    for a in 0..3 {
+        // `Link::clamp` towards the sponsor; carried lanes keep `un`.
+        let v = un[a].fast_max(best_u[a] - d[a]).fast_min(best_u[a] + d[a]);
+        let v = moved_f.select(v, un[a]);
+        let out = &st.u[wr][a];
+        store_f32(out, own, keep_f.select(v, load_f32(out, own)));
+    }
+    let k = moved_w.select(best_rank ^ time, kn);
+    store_u32(&st.key[wr], own, keep.select(k, load_u32(&st.key[wr], own)));
+    counts.0 += range.count_ones() as u64;
+    counts.1 += moved.count_ones() as u64;
+    for lane in 0..8 {
+        if moved >> lane & 1 == 1 {
+            moves.mark(w + lane);
+        }
+    }
+    true
+}
+
+/// `LANE_WORDS[m]`: lane `l` all ones where bit `l` of `m` is set.
+static LANE_WORDS: [[u32; 8]; 256] = {
+    let mut t = [[0u32; 8]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut l = 0;
+        while l < 8 {
+            if m >> l & 1 == 1 {
+                t[m][l] = u32::MAX;
+            }
+            l += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
+/// Loads 8 consecutive words of a state array.
+#[inline(always)]
+fn load_u32(s: &[AtomicU32], at: usize) -> u32x8 {
+    let w = &s[at..at + 8];
+    // SAFETY: `AtomicU32` has the size, alignment and bit validity of
+    // `u32`. During a Jacobi iteration the read copy is only read, and a
+    // row of the write copy has one writer (this task), so the plain
+    // accesses do not race.
+    u32x8::from(unsafe { std::ptr::read_unaligned(w.as_ptr() as *const [u32; 8]) })
+}
+
+/// Loads 8 consecutive values of a state array as f32.
+#[inline(always)]
+fn load_f32(s: &[AtomicU32], at: usize) -> f32x8 {
+    bytemuck::cast(load_u32(s, at))
+}
+
+/// Stores 8 consecutive values of a state array as f32.
+#[inline(always)]
+fn store_f32(s: &[AtomicU32], at: usize, v: f32x8) {
+    store_u32(s, at, bytemuck::cast(v))
+}
+
+/// Stores 8 consecutive words of a state array.
+#[inline(always)]
+fn store_u32(s: &[AtomicU32], at: usize, v: u32x8) {
+    let w = &s[at..at + 8];
+    // SAFETY: as in `load_u32`; `AtomicU32` is an `UnsafeCell`, so writing
+    // through a pointer from a shared slice is allowed.
+    unsafe { std::ptr::write_unaligned(w.as_ptr() as *mut [u32; 8], v.to_array()) }
+}
+
+/// Propagates into the element in slot `q` of a row, if there is one.
+#[inline]
+fn propagate_slot(
+    lat: &ElementLattice,
+    st: &State,
+    rd: usize,
+    rows: &RowBases,
+    q: usize,
+    moves: &mut RowMoves,
+    counts: &mut (u64, u64),
+) {
+    let n = rows.own + q;
+    let c = [2 * q + rows.p, rows.jk[0], rows.jk[1]];
+    if c[0] >= lat.dims[0] || !lat.present(n) {
+        return;
+    }
+    counts.0 += 1;
+    if !pinned(lat.cells[n])
+        && let Some((e, a)) = sponsor(lat, st, rd, n, c)
+    {
+        let wr = 1 - rd;
+        let link = lat.link(n, e);
+        st.set(wr, n, link.clamp(st.get(rd, n), st.get(rd, e)));
+        st.set_key(wr, n, a);
+        counts.1 += 1;
+        moves.mark(q);
+        return;
+    }
+    st.carry(rd, n);
 }
 
 /// The neighbour whose move element `n` takes, with the arrival key.

@@ -56,6 +56,12 @@ impl RowMoves {
             .fold(0.0, f32::max)
     }
 
+    /// Flags slot `q`.
+    #[inline]
+    pub fn mark(&mut self, q: usize) {
+        self.bits[q / 64] |= 1 << (q % 64);
+    }
+
     #[inline]
     fn record(&mut self, q: usize, mv: f32, tol: f32) {
         if mv >= tol {
@@ -172,19 +178,35 @@ pub fn face_bits(c: usize, lo: usize, hi: usize, first: u8) -> FaceMask {
 /// of its six neighbour rows shifted so that slot `q`'s neighbour is at
 /// `base + q` (in [`crate::lattice::LINKS`] order; wrapping), and the
 /// directions with no neighbour row (the lattice's faces).
-struct RowBases {
-    own: usize,
-    nb: [usize; 6],
+pub(crate) struct RowBases {
+    pub own: usize,
+    pub nb: [usize; 6],
     /// Bit `l`: no element of this row has a neighbour along link `l`
     /// (for ±x: set only when the lattice is one element wide).
-    missing: u8,
+    pub missing: u8,
     /// Row parity: slot `q` holds element `i = 2q + p`.
-    p: usize,
-    jk: [usize; 2],
+    pub p: usize,
+    pub jk: [usize; 2],
 }
 
 impl RowBases {
-    fn new(lat: &ElementLattice, colour: usize, j: usize, k: usize) -> Self {
+    /// Lanes of the window at slot `w` on the lattice's x faces: element 0
+    /// has no −x neighbour and element `nx − 1` no +x neighbour. Returns
+    /// `(−x lanes, +x lanes)`.
+    #[inline]
+    pub fn x_edges(&self, w: usize, nx: usize) -> (u8, u8) {
+        let p = self.p;
+        let minus = u8::from(w == 0 && p == 0);
+        let last = (nx - 1 - p) / 2; // slot of the last element of this parity
+        let plus = if (nx - 1 - p).is_multiple_of(2) && last >= w && last < w + 8 {
+            1u8 << (last - w)
+        } else {
+            0
+        };
+        (minus, plus)
+    }
+
+    pub fn new(lat: &ElementLattice, colour: usize, j: usize, k: usize) -> Self {
         let order: Order = lat.order();
         let [nx, ny, nz] = lat.dims;
         let (own, p) = order.row(colour, j, k);
@@ -281,21 +303,21 @@ impl<'a> Windows<'a> {
 
 /// Loads 8 consecutive site bytes as one word (lane `l` in byte `l`).
 #[inline(always)]
-fn bytes8(s: &[u8], at: usize) -> u64 {
+pub(crate) fn bytes8(s: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(s[at..at + 8].try_into().expect("8 bytes"))
 }
 
 /// Every byte of a word set to `b`.
-const fn splat_byte(b: u8) -> u64 {
+pub(crate) const fn splat_byte(b: u8) -> u64 {
     b as u64 * 0x0101_0101_0101_0101
 }
 
 /// Material bits of every byte.
-const MAT: u64 = splat_byte(ABSENT);
+pub(crate) const MAT: u64 = splat_byte(ABSENT);
 
 /// Lane bits (bit `l` for byte `l`) of the non-zero bytes of `x`.
 #[inline(always)]
-fn nonzero_lanes(x: u64) -> u8 {
+pub(crate) fn nonzero_lanes(x: u64) -> u8 {
     const LOW7: u64 = splat_byte(0x7f);
     let high = (((x & LOW7) + LOW7) | x) & splat_byte(0x80);
     pack_lanes(high >> 7)
@@ -350,19 +372,19 @@ fn relax_window(
 ) {
     let cells = &lat.cells;
     let own = rows.own + w;
-    let nb = rows.nb.map(|r| r.wrapping_add(w));
+    let r = &rows.nb;
+    // Written out: array `map` closures are not reliably inlined here.
+    let nb = [
+        r[0].wrapping_add(w),
+        r[1].wrapping_add(w),
+        r[2].wrapping_add(w),
+        r[3].wrapping_add(w),
+        r[4].wrapping_add(w),
+        r[5].wrapping_add(w),
+    ];
     let range = (((1u16 << to) - 1) & !((1u16 << from) - 1)) as u8;
     let own_cells = bytes8(cells, own);
-    let (p, nx) = (rows.p, lat.dims[0]);
-    // Lanes at the lattice's x faces: element 0 has no −x neighbour and
-    // element nx − 1 no +x neighbour.
-    let minus_x_edge = u8::from(w == 0 && p == 0);
-    let last = (nx - 1 - p) / 2; // slot of the last element of this parity
-    let plus_x_edge = if (nx - 1 - p).is_multiple_of(2) && last >= w && last < w + 8 {
-        1u8 << (last - w)
-    } else {
-        0
-    };
+    let (minus_x_edge, plus_x_edge) = rows.x_edges(w, lat.dims[0]);
     let cut = bytes8(&lat.cut, own);
     // The common case first, with the fewest checks: 8 free elements of
     // one material, all 48 neighbours there, of that material, uncut.
@@ -497,7 +519,15 @@ fn masked_window(
 ) {
     let link = lat.links[m as usize * lat.materials.len() + m as usize];
     let alpha = f32x8::splat(lat.materials[m as usize].elastic);
-    let masks = link_lanes.map(lanes);
+    let l = link_lanes;
+    let masks = [
+        lanes(l[0]),
+        lanes(l[1]),
+        lanes(l[2]),
+        lanes(l[3]),
+        lanes(l[4]),
+        lanes(l[5]),
+    ];
     let count = masks.iter().fold(f32x8::ZERO, |c, &k| c + (k & f32x8::ONE));
     let write_mask = lanes(write) & count.simd_gt(f32x8::ZERO);
     let inv_count = f32x8::ONE / count.fast_max(f32x8::ONE);

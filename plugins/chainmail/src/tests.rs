@@ -112,9 +112,10 @@ fn max_error(m: &ChainMail, want: &[[f64; 3]]) -> f64 {
 
 #[test]
 fn homogeneous_cube_parallel_equals_sequential() {
-    let v = volume([12, 10, 9], |_, _, _| 1);
+    // Odd and wide enough along x for the 8-slot windows of both colours.
+    let v = volume([37, 20, 17], |_, _, _| 1);
     let mats = "{ range = [0, 256], constraint = 0.25 }";
-    let by = [9.0, -8.0, 8.5];
+    let by = [20.0, -18.0, 16.5];
     let mut results = vec![];
     for config in [
         "algorithm = \"sequential\"",
@@ -131,7 +132,7 @@ fn homogeneous_cube_parallel_equals_sequential() {
         assert!(m.at_rest() || r.relaxation_iterations == 0);
         // The pull reaches every element.
         let lat = m.lattice();
-        let far = lat.linear([11, 9, 8]);
+        let far = lat.linear([36, 19, 16]);
         assert!(m.displacement(far)[0] > 0.0, "{:?}", m.displacement(far));
         results.push(
             (0..lat.len())
