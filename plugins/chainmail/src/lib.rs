@@ -41,6 +41,7 @@ pub mod propagate;
 pub mod relax;
 pub mod relax_lanes;
 pub mod relax_passes;
+pub mod removal;
 pub mod state;
 
 #[cfg(test)]
@@ -220,8 +221,8 @@ impl ChainMailPlugin {
             .as_mut()
             .ok_or_else(|| ModelError::new("chainmail: removed_tetrahedra before init"))?;
         match self.bindings.get(binding.0 as usize) {
-            // Only the identity binding's mesh is the one the cuts refer to.
-            Some(Binding::Lattice(g)) if mapping::is_identity(model.lattice(), g) => {
+            // The cuts refer to the source volume's sampling mesh.
+            Some(Binding::Lattice(g)) if *g == model.lattice().source => {
                 Ok(model.removed_tetrahedra(cell_bits))
             }
             Some(_) => Ok(false),

@@ -6,6 +6,7 @@ use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
 use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
 use crate::relax::{sweep, sweep_scalar};
+use crate::removal::{carve_tets, cut_tets, segment_crosses_triangle};
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
 use voxflex_core::error::ModelError;
@@ -73,8 +74,7 @@ pub struct ChainMail {
     grabs: Vec<Grab>,
     counts: Counts,
     /// Sampling-mesh tetrahedra the cuts and carving removed (one byte per
-    /// cell of the source's mesh, 5 bits), for a full-resolution, uncropped
-    /// model whose elements are the mesh vertices; empty until the first.
+    /// cell of the source volume's mesh, 5 bits); empty until the first.
     removed_tets: Vec<u8>,
     /// `removed_tets` gained bits since they were last reported.
     removed_unreported: bool,
@@ -240,6 +240,18 @@ impl ChainMail {
                     }
                     _ => false,
                 };
+                if !self.elements_are_voxels() {
+                    let region = match (centre, radius, min, max) {
+                        (Some(c), Some(r), _, _) => {
+                            let c = DVec3::from_array(c);
+                            (c - DVec3::splat(r), c + DVec3::splat(r))
+                        }
+                        (_, _, Some(a), Some(b)) => (DVec3::from_array(a), DVec3::from_array(b)),
+                        _ => (DVec3::ZERO, DVec3::ZERO),
+                    };
+                    let tets = carve_tets(&self.lat, &self.state, region, inside);
+                    self.remove_source_tets(tets);
+                }
                 let mut removed = 0usize;
                 for n in 0..self.lat.len() {
                     if self.lat.present(n) && inside(self.position(n)) {
@@ -285,12 +297,23 @@ impl ChainMail {
             && self.lat.dims == self.lat.source.dims
     }
 
+    /// Removes the tetrahedra of cut links or carved elements when the
+    /// elements are the mesh vertices (otherwise [`crate::removal`] finds
+    /// them on the mesh itself).
     fn remove_tets(&mut self, tets: Vec<(usize, u8)>) {
-        if !self.elements_are_voxels() {
+        if self.elements_are_voxels() {
+            self.remove_source_tets(tets);
+        }
+    }
+
+    /// ORs `(cell, bits)` of the source's sampling mesh into the removed
+    /// tetrahedra.
+    fn remove_source_tets(&mut self, tets: Vec<(usize, u8)>) {
+        if tets.is_empty() {
             return;
         }
         if self.removed_tets.is_empty() {
-            let [cx, cy, cz] = self.mesh_cell_dims();
+            let [cx, cy, cz] = self.lat.source.dims.map(|d| d.saturating_sub(1));
             self.removed_tets = vec![0; cx * cy * cz];
         }
         for (cell, bits) in tets {
@@ -339,6 +362,10 @@ impl ChainMail {
         for q in &p {
             lo = lo.min(*q);
             hi = hi.max(*q);
+        }
+        if !self.elements_are_voxels() {
+            let tets = cut_tets(&self.lat, &self.state, &tris);
+            self.remove_source_tets(tets);
         }
         let reach = DVec3::from(self.lat.spacing) * 2.0;
         let (lo, hi) = (lo - reach, hi + reach);
@@ -649,31 +676,6 @@ impl ChainMail {
     pub fn at_rest(&self) -> bool {
         !self.propagating() && self.relax.is_empty()
     }
-}
-
-/// True when segment `a → b` crosses triangle `t` (Möller–Trumbore; the
-/// segment's ends and the triangle's edges count as crossing).
-fn segment_crosses_triangle(a: DVec3, b: DVec3, t: &[DVec3; 3]) -> bool {
-    let d = b - a;
-    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det.abs() < 1e-12 {
-        return false;
-    }
-    let inv = 1.0 / det;
-    let s = a - t[0];
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return false;
-    }
-    let q = s.cross(e1);
-    let v = d.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return false;
-    }
-    let h = e2.dot(q) * inv;
-    (0.0..=1.0).contains(&h)
 }
 
 /// Adds a block to a short list (the grabbed elements' blocks).

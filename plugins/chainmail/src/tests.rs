@@ -447,3 +447,42 @@ fn carving_removes_elements_from_the_model() {
     assert_eq!(before - lat.element_count(), 81);
     assert!(InteractionSpec::from_toml("kind = \"carve\"\ncentre = [5, 5, 5]").is_err());
 }
+
+#[test]
+fn cuts_and_carves_of_a_down_sampled_model_reach_the_sampling_mesh() {
+    let v = volume([21, 21, 21], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.1 }";
+    let mut m = ChainMail::new(v.view(), params("downsample = 2", mats)).unwrap();
+    assert_eq!(m.lattice().dims, [11, 11, 11]);
+    let cells = 20 * 20 * 20;
+    let mut bits = vec![0u8; cells];
+    assert!(!m.removed_tetrahedra(&mut []));
+    // A cut across the plane x = 9.5 mm, between source voxels 9 and 10
+    // (elements 4 and 5 sit at voxels 8 and 10).
+    m.interact(
+        &InteractionSpec::from_toml(
+            "kind = \"cut\"\npolygon = [[9.5, -1, -1], [9.5, 21, -1], [9.5, 21, 21], [9.5, -1, 21]]",
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert!(m.removed_tetrahedra(&mut []));
+    assert!(m.removed_tetrahedra(&mut bits));
+    let marked: Vec<usize> = (0..cells).filter(|&c| bits[c] != 0).collect();
+    // Every marked cell touches the edge from voxel 9 to 10 along x, and
+    // every row of cells across the plane has one.
+    assert!(marked.iter().all(|&c| c % 20 == 9));
+    assert_eq!(marked.len(), 20 * 20);
+    // Carving a ball removes the tetrahedra around the voxels inside it.
+    let mut m = ChainMail::new(v.view(), params("downsample = 2", mats)).unwrap();
+    m.interact(
+        &InteractionSpec::from_toml("kind = \"carve\"\ncentre = [15, 15, 15]\nradius = 1.5")
+            .unwrap(),
+    )
+    .unwrap();
+    let mut bits = vec![0u8; cells];
+    assert!(m.removed_tetrahedra(&mut bits));
+    let centre = 15 + 20 * (15 + 20 * 15);
+    assert_eq!(bits[centre], 0b1_1111);
+    assert_eq!(bits[0], 0);
+}

@@ -1,0 +1,150 @@
+//! The sampling-mesh tetrahedra a cut or a carve removes, for any model.
+//!
+//! The resampler's removed-tetrahedra mask lives on the source volume's
+//! sampling mesh (one vertex per source voxel). When the elements are the
+//! source voxels one for one, a cut link *is* a mesh edge and a carved
+//! element *is* a mesh vertex ([`crate::model::ChainMail`] marks those
+//! directly). A down-sampled or cropped model has fewer elements than mesh
+//! vertices, so the same interaction is applied to the mesh itself: every
+//! source vertex takes the model's displacement (trilinear, as `map` gives
+//! it), and the mesh edges that cross the cut polygon, or the vertices the
+//! carve region holds, lose their tetrahedra. Only the source vertices
+//! that can reach the region are visited: its box, grown by the largest
+//! displacement of the model and two voxels, in rest space.
+
+use crate::lattice::ElementLattice;
+use crate::mapping;
+use crate::state::State;
+use voxflex_core::glam::DVec3;
+use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
+
+/// Source voxels (inclusive index box) whose rest position lies within the
+/// world box `[lo, hi]` grown by the model's largest displacement and two
+/// voxels, clipped to the part of the source the model covers.
+fn candidate_voxels(
+    lat: &ElementLattice,
+    state: &State,
+    lo: DVec3,
+    hi: DVec3,
+) -> Option<([usize; 3], [usize; 3])> {
+    let g = &lat.source;
+    let cur = state.cur;
+    let max_u = (0..lat.len())
+        .filter(|&n| lat.present(n))
+        .map(|n| {
+            let u = state.get(cur, n);
+            u[0].abs().max(u[1].abs()).max(u[2].abs()) as f64
+        })
+        .fold(0.0, f64::max);
+    let grow = DVec3::splat(max_u) + g.spacing * 2.0;
+    let (a, b) = (g.world_to_index(lo - grow), g.world_to_index(hi + grow));
+    // The index box of a world box (the grid may flip axes).
+    let (a, b) = (a.min(b), a.max(b));
+    let span = lat.dims.map(|d| (d - 1) * lat.downsample);
+    let mut out = ([0; 3], [0; 3]);
+    for ax in 0..3 {
+        let first = lat.first_voxel[ax] as f64;
+        let last = first + span[ax] as f64;
+        let (l, h) = (a[ax].floor().max(first), b[ax].ceil().min(last));
+        if l > h {
+            return None;
+        }
+        (out.0[ax], out.1[ax]) = (l as usize, h as usize);
+    }
+    Some(out)
+}
+
+/// Deformed world position (mm) of source voxel `v`.
+fn deformed(lat: &ElementLattice, state: &State, v: [usize; 3]) -> DVec3 {
+    let k = lat.downsample as f64;
+    let f = [0, 1, 2].map(|a| (v[a] as f64 - lat.first_voxel[a] as f64) / k);
+    let u = mapping::sample(lat, state, f);
+    lat.source
+        .index_to_world(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+        + DVec3::new(u[0] as f64, u[1] as f64, u[2] as f64)
+}
+
+/// The mesh tetrahedra on edges that cross one of `tris` (deformed
+/// positions), `(cell, bits)`.
+pub fn cut_tets(lat: &ElementLattice, state: &State, tris: &[[DVec3; 3]]) -> Vec<(usize, u8)> {
+    let (mut lo, mut hi) = (tris[0][0], tris[0][0]);
+    for p in tris.iter().flatten() {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    let Some((a, b)) = candidate_voxels(lat, state, lo, hi) else {
+        return Vec::new();
+    };
+    let cells = lat.source.dims.map(|d| d.saturating_sub(1));
+    let mut out = Vec::new();
+    for k in a[2]..=b[2] {
+        for j in a[1]..=b[1] {
+            for i in a[0]..=b[0] {
+                let v = [i, j, k];
+                let p = deformed(lat, state, v);
+                for axis in 0..3 {
+                    let mut w = v;
+                    w[axis] += 1;
+                    if w[axis] > b[axis] {
+                        continue;
+                    }
+                    let q = deformed(lat, state, w);
+                    if tris.iter().any(|t| segment_crosses_triangle(p, q, t)) {
+                        out.extend(tets_on_edge(cells, v, axis));
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The mesh tetrahedra around vertices whose deformed position `inside`
+/// holds, within the world box `[lo, hi]`, `(cell, bits)`.
+pub fn carve_tets(
+    lat: &ElementLattice,
+    state: &State,
+    (lo, hi): (DVec3, DVec3),
+    inside: impl Fn(DVec3) -> bool,
+) -> Vec<(usize, u8)> {
+    let Some((a, b)) = candidate_voxels(lat, state, lo, hi) else {
+        return Vec::new();
+    };
+    let cells = lat.source.dims.map(|d| d.saturating_sub(1));
+    let mut out = Vec::new();
+    for k in a[2]..=b[2] {
+        for j in a[1]..=b[1] {
+            for i in a[0]..=b[0] {
+                if inside(deformed(lat, state, [i, j, k])) {
+                    out.extend(tets_at_vertex(cells, [i, j, k]));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// True when segment `a → b` crosses triangle `t` (Möller–Trumbore; the
+/// segment's ends and the triangle's edges count as crossing).
+pub fn segment_crosses_triangle(a: DVec3, b: DVec3, t: &[DVec3; 3]) -> bool {
+    let d = b - a;
+    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-12 {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = a - t[0];
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let h = e2.dot(q) * inv;
+    (0.0..=1.0).contains(&h)
+}
