@@ -210,8 +210,11 @@ mod tests {
 
     /// A 37×13×11 lattice (odd `nx`: padding slots) of two materials with
     /// holes, cut links, held and fixed elements, and a random state.
-    fn setup() -> (ElementLattice, Blocks) {
-        let dims = [37, 13, 11];
+    ///
+    /// `clean`: a 34×13×11 lattice (even `nx`) of the same materials with
+    /// no hole, cut or flag, where whole rows take the uniform kernel.
+    fn setup_with(clean: bool) -> (ElementLattice, Blocks) {
+        let dims = if clean { [34, 13, 11] } else { [37, 13, 11] };
         let grid = Grid::new(dims, DVec3::ONE, DVec3::ZERO);
         let mut data = Vec::new();
         for k in 0..dims[2] {
@@ -219,7 +222,7 @@ mod tests {
                 for i in 0..dims[0] {
                     let r2 = (i as i64 - 25).pow(2) + (j as i64 - 6).pow(2) + (k as i64 - 5).pow(2);
                     data.push(match (r2, (i * 7 + j * 3 + k) % 97) {
-                        (_, 0) => 0, // hole
+                        (_, 0) if !clean => 0, // hole
                         (r2, _) if r2 < 12 => 200,
                         _ => 100,
                     });
@@ -236,6 +239,9 @@ mod tests {
         )
         .unwrap();
         let mut lat = ElementLattice::new(vol.view(), &params).unwrap();
+        if clean {
+            return (lat, Blocks::new(dims, [8, 4, 4]));
+        }
         for c in [[10, 5, 5], [11, 5, 5], [12, 6, 4], [30, 2, 9]] {
             let n = lat.linear(c);
             lat.cut_link(n, 0);
@@ -246,6 +252,10 @@ mod tests {
             lat.cells[n] |= flag;
         }
         (lat, Blocks::new(dims, [8, 4, 4]))
+    }
+
+    fn setup() -> (ElementLattice, Blocks) {
+        setup_with(false)
     }
 
     /// A reproducible pseudo-random state, displacements within ±0.05 mm.
@@ -267,7 +277,13 @@ mod tests {
 
     #[test]
     fn vector_sweep_matches_the_scalar_sweep() {
-        let (lat, blocks) = setup();
+        for clean in [false, true] {
+            vector_matches_scalar(clean);
+        }
+    }
+
+    fn vector_matches_scalar(clean: bool) {
+        let (lat, blocks) = setup_with(clean);
         // Two blocks in three, so runs have gaps and windows overlap them
         // (and the set is sparse enough not to take the dense pass).
         let set: Vec<u32> = (0..blocks.len() as u32).filter(|b| b % 3 != 1).collect();
