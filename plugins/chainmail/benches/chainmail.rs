@@ -93,10 +93,21 @@ fn main() {
         return;
     }
     if std::env::args().any(|a| a == "parallel") {
-        // Only the parallel run to rest (for profiling).
-        let (pp, ppi, pr, pri, ..) = run("parallel", [8, 4, 4], RELAX_SWEEPS);
+        // Only the parallel run to rest (for profiling); `block=X,Y,Z`
+        // picks the block size.
+        let block = std::env::args()
+            .find_map(|a| {
+                let b: Vec<usize> = a
+                    .strip_prefix("block=")?
+                    .split(',')
+                    .filter_map(|v| v.parse().ok())
+                    .collect();
+                (b.len() == 3).then(|| [b[0], b[1], b[2]])
+            })
+            .unwrap_or([8, 4, 4]);
+        let (pp, ppi, pr, pri, ..) = run("parallel", block, RELAX_SWEEPS);
         println!(
-            "parallel 8×4×4: propagation {:.1} ms ({ppi} iterations), relaxation {:.1} ms ({pri} sweeps), total {:.1} ms",
+            "parallel {block:?}: propagation {:.1} ms ({ppi} iterations), relaxation {:.1} ms ({pri} sweeps), total {:.1} ms",
             ms(pp),
             ms(pr),
             ms(pp + pr)
