@@ -29,10 +29,12 @@
 //! frames = 4
 //! ```
 //!
-//! The plugin runs on the CPU (rayon) for now; its WGSL path is future
-//! work (see the README's known gaps).
+//! Both paths live here: rayon (8-wide kernels over the red-black storage
+//! order) and WGSL (`gpu.rs`, `shaders/chainmail/chainmail.wgsl`) over the
+//! same layout, chosen by the scene's `backend`.
 
 pub mod blocks;
+pub mod gpu;
 pub mod lattice;
 pub mod mapping;
 pub mod model;
@@ -45,11 +47,14 @@ pub mod removal;
 pub mod state;
 
 #[cfg(test)]
+mod gpu_tests;
+#[cfg(test)]
 mod tests;
 
 use model::ChainMail;
 use params::{ChainMailParams, InteractionSpec};
-use voxflex_abi::ffi::CAPABILITY_CPU;
+use std::sync::Arc;
+use voxflex_abi::ffi::{CAPABILITY_CPU, CAPABILITY_GPU};
 use voxflex_abi::{DeformationPlugin, HostContext};
 use voxflex_core::deformation::{
     BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
@@ -57,6 +62,7 @@ use voxflex_core::deformation::{
 };
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::grid::Grid;
 use voxflex_core::volume::VolumeView;
 
@@ -74,17 +80,20 @@ pub struct ChainMailPlugin {
     dirty: Option<(DVec3, DVec3)>,
     /// Everything must be mapped once after `init`.
     mapped_once: bool,
+    /// The host's GPU service, if it offered one.
+    gpu: Option<Arc<dyn GpuService>>,
 }
 
 impl ChainMailPlugin {
     /// A plugin instance with parsed parameters; the model is built in `init`.
-    pub fn new(params: ChainMailParams) -> Self {
+    pub fn new(params: ChainMailParams, gpu: Option<Arc<dyn GpuService>>) -> Self {
         Self {
             params,
             model: None,
             bindings: Vec::new(),
             dirty: None,
             mapped_once: false,
+            gpu,
         }
     }
 
@@ -106,16 +115,17 @@ impl DeformationModel for ChainMailPlugin {
         volume: VolumeView<'_>,
         backend: ExecutionBackend,
     ) -> Result<(), ModelError> {
-        if backend == ExecutionBackend::Gpu {
-            return Err(ModelError::new(
-                "chainmail has no GPU path yet; use backend = \"cpu\" (or \"auto\")",
-            ));
-        }
-        let model = ChainMail::new(volume, self.params.clone())?;
+        let mut model = ChainMail::new(volume, self.params.clone())?;
         if model.lattice().element_count() == 0 {
             return Err(ModelError::new(
                 "chainmail: no voxel matches any material range; check `materials`",
             ));
+        }
+        if backend == ExecutionBackend::Gpu {
+            let gpu = self.gpu.clone().ok_or_else(|| {
+                ModelError::new("chainmail: backend is gpu but the host offered no GPU service")
+            })?;
+            model.use_gpu(gpu)?;
         }
         self.model = Some(model);
         Ok(())
@@ -138,6 +148,9 @@ impl DeformationModel for ChainMailPlugin {
     fn step(&mut self, _frame: FrameInfo) -> Result<StepOutcome, ModelError> {
         let model = self.model_mut()?;
         let changed = model.step();
+        if let Some(e) = model.take_gpu_error() {
+            return Err(e);
+        }
         if let Some((lo, hi)) = model.take_dirty() {
             self.dirty = Some(match self.dirty {
                 Some((a, b)) => (a.min(lo), b.max(hi)),
@@ -162,13 +175,8 @@ impl DeformationModel for ChainMailPlugin {
     fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError> {
         let model = self
             .model
-            .as_ref()
+            .as_mut()
             .ok_or_else(|| ModelError::new("chainmail: map before init"))?;
-        let DisplacementTarget::Cpu { x, y, z } = out else {
-            return Err(ModelError::new(
-                "chainmail has no GPU path yet; use backend = \"cpu\"",
-            ));
-        };
         let b = self
             .bindings
             .get(binding.0 as usize)
@@ -177,26 +185,36 @@ impl DeformationModel for ChainMailPlugin {
             Binding::Lattice(g) => g.len(),
             Binding::Points(p) => p.len(),
         };
-        if x.len() != n || y.len() != n || z.len() != n {
-            return Err(ModelError(format!(
-                "displacement arrays hold {} values but the binding has {n} points",
-                x.len()
-            )));
-        }
-        let (lat, state) = (model.lattice(), model.state());
-        match b {
-            Binding::Lattice(g) if mapping::is_identity(lat, g) => {
-                mapping::copy_identity(lat, state, [x, y, z])
+        match out {
+            DisplacementTarget::Cpu { x, y, z } => {
+                if x.len() != n || y.len() != n || z.len() != n {
+                    return Err(ModelError(format!(
+                        "displacement arrays hold {} values but the binding has {n} points",
+                        x.len()
+                    )));
+                }
+                model.pull()?;
+                map_cpu(model, b, [x, y, z]);
             }
-            Binding::Lattice(g) => mapping::sample_lattice(lat, state, g, [x, y, z]),
-            Binding::Points(p) => {
-                for (i, q) in p.iter().enumerate() {
-                    let f = mapping::element_coords(
-                        lat,
-                        DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64),
-                    );
-                    let u = mapping::sample(lat, state, f);
-                    (x[i], y[i], z[i]) = (u[0], u[1], u[2]);
+            DisplacementTarget::Gpu { x, y, z } => {
+                let identity =
+                    matches!(b, Binding::Lattice(g) if mapping::is_identity(model.lattice(), g));
+                if identity && model.on_gpu() {
+                    model.map_identity_gpu([x, y, z])?;
+                } else {
+                    // Interpolated bindings are mapped on the CPU and
+                    // uploaded (the identity binding is the one a scene
+                    // renders at full resolution).
+                    let gpu = self.gpu.as_ref().ok_or_else(|| {
+                        ModelError::new("chainmail: a GPU target but no GPU service")
+                    })?;
+                    model.pull()?;
+                    let mut cols = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+                    let [cx, cy, cz] = &mut cols;
+                    map_cpu(model, b, [cx, cy, cz]);
+                    for (col, id) in cols.iter().zip([x, y, z]) {
+                        upload_into(gpu.as_ref(), id, col)?;
+                    }
                 }
             }
         }
@@ -212,6 +230,31 @@ impl DeformationModel for ChainMailPlugin {
     ) -> Result<bool, ModelError> {
         self.removed(binding, cell_bits)
     }
+}
+
+/// Maps the model's current (CPU) displacements onto a binding's points.
+fn map_cpu(model: &ChainMail, b: &Binding, [x, y, z]: [&mut [f32]; 3]) {
+    let (lat, state) = (model.lattice(), model.state());
+    match b {
+        Binding::Lattice(g) if mapping::is_identity(lat, g) => {
+            mapping::copy_identity(lat, state, [x, y, z])
+        }
+        Binding::Lattice(g) => mapping::sample_lattice(lat, state, g, [x, y, z]),
+        Binding::Points(p) => {
+            for (i, q) in p.iter().enumerate() {
+                let f =
+                    mapping::element_coords(lat, DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64));
+                let u = mapping::sample(lat, state, f);
+                (x[i], y[i], z[i]) = (u[0], u[1], u[2]);
+            }
+        }
+    }
+}
+
+/// Writes `values` at the start of a host buffer.
+fn upload_into(gpu: &dyn GpuService, id: BufferId, values: &[f32]) -> Result<(), ModelError> {
+    gpu.write_buffer(id, 0, bytemuck::cast_slice(values))
+        .map_err(|e| ModelError(format!("chainmail: writing displacements to the GPU: {e}")))
 }
 
 impl ChainMailPlugin {
@@ -235,12 +278,12 @@ impl DeformationPlugin for ChainMailPlugin {
     const NAME: &'static str = "chainmail";
     const DESCRIPTION: &'static str =
         "heterogeneous sparse parallel 3D ChainMail (timestamps, wavefronts, relaxation)";
-    const CAPABILITIES: u32 = CAPABILITY_CPU;
+    const CAPABILITIES: u32 = CAPABILITY_CPU | CAPABILITY_GPU;
 
-    fn create(params_toml: &str, _host: HostContext) -> Result<Self, ModelError> {
+    fn create(params_toml: &str, host: HostContext) -> Result<Self, ModelError> {
         let params = ChainMailParams::from_toml(params_toml)?;
         tracing::debug!(?params, "chainmail plugin created");
-        Ok(Self::new(params))
+        Ok(Self::new(params, host.gpu()))
     }
 }
 

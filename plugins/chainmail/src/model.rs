@@ -2,15 +2,18 @@
 //! schedule (interleaved propagation and relaxation).
 
 use crate::blocks::{Blocks, FaceMask};
+use crate::gpu::GpuChainMail;
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
 use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
-use crate::relax::{sweep, sweep_scalar};
+use crate::relax::{sweep, sweep_scalar, sweeps_everything};
 use crate::removal::{carve_tets, cut_tets, segment_crosses_triangle};
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
+use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
 use voxflex_core::volume::VolumeView;
 
@@ -80,6 +83,13 @@ pub struct ChainMail {
     removed_unreported: bool,
     /// A cut or carve since the last step: the next step reports a change.
     topology_changed: bool,
+    /// The WGSL path, when the model runs on the GPU.
+    gpu: Option<GpuChainMail>,
+    /// The GPU has iterated since the CPU copy of the state was last
+    /// downloaded ([`Self::pull`]).
+    cpu_stale: bool,
+    /// The first GPU error; later GPU work is skipped until it is taken.
+    gpu_error: Option<ModelError>,
 }
 
 impl ChainMail {
@@ -112,7 +122,107 @@ impl ChainMail {
             removed_tets: Vec::new(),
             removed_unreported: false,
             topology_changed: false,
+            gpu: None,
+            cpu_stale: false,
+            gpu_error: None,
         })
+    }
+
+    /// Moves the model onto the GPU: from now on propagation and
+    /// relaxation run the WGSL kernels on the device's copy of the state.
+    /// Only the parallel algorithm with the block schedule has a GPU path.
+    pub fn use_gpu(&mut self, service: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        if self.params.algorithm != Algorithm::Parallel {
+            return Err(ModelError::new(
+                "chainmail: algorithm = \"sequential\" (the baseline) runs on the CPU only; \
+                 use backend = \"cpu\" or algorithm = \"parallel\"",
+            ));
+        }
+        if self.params.schedule != Schedule::Blocks {
+            return Err(ModelError::new(
+                "chainmail: schedule = \"frontier\" runs on the CPU only; use backend = \"cpu\" \
+                 or schedule = \"blocks\"",
+            ));
+        }
+        self.sync_copies();
+        self.gpu = Some(GpuChainMail::new(
+            service,
+            &self.lat,
+            &self.state,
+            &self.blocks,
+        )?);
+        Ok(())
+    }
+
+    /// True when the model runs on the GPU.
+    pub fn on_gpu(&self) -> bool {
+        self.gpu.is_some()
+    }
+
+    /// Brings the CPU copy of the state up to date with the GPU's (a no-op
+    /// on the CPU path). [`Self::displacement`] and [`Self::position`] read
+    /// the CPU copy.
+    pub fn pull(&mut self) -> Result<(), ModelError> {
+        self.check_gpu()?;
+        if let Some(g) = &self.gpu
+            && self.cpu_stale
+        {
+            g.download_state(&self.state)?;
+            self.cpu_stale = false;
+        }
+        Ok(())
+    }
+
+    /// The first GPU error since the last call (GPU work stops at an error).
+    pub fn take_gpu_error(&mut self) -> Option<ModelError> {
+        self.gpu_error.take()
+    }
+
+    fn check_gpu(&mut self) -> Result<(), ModelError> {
+        match self.gpu_error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Runs `f` on the GPU path, keeping its first error.
+    fn on_device<T: Default>(
+        &mut self,
+        f: impl FnOnce(&GpuChainMail, &State) -> Result<T, ModelError>,
+    ) -> T {
+        let (Some(g), None) = (&self.gpu, &self.gpu_error) else {
+            return T::default();
+        };
+        match f(g, &self.state) {
+            Ok(v) => v,
+            Err(e) => {
+                self.gpu_error = Some(e);
+                T::default()
+            }
+        }
+    }
+
+    /// Re-uploads the material, flag and cut bytes after an interaction.
+    fn push_sites(&mut self) {
+        let lat = &self.lat;
+        if let Some(g) = &self.gpu
+            && self.gpu_error.is_none()
+            && let Err(e) = g.upload_sites(lat)
+        {
+            self.gpu_error = Some(e);
+        }
+    }
+
+    /// The identity map on the GPU: the current displacements in voxel order
+    /// into `out` (x, y, z buffers).
+    pub fn map_identity_gpu(&mut self, out: [BufferId; 3]) -> Result<(), ModelError> {
+        self.check_gpu()?;
+        let voxels = self.lat.dims.iter().product();
+        let cur = self.state.cur;
+        match &self.gpu {
+            Some(g) => g.map_identity(cur, voxels, out),
+            None => Err(ModelError::new("chainmail: the model is not on the GPU")),
+        }
     }
 
     /// The element lattice.
@@ -140,7 +250,8 @@ impl ChainMail {
         self.counts = Counts::default();
     }
 
-    /// Current displacement of element `n`, mm.
+    /// Current displacement of element `n`, mm (on the GPU path: as of
+    /// the last [`Self::pull`]).
     pub fn displacement(&self, n: usize) -> [f32; 3] {
         self.state.get(self.state.cur, n)
     }
@@ -153,6 +264,14 @@ impl ChainMail {
 
     /// Applies one interaction.
     pub fn interact(&mut self, spec: &InteractionSpec) -> Result<(), ModelError> {
+        // Interactions read current positions and change flags and links.
+        self.pull()?;
+        self.apply(spec)?;
+        self.push_sites();
+        self.check_gpu()
+    }
+
+    fn apply(&mut self, spec: &InteractionSpec) -> Result<(), ModelError> {
         match *spec {
             InteractionSpec::Grab {
                 point,
@@ -434,6 +553,7 @@ impl ChainMail {
         let k = key(self.wave, 0);
         for (e, u) in targets {
             self.state.set_both(e, u, k);
+            self.on_device(|g, _| g.write_element(e, u, k));
             let b = self.blocks.of(self.lat.coords(e));
             if parallel && self.params.schedule == Schedule::Blocks {
                 push_unique(&mut self.active, b as u32);
@@ -551,7 +671,15 @@ impl ChainMail {
         if self.params.schedule == Schedule::Frontier {
             return self.propagate_frontier_once();
         }
-        let rep = jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active);
+        let rep = if self.gpu.is_some() {
+            let (cur, active) = (self.state.cur, std::mem::take(&mut self.active));
+            let rep = self.on_device(|g, _| g.propagate(cur, &active));
+            self.state.cur = 1 - cur;
+            self.cpu_stale = true;
+            rep
+        } else {
+            jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active)
+        };
         self.counts.propagation_iterations += 1;
         self.counts.visits += rep.visits;
         self.counts.updates += rep.updates;
@@ -595,6 +723,15 @@ impl ChainMail {
         let rep = if sequential {
             let all: Vec<u32> = (0..self.blocks.len() as u32).collect();
             sweep_scalar(&self.lat, &self.state, &self.blocks, &all, tol)
+        } else if self.gpu.is_some() {
+            self.relax.sort_unstable();
+            self.relax.dedup();
+            let (cur, mut set) = (self.state.cur, std::mem::take(&mut self.relax));
+            if sweeps_everything(&self.blocks, &set) {
+                set = (0..self.blocks.len() as u32).collect();
+            }
+            self.cpu_stale = true;
+            self.on_device(|g, _| g.relax(cur, &set, tol))
         } else {
             self.relax.sort_unstable();
             self.relax.dedup();
@@ -624,6 +761,14 @@ impl ChainMail {
     /// visits (its invariant).
     fn sync_copies(&mut self) {
         if self.unsynced.is_empty() {
+            return;
+        }
+        if self.gpu.is_some() {
+            let (cur, list) = (self.state.cur, std::mem::take(&mut self.unsynced));
+            self.on_device(|g, _| g.sync(cur, &list));
+            for b in list {
+                self.unsynced_flag[b as usize] = false;
+            }
             return;
         }
         let (lat, state, blocks) = (&self.lat, &self.state, &self.blocks);

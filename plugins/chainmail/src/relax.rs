@@ -102,13 +102,20 @@ pub fn sweep(
     set: &[u32],
     tol: f64,
 ) -> SweepReport {
-    if set.len() * 4 >= blocks.len() * 3 {
+    if sweeps_everything(blocks, set) {
         // Mostly active: one pass over the whole lattice costs less than
         // the runs (see `sweep_dense`).
         sweep_dense(lat, state, blocks, tol, 1)
     } else {
         sweep_runs(lat, state, blocks, set, tol)
     }
+}
+
+/// True when a sweep over `set` relaxes every block instead (at least three
+/// blocks in four active). The GPU path follows the same rule, so both
+/// paths relax the same elements.
+pub fn sweeps_everything(blocks: &Blocks, set: &[u32]) -> bool {
+    set.len() * 4 >= blocks.len() * 3
 }
 
 /// Relaxes element `n` (coordinates `c`) towards the weighted mean of its

@@ -12,7 +12,7 @@ use voxflex_core::phantom::phantom;
 use voxflex_core::volume::{Volume, VoxelData};
 
 /// A u8 volume of `dims` with 1 mm voxels, values from `f(i, j, k)`.
-fn volume(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
+pub(crate) fn volume(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
     let grid = Grid::new(dims, DVec3::ONE, DVec3::ZERO);
     let mut data = Vec::with_capacity(grid.len());
     for k in 0..dims[2] {
@@ -28,11 +28,11 @@ fn volume(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
     }
 }
 
-fn params(extra: &str, materials: &str) -> ChainMailParams {
+pub(crate) fn params(extra: &str, materials: &str) -> ChainMailParams {
     ChainMailParams::from_toml(&format!("{extra}\nmaterials = [{materials}]")).unwrap()
 }
 
-fn grab(m: &mut ChainMail, at: [usize; 3], by: [f64; 3]) {
+pub(crate) fn grab(m: &mut ChainMail, at: [usize; 3], by: [f64; 3]) {
     let p = m.lattice().world(at).to_array();
     m.interact(&InteractionSpec::Grab {
         point: p,

@@ -1,0 +1,401 @@
+//! The WGSL path: the model's lattice and state mirrored in GPU buffers, in
+//! the same red-black storage order, and the kernels of
+//! `shaders/chainmail/chainmail.wgsl` (the twins of `sponsor`,
+//! `relax_one` and `copy_identity`).
+//!
+//! The schedule stays on the CPU: [`crate::model::ChainMail`] builds the
+//! active-block lists exactly as for its rayon path (`Blocks::next_active`),
+//! and each iteration is **one** dispatch over its list (two for a
+//! relaxation sweep, one per colour). The kernels write one face mask per
+//! listed block plus the visit/update counts and the largest move, and the
+//! model reads those back — a few bytes per active block — to build the
+//! next list. Reading back is what keeps the GPU and rayon schedules
+//! identical (the parity tests compare them iteration by iteration); a
+//! device-side list builder would save the read-back and is left for when a
+//! real GPU is measured.
+//!
+//! Buffers (32-bit structure of arrays, see the shader's header): `u` (both
+//! copies, 3 axes: 24 B per site), `keys` (both copies: 8 B), `sites`
+//! (material, flags and cut bits: 4 B), the link table, the block list and
+//! the per-slot results. The displacement buffer is bound whole, so a model
+//! needs `24 · sites ≤ max_storage_buffer_binding_size` (128 MiB on
+//! lavapipe: 5.5 M sites); larger ones are refused with what to do.
+
+use crate::blocks::{Blocks, FaceMask};
+use crate::lattice::ElementLattice;
+use crate::propagate::IterationReport;
+use crate::relax::SweepReport;
+use crate::state::State;
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use voxflex_core::error::ModelError;
+use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+
+/// The kernels.
+pub const CHAINMAIL_WGSL: &str = include_str!("../../../shaders/chainmail/chainmail.wgsl");
+
+/// Words of the shader's `Params`.
+const PARAM_WORDS: usize = 20;
+/// Result words before the per-slot masks: visits, updates, largest move.
+const STAT_HEADER: usize = 3;
+
+/// What the kernels report for one launch.
+struct Results {
+    visits: u64,
+    updates: u64,
+    /// Largest relaxation move, fraction of the spacing.
+    max_move: f64,
+    /// `(block, face mask)` of each listed block.
+    blocks: Vec<(u32, FaceMask)>,
+}
+
+fn gpu_err(e: impl std::fmt::Display) -> ModelError {
+    ModelError(format!("chainmail (GPU): {e}"))
+}
+
+/// The model's buffers on the device.
+pub struct GpuChainMail {
+    gpu: Arc<dyn GpuService>,
+    sites: usize,
+    params: BufferId,
+    u: BufferId,
+    keys: BufferId,
+    cells: BufferId,
+    links: BufferId,
+    list: BufferId,
+    stats: BufferId,
+    propagate: PipelineId,
+    relax: PipelineId,
+    sync: PipelineId,
+    map: PipelineId,
+    /// `Params` without the per-dispatch words.
+    base: [u32; PARAM_WORDS],
+}
+
+impl GpuChainMail {
+    /// Uploads the lattice and the state.
+    pub fn new(
+        gpu: Arc<dyn GpuService>,
+        lat: &ElementLattice,
+        state: &State,
+        blocks: &Blocks,
+    ) -> Result<Self, ModelError> {
+        let n = lat.len();
+        let limit = gpu.limits().max_storage_buffer_binding_size;
+        let u_bytes = 24 * n as u64;
+        if u_bytes > limit || n >= u32::MAX as usize / 6 {
+            return Err(ModelError(format!(
+                "chainmail (GPU): {n} lattice sites need a {u_bytes}-byte displacement buffer, \
+                 above this device's largest storage binding ({limit} bytes); crop the volume, \
+                 raise `downsample`, or use backend = \"cpu\""
+            )));
+        }
+        let m = lat.materials.len();
+        let mut table = Vec::with_capacity(m * m * 5 + m);
+        for l in &lat.links {
+            table.extend([
+                l.d[0].to_bits(),
+                l.d[1].to_bits(),
+                l.d[2].to_bits(),
+                l.weight.to_bits(),
+                l.tau,
+            ]);
+        }
+        table.extend(lat.materials.iter().map(|mat| mat.elastic.to_bits()));
+        let [nx, ny, nz] = lat.dims.map(|d| d as u32);
+        let [sx, sy, sz] = blocks.size.map(|s| s as u32);
+        let [cx, cy, _] = blocks.count.map(|c| c as u32);
+        let mut base = [0u32; PARAM_WORDS];
+        base[..16].copy_from_slice(&[
+            nx,
+            ny,
+            nz,
+            lat.hx as u32,
+            sx,
+            sy,
+            sz,
+            cx,
+            cy,
+            lat.half as u32,
+            m as u32,
+            0,
+            0,
+            0,
+            n as u32,
+            0,
+        ]);
+        for a in 0..3 {
+            base[16 + a] = (lat.spacing[a] as f32).to_bits();
+        }
+        let g = &gpu;
+        let this = Self {
+            params: g
+                .create_buffer(4 * PARAM_WORDS as u64, "chainmail params")
+                .map_err(gpu_err)?,
+            u: g.create_buffer(u_bytes, "chainmail u").map_err(gpu_err)?,
+            keys: g
+                .create_buffer(8 * n as u64, "chainmail keys")
+                .map_err(gpu_err)?,
+            cells: g
+                .create_buffer(4 * n as u64, "chainmail sites")
+                .map_err(gpu_err)?,
+            links: g.upload(&table, "chainmail links").map_err(gpu_err)?,
+            list: g
+                .create_buffer(4 * blocks.len().max(1) as u64, "chainmail block list")
+                .map_err(gpu_err)?,
+            stats: g
+                .create_buffer(
+                    4 * (STAT_HEADER + blocks.len().max(1)) as u64,
+                    "chainmail results",
+                )
+                .map_err(gpu_err)?,
+            propagate: g.compile(CHAINMAIL_WGSL, "propagate").map_err(gpu_err)?,
+            relax: g.compile(CHAINMAIL_WGSL, "relax").map_err(gpu_err)?,
+            sync: g.compile(CHAINMAIL_WGSL, "sync_copies").map_err(gpu_err)?,
+            map: g.compile(CHAINMAIL_WGSL, "map_identity").map_err(gpu_err)?,
+            sites: n,
+            base,
+            gpu,
+        };
+        this.upload_sites(lat)?;
+        this.upload_state(state)?;
+        Ok(this)
+    }
+
+    /// Uploads the material, flag and cut bytes (after an interaction
+    /// changed them).
+    pub fn upload_sites(&self, lat: &ElementLattice) -> Result<(), ModelError> {
+        let words: Vec<u32> = lat
+            .cells
+            .iter()
+            .zip(&lat.cut)
+            .map(|(&c, &k)| c as u32 | (k as u32) << 8)
+            .collect();
+        self.gpu
+            .write_buffer(self.cells, 0, bytemuck::cast_slice(&words))
+            .map_err(gpu_err)
+    }
+
+    /// Uploads both copies of the state.
+    pub fn upload_state(&self, state: &State) -> Result<(), ModelError> {
+        let n = self.sites;
+        let mut words = Vec::with_capacity(6 * n);
+        for copy in &state.u {
+            for axis in copy {
+                words.extend(axis.iter().map(|v| v.load(Relaxed)));
+            }
+        }
+        self.gpu
+            .write_buffer(self.u, 0, bytemuck::cast_slice(&words))
+            .map_err(gpu_err)?;
+        words.clear();
+        for copy in &state.key {
+            words.extend(copy.iter().map(|v| v.load(Relaxed)));
+        }
+        self.gpu
+            .write_buffer(self.keys, 0, bytemuck::cast_slice(&words))
+            .map_err(gpu_err)
+    }
+
+    /// Downloads both copies of the state (its `cur` is left as is).
+    pub fn download_state(&self, state: &State) -> Result<(), ModelError> {
+        let n = self.sites;
+        let mut words = vec![0u32; 6 * n];
+        self.gpu.download(self.u, &mut words).map_err(gpu_err)?;
+        for (c, copy) in state.u.iter().enumerate() {
+            for (a, axis) in copy.iter().enumerate() {
+                let src = &words[(3 * c + a) * n..(3 * c + a + 1) * n];
+                axis.iter().zip(src).for_each(|(d, &s)| d.store(s, Relaxed));
+            }
+        }
+        words.truncate(2 * n);
+        self.gpu.download(self.keys, &mut words).map_err(gpu_err)?;
+        for (c, copy) in state.key.iter().enumerate() {
+            copy.iter()
+                .zip(&words[c * n..(c + 1) * n])
+                .for_each(|(d, &s)| d.store(s, Relaxed));
+        }
+        Ok(())
+    }
+
+    /// Writes element `n`'s displacement (mm) and key into both copies.
+    pub fn write_element(&self, n: usize, u: [f32; 3], key: u32) -> Result<(), ModelError> {
+        let g = &self.gpu;
+        for copy in 0..2 {
+            for (a, v) in u.iter().enumerate() {
+                let at = ((3 * copy + a) * self.sites + n) as u64 * 4;
+                g.write_buffer(self.u, at, &v.to_bits().to_le_bytes())
+                    .map_err(gpu_err)?;
+            }
+            let at = (copy * self.sites + n) as u64 * 4;
+            g.write_buffer(self.keys, at, &key.to_le_bytes())
+                .map_err(gpu_err)?;
+        }
+        Ok(())
+    }
+
+    fn write_params(
+        &self,
+        copy: usize,
+        colour: usize,
+        len: usize,
+        tol: f32,
+    ) -> Result<(), ModelError> {
+        let mut p = self.base;
+        p[11] = len as u32;
+        p[12] = copy as u32;
+        p[13] = colour as u32;
+        p[15] = tol.to_bits();
+        self.gpu
+            .write_buffer(self.params, 0, bytemuck::cast_slice(&p))
+            .map_err(gpu_err)
+    }
+
+    /// Uploads a block list and zeroes the results of its slots.
+    fn start(&self, list: &[u32]) -> Result<(), ModelError> {
+        self.gpu
+            .write_buffer(self.list, 0, bytemuck::cast_slice(list))
+            .map_err(gpu_err)?;
+        let zeros = vec![0u32; STAT_HEADER + list.len()];
+        self.gpu
+            .write_buffer(self.stats, 0, bytemuck::cast_slice(&zeros))
+            .map_err(gpu_err)
+    }
+
+    fn dispatch(
+        &self,
+        pipeline: PipelineId,
+        len: usize,
+        with: &[(u32, BufferId)],
+    ) -> Result<(), ModelError> {
+        let bindings: Vec<BufferBinding> = with
+            .iter()
+            .map(|&(b, id)| BufferBinding::whole(b, id))
+            .collect();
+        let groups = self.gpu.workgroups_for(len as u64, 1).map_err(gpu_err)?;
+        self.gpu
+            .dispatch(pipeline, &bindings, groups)
+            .map_err(gpu_err)
+    }
+
+    /// Reads the results of the listed blocks.
+    fn results(&self, list: &[u32]) -> Result<Results, ModelError> {
+        let mut words = vec![0u32; STAT_HEADER + list.len()];
+        self.gpu.download(self.stats, &mut words).map_err(gpu_err)?;
+        Ok(Results {
+            visits: words[0] as u64,
+            updates: words[1] as u64,
+            max_move: f32::from_bits(words[2]) as f64,
+            blocks: list
+                .iter()
+                .zip(&words[STAT_HEADER..])
+                .map(|(&b, &m)| (b, m as FaceMask))
+                .collect(),
+        })
+    }
+
+    /// One Jacobi propagation iteration over `active` (reads copy `rd`,
+    /// writes the other).
+    pub fn propagate(&self, rd: usize, active: &[u32]) -> Result<IterationReport, ModelError> {
+        if active.is_empty() {
+            return Ok(IterationReport::default());
+        }
+        self.start(active)?;
+        self.write_params(rd, 0, active.len(), 0.0)?;
+        let with = [
+            (0, self.params),
+            (1, self.u),
+            (2, self.keys),
+            (3, self.cells),
+            (4, self.links),
+            (5, self.list),
+            (6, self.stats),
+        ];
+        self.dispatch(self.propagate, active.len(), &with)?;
+        let r = self.results(active)?;
+        Ok(IterationReport {
+            blocks: r.blocks,
+            visits: r.visits,
+            updates: r.updates,
+        })
+    }
+
+    /// One red-black relaxation sweep over `set`, in place in copy `cur`.
+    pub fn relax(&self, cur: usize, set: &[u32], tol: f64) -> Result<SweepReport, ModelError> {
+        if set.is_empty() {
+            return Ok(SweepReport::default());
+        }
+        self.start(set)?;
+        let with = [
+            (0, self.params),
+            (1, self.u),
+            (3, self.cells),
+            (4, self.links),
+            (5, self.list),
+            (6, self.stats),
+        ];
+        for colour in 0..2 {
+            self.write_params(cur, colour, set.len(), tol as f32)?;
+            self.dispatch(self.relax, set.len(), &with)?;
+        }
+        let r = self.results(set)?;
+        Ok(SweepReport {
+            blocks: r.blocks,
+            max_move: r.max_move,
+        })
+    }
+
+    /// Copies the displacements of `blocks` from copy `from` to the other.
+    pub fn sync(&self, from: usize, blocks: &[u32]) -> Result<(), ModelError> {
+        if blocks.is_empty() {
+            return Ok(());
+        }
+        self.gpu
+            .write_buffer(self.list, 0, bytemuck::cast_slice(blocks))
+            .map_err(gpu_err)?;
+        self.write_params(from, 0, blocks.len(), 0.0)?;
+        let with = [(0, self.params), (1, self.u), (5, self.list)];
+        self.dispatch(self.sync, blocks.len(), &with)
+    }
+
+    /// The current displacements (copy `cur`) in voxel order into `out`
+    /// (x, y, z buffers of at least one f32 per element).
+    pub fn map_identity(
+        &self,
+        cur: usize,
+        voxels: usize,
+        out: [BufferId; 3],
+    ) -> Result<(), ModelError> {
+        self.write_params(cur, 0, 0, 0.0)?;
+        let bindings = [
+            BufferBinding::whole(0, self.params),
+            BufferBinding::whole(1, self.u),
+            BufferBinding::whole(7, out[0]),
+            BufferBinding::whole(8, out[1]),
+            BufferBinding::whole(9, out[2]),
+        ];
+        let groups = self
+            .gpu
+            .workgroups_for(voxels as u64, 64)
+            .map_err(gpu_err)?;
+        self.gpu
+            .dispatch(self.map, &bindings, groups)
+            .map_err(gpu_err)
+    }
+}
+
+impl Drop for GpuChainMail {
+    fn drop(&mut self) {
+        for id in [
+            self.params,
+            self.u,
+            self.keys,
+            self.cells,
+            self.links,
+            self.list,
+            self.stats,
+        ] {
+            self.gpu.destroy_buffer(id);
+        }
+    }
+}
