@@ -12,7 +12,8 @@
 //!
 //! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`);
 //! `-- parallel` runs only the parallel model to rest, `-- kernels` times
-//! only the relaxation kernels.
+//! only the relaxation kernels, `-- gpu` runs the papers' test on the WGSL
+//! path (any adapter).
 
 use std::time::Instant;
 use voxflex_chainmail::model::ChainMail;
@@ -82,6 +83,36 @@ fn main() {
         // Only the relaxation kernels (for profiling).
         let (.., pm) = run("parallel", [8, 4, 4], 20);
         relaxation_kernels(&pm, ms);
+        return;
+    }
+    if std::env::args().any(|a| a == "gpu") {
+        // The papers' test on the WGSL path (any adapter; lavapipe is slow).
+        use voxflex_core::gpu::GpuService;
+        let service = voxflex_runtime::gpu_context::WgpuService::new(
+            voxflex_runtime::gpu_context::AdapterPolicy::AnyAdapter,
+        )
+        .expect("a GPU adapter");
+        println!("adapter: {}", service.adapter_description());
+        let service: std::sync::Arc<dyn GpuService> = std::sync::Arc::new(service);
+        for _ in 0..3 {
+            let mut m = setup(n, "parallel", [8, 4, 4]);
+            m.use_gpu(service.clone()).expect("model on the GPU");
+            let t = Instant::now();
+            m.start_deformation();
+            let prop = m.propagate(u64::MAX);
+            m.pull().expect("GPU state");
+            let tp = t.elapsed();
+            let t = Instant::now();
+            let sweeps = m.relax(RELAX_SWEEPS);
+            m.pull().expect("GPU state");
+            let tr = t.elapsed();
+            println!(
+                "GPU 8×4×4: propagation {:.1} ms ({prop} iterations), relaxation {:.1} ms ({sweeps} sweeps), total {:.1} ms (state read back after each stage)",
+                ms(tp),
+                ms(tr),
+                ms(tp + tr)
+            );
+        }
         return;
     }
     if std::env::args().any(|a| a == "propagation") {
