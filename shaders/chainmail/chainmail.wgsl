@@ -10,9 +10,11 @@
 //   links  u32  [a * M + b] * 5      d.x, d.y, d.z (f32 bits), weight (f32
 //                                    bits), tau; then M elastic fractions
 //   list   u32  [slot]               active block indices
-//   stats  atomic<u32> [3 + slot]    visits, updates, largest move (f32
-//                                    bits), then one face mask per slot
-// One workgroup per active block; its threads stride over the block.
+//   stats  atomic<u32> [slot * 4]    per listed block: face mask, visits,
+//                                    updates, largest move (f32 bits)
+// One workgroup per active block; its threads stride over the block and
+// reduce into workgroup atomics, and one thread writes the block's four
+// result words (so nothing needs clearing between launches).
 
 struct Params {
     dims: vec4<u32>,   // nx, ny, nz, hx
@@ -41,7 +43,20 @@ const CHANGED: u32 = 64u;
 const MAX_TIME: u32 = 0xfffffu;
 const WAVE_SHIFT: u32 = 20u;
 
-var<workgroup> block_mask: atomic<u32>;
+var<workgroup> wg_mask: atomic<u32>;
+var<workgroup> wg_visits: atomic<u32>;
+var<workgroup> wg_updates: atomic<u32>;
+var<workgroup> wg_max: atomic<u32>;
+
+fn clear_workgroup(lid: u32) {
+    if (lid == 0u) {
+        atomicStore(&wg_mask, 0u);
+        atomicStore(&wg_visits, 0u);
+        atomicStore(&wg_updates, 0u);
+        atomicStore(&wg_max, 0u);
+    }
+    workgroupBarrier();
+}
 
 // Storage index of element c (lattice.rs, `Order::linear`).
 fn linear(c: vec3<u32>) -> u32 {
@@ -164,10 +179,7 @@ fn propagate(
     if (slot >= p.counts.w) {
         return;
     }
-    if (lid == 0u) {
-        atomicStore(&block_mask, 0u);
-    }
-    workgroupBarrier();
+    clear_workgroup(lid);
     let blk = block_of(slot);
     let rd = p.step.x;
     let wr = 1u - rd;
@@ -232,12 +244,15 @@ fn propagate(
             keys[wr * p.step.z + n] = kn;
         }
     }
-    atomicAdd(&stats[0], visits);
-    atomicAdd(&stats[1], updates);
-    atomicOr(&block_mask, mask);
+    atomicAdd(&wg_visits, visits);
+    atomicAdd(&wg_updates, updates);
+    atomicOr(&wg_mask, mask);
     workgroupBarrier();
     if (lid == 0u) {
-        atomicStore(&stats[3u + slot], atomicLoad(&block_mask));
+        atomicStore(&stats[4u * slot], atomicLoad(&wg_mask));
+        atomicStore(&stats[4u * slot + 1u], atomicLoad(&wg_visits));
+        atomicStore(&stats[4u * slot + 2u], atomicLoad(&wg_updates));
+        atomicStore(&stats[4u * slot + 3u], 0u);
     }
 }
 
@@ -253,10 +268,7 @@ fn relax(
     if (slot >= p.counts.w) {
         return;
     }
-    if (lid == 0u) {
-        atomicStore(&block_mask, 0u);
-    }
-    workgroupBarrier();
+    clear_workgroup(lid);
     let blk = block_of(slot);
     let cur = p.step.x;
     let colour = p.step.y;
@@ -311,11 +323,20 @@ fn relax(
             mask = mask | CHANGED | border(c, blk.lo, blk.hi);
         }
     }
-    atomicMax(&stats[2], bitcast<u32>(max_move));
-    atomicOr(&block_mask, mask);
+    atomicMax(&wg_max, bitcast<u32>(max_move));
+    atomicOr(&wg_mask, mask);
     workgroupBarrier();
     if (lid == 0u) {
-        atomicOr(&stats[3u + slot], atomicLoad(&block_mask));
+        // The first colour's launch starts the block's results.
+        let m = atomicLoad(&wg_mask);
+        let mv = atomicLoad(&wg_max);
+        if (colour == 0u) {
+            atomicStore(&stats[4u * slot], m);
+            atomicStore(&stats[4u * slot + 3u], mv);
+        } else {
+            atomicOr(&stats[4u * slot], m);
+            atomicMax(&stats[4u * slot + 3u], mv);
+        }
     }
 }
 

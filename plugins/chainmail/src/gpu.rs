@@ -16,8 +16,12 @@
 //!
 //! Buffers (32-bit structure of arrays, see the shader's header): `u` (both
 //! copies, 3 axes: 24 B per site), `keys` (both copies: 8 B), `sites`
-//! (material, flags and cut bits: 4 B), the link table, the block list and
-//! the per-slot results. The displacement buffer is bound whole, so a model
+//! (material, flags and cut bits: 4 B), the link table, a control buffer
+//! (both colours' parameters and the block list, written with one call per
+//! launch) and four result words per listed block, which each workgroup
+//! writes whole, so nothing is cleared between launches. A propagation
+//! iteration is one write, one dispatch and one read-back; a relaxation
+//! sweep one write, two dispatches and one read-back. The displacement buffer is bound whole, so a model
 //! needs `24 · sites ≤ max_storage_buffer_binding_size` (128 MiB on
 //! lavapipe: 5.5 M sites); larger ones are refused with what to do.
 
@@ -36,8 +40,8 @@ pub const CHAINMAIL_WGSL: &str = include_str!("../../../shaders/chainmail/chainm
 
 /// Words of the shader's `Params`.
 const PARAM_WORDS: usize = 20;
-/// Result words before the per-slot masks: visits, updates, largest move.
-const STAT_HEADER: usize = 3;
+/// Result words per listed block: face mask, visits, updates, largest move.
+const STAT_WORDS: usize = 4;
 
 /// What the kernels report for one launch.
 struct Results {
@@ -57,12 +61,16 @@ fn gpu_err(e: impl std::fmt::Display) -> ModelError {
 pub struct GpuChainMail {
     gpu: Arc<dyn GpuService>,
     sites: usize,
-    params: BufferId,
+    /// One launch's inputs in one buffer, written with one call: the
+    /// `Params` of colour 0 and of colour 1, each at a multiple of the
+    /// device's storage offset alignment, then the block list.
+    control: BufferId,
+    /// Byte stride of the two `Params` slots (the list starts at twice it).
+    slot_bytes: u64,
     u: BufferId,
     keys: BufferId,
     cells: BufferId,
     links: BufferId,
-    list: BufferId,
     stats: BufferId,
     propagate: PipelineId,
     relax: PipelineId,
@@ -128,10 +136,16 @@ impl GpuChainMail {
             base[16 + a] = (lat.spacing[a] as f32).to_bits();
         }
         let g = &gpu;
+        let align = (g.limits().min_storage_buffer_offset_alignment as u64).max(4);
+        let slot_bytes = (4 * PARAM_WORDS as u64).next_multiple_of(align);
         let this = Self {
-            params: g
-                .create_buffer(4 * PARAM_WORDS as u64, "chainmail params")
+            control: g
+                .create_buffer(
+                    2 * slot_bytes + 4 * blocks.len().max(1) as u64,
+                    "chainmail params and block list",
+                )
                 .map_err(gpu_err)?,
+            slot_bytes,
             u: g.create_buffer(u_bytes, "chainmail u").map_err(gpu_err)?,
             keys: g
                 .create_buffer(8 * n as u64, "chainmail keys")
@@ -140,12 +154,9 @@ impl GpuChainMail {
                 .create_buffer(4 * n as u64, "chainmail sites")
                 .map_err(gpu_err)?,
             links: g.upload(&table, "chainmail links").map_err(gpu_err)?,
-            list: g
-                .create_buffer(4 * blocks.len().max(1) as u64, "chainmail block list")
-                .map_err(gpu_err)?,
             stats: g
                 .create_buffer(
-                    4 * (STAT_HEADER + blocks.len().max(1)) as u64,
+                    4 * (STAT_WORDS * blocks.len().max(1)) as u64,
                     "chainmail results",
                 )
                 .map_err(gpu_err)?,
@@ -234,44 +245,53 @@ impl GpuChainMail {
         Ok(())
     }
 
-    fn write_params(
-        &self,
-        copy: usize,
-        colour: usize,
-        len: usize,
-        tol: f32,
-    ) -> Result<(), ModelError> {
-        let mut p = self.base;
-        p[11] = len as u32;
-        p[12] = copy as u32;
-        p[13] = colour as u32;
-        p[15] = tol.to_bits();
+    /// Writes one launch's inputs with one call: the `Params` of both
+    /// colours (read copy `copy`, list length, tolerance) and the list.
+    fn write_control(&self, copy: usize, list: &[u32], tol: f32) -> Result<(), ModelError> {
+        let slot = self.slot_bytes as usize / 4;
+        let mut words = vec![0u32; 2 * slot + list.len()];
+        for colour in 0..2 {
+            let p = &mut words[colour * slot..colour * slot + PARAM_WORDS];
+            p.copy_from_slice(&self.base);
+            p[11] = list.len() as u32;
+            p[12] = copy as u32;
+            p[13] = colour as u32;
+            p[15] = tol.to_bits();
+        }
+        words[2 * slot..].copy_from_slice(list);
         self.gpu
-            .write_buffer(self.params, 0, bytemuck::cast_slice(&p))
+            .write_buffer(self.control, 0, bytemuck::cast_slice(&words))
             .map_err(gpu_err)
     }
 
-    /// Uploads a block list and zeroes the results of its slots.
-    fn start(&self, list: &[u32]) -> Result<(), ModelError> {
-        self.gpu
-            .write_buffer(self.list, 0, bytemuck::cast_slice(list))
-            .map_err(gpu_err)?;
-        let zeros = vec![0u32; STAT_HEADER + list.len()];
-        self.gpu
-            .write_buffer(self.stats, 0, bytemuck::cast_slice(&zeros))
-            .map_err(gpu_err)
+    /// The bindings of the `Params` of `colour` and of a list of `len`.
+    fn control_bindings(&self, colour: usize, len: usize) -> [BufferBinding; 2] {
+        [
+            BufferBinding {
+                binding: 0,
+                buffer: self.control,
+                offset: colour as u64 * self.slot_bytes,
+                size: 4 * PARAM_WORDS as u64,
+            },
+            BufferBinding {
+                binding: 5,
+                buffer: self.control,
+                offset: 2 * self.slot_bytes,
+                size: 4 * len.max(1) as u64,
+            },
+        ]
     }
 
-    fn dispatch(
+    /// Queues `pipeline` over a list of `len` blocks, one workgroup each.
+    fn launch(
         &self,
         pipeline: PipelineId,
+        colour: usize,
         len: usize,
         with: &[(u32, BufferId)],
     ) -> Result<(), ModelError> {
-        let bindings: Vec<BufferBinding> = with
-            .iter()
-            .map(|&(b, id)| BufferBinding::whole(b, id))
-            .collect();
+        let mut bindings: Vec<BufferBinding> = self.control_bindings(colour, len).to_vec();
+        bindings.extend(with.iter().map(|&(b, id)| BufferBinding::whole(b, id)));
         let groups = self.gpu.workgroups_for(len as u64, 1).map_err(gpu_err)?;
         self.gpu
             .dispatch(pipeline, &bindings, groups)
@@ -280,38 +300,38 @@ impl GpuChainMail {
 
     /// Reads the results of the listed blocks.
     fn results(&self, list: &[u32]) -> Result<Results, ModelError> {
-        let mut words = vec![0u32; STAT_HEADER + list.len()];
+        let mut words = vec![0u32; STAT_WORDS * list.len()];
         self.gpu.download(self.stats, &mut words).map_err(gpu_err)?;
-        Ok(Results {
-            visits: words[0] as u64,
-            updates: words[1] as u64,
-            max_move: f32::from_bits(words[2]) as f64,
-            blocks: list
-                .iter()
-                .zip(&words[STAT_HEADER..])
-                .map(|(&b, &m)| (b, m as FaceMask))
-                .collect(),
-        })
+        let mut r = Results {
+            visits: 0,
+            updates: 0,
+            max_move: 0.0,
+            blocks: Vec::with_capacity(list.len()),
+        };
+        for (&b, w) in list.iter().zip(words.chunks_exact(STAT_WORDS)) {
+            r.blocks.push((b, w[0] as FaceMask));
+            r.visits += w[1] as u64;
+            r.updates += w[2] as u64;
+            r.max_move = r.max_move.max(f32::from_bits(w[3]) as f64);
+        }
+        Ok(r)
     }
 
     /// One Jacobi propagation iteration over `active` (reads copy `rd`,
-    /// writes the other).
+    /// writes the other): one write, one dispatch, one read-back.
     pub fn propagate(&self, rd: usize, active: &[u32]) -> Result<IterationReport, ModelError> {
         if active.is_empty() {
             return Ok(IterationReport::default());
         }
-        self.start(active)?;
-        self.write_params(rd, 0, active.len(), 0.0)?;
+        self.write_control(rd, active, 0.0)?;
         let with = [
-            (0, self.params),
             (1, self.u),
             (2, self.keys),
             (3, self.cells),
             (4, self.links),
-            (5, self.list),
             (6, self.stats),
         ];
-        self.dispatch(self.propagate, active.len(), &with)?;
+        self.launch(self.propagate, 0, active.len(), &with)?;
         let r = self.results(active)?;
         Ok(IterationReport {
             blocks: r.blocks,
@@ -320,23 +340,21 @@ impl GpuChainMail {
         })
     }
 
-    /// One red-black relaxation sweep over `set`, in place in copy `cur`.
+    /// One red-black relaxation sweep over `set`, in place in copy `cur`:
+    /// one write, two dispatches (one per colour), one read-back.
     pub fn relax(&self, cur: usize, set: &[u32], tol: f64) -> Result<SweepReport, ModelError> {
         if set.is_empty() {
             return Ok(SweepReport::default());
         }
-        self.start(set)?;
+        self.write_control(cur, set, tol as f32)?;
         let with = [
-            (0, self.params),
             (1, self.u),
             (3, self.cells),
             (4, self.links),
-            (5, self.list),
             (6, self.stats),
         ];
         for colour in 0..2 {
-            self.write_params(cur, colour, set.len(), tol as f32)?;
-            self.dispatch(self.relax, set.len(), &with)?;
+            self.launch(self.relax, colour, set.len(), &with)?;
         }
         let r = self.results(set)?;
         Ok(SweepReport {
@@ -350,12 +368,8 @@ impl GpuChainMail {
         if blocks.is_empty() {
             return Ok(());
         }
-        self.gpu
-            .write_buffer(self.list, 0, bytemuck::cast_slice(blocks))
-            .map_err(gpu_err)?;
-        self.write_params(from, 0, blocks.len(), 0.0)?;
-        let with = [(0, self.params), (1, self.u), (5, self.list)];
-        self.dispatch(self.sync, blocks.len(), &with)
+        self.write_control(from, blocks, 0.0)?;
+        self.launch(self.sync, 0, blocks.len(), &[(1, self.u)])
     }
 
     /// The current displacements (copy `cur`) in voxel order into `out`
@@ -366,9 +380,9 @@ impl GpuChainMail {
         voxels: usize,
         out: [BufferId; 3],
     ) -> Result<(), ModelError> {
-        self.write_params(cur, 0, 0, 0.0)?;
+        self.write_control(cur, &[], 0.0)?;
         let bindings = [
-            BufferBinding::whole(0, self.params),
+            self.control_bindings(0, 0)[0],
             BufferBinding::whole(1, self.u),
             BufferBinding::whole(7, out[0]),
             BufferBinding::whole(8, out[1]),
@@ -387,12 +401,11 @@ impl GpuChainMail {
 impl Drop for GpuChainMail {
     fn drop(&mut self) {
         for id in [
-            self.params,
+            self.control,
             self.u,
             self.keys,
             self.cells,
             self.links,
-            self.list,
             self.stats,
         ] {
             self.gpu.destroy_buffer(id);
