@@ -89,3 +89,55 @@ impl From<GpuError> for ModelError {
         Self(e.to_string())
     }
 }
+
+/// A tetrahedral mesh that cannot be used, or a proxy that cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// A node coordinate is NaN or infinite.
+    #[error(
+        "{source_name}: node {node} has a non-finite coordinate {value:?} (mm); fix or remove it"
+    )]
+    NonFinite {
+        /// The mesh's origin (file name or generator).
+        source_name: String,
+        /// Node index.
+        node: usize,
+        /// The node's coordinates, mm.
+        value: [f64; 3],
+    },
+    /// A tetrahedron names a node that does not exist.
+    #[error("{source_name}: tetrahedron {tet} names node {node}, but the mesh has {nodes} nodes")]
+    BadIndex {
+        /// The mesh's origin.
+        source_name: String,
+        /// Tetrahedron index.
+        tet: usize,
+        /// The missing node.
+        node: u32,
+        /// Nodes in the mesh.
+        nodes: usize,
+    },
+    /// A tetrahedron has (almost) no volume.
+    #[error(
+        "{source_name}: tetrahedron {tet} is degenerate (volume {volume:e} mm³ against edge {edge:e} mm); \
+         remove it or remesh"
+    )]
+    Degenerate {
+        /// The mesh's origin.
+        source_name: String,
+        /// Tetrahedron index.
+        tet: usize,
+        /// Its volume, mm³.
+        volume: f64,
+        /// Its longest edge, mm.
+        edge: f64,
+    },
+    /// Arrays of different lengths, or a mesh with nothing in it.
+    #[error("{source_name}: {message}")]
+    Shape {
+        /// The mesh's origin.
+        source_name: String,
+        /// What is wrong and what to do.
+        message: String,
+    },
+}

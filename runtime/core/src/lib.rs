@@ -12,6 +12,7 @@
 //! Units: world coordinates are millimetres; voxel indices address voxel
 //! centres (see [`grid`]).
 
+pub mod barycentric;
 pub mod camera;
 pub mod deformation;
 pub mod error;
@@ -22,10 +23,12 @@ pub mod io;
 pub mod opacity;
 pub mod opacity_map;
 pub mod phantom;
+pub mod proxy;
 pub mod render;
 pub mod resample;
 pub mod stats;
 pub mod test_data;
+pub mod tet_mesh;
 pub mod volume;
 
 pub use glam;
