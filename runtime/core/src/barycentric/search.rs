@@ -1,0 +1,203 @@
+//! Finding the tetrahedron of a point: a uniform grid of tetrahedron
+//! bounding boxes, containment by barycentric weights, and for points
+//! outside the mesh the nearest tetrahedron by exact point–triangle
+//! distance.
+
+use super::{CONTAINED, weights};
+use crate::tet_mesh::TetMesh;
+use glam::DVec3;
+
+/// A uniform grid over the mesh bounds; each cell lists the tetrahedra
+/// whose bounding boxes overlap it (compressed rows).
+pub(super) struct TetGrid {
+    pub(super) lo: DVec3,
+    pub(super) cell: f64,
+    pub(super) dims: [usize; 3],
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl TetGrid {
+    pub(super) fn new(mesh: &TetMesh) -> Self {
+        let (lo, hi) = mesh.bounds();
+        // About one tetrahedron per cell (at most 1024 cells per axis).
+        let extent = hi - lo;
+        let volume = extent.x.max(1e-9) * extent.y.max(1e-9) * extent.z.max(1e-9);
+        let cell = (volume / mesh.tets.len() as f64)
+            .cbrt()
+            .max(extent.max_element() / 1024.0)
+            .max(1e-9);
+        let dims = [0, 1, 2].map(|a| ((extent[a] / cell).floor() as usize + 1).min(1024));
+        let range = |t: usize| {
+            let x = mesh.corners(t);
+            let (a, b) = x
+                .iter()
+                .fold((x[0], x[0]), |(a, b), p| (a.min(*p), b.max(*p)));
+            (
+                Self::cell_of(lo, cell, dims, a),
+                Self::cell_of(lo, cell, dims, b),
+            )
+        };
+        let linear = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+        let mut count = vec![0u32; dims[0] * dims[1] * dims[2] + 1];
+        for t in 0..mesh.tets.len() {
+            let (a, b) = range(t);
+            for k in a[2]..=b[2] {
+                for j in a[1]..=b[1] {
+                    for i in a[0]..=b[0] {
+                        count[linear([i, j, k]) + 1] += 1;
+                    }
+                }
+            }
+        }
+        for c in 1..count.len() {
+            count[c] += count[c - 1];
+        }
+        let mut fill = count.clone();
+        let mut items = vec![0u32; *count.last().unwrap_or(&0) as usize];
+        for t in 0..mesh.tets.len() {
+            let (a, b) = range(t);
+            for k in a[2]..=b[2] {
+                for j in a[1]..=b[1] {
+                    for i in a[0]..=b[0] {
+                        let c = linear([i, j, k]);
+                        items[fill[c] as usize] = t as u32;
+                        fill[c] += 1;
+                    }
+                }
+            }
+        }
+        Self {
+            lo,
+            cell,
+            dims,
+            start: count,
+            items,
+        }
+    }
+
+    pub(super) fn cell_of(lo: DVec3, cell: f64, dims: [usize; 3], p: DVec3) -> [usize; 3] {
+        [0, 1, 2].map(|a| (((p[a] - lo[a]) / cell).floor().max(0.0) as usize).min(dims[a] - 1))
+    }
+
+    /// The tetrahedra listed in the cells at Chebyshev distance `ring` from
+    /// cell `c` (cell indices).
+    pub(super) fn ring(&self, c: [usize; 3], ring: usize, mut visit: impl FnMut(u32)) {
+        let r = ring as isize;
+        for dk in -r..=r {
+            for dj in -r..=r {
+                for di in -r..=r {
+                    if di.abs().max(dj.abs()).max(dk.abs()) != r {
+                        continue;
+                    }
+                    let q = [c[0] as isize + di, c[1] as isize + dj, c[2] as isize + dk];
+                    if (0..3).any(|a| q[a] < 0 || q[a] >= self.dims[a] as isize) {
+                        continue;
+                    }
+                    let l = q[0] as usize
+                        + self.dims[0] * (q[1] as usize + self.dims[1] * q[2] as usize);
+                    for &t in &self.items[self.start[l] as usize..self.start[l + 1] as usize] {
+                        visit(t);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `w` with negative weights set to zero, renormalised (rounding on shared
+/// faces).
+pub(super) fn clamped(w: [f64; 4]) -> [f64; 4] {
+    let c = w.map(|v| v.max(0.0));
+    let s: f64 = c.iter().sum();
+    c.map(|v| v / s)
+}
+
+/// The point of triangle `t` nearest `p` (Ericson, *Real-Time Collision
+/// Detection*, 5.1.5), as weights of the triangle's corners.
+fn nearest_on_triangle(t: [DVec3; 3], p: DVec3) -> [f64; 3] {
+    let (a, b, c) = (t[0], t[1], t[2]);
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    [1.0 - v - w, v, w]
+}
+
+/// The weights of the point of tetrahedron `x` nearest `p` (`p`'s own
+/// weights when it is inside), and the squared distance (mm²).
+fn nearest_in_tet(x: [DVec3; 4], p: DVec3) -> ([f64; 4], f64) {
+    let w = weights(x, p);
+    if w.iter().all(|&v| v >= -CONTAINED) {
+        return (clamped(w), 0.0);
+    }
+    let mut best = ([0.0; 4], f64::INFINITY);
+    for skip in 0..4 {
+        let idx: Vec<usize> = (0..4).filter(|&k| k != skip).collect();
+        let f = nearest_on_triangle([x[idx[0]], x[idx[1]], x[idx[2]]], p);
+        let q = x[idx[0]] * f[0] + x[idx[1]] * f[1] + x[idx[2]] * f[2];
+        let d = (q - p).length_squared();
+        if d < best.1 {
+            let mut w = [0.0; 4];
+            for (m, &k) in idx.iter().enumerate() {
+                w[k] = f[m];
+            }
+            best = (w, d);
+        }
+    }
+    best
+}
+
+/// The tetrahedron nearest `p` and the weights of its nearest point,
+/// searching rings of grid cells outward from cell `c` (`p`'s cell, or the
+/// nearest one when `p` lies outside the grid). Cells of ring `r + 1` lie
+/// at least `r` cell widths from `p` (projecting `p` onto the grid's box
+/// never lengthens a distance to it), so the search stops once that bound
+/// passes the best distance found.
+pub(super) fn nearest(mesh: &TetMesh, grid: &TetGrid, c: [usize; 3], p: DVec3) -> (u32, [f64; 4]) {
+    let mut best: Option<(f64, u32, [f64; 4])> = None;
+    let max_ring = grid.dims.iter().copied().max().unwrap_or(1);
+    for r in 0..=max_ring {
+        grid.ring(c, r, |t| {
+            let (w, d) = nearest_in_tet(mesh.corners(t as usize), p);
+            if best.is_none_or(|b| d < b.0) {
+                best = Some((d, t, w));
+            }
+        });
+        if let Some((d, ..)) = best
+            && r as f64 * grid.cell >= d.sqrt()
+        {
+            break;
+        }
+    }
+    let (_, t, w) = best.expect("a mesh has at least one tetrahedron");
+    (t, w)
+}
