@@ -65,6 +65,10 @@ pub enum IoError {
         /// What is wrong and what to do.
         message: String,
     },
+    /// A mesh file parsed, but its mesh cannot be used (the error names the
+    /// file).
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
 }
 
 /// A GPU service call failed.

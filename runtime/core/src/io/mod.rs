@@ -29,9 +29,11 @@
 //! directory, renamed over the target only once it is complete.
 
 pub mod metaimage;
+pub mod msh;
 pub mod nifti;
 pub mod nrrd;
 pub mod png;
+pub mod vtu;
 
 use crate::error::IoError;
 use crate::volume::{Volume, VolumeView, VoxelData};
