@@ -8,6 +8,13 @@
 //! share face diagonals and the mesh is conforming. A cell takes the label
 //! of the voxel nearest its centre, and cells without a label (air) are
 //! left out. Node positions are voxel centres, in world millimetres.
+//!
+//! [`octree_proxy`]: label-aware octree cells, 2:1 balanced, with
+//! hanging-node constraints (see [`octree`]).
+
+pub mod octree;
+
+pub use octree::{HangingNode, OctreeProxy, octree_proxy};
 
 use crate::error::MeshError;
 use crate::grid::Grid;
