@@ -62,6 +62,7 @@ impl RowMoves {
         self.bits[q / 64] |= 1 << (q % 64);
     }
 
+    /// Records slot `q`'s move `mv` against the tolerance `tol`.
     #[inline]
     fn record(&mut self, q: usize, mv: f32, tol: f32) {
         if mv >= tol {
@@ -70,6 +71,8 @@ impl RowMoves {
         self.max = self.max.fast_max(f32x8::splat(mv));
     }
 
+    /// Flags the slots `w + l` for the set bits `l` of `lanes` and records
+    /// the window's moves `mv`.
     #[inline]
     fn record8(&mut self, w: usize, lanes: u8, mv: f32x8) {
         let (word, shift) = (w / 64, w % 64);
@@ -179,13 +182,17 @@ pub fn face_bits(c: usize, lo: usize, hi: usize, first: u8) -> FaceMask {
 /// `base + q` (in [`crate::lattice::LINKS`] order; wrapping), and the
 /// directions with no neighbour row (the lattice's faces).
 pub(crate) struct RowBases {
+    /// Storage index of slot 0 of the row.
     pub own: usize,
+    /// Storage index (wrapping) that slot 0's neighbour along each link
+    /// would have.
     pub nb: [usize; 6],
     /// Bit `l`: no element of this row has a neighbour along link `l`
     /// (for ±x: set only when the lattice is one element wide).
     pub missing: u8,
     /// Row parity: slot `q` holds element `i = 2q + p`.
     pub p: usize,
+    /// The row's element indices `(j, k)`.
     pub jk: [usize; 2],
 }
 
@@ -206,6 +213,7 @@ impl RowBases {
         (minus, plus)
     }
 
+    /// The bases of colour `colour`'s row `(j, k)`.
     pub fn new(lat: &ElementLattice, colour: usize, j: usize, k: usize) -> Self {
         let order: Order = lat.order();
         let [nx, ny, nz] = lat.dims;
