@@ -33,6 +33,7 @@ pub mod msh;
 pub mod nifti;
 pub mod nrrd;
 pub mod png;
+pub mod tetgen;
 pub mod vtu;
 
 use crate::error::IoError;
