@@ -163,6 +163,12 @@ fn block_of(slot: u32) -> Block {
     return k;
 }
 
+// Element t of a block (x fastest); may lie past the lattice (test `hi`).
+fn element_of(blk: Block, t: u32) -> vec3<u32> {
+    let s = blk.size;
+    return blk.lo + vec3<u32>(t % s.x, (t / s.x) % s.y, t / (s.x * s.y));
+}
+
 fn slot_of(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return wid.x + wid.y * nwg.x + wid.z * nwg.x * nwg.y;
 }
@@ -188,7 +194,7 @@ fn propagate(
     var updates = 0u;
     var mask = 0u;
     for (var t = lid; t < total; t = t + WG) {
-        let c = blk.lo + vec3<u32>(t % blk.size.x, (t / blk.size.x) % blk.size.y, t / (blk.size.x * blk.size.y));
+        let c = element_of(blk, t);
         if (any(c >= blk.hi)) {
             continue;
         }
@@ -278,7 +284,7 @@ fn relax(
     var mask = 0u;
     var max_move = 0.0;
     for (var t = lid; t < total; t = t + WG) {
-        let c = blk.lo + vec3<u32>(t % blk.size.x, (t / blk.size.x) % blk.size.y, t / (blk.size.x * blk.size.y));
+        let c = element_of(blk, t);
         if (any(c >= blk.hi) || ((c.x + c.y + c.z) & 1u) != colour) {
             continue;
         }
@@ -356,7 +362,7 @@ fn sync_copies(
     let src = p.step.x;
     let total = blk.size.x * blk.size.y * blk.size.z;
     for (var t = lid; t < total; t = t + WG) {
-        let c = blk.lo + vec3<u32>(t % blk.size.x, (t / blk.size.x) % blk.size.y, t / (blk.size.x * blk.size.y));
+        let c = element_of(blk, t);
         if (any(c >= blk.hi)) {
             continue;
         }

@@ -309,11 +309,13 @@ impl ElementLattice {
     /// The link between present elements `n` and `e`.
     #[inline]
     pub fn link(&self, n: usize, e: usize) -> &Link {
-        let (a, b) = (
-            (self.cells[n] & ABSENT) as usize,
-            (self.cells[e] & ABSENT) as usize,
-        );
-        &self.links[a * self.materials.len() + b]
+        self.material_link(self.cells[n] & ABSENT, self.cells[e] & ABSENT)
+    }
+
+    /// The link between elements of materials `a` and `b`.
+    #[inline]
+    pub fn material_link(&self, a: u8, b: u8) -> &Link {
+        &self.links[a as usize * self.materials.len() + b as usize]
     }
 
     /// World position (mm) at rest of element `[i, j, k]`.

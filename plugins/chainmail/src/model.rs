@@ -720,12 +720,14 @@ impl ChainMail {
         // blocks, in parallel and 8 at a time.
         let sequential = self.params.algorithm == Algorithm::Sequential;
         let tol = self.params.rest_tolerance;
+        if !sequential {
+            self.relax.sort_unstable();
+            self.relax.dedup();
+        }
         let rep = if sequential {
             let all: Vec<u32> = (0..self.blocks.len() as u32).collect();
             sweep_scalar(&self.lat, &self.state, &self.blocks, &all, tol)
         } else if self.gpu.is_some() {
-            self.relax.sort_unstable();
-            self.relax.dedup();
             let (cur, mut set) = (self.state.cur, std::mem::take(&mut self.relax));
             if sweeps_everything(&self.blocks, &set) {
                 set = (0..self.blocks.len() as u32).collect();
@@ -733,8 +735,6 @@ impl ChainMail {
             self.cpu_stale = true;
             self.on_device(|g, _| g.relax(cur, &set, tol))
         } else {
-            self.relax.sort_unstable();
-            self.relax.dedup();
             sweep(&self.lat, &self.state, &self.blocks, &self.relax, tol)
         };
         self.counts.relaxation_iterations += 1;

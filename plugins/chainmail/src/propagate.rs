@@ -14,11 +14,9 @@
 //!   moved at most once per deformation. The baseline.
 
 use crate::blocks::{Blocks, FaceMask};
-use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD, LINKS};
-use crate::relax_lanes::{
-    MAT, RowBases, RowMoves, bytes8, face_bits, fold_row, nonzero_lanes, splat_byte,
-};
-use crate::relax_passes::runs_by_row;
+use crate::lattice::{ElementLattice, FIXED, HELD, LINKS};
+use crate::relax_lanes::{RowBases, RowMoves, bytes8, lane_range, nonzero_lanes, splat_byte};
+use crate::relax_passes::{run_blocks, runs_by_row, walk_block_row};
 use crate::state::{MAX_TIME, State, arrival, earlier, wave};
 use rayon::prelude::*;
 use std::collections::VecDeque;
@@ -65,34 +63,22 @@ pub fn jacobi_iteration(
     let results: Vec<BlockRowReport> = rows
         .par_iter()
         .map(|runs| {
-            let mut out: Vec<(u32, FaceMask)> = runs
-                .iter()
-                .flat_map(|r| (r.first..r.first + r.len).map(|b| (b, 0)))
-                .collect();
+            let mut out = run_blocks(runs);
             let mut counts = (0u64, 0u64);
             let mut moves = RowMoves::new(lat.hx);
-            let (lo, hi) = blocks.range(runs[0].first as usize);
-            let (nx, sx) = (lat.dims[0], blocks.size[0]);
-            for k in lo[2]..hi[2] {
-                for j in lo[1]..hi[1] {
-                    let yz =
-                        face_bits(j, lo[1], hi[1], 1 << 2) | face_bits(k, lo[2], hi[2], 1 << 4);
-                    for colour in 0..2 {
-                        let p = (colour + j + k) & 1;
+            for colour in 0..2 {
+                walk_block_row(
+                    lat,
+                    blocks,
+                    runs,
+                    colour,
+                    &mut moves,
+                    &mut out,
+                    |[j, k], q, moves| {
                         let rows = RowBases::new(lat, colour, j, k);
-                        moves.clear();
-                        let mut slot = 0;
-                        for run in runs {
-                            let x0 = blocks.range(run.first as usize).0[0];
-                            let x1 = (x0 + run.len as usize * sx).min(nx);
-                            let (qa, qb) = ((x0 + 1 - p) / 2, (x1 + 1 - p) / 2);
-                            propagate_row(lat, st, rd, &rows, (qa, qb), &mut moves, &mut counts);
-                            let entries = &mut out[slot..slot + run.len as usize];
-                            fold_row(&moves, p, x0, sx, x1, yz, |b, bits| entries[b].1 |= bits);
-                            slot += run.len as usize;
-                        }
-                    }
-                }
+                        propagate_row(lat, st, rd, &rows, q, moves, &mut counts)
+                    },
+                );
             }
             (out, counts.0, counts.1)
         })
@@ -131,7 +117,7 @@ fn propagate_row(
         // done: those lanes are left alone.
         let w = q.min(lat.hx - 8);
         let (from, to) = (q - w, (qb - w).min(8));
-        let range = (((1u16 << to) - 1) & !((1u16 << from) - 1)) as u8;
+        let range = lane_range(from, to);
         if !uniform_window(lat, st, rd, rows, w, range, moves, counts) {
             for lane in from..to {
                 propagate_slot(lat, st, rd, rows, w + lane, moves, counts);
@@ -164,29 +150,13 @@ fn uniform_window(
     moves: &mut RowMoves,
     counts: &mut (u64, u64),
 ) -> bool {
-    let cells = &lat.cells;
     let own = rows.own + w;
-    let own_cells = bytes8(cells, own);
-    let m = (own_cells & 0x3f) as u8;
-    let (minus, plus) = rows.x_edges(w, lat.dims[0]);
-    let r = &rows.nb;
-    let nb = [
-        r[0].wrapping_add(w),
-        r[1].wrapping_add(w),
-        r[2].wrapping_add(w),
-        r[3].wrapping_add(w),
-        r[4].wrapping_add(w),
-        r[5].wrapping_add(w),
-    ];
-    let uniform = own_cells & MAT == splat_byte(m)
-        && m != ABSENT
-        && rows.missing | minus | plus == 0
-        && bytes8(&lat.cut, own) == 0
-        && nb.iter().all(|&e| bytes8(cells, e) & MAT == splat_byte(m));
-    if !uniform {
+    let own_cells = bytes8(&lat.cells, own);
+    let nb = rows.window(w);
+    let Some(m) = rows.window_material(lat, w, own_cells, &nb) else {
         return false;
-    }
-    let link = lat.links[m as usize * lat.materials.len() + m as usize];
+    };
+    let link = *lat.material_link(m, m);
     let tau = u32x8::splat(link.tau);
     let time = u32x8::splat(MAX_TIME);
     let (keys, u) = (&st.key[rd], &st.u[rd]);

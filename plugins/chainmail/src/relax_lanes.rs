@@ -197,6 +197,45 @@ pub(crate) struct RowBases {
 }
 
 impl RowBases {
+    /// The six neighbour windows of the window at slot `w`.
+    #[inline(always)]
+    pub fn window(&self, w: usize) -> [usize; 6] {
+        // Written out: array `map` closures are not reliably inlined here.
+        let r = &self.nb;
+        [
+            r[0].wrapping_add(w),
+            r[1].wrapping_add(w),
+            r[2].wrapping_add(w),
+            r[3].wrapping_add(w),
+            r[4].wrapping_add(w),
+            r[5].wrapping_add(w),
+        ]
+    }
+
+    /// The material of the 8-slot window at slot `w` (whose site bytes are
+    /// `own_cells`, neighbour windows `nb`) when every lane is an element of
+    /// it, flags aside, all six links of every lane exist and are uncut, and
+    /// every neighbour is of it too.
+    #[inline]
+    pub fn window_material(
+        &self,
+        lat: &ElementLattice,
+        w: usize,
+        own_cells: u64,
+        nb: &[usize; 6],
+    ) -> Option<u8> {
+        let m = (own_cells & 0x3f) as u8;
+        let (minus, plus) = self.x_edges(w, lat.dims[0]);
+        (m != ABSENT
+            && own_cells & MAT == splat_byte(m)
+            && self.missing | minus | plus == 0
+            && bytes8(&lat.cut, self.own + w) == 0
+            && nb
+                .iter()
+                .all(|&e| bytes8(&lat.cells, e) & MAT == splat_byte(m)))
+        .then_some(m)
+    }
+
     /// Lanes of the window at slot `w` on the lattice's x faces: element 0
     /// has no −x neighbour and element `nx − 1` no +x neighbour. Returns
     /// `(−x lanes, +x lanes)`.
@@ -315,6 +354,12 @@ pub(crate) fn bytes8(s: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(s[at..at + 8].try_into().expect("8 bytes"))
 }
 
+/// Lanes `from..to` (`from ≤ to ≤ 8`) as bits.
+#[inline]
+pub(crate) fn lane_range(from: usize, to: usize) -> u8 {
+    (((1u16 << to) - 1) & !((1u16 << from) - 1)) as u8
+}
+
 /// Every byte of a word set to `b`.
 pub(crate) const fn splat_byte(b: u8) -> u64 {
     b as u64 * 0x0101_0101_0101_0101
@@ -380,32 +425,19 @@ fn relax_window(
 ) {
     let cells = &lat.cells;
     let own = rows.own + w;
-    let r = &rows.nb;
-    // Written out: array `map` closures are not reliably inlined here.
-    let nb = [
-        r[0].wrapping_add(w),
-        r[1].wrapping_add(w),
-        r[2].wrapping_add(w),
-        r[3].wrapping_add(w),
-        r[4].wrapping_add(w),
-        r[5].wrapping_add(w),
-    ];
-    let range = (((1u16 << to) - 1) & !((1u16 << from) - 1)) as u8;
+    let nb = rows.window(w);
+    let range = lane_range(from, to);
     let own_cells = bytes8(cells, own);
-    let (minus_x_edge, plus_x_edge) = rows.x_edges(w, lat.dims[0]);
-    let cut = bytes8(&lat.cut, own);
     // The common case first, with the fewest checks: 8 free elements of
     // one material, all 48 neighbours there, of that material, uncut.
-    let m0 = (own_cells & 0x3f) as u8;
-    if own_cells == splat_byte(m0)
-        && m0 != ABSENT
-        && rows.missing | minus_x_edge | plus_x_edge == 0
-        && cut == 0
-        && nb.iter().all(|&e| bytes8(cells, e) & MAT == splat_byte(m0))
+    if own_cells & splat_byte(FIXED | HELD) == 0
+        && let Some(m) = rows.window_material(lat, w, own_cells, &nb)
     {
-        uniform_window(lat, state, own, &nb, m0, range, inv, tol, moves, w);
+        uniform_window(lat, state, own, &nb, m, range, inv, tol, moves, w);
         return;
     }
+    let (minus_x_edge, plus_x_edge) = rows.x_edges(w, lat.dims[0]);
+    let cut = bytes8(&lat.cut, own);
     // Lanes holding an element (padding slots past the row are absent).
     let present = nonzero_lanes((own_cells & MAT) ^ MAT) & range;
     if present == 0 {
@@ -477,7 +509,7 @@ fn uniform_window(
     moves: &mut RowMoves,
     w: usize,
 ) {
-    let link = lat.links[m as usize * lat.materials.len() + m as usize];
+    let link = *lat.material_link(m, m);
     let alpha = f32x8::splat(lat.materials[m as usize].elastic);
     let write_mask = lanes(write);
     let sixth = f32x8::splat(1.0 / 6.0);
@@ -525,7 +557,7 @@ fn masked_window(
     moves: &mut RowMoves,
     w: usize,
 ) {
-    let link = lat.links[m as usize * lat.materials.len() + m as usize];
+    let link = *lat.material_link(m, m);
     let alpha = f32x8::splat(lat.materials[m as usize].elastic);
     let l = link_lanes;
     let masks = [

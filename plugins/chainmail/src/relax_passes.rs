@@ -55,23 +55,23 @@ pub fn sweep_runs(
 ) -> SweepReport {
     debug_assert!(set.windows(2).all(|w| w[0] < w[1]), "set must be ascending");
     let rows = runs_by_row(blocks, set);
-    let mut results: Vec<(Vec<(u32, FaceMask)>, f32)> = rows
-        .iter()
-        .map(|runs| {
-            let list = runs
-                .iter()
-                .flat_map(|r| (r.first..r.first + r.len).map(|b| (b, 0)))
-                .collect();
-            (list, 0.0)
-        })
-        .collect();
+    let mut results: Vec<(Vec<(u32, FaceMask)>, f32)> =
+        rows.iter().map(|runs| (run_blocks(runs), 0.0)).collect();
     let tol = tol as f32;
     for colour in 0..2 {
         rows.par_iter()
             .zip(results.par_iter_mut())
             .for_each(|(runs, (out, max))| {
                 let mut moves = RowMoves::new(lat.hx);
-                block_row(lat, state, blocks, runs, colour, tol, &mut moves, out);
+                walk_block_row(
+                    lat,
+                    blocks,
+                    runs,
+                    colour,
+                    &mut moves,
+                    out,
+                    |jk, q, moves| relax_row(lat, state, colour, jk, q, tol, moves),
+                );
                 *max = max.max(moves.take_max());
             });
     }
@@ -81,18 +81,28 @@ pub fn sweep_runs(
     }
 }
 
-/// Relaxes colour `colour` of the runs of one block row; ORs each block's
-/// face mask into `out` (the runs' blocks in order).
-#[allow(clippy::too_many_arguments)]
-fn block_row(
+/// The blocks of a block row's runs, in order, each with an empty face
+/// mask.
+pub(crate) fn run_blocks(runs: &[Run]) -> Vec<(u32, FaceMask)> {
+    runs.iter()
+        .flat_map(|r| (r.first..r.first + r.len).map(|b| (b, 0)))
+        .collect()
+}
+
+/// Walks colour `colour`'s rows of one block row: for each row `(j, k)`
+/// and each run, `row((j, k), slots, moves)` processes the run's slots of
+/// that row and flags in `moves` those that changed, which are then folded
+/// into the run's entries of `out` (the runs' blocks in order, see
+/// [`run_blocks`]) as block face masks. Shared by relaxation and
+/// propagation.
+pub(crate) fn walk_block_row(
     lat: &ElementLattice,
-    state: &State,
     blocks: &Blocks,
     runs: &[Run],
     colour: usize,
-    tol: f32,
     moves: &mut RowMoves,
     out: &mut [(u32, FaceMask)],
+    mut row: impl FnMut([usize; 2], (usize, usize), &mut RowMoves),
 ) {
     let nx = lat.dims[0];
     let sx = blocks.size[0];
@@ -107,8 +117,7 @@ fn block_row(
                 let x0 = blocks.range(run.first as usize).0[0];
                 let x1 = (x0 + run.len as usize * sx).min(nx);
                 // Slots of this colour row in [x0, x1).
-                let (qa, qb) = ((x0 + 1 - p) / 2, (x1 + 1 - p) / 2);
-                relax_row(lat, state, colour, [j, k], (qa, qb), tol, moves);
+                row([j, k], ((x0 + 1 - p) / 2, (x1 + 1 - p) / 2), moves);
                 let entries = &mut out[slot..slot + run.len as usize];
                 fold_row(moves, p, x0, sx, x1, yz_faces, |b, bits| {
                     entries[b].1 |= bits

@@ -64,6 +64,26 @@ fn deformed(lat: &ElementLattice, state: &State, v: [usize; 3]) -> DVec3 {
         + DVec3::new(u[0] as f64, u[1] as f64, u[2] as f64)
 }
 
+/// The deformed positions (mm) of the source voxels in the inclusive index
+/// box `[a, b]`, x fastest, each computed once.
+fn deformed_box(lat: &ElementLattice, state: &State, a: [usize; 3], b: [usize; 3]) -> Vec<DVec3> {
+    let mut out = Vec::with_capacity((0..3).map(|k| b[k] - a[k] + 1).product());
+    for k in a[2]..=b[2] {
+        for j in a[1]..=b[1] {
+            for i in a[0]..=b[0] {
+                out.push(deformed(lat, state, [i, j, k]));
+            }
+        }
+    }
+    out
+}
+
+/// The voxel indices of entry `n` of a [`deformed_box`] over `[a, b]`.
+fn box_voxel(a: [usize; 3], b: [usize; 3], n: usize) -> [usize; 3] {
+    let (sx, sy) = (b[0] - a[0] + 1, b[1] - a[1] + 1);
+    [a[0] + n % sx, a[1] + (n / sx) % sy, a[2] + n / (sx * sy)]
+}
+
 /// The mesh tetrahedra on edges that cross one of `tris` (deformed
 /// positions), `(cell, bits)`.
 pub fn cut_tets(lat: &ElementLattice, state: &State, tris: &[[DVec3; 3]]) -> Vec<(usize, u8)> {
@@ -76,23 +96,18 @@ pub fn cut_tets(lat: &ElementLattice, state: &State, tris: &[[DVec3; 3]]) -> Vec
         return Vec::new();
     };
     let cells = lat.source.dims.map(|d| d.saturating_sub(1));
+    let positions = deformed_box(lat, state, a, b);
+    let stride = [1, b[0] - a[0] + 1, (b[0] - a[0] + 1) * (b[1] - a[1] + 1)];
     let mut out = Vec::new();
-    for k in a[2]..=b[2] {
-        for j in a[1]..=b[1] {
-            for i in a[0]..=b[0] {
-                let v = [i, j, k];
-                let p = deformed(lat, state, v);
-                for axis in 0..3 {
-                    let mut w = v;
-                    w[axis] += 1;
-                    if w[axis] > b[axis] {
-                        continue;
-                    }
-                    let q = deformed(lat, state, w);
-                    if tris.iter().any(|t| segment_crosses_triangle(p, q, t)) {
-                        out.extend(tets_on_edge(cells, v, axis));
-                    }
-                }
+    for (n, &p) in positions.iter().enumerate() {
+        let v = box_voxel(a, b, n);
+        for axis in 0..3 {
+            if v[axis] == b[axis] {
+                continue;
+            }
+            let q = positions[n + stride[axis]];
+            if tris.iter().any(|t| segment_crosses_triangle(p, q, t)) {
+                out.extend(tets_on_edge(cells, v, axis));
             }
         }
     }
@@ -111,17 +126,12 @@ pub fn carve_tets(
         return Vec::new();
     };
     let cells = lat.source.dims.map(|d| d.saturating_sub(1));
-    let mut out = Vec::new();
-    for k in a[2]..=b[2] {
-        for j in a[1]..=b[1] {
-            for i in a[0]..=b[0] {
-                if inside(deformed(lat, state, [i, j, k])) {
-                    out.extend(tets_at_vertex(cells, [i, j, k]));
-                }
-            }
-        }
-    }
-    out
+    deformed_box(lat, state, a, b)
+        .into_iter()
+        .enumerate()
+        .filter(|&(_, p)| inside(p))
+        .flat_map(|(n, _)| tets_at_vertex(cells, box_voxel(a, b, n)))
+        .collect()
 }
 
 /// True when segment `a → b` crosses triangle `t` (Möller–Trumbore; the

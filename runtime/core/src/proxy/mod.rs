@@ -30,6 +30,25 @@ fn ticks(n: usize, step: usize) -> Vec<usize> {
     t
 }
 
+/// Refuses a cell size (`key`, voxels) of 0 and a volume with fewer than 2
+/// voxels along an axis, naming the generator `name`.
+fn check_sizes(name: &str, key: &str, size: usize, grid: &Grid) -> Result<(), MeshError> {
+    let message = if size == 0 {
+        format!("`{key}` must be at least 1 voxel")
+    } else if grid.dims.iter().any(|&d| d < 2) {
+        format!(
+            "the volume ({:?} voxels) needs at least 2 voxels along every axis",
+            grid.dims
+        )
+    } else {
+        return Ok(());
+    };
+    Err(MeshError::Shape {
+        source_name: name.to_string(),
+        message,
+    })
+}
+
 /// A conforming tetrahedral proxy of `grid` with cells of `step` voxels;
 /// `label(voxel)` gives a voxel's material label or `None` outside the
 /// model (voxel indices).
@@ -39,21 +58,7 @@ pub fn uniform_proxy(
     label: impl Fn([usize; 3]) -> Option<u16>,
 ) -> Result<TetMesh, MeshError> {
     let name = format!("uniform proxy (step {step})");
-    if step == 0 {
-        return Err(MeshError::Shape {
-            source_name: name,
-            message: "`step` must be at least 1 voxel".into(),
-        });
-    }
-    if grid.dims.iter().any(|&d| d < 2) {
-        return Err(MeshError::Shape {
-            source_name: name,
-            message: format!(
-                "the volume ({:?} voxels) needs at least 2 voxels along every axis",
-                grid.dims
-            ),
-        });
-    }
+    check_sizes(&name, "step", step, grid)?;
     let t = grid.dims.map(|d| ticks(d, step));
     let nodes_per = t.clone().map(|v| v.len());
     let node_id = |c: [usize; 3]| c[0] + nodes_per[0] * (c[1] + nodes_per[1] * c[2]);

@@ -90,15 +90,7 @@ pub fn octree_proxy(
     label: impl Fn([usize; 3]) -> Option<u16>,
 ) -> Result<OctreeProxy, MeshError> {
     let name = format!("octree proxy (cells up to {max_cell} voxels)");
-    if max_cell == 0 || grid.dims.iter().any(|&d| d < 2) {
-        return Err(MeshError::Shape {
-            source_name: name,
-            message: format!(
-                "needs `max_cell` ≥ 1 and at least 2 voxels per axis (got {max_cell}, {:?})",
-                grid.dims
-            ),
-        });
-    }
+    super::check_sizes(&name, "max_cell", max_cell, grid)?;
     let max_cell = 1usize << max_cell.ilog2();
     let cells = grid.dims.map(|d| d - 1);
     let root = cells.iter().copied().max().unwrap_or(1).next_power_of_two();
