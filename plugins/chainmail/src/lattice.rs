@@ -38,6 +38,10 @@ pub const HELD: u8 = 0x40;
 /// Bit set on a fixed element.
 pub const FIXED: u8 = 0x80;
 
+/// Added to an [`ElementLattice::interior`] entry: the element lies on the
+/// lattice's low or high x face, and is interior otherwise.
+pub const X_FACE: u8 = 0x40;
+
 /// The six link directions, `(axis, sign)`, in the order every algorithm
 /// visits neighbours: +x, −x, +y, −y, +z, −z.
 pub const LINKS: [(usize, isize); 6] = [(0, 1), (0, -1), (1, 1), (1, -1), (2, 1), (2, -1)];
@@ -146,7 +150,20 @@ pub struct ElementLattice {
     /// Per site (red-black order): material index and flags.
     pub cells: Vec<Cell>,
     /// Per site: bit `l` set when link `l` (in [`LINKS`] order) was cut.
+    /// Change it only through [`ElementLattice::cut_link`], which keeps
+    /// [`ElementLattice::interior`] in step.
     pub cut: Vec<u8>,
+    /// Per site: the material of an *interior* element — present, with all
+    /// six links inside the lattice and uncut, each reaching an element of
+    /// its own material — and [`ABSENT`] for every other site; elements
+    /// that would be interior but for the lattice's x faces (their ±x link
+    /// leaves the lattice) have [`X_FACE`] added. The 8-lane
+    /// kernels take a window whose 8 bytes here are one material as
+    /// uniform with one load instead of re-deriving it from `cells`, `cut`
+    /// and the lattice's faces on every sweep. It depends on the topology
+    /// only (flags aside), so it is computed once and updated by
+    /// [`ElementLattice::cut_link`] and [`ElementLattice::remove`].
+    interior: Vec<u8>,
 }
 
 impl ElementLattice {
@@ -215,8 +232,66 @@ impl ElementLattice {
             source: g,
             materials,
             cut: vec![0; cells.len()],
+            interior: Vec::new(),
             cells,
-        })
+        }
+        .with_interior())
+    }
+
+    /// The lattice with [`ElementLattice::interior`] computed for every site.
+    fn with_interior(mut self) -> Self {
+        self.interior = (0..self.len()).map(|n| self.interior_material(n)).collect();
+        self
+    }
+
+    /// Per site: the material of an interior element, [`ABSENT`] otherwise
+    /// (see the field's docs).
+    #[inline]
+    pub fn interior(&self) -> &[u8] {
+        &self.interior
+    }
+
+    /// Site `n`'s entry of [`ElementLattice::interior`].
+    fn interior_material(&self, n: usize) -> u8 {
+        let m = self.cells[n] & ABSENT;
+        if m == ABSENT || self.cut[n] != 0 {
+            return ABSENT;
+        }
+        let c = self.coords(n);
+        let offsets = self.offsets(c);
+        let mut x_face = 0;
+        for (l, &(a, s)) in LINKS.iter().enumerate() {
+            let inside = if s < 0 {
+                c[a] > 0
+            } else {
+                c[a] + 1 < self.dims[a]
+            };
+            if !inside && a == 0 {
+                x_face = X_FACE;
+            } else if !inside || self.cells[offsets[l].wrapping_add(n)] & ABSENT != m {
+                return ABSENT;
+            }
+        }
+        m | x_face
+    }
+
+    /// Recomputes the interior entries of site `n` and its neighbours after
+    /// a topology change at `n`.
+    fn refresh_interior(&mut self, n: usize) {
+        let c = self.coords(n);
+        let offsets = self.offsets(c);
+        self.interior[n] = self.interior_material(n);
+        for (l, &(a, s)) in LINKS.iter().enumerate() {
+            let inside = if s < 0 {
+                c[a] > 0
+            } else {
+                c[a] + 1 < self.dims[a]
+            };
+            if inside {
+                let e = offsets[l].wrapping_add(n);
+                self.interior[e] = self.interior_material(e);
+            }
+        }
     }
 
     /// Number of lattice sites (elements and absent sites).
@@ -349,12 +424,15 @@ impl ElementLattice {
             self.cut[n] |= 1 << l;
             // The opposite link of the neighbour: +x ↔ −x, …
             self.cut[e] |= 1 << (l ^ 1);
+            self.interior[n] = ABSENT;
+            self.interior[e] = ABSENT;
         }
     }
 
     /// Removes element `n` from the model (carving).
     pub fn remove(&mut self, n: usize) {
         self.cells[n] = ABSENT;
+        self.refresh_interior(n);
     }
 
     /// Number of present elements.
@@ -410,6 +488,67 @@ fn fill_cells<T: Sample>(
                 let value = src[g.linear(v[0], v[1], v[2])].to_f32() as f64;
                 cells[order.linear([ei, ej, ek])] = classify(value);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxflex_core::volume::{Volume, VoxelData};
+
+    /// A 13 × 9 × 7 lattice of two materials with holes.
+    fn lattice() -> ElementLattice {
+        let dims = [13, 9, 7];
+        let data = (0..dims.iter().product::<usize>())
+            .map(|v| match v % 23 {
+                0 => 0,
+                1..=4 => 200,
+                _ => 100,
+            })
+            .collect();
+        let vol = Volume {
+            grid: Grid::new(dims, DVec3::ONE, DVec3::ZERO),
+            data: VoxelData::U8(data),
+        };
+        let params = ChainMailParams::from_toml(
+            "materials = [{ range = [50, 150], constraint = 0.2 }, \
+             { range = [150, 256], constraint = 0.1 }]",
+        )
+        .unwrap();
+        ElementLattice::new(vol.view(), &params).unwrap()
+    }
+
+    #[test]
+    fn interior_entries_follow_cuts_and_carving() {
+        let mut lat = lattice();
+        let fresh = |lat: &ElementLattice| lat.clone().with_interior().interior;
+        let interior = lat.interior().iter().filter(|&&m| m & ABSENT != ABSENT);
+        assert!(
+            interior.count() > 50,
+            "the test lattice has interior elements"
+        );
+        assert!(lat.interior().iter().any(|&m| m & X_FACE != 0));
+        // Only elements on the x faces carry the flag.
+        for n in 0..lat.len() {
+            let m = lat.interior()[n];
+            if m & X_FACE != 0 {
+                let c = lat.coords(n);
+                assert!(c[0] == 0 || c[0] + 1 == lat.dims[0], "{c:?}");
+            }
+        }
+        let mut seed = 7u64;
+        for step in 0..200 {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let n = (seed >> 33) as usize % lat.len();
+            if step % 3 == 0 {
+                lat.remove(n);
+            } else {
+                lat.cut_link(n, (seed >> 20) as usize % 6);
+            }
+            assert_eq!(lat.interior, fresh(&lat), "after step {step}");
         }
     }
 }

@@ -44,6 +44,7 @@ pub mod relax;
 pub mod relax_lanes;
 pub mod relax_passes;
 pub mod removal;
+pub mod row_moves;
 pub mod state;
 
 #[cfg(test)]

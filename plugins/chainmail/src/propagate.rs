@@ -15,8 +15,9 @@
 
 use crate::blocks::{Blocks, FaceMask};
 use crate::lattice::{ElementLattice, FIXED, HELD, LINKS};
-use crate::relax_lanes::{RowBases, RowMoves, bytes8, lane_range, nonzero_lanes, splat_byte};
-use crate::relax_passes::{run_blocks, runs_by_row, walk_block_row};
+use crate::relax_lanes::{RowBases, bytes8, lane_range, nonzero_lanes, splat_byte};
+use crate::relax_passes::{fold_runs, run_blocks, runs_by_row, walk_block_row};
+use crate::row_moves::{BlockRowMoves, RowMoves};
 use crate::state::{MAX_TIME, State, arrival, earlier, wave};
 use rayon::prelude::*;
 use std::collections::VecDeque;
@@ -66,6 +67,7 @@ pub fn jacobi_iteration(
             let mut out = run_blocks(runs);
             let mut counts = (0u64, 0u64);
             let mut moves = RowMoves::new(lat.hx);
+            let mut acc = BlockRowMoves::new(lat.hx);
             for colour in 0..2 {
                 walk_block_row(
                     lat,
@@ -73,13 +75,14 @@ pub fn jacobi_iteration(
                     runs,
                     colour,
                     &mut moves,
-                    &mut out,
+                    &mut acc,
                     |[j, k], q, moves| {
                         let rows = RowBases::new(lat, colour, j, k);
                         propagate_row(lat, st, rd, &rows, q, moves, &mut counts)
                     },
                 );
             }
+            fold_runs(blocks, runs, &acc, &mut out);
             (out, counts.0, counts.1)
         })
         .collect();
@@ -129,7 +132,8 @@ fn propagate_row(
 
 /// One Jacobi step of the 8 lanes of the window at slot `w`, in vector
 /// arithmetic, when the window is uniform: one material, every element
-/// and every link there and uncut. Writes the lanes in `range` to the
+/// and every link there and uncut, but for the links that leave the
+/// lattice's x faces. Writes the lanes in `range` to the
 /// write copy (their move, or their carried value), flags the moved ones in
 /// `moves`, adds the counts, and returns true; returns false, writing
 /// nothing, for any other window.
@@ -153,9 +157,16 @@ fn uniform_window(
     let own = rows.own + w;
     let own_cells = bytes8(&lat.cells, own);
     let nb = rows.window(w);
-    let Some(m) = rows.window_material(lat, w, own_cells, &nb) else {
+    // Interior windows, and those on the lattice's x faces with the links
+    // that leave it masked off.
+    let Some(m) = rows.window_material_x_faces(lat, w) else {
         return false;
     };
+    let (minus_x_edge, plus_x_edge) = rows.x_edges(w, lat.dims[0]);
+    let off_lattice = [
+        u32x8::from(LANE_WORDS[plus_x_edge as usize]),
+        u32x8::from(LANE_WORDS[minus_x_edge as usize]),
+    ];
     let link = *lat.material_link(m, m);
     let tau = u32x8::splat(link.tau);
     let time = u32x8::splat(MAX_TIME);
@@ -176,10 +187,13 @@ fn uniform_window(
     let mut best_rank = u32x8::ZERO;
     let mut best_u = un;
     let mut found = u32x8::ZERO;
-    for &e in &nb {
+    for (l, &e) in nb.iter().enumerate() {
         let ke = load_u32(keys, e);
         // `arrival`: reached, and the time does not overflow.
-        let reached = !ke.simd_eq(u32x8::ZERO) & ((ke & time) + tau).simd_le(time);
+        let mut reached = !ke.simd_eq(u32x8::ZERO) & ((ke & time) + tau).simd_le(time);
+        if l < 2 {
+            reached &= !off_lattice[l];
+        }
         let rank = (ke + tau) ^ time;
         let ue = [load_f32(&u[0], e), load_f32(&u[1], e), load_f32(&u[2], e)];
         let mut violated = f32x8::ZERO;

@@ -18,92 +18,12 @@
 //! Every kernel writes only the current Jacobi copy and records, per slot,
 //! whether the element moved by at least the tolerance ([`RowMoves`]).
 
-use crate::blocks::{CHANGED, FaceMask};
-use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD, Order};
+use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD, Order, X_FACE};
 use crate::relax::{movable, relax_one};
+use crate::row_moves::RowMoves;
 use crate::state::State;
 use std::sync::atomic::AtomicU32;
 use wide::f32x8;
-
-/// Per slot of a colour row: moved by at least the tolerance (a bit set),
-/// and the largest move seen (fraction of the spacing).
-#[derive(Clone, Debug, Default)]
-pub struct RowMoves {
-    bits: Vec<u64>,
-    max: f32x8,
-}
-
-impl RowMoves {
-    /// Empty flags for rows of `hx` slots.
-    pub fn new(hx: usize) -> Self {
-        Self {
-            bits: vec![0; hx / 64 + 2],
-            max: f32x8::ZERO,
-        }
-    }
-
-    /// Clears every flag (the largest move is kept).
-    #[inline]
-    pub fn clear(&mut self) {
-        self.bits.fill(0);
-    }
-
-    /// Largest move recorded since the last call (or creation); restarts.
-    pub fn take_max(&mut self) -> f32 {
-        std::mem::take(&mut self.max)
-            .to_array()
-            .into_iter()
-            .fold(0.0, f32::max)
-    }
-
-    /// Flags slot `q`.
-    #[inline]
-    pub fn mark(&mut self, q: usize) {
-        self.bits[q / 64] |= 1 << (q % 64);
-    }
-
-    /// Records slot `q`'s move `mv` against the tolerance `tol`.
-    #[inline]
-    fn record(&mut self, q: usize, mv: f32, tol: f32) {
-        if mv >= tol {
-            self.bits[q / 64] |= 1 << (q % 64);
-        }
-        self.max = self.max.fast_max(f32x8::splat(mv));
-    }
-
-    /// Flags the slots `w + l` for the set bits `l` of `lanes` and records
-    /// the window's moves `mv`.
-    #[inline]
-    fn record8(&mut self, w: usize, lanes: u8, mv: f32x8) {
-        let (word, shift) = (w / 64, w % 64);
-        self.bits[word] |= (lanes as u64) << shift;
-        if shift > 56 {
-            self.bits[word + 1] |= (lanes as u64) >> (64 - shift);
-        }
-        self.max = self.max.fast_max(mv);
-    }
-
-    /// True when slot `q` moved by at least the tolerance.
-    #[inline]
-    pub fn get(&self, q: usize) -> bool {
-        self.bits[q / 64] >> (q % 64) & 1 != 0
-    }
-
-    /// True when a slot in `a..b` moved by at least the tolerance.
-    #[inline]
-    pub fn any(&self, a: usize, b: usize) -> bool {
-        (a / 64..b.div_ceil(64)).any(|word| {
-            let lo = (word * 64).max(a) - word * 64;
-            let hi = ((word + 1) * 64).min(b) - word * 64;
-            let mask = if hi - lo == 64 {
-                u64::MAX
-            } else {
-                ((1u64 << (hi - lo)) - 1) << lo
-            };
-            self.bits[word] & mask != 0
-        })
-    }
-}
 
 /// Relaxes slots `qa..qb` of colour `colour`'s row `(j, k)`, recording
 /// their moves (fraction of the spacing) against `tol` in `moves`.
@@ -133,48 +53,6 @@ pub fn relax_row(
         relax_window(lat, state, &rows, w, lanes, inv, tol, moves);
         q = w + 8;
     }
-}
-
-/// Folds one colour row's moves (parity `p`) into the blocks of x size `sx`
-/// that tile `x0..x_end`: calls `add(block offset from x0's block, face
-/// mask)` for each of them (mask 0 when nothing moved by the tolerance).
-#[allow(clippy::too_many_arguments)]
-#[inline]
-pub fn fold_row(
-    moves: &RowMoves,
-    p: usize,
-    x0: usize,
-    sx: usize,
-    x_end: usize,
-    yz_faces: FaceMask,
-    mut add: impl FnMut(usize, FaceMask),
-) {
-    let mut b = 0;
-    let mut bx0 = x0;
-    while bx0 < x_end {
-        let bx1 = (bx0 + sx).min(x_end);
-        let (sa, sb) = ((bx0 + 1 - p) / 2, (bx1 + 1 - p) / 2);
-        let mut bits = 0;
-        if moves.any(sa, sb) {
-            bits = CHANGED | yz_faces;
-            if (bx0 + p).is_multiple_of(2) && moves.get((bx0 - p) / 2) {
-                bits |= 1;
-            }
-            if (bx1 - 1 + p).is_multiple_of(2) && moves.get((bx1 - 1 - p) / 2) {
-                bits |= 2;
-            }
-        }
-        add(b, bits);
-        b += 1;
-        bx0 = bx1;
-    }
-}
-
-/// Face bits (`first` for the low face, `first << 1` for the high) of
-/// coordinate `c` in the block range `[lo, hi)`.
-#[inline]
-pub fn face_bits(c: usize, lo: usize, hi: usize, first: u8) -> FaceMask {
-    (if c == lo { first } else { 0 }) | (if c + 1 == hi { first << 1 } else { 0 })
 }
 
 /// A colour row `(j, k)`: storage index of its slot 0, the storage indices
@@ -212,28 +90,24 @@ impl RowBases {
         ]
     }
 
-    /// The material of the 8-slot window at slot `w` (whose site bytes are
-    /// `own_cells`, neighbour windows `nb`) when every lane is an element of
-    /// it, flags aside, all six links of every lane exist and are uncut, and
-    /// every neighbour is of it too.
-    #[inline]
-    pub fn window_material(
-        &self,
-        lat: &ElementLattice,
-        w: usize,
-        own_cells: u64,
-        nb: &[usize; 6],
-    ) -> Option<u8> {
-        let m = (own_cells & 0x3f) as u8;
-        let (minus, plus) = self.x_edges(w, lat.dims[0]);
-        (m != ABSENT
-            && own_cells & MAT == splat_byte(m)
-            && self.missing | minus | plus == 0
-            && bytes8(&lat.cut, self.own + w) == 0
-            && nb
-                .iter()
-                .all(|&e| bytes8(&lat.cells, e) & MAT == splat_byte(m)))
-        .then_some(m)
+    /// The material of the 8-slot window at slot `w` when every lane is an
+    /// interior element of it ([`ElementLattice::interior`]): all six links
+    /// of every lane exist and are uncut, and every neighbour is of it too.
+    #[inline(always)]
+    pub fn window_material(&self, lat: &ElementLattice, w: usize) -> Option<u8> {
+        let x = bytes8(lat.interior(), self.own + w);
+        let m = x as u8;
+        (m != ABSENT && x == splat_byte(m)).then_some(m)
+    }
+
+    /// The material of the 8-slot window at slot `w` when every lane is an
+    /// interior element of it, or one but for its link across the
+    /// lattice's x faces ([`X_FACE`]).
+    #[inline(always)]
+    pub fn window_material_x_faces(&self, lat: &ElementLattice, w: usize) -> Option<u8> {
+        let x = bytes8(lat.interior(), self.own + w) & !splat_byte(X_FACE);
+        let m = x as u8;
+        (m != ABSENT && x == splat_byte(m)).then_some(m)
     }
 
     /// Lanes of the window at slot `w` on the lattice's x faces: element 0
@@ -303,31 +177,34 @@ fn relax_slot(
     moves.record(q, mv, tol);
 }
 
-/// The 8-slot windows `at .. at + 8` of one state array, bounds-checked
-/// once for all of them (the kernels then load and store without checks).
+/// The 8-slot windows `at .. at + 8` of the three state arrays of one
+/// copy, bounds-checked once for all of them (the kernels then load and
+/// store without checks).
 struct Windows<'a> {
-    ptr: *const AtomicU32,
-    _array: &'a [AtomicU32],
+    ptr: [*const AtomicU32; 3],
+    _arrays: &'a [Vec<AtomicU32>; 3],
 }
 
 impl<'a> Windows<'a> {
-    /// `array`, whose windows at every index of `starts` must lie inside it.
+    /// `arrays` (of equal length), whose windows at every index of
+    /// `starts` must lie inside them.
     #[inline(always)]
-    fn new(array: &'a [AtomicU32], starts: &[usize]) -> Self {
+    fn new(arrays: &'a [Vec<AtomicU32>; 3], starts: &[usize]) -> Self {
         let end = starts.iter().fold(0, |m, &s| m.max(s.wrapping_add(8)));
+        let len = arrays[0].len();
         assert!(
-            end <= array.len() && starts.iter().all(|&s| s < end),
+            arrays.iter().all(|a| a.len() == len) && end <= len && starts.iter().all(|&s| s < end),
             "relaxation window outside the state"
         );
         Self {
-            ptr: array.as_ptr(),
-            _array: array,
+            ptr: [arrays[0].as_ptr(), arrays[1].as_ptr(), arrays[2].as_ptr()],
+            _arrays: arrays,
         }
     }
 
-    /// Loads the window at `at`, one of the checked starts.
+    /// Loads axis `a`'s window at `at`, one of the checked starts.
     #[inline(always)]
-    fn load(&self, at: usize) -> f32x8 {
+    fn load(&self, a: usize, at: usize) -> f32x8 {
         // SAFETY: `at + 8 <= len` was checked in `new`; `AtomicU32` has the
         // size, alignment and bit validity of `u32`, so 8 of them read as
         // `[f32; 8]`. While a colour is relaxed no thread writes these
@@ -335,16 +212,16 @@ impl<'a> Windows<'a> {
         // the other colour is only read, and the dense pass orders its
         // stages with release/acquire counters), so the plain read does not
         // race.
-        f32x8::from(unsafe { std::ptr::read_unaligned(self.ptr.add(at) as *const [f32; 8]) })
+        f32x8::from(unsafe { std::ptr::read_unaligned(self.ptr[a].add(at) as *const [f32; 8]) })
     }
 
-    /// Stores the window at `at`, one of the checked starts.
+    /// Stores axis `a`'s window at `at`, one of the checked starts.
     #[inline(always)]
-    fn store(&self, at: usize, v: f32x8) {
+    fn store(&self, a: usize, at: usize, v: f32x8) {
         // SAFETY: as in `load`; `AtomicU32` is an `UnsafeCell`, so writing
         // through a pointer from a shared slice is allowed, and this thread
         // is the only one accessing these slots while it relaxes them.
-        unsafe { std::ptr::write_unaligned(self.ptr.add(at) as *mut [f32; 8], v.to_array()) }
+        unsafe { std::ptr::write_unaligned(self.ptr[a].add(at) as *mut [f32; 8], v.to_array()) }
     }
 }
 
@@ -431,12 +308,21 @@ fn relax_window(
     // The common case first, with the fewest checks: 8 free elements of
     // one material, all 48 neighbours there, of that material, uncut.
     if own_cells & splat_byte(FIXED | HELD) == 0
-        && let Some(m) = rows.window_material(lat, w, own_cells, &nb)
+        && let Some(m) = rows.window_material(lat, w)
     {
         uniform_window(lat, state, own, &nb, m, range, inv, tol, moves, w);
         return;
     }
     let (minus_x_edge, plus_x_edge) = rows.x_edges(w, lat.dims[0]);
+    // The next most common case: the same, but for the lattice's x faces
+    // (the first and last windows of every inner row).
+    if own_cells & splat_byte(FIXED | HELD) == 0
+        && let Some(m) = rows.window_material_x_faces(lat, w)
+    {
+        let links = [!plus_x_edge, !minus_x_edge, 0xff, 0xff, 0xff, 0xff];
+        masked_window(lat, state, own, &nb, &links, m, range, inv, tol, moves, w);
+        return;
+    }
     let cut = bytes8(&lat.cut, own);
     // Lanes holding an element (padding slots past the row are absent).
     let present = nonzero_lanes((own_cells & MAT) ^ MAT) & range;
@@ -516,13 +402,13 @@ fn uniform_window(
     let cur = &state.u[state.cur];
     let mut mv = f32x8::ZERO;
     let starts = [own, nb[0], nb[1], nb[2], nb[3], nb[4], nb[5]];
-    for a in 0..3 {
-        let arr = Windows::new(&cur[a], &starts);
-        let u = arr.load(own);
-        let n0 = arr.load(nb[0]);
+    let arr = Windows::new(cur, &starts);
+    for (a, &inv_a) in inv.iter().enumerate() {
+        let u = arr.load(a, own);
+        let n0 = arr.load(a, nb[0]);
         let (mut sum, mut lo, mut hi) = (n0, n0, n0);
         for &e in &nb[1..] {
-            let v = arr.load(e);
+            let v = arr.load(a, e);
             sum += v;
             lo = lo.fast_max(v);
             hi = hi.fast_min(v);
@@ -532,8 +418,8 @@ fn uniform_window(
         let cand = u + alpha * (sum * sixth - u);
         let clamped = cand.fast_max(lo).fast_min(hi);
         let v = (lo.simd_le(hi) & write_mask).select(clamped, u);
-        arr.store(own, v);
-        mv = mv.fast_max((v - u).abs() * f32x8::splat(inv[a]));
+        arr.store(a, own, v);
+        mv = mv.fast_max((v - u).abs() * f32x8::splat(inv_a));
     }
     let moved = mv.simd_ge(f32x8::splat(tol)).to_bitmask() as u8 & write;
     moves.record8(w, moved, write_mask & mv);
@@ -580,9 +466,9 @@ fn masked_window(
             starts[l + 1] = nb[l];
         }
     }
-    for a in 0..3 {
-        let arr = Windows::new(&cur[a], &starts);
-        let u = arr.load(own);
+    let arr = Windows::new(cur, &starts);
+    for (a, &inv_a) in inv.iter().enumerate() {
+        let u = arr.load(a, own);
         let (mut sum, mut lo, mut hi) = (
             f32x8::ZERO,
             f32x8::splat(f32::NEG_INFINITY),
@@ -592,7 +478,7 @@ fn masked_window(
             if link_lanes[l] == 0 {
                 continue;
             }
-            let v = arr.load(nb[l]);
+            let v = arr.load(a, nb[l]);
             sum += masks[l] & v;
             lo = lo.fast_max(masks[l].select(v, f32x8::splat(f32::NEG_INFINITY)));
             hi = hi.fast_min(masks[l].select(v, f32x8::splat(f32::INFINITY)));
@@ -602,8 +488,8 @@ fn masked_window(
         let cand = u + alpha * (sum * inv_count - u);
         let clamped = cand.fast_max(lo).fast_min(hi);
         let v = (lo.simd_le(hi) & write_mask).select(clamped, u);
-        arr.store(own, v);
-        mv = mv.fast_max((v - u).abs() * f32x8::splat(inv[a]));
+        arr.store(a, own, v);
+        mv = mv.fast_max((v - u).abs() * f32x8::splat(inv_a));
     }
     let moved = mv.simd_ge(f32x8::splat(tol)).to_bitmask() as u8 & write;
     moves.record8(w, moved, write_mask & mv);
@@ -619,13 +505,5 @@ mod tests {
         assert_eq!(nonzero_lanes(0x0100_00ff_0000_8000), 0b1001_0010);
         assert_eq!(nonzero_lanes(u64::MAX), 0xff);
         assert_eq!(pack_lanes(0x0100_0001_0000_0001), 0b1001_0001);
-        let mut r = RowMoves::new(130);
-        r.record8(60, 0b1000_0001, f32x8::ZERO);
-        assert!(r.get(60) && r.get(67) && !r.get(61));
-        assert!(r.any(61, 68) && !r.any(61, 67) && !r.any(0, 60));
-        r.record(129, 1.0, 0.5);
-        assert!(r.any(100, 130));
-        assert_eq!(r.take_max(), 1.0);
-        assert_eq!(r.take_max(), 0.0);
     }
 }

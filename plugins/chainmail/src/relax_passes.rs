@@ -9,7 +9,8 @@
 use crate::blocks::{Blocks, FaceMask};
 use crate::lattice::ElementLattice;
 use crate::relax::SweepReport;
-use crate::relax_lanes::{RowMoves, face_bits, fold_row, relax_row};
+use crate::relax_lanes::relax_row;
+use crate::row_moves::{BlockRowMoves, RowMoves, face_bits};
 use crate::state::State;
 use rayon::prelude::*;
 use std::sync::atomic::AtomicUsize;
@@ -55,13 +56,15 @@ pub fn sweep_runs(
 ) -> SweepReport {
     debug_assert!(set.windows(2).all(|w| w[0] < w[1]), "set must be ascending");
     let rows = runs_by_row(blocks, set);
-    let mut results: Vec<(Vec<(u32, FaceMask)>, f32)> =
-        rows.iter().map(|runs| (run_blocks(runs), 0.0)).collect();
+    let mut results: Vec<BlockRowSweep> = rows
+        .iter()
+        .map(|runs| (run_blocks(runs), BlockRowMoves::new(lat.hx), 0.0))
+        .collect();
     let tol = tol as f32;
     for colour in 0..2 {
         rows.par_iter()
             .zip(results.par_iter_mut())
-            .for_each(|(runs, (out, max))| {
+            .for_each(|(runs, (out, acc, max))| {
                 let mut moves = RowMoves::new(lat.hx);
                 walk_block_row(
                     lat,
@@ -69,17 +72,24 @@ pub fn sweep_runs(
                     runs,
                     colour,
                     &mut moves,
-                    out,
+                    acc,
                     |jk, q, moves| relax_row(lat, state, colour, jk, q, tol, moves),
                 );
+                if colour == 1 {
+                    fold_runs(blocks, runs, acc, out);
+                }
                 *max = max.max(moves.take_max());
             });
     }
     SweepReport {
-        max_move: results.iter().map(|r| r.1 as f64).fold(0.0, f64::max),
+        max_move: results.iter().map(|r| r.2 as f64).fold(0.0, f64::max),
         blocks: results.into_iter().flat_map(|r| r.0).collect(),
     }
 }
+
+/// One block row's part of a sweep: its blocks' masks, its moves over both
+/// colours, and its largest move.
+type BlockRowSweep = (Vec<(u32, FaceMask)>, BlockRowMoves, f32);
 
 /// The blocks of a block row's runs, in order, each with an empty face
 /// mask.
@@ -91,17 +101,15 @@ pub(crate) fn run_blocks(runs: &[Run]) -> Vec<(u32, FaceMask)> {
 
 /// Walks colour `colour`'s rows of one block row: for each row `(j, k)`
 /// and each run, `row((j, k), slots, moves)` processes the run's slots of
-/// that row and flags in `moves` those that changed, which are then folded
-/// into the run's entries of `out` (the runs' blocks in order, see
-/// [`run_blocks`]) as block face masks. Shared by relaxation and
-/// propagation.
+/// that row and flags in `moves` those that changed, which are then OR-ed
+/// into `acc`. Shared by relaxation and propagation.
 pub(crate) fn walk_block_row(
     lat: &ElementLattice,
     blocks: &Blocks,
     runs: &[Run],
     colour: usize,
     moves: &mut RowMoves,
-    out: &mut [(u32, FaceMask)],
+    acc: &mut BlockRowMoves,
     mut row: impl FnMut([usize; 2], (usize, usize), &mut RowMoves),
 ) {
     let nx = lat.dims[0];
@@ -110,21 +118,35 @@ pub(crate) fn walk_block_row(
     for k in lo[2]..hi[2] {
         for j in lo[1]..hi[1] {
             let p = (colour + j + k) & 1;
-            let yz_faces = face_bits(j, lo[1], hi[1], 1 << 2) | face_bits(k, lo[2], hi[2], 1 << 4);
             moves.clear();
-            let mut slot = 0;
             for run in runs {
                 let x0 = blocks.range(run.first as usize).0[0];
                 let x1 = (x0 + run.len as usize * sx).min(nx);
                 // Slots of this colour row in [x0, x1).
                 row([j, k], ((x0 + 1 - p) / 2, (x1 + 1 - p) / 2), moves);
-                let entries = &mut out[slot..slot + run.len as usize];
-                fold_row(moves, p, x0, sx, x1, yz_faces, |b, bits| {
-                    entries[b].1 |= bits
-                });
-                slot += run.len as usize;
             }
+            let yz_faces = face_bits(j, lo[1], hi[1], 1 << 2) | face_bits(k, lo[2], hi[2], 1 << 4);
+            acc.add_row(moves, p, yz_faces);
         }
+    }
+}
+
+/// Folds a block row's moves `acc` into the face masks of its runs' blocks
+/// (`out`, in [`run_blocks`] order).
+pub(crate) fn fold_runs(
+    blocks: &Blocks,
+    runs: &[Run],
+    acc: &BlockRowMoves,
+    out: &mut [(u32, FaceMask)],
+) {
+    let (nx, sx) = (blocks.dims[0], blocks.size[0]);
+    let mut slot = 0;
+    for run in runs {
+        let x0 = blocks.range(run.first as usize).0[0];
+        let x1 = (x0 + run.len as usize * sx).min(nx);
+        let entries = &mut out[slot..slot + run.len as usize];
+        acc.fold(x0, sx, x1, |b, bits| entries[b].1 |= bits);
+        slot += run.len as usize;
     }
 }
 
@@ -161,6 +183,7 @@ pub fn sweep_dense(
         let last = (g + 1) * stages / threads;
         let mut masks = vec![0; if last + 2 > stages { blocks.len() } else { 0 }];
         let mut moves = RowMoves::new(lat.hx);
+        let mut acc = BlockRowMoves::new(lat.hx);
         let mut max = 0f32;
         for step in 0..nz + (last - first) - 1 {
             for s in first..last {
@@ -177,7 +200,17 @@ pub fn sweep_dense(
                 } else {
                     &mut []
                 };
-                dense_plane(lat, state, blocks, s % 2, z, tol, &mut moves, plane);
+                dense_plane(
+                    lat,
+                    state,
+                    blocks,
+                    s % 2,
+                    z,
+                    tol,
+                    &mut moves,
+                    &mut acc,
+                    plane,
+                );
                 let m = moves.take_max();
                 if report {
                     max = max.max(m);
@@ -234,8 +267,7 @@ fn wait_for(counter: &AtomicUsize, need: usize) {
 }
 
 /// Relaxes colour `colour` on the whole plane `z`; ORs the face masks of
-/// the plane's block row (x fastest, then y) into `plane` unless it is
-/// empty.
+/// the plane's blocks (x fastest, then y) into `plane` unless it is empty.
 #[allow(clippy::too_many_arguments)]
 fn dense_plane(
     lat: &ElementLattice,
@@ -245,6 +277,7 @@ fn dense_plane(
     z: usize,
     tol: f32,
     moves: &mut RowMoves,
+    acc: &mut BlockRowMoves,
     plane: &mut [FaceMask],
 ) {
     let [nx, ny, nz] = lat.dims;
@@ -266,9 +299,14 @@ fn dense_plane(
         );
         if !plane.is_empty() {
             let (by, ylo) = (j / sy, (j / sy) * sy);
-            let faces = z_faces | face_bits(j, ylo, (ylo + sy).min(ny), 1 << 2);
-            let row = &mut plane[cx * by..cx * (by + 1)];
-            fold_row(moves, p, 0, sx, nx, faces, |b, bits| row[b] |= bits);
+            let yhi = (ylo + sy).min(ny);
+            acc.add_row(moves, p, z_faces | face_bits(j, ylo, yhi, 1 << 2));
+            if j + 1 == yhi {
+                // The block row's last row: fold it.
+                let row = &mut plane[cx * by..cx * (by + 1)];
+                acc.fold(0, sx, nx, |b, bits| row[b] |= bits);
+                acc.clear();
+            }
         }
     }
 }
