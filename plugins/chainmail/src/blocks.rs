@@ -108,10 +108,20 @@ impl Blocks {
                 }
             }
         }
-        for &b in &out {
-            seen[b as usize] = false;
+        if out.len() * 32 >= seen.len() {
+            // Dense: reading the flags in order is cheaper than sorting.
+            out.clear();
+            for (b, s) in seen.iter_mut().enumerate() {
+                if std::mem::take(s) {
+                    out.push(b as u32);
+                }
+            }
+        } else {
+            for &b in &out {
+                seen[b as usize] = false;
+            }
+            out.sort_unstable();
         }
-        out.sort_unstable();
         out
     }
 }
@@ -139,5 +149,37 @@ mod tests {
         assert!(seen.iter().all(|s| !s));
         // Unchanged blocks activate nothing.
         assert!(b.next_active(&[(4, 0b11_1111)], &mut seen).is_empty());
+    }
+
+    #[test]
+    fn sparse_and_dense_activation_lists_are_ascending_and_complete() {
+        let b = Blocks::new([64, 64, 64], [4, 4, 4]);
+        let mut seen = vec![false; b.len()];
+        for every in [1000, 7, 2] {
+            // Every `every`-th block changed, with varying borders.
+            let results: Vec<(u32, FaceMask)> = (0..b.len() as u32)
+                .step_by(every)
+                .map(|x| (x, CHANGED | (x % 64) as FaceMask))
+                .collect();
+            let mut expected = std::collections::BTreeSet::new();
+            for &(x, m) in &results {
+                let x = x as usize;
+                let c = [x % 16, (x / 16) % 16, x / 256];
+                expected.insert(x);
+                for a in 0..3 {
+                    let stride = [1, 16, 256][a];
+                    if m & (1 << (2 * a)) != 0 && c[a] > 0 {
+                        expected.insert(x - stride);
+                    }
+                    if m & (1 << (2 * a + 1)) != 0 && c[a] < 15 {
+                        expected.insert(x + stride);
+                    }
+                }
+            }
+            let next = b.next_active(&results, &mut seen);
+            let expected: Vec<u32> = expected.into_iter().map(|x| x as u32).collect();
+            assert_eq!(next, expected, "every {every}th block");
+            assert!(seen.iter().all(|s| !s));
+        }
     }
 }

@@ -6,7 +6,8 @@ use crate::gpu::GpuChainMail;
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
 use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
-use crate::relax::{sweep, sweep_scalar, sweeps_everything};
+use crate::relax::sweep_scalar;
+use crate::relax_passes::sweep_runs;
 use crate::removal::{carve_tets, cut_tets, segment_crosses_triangle};
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
@@ -256,10 +257,12 @@ impl ChainMail {
         self.state.get(self.state.cur, n)
     }
 
-    /// Bytes of model state per lattice site (both Jacobi copies, keys, the
-    /// material byte and the cut-link byte; block lists excluded).
-    pub fn bytes_per_element(&self) -> usize {
-        State::BYTES_PER_ELEMENT + 2
+    /// Bytes of model state per lattice site, counted from the arrays
+    /// themselves (both Jacobi copies, keys, and the lattice's material,
+    /// cut-link and interior bytes; block lists excluded).
+    pub fn bytes_per_element(&self) -> f64 {
+        let lattice = self.lat.cells.len() + self.lat.cut.len() + self.lat.interior().len();
+        (self.state.bytes() + lattice) as f64 / self.lat.len().max(1) as f64
     }
 
     /// Applies one interaction.
@@ -728,14 +731,11 @@ impl ChainMail {
             let all: Vec<u32> = (0..self.blocks.len() as u32).collect();
             sweep_scalar(&self.lat, &self.state, &self.blocks, &all, tol)
         } else if self.gpu.is_some() {
-            let (cur, mut set) = (self.state.cur, std::mem::take(&mut self.relax));
-            if sweeps_everything(&self.blocks, &set) {
-                set = (0..self.blocks.len() as u32).collect();
-            }
+            let (cur, set) = (self.state.cur, std::mem::take(&mut self.relax));
             self.cpu_stale = true;
             self.on_device(|g, _| g.relax(cur, &set, tol))
         } else {
-            sweep(&self.lat, &self.state, &self.blocks, &self.relax, tol)
+            sweep_runs(&self.lat, &self.state, &self.blocks, &self.relax, tol)
         };
         self.counts.relaxation_iterations += 1;
         for &(b, _) in &rep.blocks {

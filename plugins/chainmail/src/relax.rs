@@ -23,14 +23,12 @@
 //! Two kinds of sweep share [`relax_one`]:
 //! - [`sweep_scalar`], element by element in block order on one thread:
 //!   the sequential baseline's relaxation.
-//! - [`sweep`], the parallel model's: 8 elements at a time
-//!   ([`crate::relax_lanes`]) over the runs of active blocks, or over the
-//!   whole lattice in one pass when most blocks are active
+//! - [`crate::relax_passes::sweep_runs`], the parallel model's: 8 elements at a time
+//!   ([`crate::relax_lanes`]) over the runs of active blocks
 //!   ([`crate::relax_passes`]).
 
 use crate::blocks::{Blocks, CHANGED, FaceMask};
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
-use crate::relax_passes::{sweep_dense, sweep_runs};
 use crate::state::State;
 use rayon::prelude::*;
 
@@ -88,34 +86,6 @@ pub fn sweep_scalar(
         max_move: per_block.iter().map(|p| p.2 as f64).fold(0.0, f64::max),
         blocks: per_block.into_iter().map(|p| (p.0, p.1)).collect(),
     }
-}
-
-/// One red-black sweep over `set` (blocks, ascending), in parallel and 8
-/// slots at a time; moves smaller than `tol` (fraction of the element
-/// spacing) do not keep a block active. When at least three blocks in four
-/// are in the set, the whole lattice is swept in one pass instead
-/// ([`sweep_dense`]), and every block is reported.
-pub fn sweep(
-    lat: &ElementLattice,
-    state: &State,
-    blocks: &Blocks,
-    set: &[u32],
-    tol: f64,
-) -> SweepReport {
-    if sweeps_everything(blocks, set) {
-        // Mostly active: one pass over the whole lattice costs less than
-        // the runs (see `sweep_dense`).
-        sweep_dense(lat, state, blocks, tol, 1)
-    } else {
-        sweep_runs(lat, state, blocks, set, tol)
-    }
-}
-
-/// True when a sweep over `set` relaxes every block instead (at least three
-/// blocks in four active). The GPU path follows the same rule, so both
-/// paths relax the same elements.
-pub fn sweeps_everything(blocks: &Blocks, set: &[u32]) -> bool {
-    set.len() * 4 >= blocks.len() * 3
 }
 
 /// Relaxes element `n` (coordinates `c`) towards the weighted mean of its
@@ -210,7 +180,7 @@ pub fn energy(lat: &ElementLattice, state: &State) -> f64 {
 mod tests {
     use super::*;
     use crate::params::ChainMailParams;
-    use crate::relax_passes::{runs_by_row, sweep_dense, sweep_runs};
+    use crate::relax_passes::{runs_by_row, sweep_runs};
     use voxflex_core::glam::DVec3;
     use voxflex_core::grid::Grid;
     use voxflex_core::volume::{Volume, VoxelData};
@@ -261,10 +231,6 @@ mod tests {
         (lat, Blocks::new(dims, [8, 4, 4]))
     }
 
-    fn setup() -> (ElementLattice, Blocks) {
-        setup_with(false)
-    }
-
     /// A reproducible pseudo-random state, displacements within ±0.05 mm.
     fn random_state(lat: &ElementLattice) -> State {
         let s = State::new(lat.len());
@@ -291,12 +257,11 @@ mod tests {
 
     fn vector_matches_scalar(clean: bool) {
         let (lat, blocks) = setup_with(clean);
-        // Two blocks in three, so runs have gaps and windows overlap them
-        // (and the set is sparse enough not to take the dense pass).
+        // Two blocks in three, so runs have gaps and windows overlap them.
         let set: Vec<u32> = (0..blocks.len() as u32).filter(|b| b % 3 != 1).collect();
         let (a, b) = (random_state(&lat), random_state(&lat));
         for it in 0..6 {
-            let ra = sweep(&lat, &a, &blocks, &set, 1e-3);
+            let ra = sweep_runs(&lat, &a, &blocks, &set, 1e-3);
             let rb = sweep_scalar(&lat, &b, &blocks, &set, 1e-3);
             assert_eq!(ra.blocks, rb.blocks, "sweep {it}: block masks differ");
             assert!((ra.max_move - rb.max_move).abs() < 1e-5);
@@ -317,33 +282,6 @@ mod tests {
         assert!(moved.clone().count() > lat.len() / 2);
         assert!(moved.clone().all(|n| movable(lat.cells[n])));
         assert!(moved.into_iter().all(|n| lat.coords(n)[0] < lat.dims[0]));
-    }
-
-    #[test]
-    fn dense_pipelined_sweeps_equal_sweeps_one_after_another() {
-        let (lat, blocks) = setup();
-        let all: Vec<u32> = (0..blocks.len() as u32).collect();
-        for (threads, sweeps) in [(1, 1), (2, 1), (2, 3), (3, 2), (4, 4)] {
-            let (a, b) = (random_state(&lat), random_state(&lat));
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let ra = pool.install(|| sweep_dense(&lat, &a, &blocks, 1e-3, sweeps));
-            let mut rb = SweepReport::default();
-            for _ in 0..sweeps {
-                rb = sweep_runs(&lat, &b, &blocks, &all, 1e-3);
-            }
-            assert_eq!(ra.blocks, rb.blocks, "{threads} threads, {sweeps} sweeps");
-            assert_eq!(ra.max_move, rb.max_move);
-            for n in 0..lat.len() {
-                assert_eq!(
-                    a.get(0, n),
-                    b.get(0, n),
-                    "{threads} threads, {sweeps} sweeps"
-                );
-            }
-        }
     }
 
     #[test]

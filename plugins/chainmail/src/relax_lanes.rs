@@ -208,9 +208,8 @@ impl<'a> Windows<'a> {
         // SAFETY: `at + 8 <= len` was checked in `new`; `AtomicU32` has the
         // size, alignment and bit validity of `u32`, so 8 of them read as
         // `[f32; 8]`. While a colour is relaxed no thread writes these
-        // slots except the one reading them (a colour row has one writer,
-        // the other colour is only read, and the dense pass orders its
-        // stages with release/acquire counters), so the plain read does not
+        // slots except the one reading them (a colour row has one writer
+        // and the other colour is only read), so the plain read does not
         // race.
         f32x8::from(unsafe { std::ptr::read_unaligned(self.ptr[a].add(at) as *const [f32; 8]) })
     }
@@ -310,7 +309,9 @@ fn relax_window(
     if own_cells & splat_byte(FIXED | HELD) == 0
         && let Some(m) = rows.window_material(lat, w)
     {
-        uniform_window(lat, state, own, &nb, m, range, inv, tol, moves, w);
+        uniform_window::<false>(
+            lat, state, own, &nb, m, range, [0xff; 2], inv, tol, moves, w,
+        );
         return;
     }
     let (minus_x_edge, plus_x_edge) = rows.x_edges(w, lat.dims[0]);
@@ -319,8 +320,8 @@ fn relax_window(
     if own_cells & splat_byte(FIXED | HELD) == 0
         && let Some(m) = rows.window_material_x_faces(lat, w)
     {
-        let links = [!plus_x_edge, !minus_x_edge, 0xff, 0xff, 0xff, 0xff];
-        masked_window(lat, state, own, &nb, &links, m, range, inv, tol, moves, w);
+        let x_links = [!plus_x_edge, !minus_x_edge];
+        uniform_window::<true>(lat, state, own, &nb, m, range, x_links, inv, tol, moves, w);
         return;
     }
     let cut = bytes8(&lat.cut, own);
@@ -380,16 +381,20 @@ fn relax_window(
 }
 
 /// The uniform kernel: all six neighbours of every lane exist, share
-/// material `m` with it, and no link is cut.
+/// material `m` with it, and no link is cut. With `X_FACES`, the ±x links
+/// exist only in the lanes `x_links = [+x, −x]` (the window touches the
+/// lattice's x faces); the result is then bit-identical to
+/// [`masked_window`]'s with those masks, in fewer operations.
 #[allow(clippy::too_many_arguments)]
-#[inline]
-fn uniform_window(
+#[inline(always)]
+fn uniform_window<const X_FACES: bool>(
     lat: &ElementLattice,
     state: &State,
     own: usize,
     nb: &[usize; 6],
     m: u8,
     write: u8,
+    x_links: [u8; 2],
     inv: [f32; 3],
     tol: f32,
     moves: &mut RowMoves,
@@ -398,16 +403,33 @@ fn uniform_window(
     let link = *lat.material_link(m, m);
     let alpha = f32x8::splat(lat.materials[m as usize].elastic);
     let write_mask = lanes(write);
-    let sixth = f32x8::splat(1.0 / 6.0);
+    let (plus_x, minus_x) = (lanes(x_links[0]), lanes(x_links[1]));
+    let inv_count = if X_FACES {
+        let four = f32x8::splat(4.0);
+        f32x8::ONE / (four + (plus_x & f32x8::ONE) + (minus_x & f32x8::ONE))
+    } else {
+        f32x8::splat(1.0 / 6.0)
+    };
     let cur = &state.u[state.cur];
     let mut mv = f32x8::ZERO;
     let starts = [own, nb[0], nb[1], nb[2], nb[3], nb[4], nb[5]];
     let arr = Windows::new(cur, &starts);
+    let (neg, pos) = (f32x8::splat(f32::NEG_INFINITY), f32x8::splat(f32::INFINITY));
     for (a, &inv_a) in inv.iter().enumerate() {
         let u = arr.load(a, own);
         let n0 = arr.load(a, nb[0]);
-        let (mut sum, mut lo, mut hi) = (n0, n0, n0);
-        for &e in &nb[1..] {
+        let n1 = arr.load(a, nb[1]);
+        // Summed in the masked kernel's order, so both round alike.
+        let (mut sum, mut lo, mut hi) = if X_FACES {
+            (
+                (plus_x & n0) + (minus_x & n1),
+                plus_x.select(n0, neg).fast_max(minus_x.select(n1, neg)),
+                plus_x.select(n0, pos).fast_min(minus_x.select(n1, pos)),
+            )
+        } else {
+            (n0 + n1, n0.fast_max(n1), n0.fast_min(n1))
+        };
+        for &e in &nb[2..] {
             let v = arr.load(a, e);
             sum += v;
             lo = lo.fast_max(v);
@@ -415,7 +437,7 @@ fn uniform_window(
         }
         let d = f32x8::splat(link.d[a]);
         let (lo, hi) = (lo - d, hi + d);
-        let cand = u + alpha * (sum * sixth - u);
+        let cand = u + alpha * (sum * inv_count - u);
         let clamped = cand.fast_max(lo).fast_min(hi);
         let v = (lo.simd_le(hi) & write_mask).select(clamped, u);
         arr.store(a, own, v);

@@ -1,10 +1,10 @@
-//! The parallel model's relaxation passes over the lattice, built on the
-//! row kernels of [`crate::relax_lanes`]:
-//! - [`sweep_runs`]: one sweep over the active blocks, grouped into runs
-//!   along x per block row (one rayon task per block row, so a colour row
-//!   has one writer);
-//! - [`sweep_dense`]: several sweeps over the whole lattice in one pass
-//!   through memory, when most blocks are active.
+//! The parallel model's relaxation pass over the lattice, built on the row
+//! kernels of [`crate::relax_lanes`].
+//!
+//! [`sweep_runs`]: one sweep over the active blocks, grouped into runs
+//! along x per block row (one rayon task per block row, so a colour row has
+//! one writer). The walk over a block row's colour rows is shared with
+//! propagation.
 
 use crate::blocks::{Blocks, FaceMask};
 use crate::lattice::ElementLattice;
@@ -13,8 +13,6 @@ use crate::relax_lanes::relax_row;
 use crate::row_moves::{BlockRowMoves, RowMoves, face_bits};
 use crate::state::State;
 use rayon::prelude::*;
-use std::sync::atomic::AtomicUsize;
-use std::sync::atomic::Ordering::{Acquire, Release};
 
 /// A run of active blocks along x in one block row: blocks
 /// `first .. first + len` (block indices, consecutive in x).
@@ -147,166 +145,5 @@ pub(crate) fn fold_runs(
         let entries = &mut out[slot..slot + run.len as usize];
         acc.fold(x0, sx, x1, |b, bits| entries[b].1 |= bits);
         slot += run.len as usize;
-    }
-}
-
-/// `sweeps` red-black sweeps over the whole lattice in one pass through
-/// memory (temporal blocking); returns the last sweep's report, every block
-/// listed.
-///
-/// The `2 · sweeps` half-sweeps ("stages": red of sweep 0, black of sweep
-/// 0, red of sweep 1, …) walk the z planes as a skewed wavefront: at step
-/// `t`, stage `s` relaxes its colour on plane `t − s`. A stage reads the
-/// other colour on planes `z − 1 … z + 1`, which stage `s − 1` finished one
-/// step earlier and stage `s + 1` has not touched yet, so the result is
-/// exactly that of the sweeps one after the other, while a plane stays in
-/// cache for all stages. The stages are split into one contiguous group
-/// per thread (a pipeline); the first stage of a group waits until the
-/// previous group's last stage has finished plane `z + 1` (a release/acquire
-/// counter per stage), and no group ever waits on a later one.
-pub fn sweep_dense(
-    lat: &ElementLattice,
-    state: &State,
-    blocks: &Blocks,
-    tol: f64,
-    sweeps: usize,
-) -> SweepReport {
-    let stages = 2 * sweeps.max(1);
-    let nz = lat.dims[2];
-    let threads = rayon::current_num_threads().clamp(1, stages);
-    let progress: Vec<AtomicUsize> = (0..stages).map(|_| AtomicUsize::new(0)).collect();
-    let tol = tol as f32;
-    let plane_blocks = blocks.count[0] * blocks.count[1];
-    // Each group's masks (of the last sweep's stages) and largest move.
-    let group = |g: usize| -> (Vec<FaceMask>, f32) {
-        let first = g * stages / threads;
-        let last = (g + 1) * stages / threads;
-        let mut masks = vec![0; if last + 2 > stages { blocks.len() } else { 0 }];
-        let mut moves = RowMoves::new(lat.hx);
-        let mut acc = BlockRowMoves::new(lat.hx);
-        let mut max = 0f32;
-        for step in 0..nz + (last - first) - 1 {
-            for s in first..last {
-                let Some(z) = step.checked_sub(s - first).filter(|&z| z < nz) else {
-                    continue;
-                };
-                if s == first && s > 0 {
-                    wait_for(&progress[s - 1], (z + 2).min(nz));
-                }
-                let report = s + 2 >= stages;
-                let base = plane_blocks * (z / blocks.size[2]);
-                let plane = if report {
-                    &mut masks[base..base + plane_blocks]
-                } else {
-                    &mut []
-                };
-                dense_plane(
-                    lat,
-                    state,
-                    blocks,
-                    s % 2,
-                    z,
-                    tol,
-                    &mut moves,
-                    &mut acc,
-                    plane,
-                );
-                let m = moves.take_max();
-                if report {
-                    max = max.max(m);
-                }
-                progress[s].store(z + 1, Release);
-            }
-        }
-        (masks, max)
-    };
-    let results: Vec<(Vec<FaceMask>, f32)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (1..threads)
-            .map(|g| {
-                let group = &group;
-                scope.spawn(move || group(g))
-            })
-            .collect();
-        let mut out = vec![group(0)];
-        out.extend(
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("relaxation thread")),
-        );
-        out
-    });
-    let mut masks = vec![0; blocks.len()];
-    let mut max_move = 0f64;
-    for (m, max) in results {
-        for (o, b) in masks.iter_mut().zip(m) {
-            *o |= b;
-        }
-        max_move = max_move.max(max as f64);
-    }
-    SweepReport {
-        blocks: masks
-            .into_iter()
-            .enumerate()
-            .map(|(b, m)| (b as u32, m))
-            .collect(),
-        max_move,
-    }
-}
-
-/// Spins, then yields, until `counter` reaches `need`.
-fn wait_for(counter: &AtomicUsize, need: usize) {
-    let mut spins = 0u32;
-    while counter.load(Acquire) < need {
-        spins += 1;
-        if spins < 1 << 10 {
-            std::hint::spin_loop();
-        } else {
-            std::thread::yield_now();
-        }
-    }
-}
-
-/// Relaxes colour `colour` on the whole plane `z`; ORs the face masks of
-/// the plane's blocks (x fastest, then y) into `plane` unless it is empty.
-#[allow(clippy::too_many_arguments)]
-fn dense_plane(
-    lat: &ElementLattice,
-    state: &State,
-    blocks: &Blocks,
-    colour: usize,
-    z: usize,
-    tol: f32,
-    moves: &mut RowMoves,
-    acc: &mut BlockRowMoves,
-    plane: &mut [FaceMask],
-) {
-    let [nx, ny, nz] = lat.dims;
-    let [sx, sy, sz] = blocks.size;
-    let cx = blocks.count[0];
-    let zlo = (z / sz) * sz;
-    let z_faces = face_bits(z, zlo, (zlo + sz).min(nz), 1 << 4);
-    for j in 0..ny {
-        let p = (colour + j + z) & 1;
-        moves.clear();
-        relax_row(
-            lat,
-            state,
-            colour,
-            [j, z],
-            (0, (nx + 1 - p) / 2),
-            tol,
-            moves,
-        );
-        if !plane.is_empty() {
-            let (by, ylo) = (j / sy, (j / sy) * sy);
-            let yhi = (ylo + sy).min(ny);
-            acc.add_row(moves, p, z_faces | face_bits(j, ylo, yhi, 1 << 2));
-            if j + 1 == yhi {
-                // The block row's last row: fold it.
-                let row = &mut plane[cx * by..cx * (by + 1)];
-                acc.fold(0, sx, nx, |b, bits| row[b] |= bits);
-                acc.clear();
-            }
-        }
     }
 }

@@ -191,8 +191,11 @@ impl State {
         current - shift
     }
 
-    /// Bytes held per element (both copies).
-    pub const BYTES_PER_ELEMENT: usize = 2 * (3 * 4 + 4);
+    /// Bytes held in the state's arrays (both copies).
+    pub fn bytes(&self) -> usize {
+        let words: usize = self.u.iter().flatten().chain(&self.key).map(Vec::len).sum();
+        words * std::mem::size_of::<AtomicU32>()
+    }
 }
 
 #[cfg(test)]

@@ -486,3 +486,14 @@ fn cuts_and_carves_of_a_down_sampled_model_reach_the_sampling_mesh() {
     assert_eq!(bits[centre], 0b1_1111);
     assert_eq!(bits[0], 0);
 }
+
+#[test]
+fn memory_per_element_is_within_the_budget() {
+    // Counted from the arrays: 2 × (3 displacements + key) × 4 B, plus the
+    // material, cut-link and interior bytes; the budget is 40 B.
+    let v = volume([16, 12, 10], |_, _, _| 100);
+    let mats = "{ range = [50, 150], constraint = 0.3 }";
+    let m = ChainMail::new(v.view(), params("block = [4, 4, 4]", mats)).unwrap();
+    let b = m.bytes_per_element();
+    assert!((35.0..=40.0).contains(&b), "{b} bytes per element");
+}
