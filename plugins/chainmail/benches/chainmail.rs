@@ -45,6 +45,7 @@ fn setup(n: usize, algorithm: &str, block: [usize; 3]) -> ChainMail {
         point: corner.to_array(),
         by: Some([-pull, -pull, -pull]),
         to: None,
+        path: None,
         frames: 1,
     })
     .expect("grab");
@@ -205,6 +206,7 @@ fn main() {
             point: centre.to_array(),
             by: Some([0.0, 0.0, reach]),
             to: None,
+            path: None,
             frames: 1,
         })
         .expect("grab");

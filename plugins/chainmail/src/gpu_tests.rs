@@ -135,6 +135,7 @@ fn gpu_frames_and_identity_map_match_rayon() {
             point: p,
             by: Some([3.0, -2.0, 2.0]),
             to: None,
+            path: None,
             frames: 3,
         })
         .unwrap();

@@ -15,6 +15,7 @@ use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferId, GpuService};
+use voxflex_core::interaction::GrabMotion;
 use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
 use voxflex_core::volume::VolumeView;
 
@@ -22,12 +23,10 @@ use voxflex_core::volume::VolumeView;
 #[derive(Clone, Debug)]
 struct Grab {
     element: usize,
-    /// Displacement when grabbed, mm.
-    start: [f32; 3],
-    /// Total offset, mm.
-    offset: [f64; 3],
-    frames: u64,
-    done: u64,
+    /// Rest position of the element, world mm.
+    rest: DVec3,
+    /// Where the element goes, world mm.
+    motion: GrabMotion,
 }
 
 /// Counts since the model was built (or the last [`ChainMail::reset_counts`]).
@@ -276,35 +275,21 @@ impl ChainMail {
 
     fn apply(&mut self, spec: &InteractionSpec) -> Result<(), ModelError> {
         match *spec {
-            InteractionSpec::Grab {
-                point,
-                by,
-                to,
-                frames,
-            } => {
+            InteractionSpec::Grab { point, .. } => {
                 let p = DVec3::from_array(point);
                 let element = self.lat.nearest(p).ok_or_else(|| {
                     ModelError::new("chainmail grab: the model has no element to grab")
                 })?;
                 let rest = self.lat.world(self.lat.coords(element));
-                let start = self.displacement(element);
-                let offset = match (by, to) {
-                    (Some(b), _) => b,
-                    (None, Some(t)) => {
-                        let now =
-                            rest + DVec3::new(start[0] as f64, start[1] as f64, start[2] as f64);
-                        (DVec3::from_array(t) - now).to_array()
-                    }
-                    (None, None) => unreachable!("validated by InteractionSpec::from_toml"),
-                };
+                let u = self.displacement(element).map(f64::from);
+                let motion = GrabMotion::new(spec, rest + DVec3::from_array(u))
+                    .expect("a grab has a motion");
                 self.grabs.retain(|g| g.element != element);
                 self.lat.cells[element] |= HELD;
                 self.grabs.push(Grab {
                     element,
-                    start,
-                    offset,
-                    frames,
-                    done: 0,
+                    rest,
+                    motion,
                 });
             }
             InteractionSpec::Fix {
@@ -387,6 +372,11 @@ impl ChainMail {
                 }
                 self.topology_changed |= removed > 0;
                 tracing::debug!(removed, "chainmail: elements carved");
+            }
+            InteractionSpec::Load { .. } => {
+                return Err(ModelError::new(
+                    "chainmail load: ChainMail has no forces; move the tissue with a `grab` instead",
+                ));
             }
             InteractionSpec::Release => {
                 for g in self.grabs.drain(..) {
@@ -529,15 +519,10 @@ impl ChainMail {
         let mut moved = Vec::new();
         let mut targets = Vec::new();
         for g in &mut self.grabs {
-            if g.done >= g.frames {
-                continue;
+            if let Some(target) = g.motion.advance() {
+                let u = target - g.rest;
+                targets.push((g.element, [u.x as f32, u.y as f32, u.z as f32]));
             }
-            g.done += 1;
-            let f = g.done as f64 / g.frames as f64;
-            targets.push((
-                g.element,
-                [0, 1, 2].map(|a| (g.start[a] as f64 + f * g.offset[a]) as f32),
-            ));
         }
         if targets.is_empty() {
             return moved;

@@ -38,6 +38,7 @@ pub(crate) fn grab(m: &mut ChainMail, at: [usize; 3], by: [f64; 3]) {
         point: p,
         by: Some(by),
         to: None,
+        path: None,
         frames: 1,
     })
     .unwrap();
@@ -182,6 +183,7 @@ fn heterogeneous_ring_needs_timestamps() {
             point,
             by: Some(by),
             to: None,
+            path: None,
             frames: 1,
         })
         .unwrap();
@@ -324,6 +326,7 @@ fn a_moving_grab_starts_a_new_wave_each_frame() {
         point: p,
         by: Some([-4.0, 0.0, 0.0]),
         to: None,
+        path: None,
         frames: 4,
     })
     .unwrap();

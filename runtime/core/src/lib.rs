@@ -19,6 +19,7 @@ pub mod error;
 mod fast_div;
 pub mod gpu;
 pub mod grid;
+pub mod interaction;
 pub mod io;
 pub mod opacity;
 pub mod opacity_map;
