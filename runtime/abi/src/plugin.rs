@@ -536,3 +536,18 @@ macro_rules! __export_header {
         }
     };
 }
+
+/// Every mesh-based model is a plugin by its solver alone: a crate that
+/// implements [`voxflex_core::mesh_model::MeshSolver`] for `S` exports
+/// `MeshModel<S>` with [`export_deformation_plugin!`].
+impl<S: voxflex_core::mesh_model::MeshSolver> DeformationPlugin
+    for voxflex_core::mesh_model::MeshModel<S>
+{
+    const NAME: &'static str = S::NAME;
+    const DESCRIPTION: &'static str = S::DESCRIPTION;
+    const CAPABILITIES: u32 = crate::ffi::CAPABILITY_CPU;
+
+    fn create(params_toml: &str, _host: HostContext) -> Result<Self, ModelError> {
+        Self::from_toml(params_toml)
+    }
+}

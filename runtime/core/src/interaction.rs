@@ -217,7 +217,9 @@ impl InteractionSpec {
                         return fail("give `traction` (Pa) or `force` (N), not both");
                     }
                     (None, None) => {
-                        return fail("needs `traction = [x, y, z]` (Pa) or `force = [x, y, z]` (N)");
+                        return fail(
+                            "needs `traction = [x, y, z]` (Pa) or `force = [x, y, z]` (N)",
+                        );
                     }
                     _ => return fail("`traction`/`force` must be finite"),
                 }

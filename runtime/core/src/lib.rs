@@ -21,6 +21,7 @@ pub mod gpu;
 pub mod grid;
 pub mod interaction;
 pub mod io;
+pub mod mesh_model;
 pub mod opacity;
 pub mod opacity_map;
 pub mod phantom;

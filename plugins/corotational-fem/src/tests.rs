@@ -1,0 +1,245 @@
+//! Accuracy and robustness tests of the corotational solver through the
+//! shared mesh model (the same path the plugin's scenes take).
+
+use crate::solver::{CorotationalFem, FemParams, SolverKind};
+use voxflex_core::deformation::{DeformationModel, FrameInfo};
+use voxflex_core::glam::{DMat3, DQuat, DVec3};
+use voxflex_core::grid::Grid;
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::proxy::uniform_proxy;
+use voxflex_core::tet_mesh::TetMesh;
+
+type Fem = MeshModel<CorotationalFem>;
+
+/// The cantilever box [0, 10] × [0, 1] × [0, 1] with cells of 1/r (the
+/// mesh rule of `tests/reference/cantilever.py`).
+pub(crate) fn cantilever_mesh(r: usize) -> TetMesh {
+    let h = 1.0 / r as f64;
+    let grid = Grid::new([10 * r + 1, r + 1, r + 1], DVec3::splat(h), DVec3::ZERO);
+    uniform_proxy(&grid, 1, |_| Some(0)).expect("cantilever mesh")
+}
+
+/// The reference's node index of a position (x fastest).
+fn reference_index(p: DVec3, r: usize) -> usize {
+    let [i, j, k] = [p.x, p.y, p.z].map(|c| (c * r as f64).round() as usize);
+    i + (10 * r + 1) * (j + (r + 1) * k)
+}
+
+/// A static cantilever model, clamped at x = 0, with a traction of `load`
+/// (Pa, −z) on the face x = 10.
+pub(crate) fn cantilever(r: usize, load: f64, params: FemParams) -> Fem {
+    let mut m = Fem::with_mesh(
+        cantilever_mesh(r),
+        vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
+        DVec3::ZERO,
+        params,
+    )
+    .unwrap();
+    m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 1.01]")
+        .unwrap();
+    m.interact(&format!(
+        "kind = \"load\"\nmin = [9.99, -0.01, -0.01]\nmax = [10.01, 1.01, 1.01]\ntraction = [0, 0, {}]",
+        -load
+    ))
+    .unwrap();
+    m
+}
+
+pub(crate) fn static_params(tolerance: f64) -> FemParams {
+    FemParams {
+        solver: SolverKind::Static,
+        cg_tolerance: tolerance,
+        cg_max_iterations: 5000,
+        ..FemParams::default()
+    }
+}
+
+fn frame(dt: f64) -> FrameInfo {
+    FrameInfo {
+        frame: 0,
+        frames: 1,
+        dt_s: dt,
+    }
+}
+
+fn reference() -> serde_json::Value {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/reference/cantilever.json"
+    );
+    let text = std::fs::read_to_string(path).expect("tests/reference/cantilever.json");
+    serde_json::from_str(&text).expect("reference JSON")
+}
+
+#[test]
+fn cantilever_matches_an_independent_linear_solution_on_the_same_mesh() {
+    let reference = reference();
+    for level in reference["levels"].as_array().unwrap() {
+        let r = level["r"].as_u64().unwrap() as usize;
+        let Some(expected) = level.get("displacements").and_then(|d| d.as_array()) else {
+            continue;
+        };
+        // Small deflection: the linear reference scales with the load, so
+        // compare u / P at a load where rotations are negligible.
+        let p = 1e-4;
+        let mut m = cantilever(r, p, static_params(1e-12));
+        m.step(frame(0.0)).unwrap();
+        let mesh = m.mesh().unwrap().clone();
+        let u = &m.state().unwrap().u;
+        let mut worst = 0f64;
+        let mut largest = 0f64;
+        for (n, x) in mesh.nodes.iter().enumerate() {
+            let e = &expected[reference_index(*x, r)];
+            let e = DVec3::new(
+                e[0].as_f64().unwrap(),
+                e[1].as_f64().unwrap(),
+                e[2].as_f64().unwrap(),
+            );
+            worst = worst.max((u[n] / p - e).length());
+            largest = largest.max(e.length());
+        }
+        assert!(
+            worst <= 0.005 * largest,
+            "r = {r}: largest deviation {worst:.3e} of {largest:.3e}"
+        );
+        assert!(largest > 1.0, "the reference deflects");
+    }
+}
+
+#[test]
+fn a_rigidly_rotated_rest_state_has_no_elastic_force() {
+    let mesh = cantilever_mesh(2);
+    let fem = Fem::with_mesh(
+        mesh.clone(),
+        vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
+        DVec3::ZERO,
+        FemParams::default(),
+    )
+    .unwrap();
+    let solver = fem.solver().unwrap();
+    let q = DMat3::from_quat(DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2));
+    let rotated: Vec<DVec3> = mesh.nodes.iter().map(|x| q * *x - *x).collect();
+    let f = solver.elastic_forces(&rotated);
+    // Against the forces of a 1 % stretch along x.
+    let stretched: Vec<DVec3> = mesh
+        .nodes
+        .iter()
+        .map(|x| DVec3::new(0.01 * x.x, 0.0, 0.0))
+        .collect();
+    let scale = solver
+        .elastic_forces(&stretched)
+        .iter()
+        .map(|v| v.length())
+        .fold(0.0, f64::max);
+    let worst = f.iter().map(|v| v.length()).fold(0.0, f64::max);
+    assert!(worst <= 1e-9 * scale, "{worst:.3e} against {scale:.3e}");
+}
+
+#[test]
+fn a_large_rotation_keeps_the_beam_length_where_linear_fem_grows_it() {
+    // A heavy tip load bends the beam through a large angle: the
+    // corotational beam keeps its axis length; the linear solution (one
+    // solve about the rest rotations) stretches it.
+    let length = |m: &Fem| {
+        let mesh = m.mesh().unwrap();
+        let u = &m.state().unwrap().u;
+        // The neutral axis y = z = 0.5 (a node line at r = 2).
+        let mut edge: Vec<DVec3> = mesh
+            .nodes
+            .iter()
+            .zip(u)
+            .filter(|(x, _)| x.y == 0.5 && x.z == 0.5)
+            .map(|(x, d)| *x + *d)
+            .collect();
+        edge.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.z.total_cmp(&b.z)));
+        edge.windows(2).map(|w| (w[1] - w[0]).length()).sum::<f64>()
+    };
+    let mut corotated = cantilever(2, 3.0, static_params(1e-10));
+    corotated.step(frame(0.0)).unwrap();
+    let linear_params = FemParams {
+        static_iterations: 1,
+        ..static_params(1e-10)
+    };
+    let mut linear = cantilever(2, 3.0, linear_params);
+    linear.step(frame(0.0)).unwrap();
+    let (lc, ll) = (length(&corotated), length(&linear));
+    let tip = |m: &Fem| {
+        let mesh = m.mesh().unwrap();
+        let u = &m.state().unwrap().u;
+        mesh.nodes
+            .iter()
+            .zip(u)
+            .filter(|(x, _)| x.x == 10.0)
+            .map(|(_, d)| d.z)
+            .sum::<f64>()
+    };
+    assert!(tip(&corotated) < -3.0, "the load bends the beam a lot");
+    assert!((lc - 10.0).abs() < 0.1, "corotational length {lc}");
+    assert!(ll > 10.5, "linear length {ll}");
+}
+
+#[test]
+fn inverted_elements_recover_without_nan() {
+    // A block squashed through itself along z (z → −0.2 z: every element
+    // inside out, the flip along its shortest axis), then let go: it
+    // returns to rest.
+    let h = 0.5;
+    let grid = Grid::new([5, 5, 5], DVec3::splat(h), DVec3::ZERO);
+    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
+    let params = FemParams {
+        solver: SolverKind::Dynamic,
+        substeps: 4,
+        mass_damping: 5.0,
+        ..FemParams::default()
+    };
+    let mut m = Fem::with_mesh(
+        mesh.clone(),
+        vec![ElasticMaterial::new(5000.0, 0.3, 1e-6)],
+        DVec3::ZERO,
+        params,
+    )
+    .unwrap();
+    let inverted: Vec<DVec3> = mesh
+        .nodes
+        .iter()
+        .map(|x| DVec3::new(0.0, 0.0, -1.2 * x.z))
+        .collect();
+    m.set_displacements(&inverted).unwrap();
+    let inverted_count = (0..mesh.tets.len())
+        .filter(|&t| {
+            let x = mesh.tets[t].map(|n| mesh.nodes[n as usize] + inverted[n as usize]);
+            voxflex_core::tet_mesh::signed_volume(x) < 0.0
+        })
+        .count();
+    assert_eq!(
+        inverted_count,
+        mesh.tets.len(),
+        "every element starts inverted"
+    );
+    for _ in 0..400 {
+        m.step(frame(0.01)).unwrap();
+    }
+    let u = &m.state().unwrap().u;
+    assert!(u.iter().all(|v| v.is_finite()));
+    let still_inverted = (0..mesh.tets.len())
+        .filter(|&t| {
+            let x = mesh.tets[t].map(|n| mesh.nodes[n as usize] + u[n as usize]);
+            voxflex_core::tet_mesh::signed_volume(x) <= 0.0
+        })
+        .count();
+    assert_eq!(still_inverted, 0, "elements still inverted");
+    // Back at rest up to a rigid motion: every edge has its rest length.
+    for tet in &mesh.tets {
+        for a in 0..4 {
+            for b in a + 1..4 {
+                let (i, j) = (tet[a] as usize, tet[b] as usize);
+                let rest = (mesh.nodes[i] - mesh.nodes[j]).length();
+                let now = (mesh.nodes[i] + u[i] - mesh.nodes[j] - u[j]).length();
+                assert!(
+                    (now - rest).abs() < 0.02 * rest,
+                    "edge {i}-{j}: {now} vs {rest}"
+                );
+            }
+        }
+    }
+}

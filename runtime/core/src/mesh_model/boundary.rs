@@ -1,0 +1,140 @@
+//! Boundary conditions of a mesh model, as the solvers see them for one
+//! step: which nodes are fixed, which are driven to a displacement, the
+//! hanging-node ties of an octree proxy, and the external nodal forces.
+
+use crate::proxy::HangingNode;
+use crate::tet_mesh::TetMesh;
+use glam::DVec3;
+
+/// The boundary conditions of one step. Node indices are the proxy's;
+/// displacements in mm, forces in µN (g·mm/s²).
+#[derive(Clone, Debug, Default)]
+pub struct Boundary {
+    /// Per node: held at zero displacement.
+    pub fixed: Vec<bool>,
+    /// Nodes driven to a displacement this step (grabs), mm.
+    pub driven: Vec<(u32, DVec3)>,
+    /// Hanging nodes: each takes `Σ w · master` (octree proxies).
+    pub hanging: Vec<HangingNode>,
+    /// External force per node (gravity, loads), µN.
+    pub force: Vec<DVec3>,
+}
+
+impl Boundary {
+    /// Free boundary conditions for `nodes` nodes.
+    pub fn new(nodes: usize) -> Self {
+        Self {
+            fixed: vec![false; nodes],
+            driven: Vec::new(),
+            hanging: Vec::new(),
+            force: vec![DVec3::ZERO; nodes],
+        }
+    }
+
+    /// Per node: its displacement is imposed (fixed, driven or hanging), so
+    /// the solver does not solve for it.
+    pub fn constrained(&self) -> Vec<bool> {
+        let mut c = self.fixed.clone();
+        for &(n, _) in &self.driven {
+            c[n as usize] = true;
+        }
+        for h in &self.hanging {
+            c[h.node as usize] = true;
+        }
+        c
+    }
+
+    /// Sets the imposed displacements in `u`: zero on fixed nodes, the
+    /// target on driven ones, then every hanging node from its masters.
+    pub fn impose(&self, u: &mut [DVec3]) {
+        for (n, f) in self.fixed.iter().enumerate() {
+            if *f {
+                u[n] = DVec3::ZERO;
+            }
+        }
+        for &(n, d) in &self.driven {
+            u[n as usize] = d;
+        }
+        self.tie(u);
+    }
+
+    /// Sets every hanging node of `v` from its masters (`v = P v`).
+    pub fn tie(&self, v: &mut [DVec3]) {
+        for h in &self.hanging {
+            v[h.node as usize] = h
+                .masters
+                .iter()
+                .map(|&(m, w)| w as f64 * v[m as usize])
+                .sum();
+        }
+    }
+
+    /// Moves what acts on hanging nodes to their masters and clears it
+    /// (`f ← Pᵀ f`), the transpose of [`Boundary::tie`].
+    pub fn untie(&self, f: &mut [DVec3]) {
+        for h in self.hanging.iter().rev() {
+            let v = std::mem::take(&mut f[h.node as usize]);
+            for &(m, w) in &h.masters {
+                f[m as usize] += w as f64 * v;
+            }
+        }
+    }
+}
+
+/// Nodal forces (µN) of a uniform traction `t` (Pa) on the boundary faces
+/// of `mesh` whose centroids lie in the box `[lo, hi]` (mm): each face of
+/// area `A` gives `A t / 3` to each corner (the consistent load of linear
+/// elements). Returns the forces added and how many faces carried load.
+pub fn traction_forces(mesh: &TetMesh, lo: DVec3, hi: DVec3, t: DVec3, out: &mut [DVec3]) -> usize {
+    let Ok(faces) = mesh.boundary_faces() else {
+        return 0;
+    };
+    let mut loaded = 0;
+    for f in faces {
+        let p = f.map(|n| mesh.nodes[n as usize]);
+        let c = (p[0] + p[1] + p[2]) / 3.0;
+        if c.cmplt(lo).any() || c.cmpgt(hi).any() {
+            continue;
+        }
+        let area = (p[1] - p[0]).cross(p[2] - p[0]).length() / 2.0;
+        for n in f {
+            out[n as usize] += t * (area / 3.0);
+        }
+        loaded += 1;
+    }
+    loaded
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn untie_is_the_transpose_of_tie() {
+        let mut b = Boundary::new(4);
+        b.hanging.push(HangingNode {
+            node: 3,
+            masters: vec![(0, 0.25), (1, 0.75)],
+        });
+        let x = [
+            DVec3::new(1.0, 2.0, 3.0),
+            DVec3::new(-1.0, 0.5, 2.0),
+            DVec3::new(4.0, 4.0, 4.0),
+            DVec3::new(9.0, 9.0, 9.0),
+        ];
+        let y = [
+            DVec3::new(0.3, 0.1, -2.0),
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(2.0, -1.0, 0.0),
+            DVec3::new(5.0, 6.0, 7.0),
+        ];
+        let (mut px, mut pty) = (x, y);
+        b.tie(&mut px);
+        b.untie(&mut pty);
+        // ⟨P x, y⟩ = ⟨x, Pᵀ y⟩ for x that P leaves unchanged off the tie.
+        let dot =
+            |a: &[DVec3; 4], b: &[DVec3; 4]| a.iter().zip(b).map(|(p, q)| p.dot(*q)).sum::<f64>();
+        assert!((dot(&px, &y) - dot(&x, &pty)).abs() < 1e-12);
+        assert_eq!(pty[3], DVec3::ZERO);
+    }
+}

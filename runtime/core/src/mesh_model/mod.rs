@@ -1,0 +1,92 @@
+//! What every mesh-based deformation model shares, so that a plugin such as
+//! `mass-spring` or `corotational-fem` is only its solver.
+//!
+//! [`MeshModel<S>`] is the whole [`crate::deformation::DeformationModel`]:
+//! it builds the tetrahedral proxy from the scene (a uniform or octree
+//! proxy of the volume, or a mesh file; [`params`]), gives each tetrahedron
+//! its material, binds rest points barycentrically, turns the scene's
+//! interactions into boundary conditions ([`boundary`]: fixed nodes, grabs
+//! along paths, loads ramped in, gravity), calls the solver once per frame,
+//! maps, and exports the deformed proxy as `.vtu`. A solver implements
+//! [`MeshSolver`]: one step from the boundary conditions.
+//!
+//! Frames: node indices are the proxy's; positions and displacements in
+//! world millimetres; forces in µN (mm-g-s units; stresses in Pa).
+
+pub mod block_matrix;
+pub mod boundary;
+pub mod material;
+mod model;
+pub mod params;
+pub mod pcg;
+
+pub use block_matrix::BlockMatrix;
+pub use boundary::Boundary;
+pub use material::{ElasticMaterial, lumped_masses};
+pub use model::MeshModel;
+pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
+pub use pcg::{CgOutcome, CgSettings};
+
+use crate::error::ModelError;
+use crate::tet_mesh::TetMesh;
+use glam::DVec3;
+
+/// The nodes' state: displacement (mm) and velocity (mm/s) per node.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NodeState {
+    /// Displacement from the rest position, mm.
+    pub u: Vec<DVec3>,
+    /// Velocity, mm/s (dynamic solvers).
+    pub v: Vec<DVec3>,
+}
+
+impl NodeState {
+    /// At rest: every node at zero displacement and velocity.
+    pub fn at_rest(nodes: usize) -> Self {
+        Self {
+            u: vec![DVec3::ZERO; nodes],
+            v: vec![DVec3::ZERO; nodes],
+        }
+    }
+}
+
+/// What a solver's step did, for metrics and tests.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SolveReport {
+    /// Explicit sub-steps taken (1 for implicit and static solves).
+    pub substeps: u32,
+    /// Linear-solver iterations, summed over the step.
+    pub iterations: u32,
+    /// Relative residual of the last linear solve (0 for explicit steps).
+    pub residual: f64,
+}
+
+/// A deformation solver on a tetrahedral proxy: the only part a mesh-based
+/// plugin writes.
+pub trait MeshSolver: Send + Sized + 'static {
+    /// The plugin's name (`plugin = "…"`, `[model.params.<name>]`).
+    const NAME: &'static str;
+    /// One line for `voxflex plugins`.
+    const DESCRIPTION: &'static str;
+    /// The solver's own keys of the plugin's table (everything but
+    /// [`MeshModelParams`]'s), refusing unknown keys.
+    type Params: serde::de::DeserializeOwned + Send;
+
+    /// Builds the solver for `mesh` (rest configuration, world mm), whose
+    /// tetrahedron `t` has material `materials[mesh.labels[t]]`.
+    fn new(
+        mesh: &TetMesh,
+        materials: &[ElasticMaterial],
+        params: Self::Params,
+    ) -> Result<Self, ModelError>;
+
+    /// Advances `state` by `dt_s` seconds under `bc` (a static solver finds
+    /// the equilibrium instead). On return the imposed displacements of
+    /// `bc` hold exactly and every value is finite.
+    fn step(
+        &mut self,
+        dt_s: f64,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError>;
+}

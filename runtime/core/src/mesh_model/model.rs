@@ -1,0 +1,548 @@
+//! [`MeshModel`]: a [`MeshSolver`] wrapped into a whole deformation model.
+
+use super::boundary::{Boundary, traction_forces};
+use super::material::{ElasticMaterial, lumped_masses};
+use super::params::{MeshModelParams, ProxySpec, solver_params, split};
+use super::{MeshSolver, NodeState, SolveReport};
+use crate::barycentric::BarycentricBinding;
+use crate::deformation::{
+    BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
+    RestPoints, StepOutcome,
+};
+use crate::error::ModelError;
+use crate::interaction::{GrabMotion, InteractionSpec};
+use crate::io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
+use crate::proxy::{HangingNode, octree_proxy, uniform_proxy};
+use crate::tet_mesh::TetMesh;
+use crate::volume::VolumeView;
+use glam::DVec3;
+
+/// A node moved by less than this (mm) in a step does not count as a
+/// change (downstream stages skip a frame where nothing moved more).
+const STILL_MM: f64 = 1e-6;
+
+/// A load being ramped in.
+struct Load {
+    /// Full nodal forces, µN.
+    forces: Vec<DVec3>,
+    frames: u64,
+    done: u64,
+}
+
+/// A grabbed node and where it goes.
+struct Grab {
+    node: u32,
+    motion: GrabMotion,
+    /// Displacement it is held at, mm.
+    held: DVec3,
+}
+
+/// A mesh-based deformation model: the proxy, its boundary conditions and
+/// bindings, around solver `S`.
+pub struct MeshModel<S: MeshSolver> {
+    params: MeshModelParams,
+    solver_params: Option<S::Params>,
+    built: Option<Built<S>>,
+    bindings: Vec<BarycentricBinding>,
+    grabs: Vec<Grab>,
+    loads: Vec<Load>,
+    /// The field changed since the last `map`.
+    unmapped: bool,
+    last: SolveReport,
+}
+
+/// What `init` builds.
+struct Built<S> {
+    mesh: TetMesh,
+    materials: Vec<ElasticMaterial>,
+    solver: S,
+    state: NodeState,
+    /// Fixed nodes and hanging ties (forces and drives are set per step).
+    bc: Boundary,
+    /// Gravity's nodal forces, µN.
+    gravity: Vec<DVec3>,
+    /// The displacements as f32 arrays, for `map`.
+    u32: [Vec<f32>; 3],
+}
+
+impl<S: MeshSolver> MeshModel<S> {
+    /// A model from the TOML text of its `[model.params.<plugin>]` table;
+    /// the proxy is built in `init`.
+    pub fn from_toml(text: &str) -> Result<Self, ModelError> {
+        let (params, rest) = split(S::NAME, text)?;
+        let solver_params = solver_params::<S::Params>(S::NAME, rest)?;
+        Ok(Self::new(params, solver_params))
+    }
+
+    /// A model from parsed parameters.
+    pub fn new(params: MeshModelParams, solver_params: S::Params) -> Self {
+        Self {
+            params,
+            solver_params: Some(solver_params),
+            built: None,
+            bindings: Vec::new(),
+            grabs: Vec::new(),
+            loads: Vec::new(),
+            unmapped: true,
+            last: SolveReport::default(),
+        }
+    }
+
+    /// Builds the model on a given mesh (labels are material indices) with
+    /// the given materials, bypassing the scene's proxy: for programs and
+    /// tests that bring their own mesh.
+    pub fn with_mesh(
+        mesh: TetMesh,
+        materials: Vec<ElasticMaterial>,
+        gravity: DVec3,
+        solver_params: S::Params,
+    ) -> Result<Self, ModelError> {
+        let mut m = Self::new(
+            MeshModelParams {
+                proxy: ProxySpec::default(),
+                materials: Vec::new(),
+                gravity: gravity.to_array(),
+                vtu: None,
+            },
+            solver_params,
+        );
+        m.build(mesh, materials, Vec::new())?;
+        Ok(m)
+    }
+
+    fn build(
+        &mut self,
+        mesh: TetMesh,
+        materials: Vec<ElasticMaterial>,
+        hanging: Vec<HangingNode>,
+    ) -> Result<(), ModelError> {
+        if let Some(&l) = mesh.labels.iter().find(|&&l| l as usize >= materials.len()) {
+            return Err(ModelError(format!(
+                "{}: a tetrahedron has material {l} but there are {} materials",
+                S::NAME,
+                materials.len()
+            )));
+        }
+        let params = self
+            .solver_params
+            .take()
+            .ok_or_else(|| ModelError(format!("{}: init called twice", S::NAME)))?;
+        let solver = S::new(&mesh, &materials, params)?;
+        let n = mesh.nodes.len();
+        let g = DVec3::from_array(self.params.gravity);
+        let gravity = lumped_masses(&mesh, &materials)
+            .into_iter()
+            .map(|m| m * g)
+            .collect();
+        let mut bc = Boundary::new(n);
+        bc.hanging = hanging;
+        tracing::info!(
+            nodes = n,
+            tetrahedra = mesh.tets.len(),
+            hanging = bc.hanging.len(),
+            "{}: proxy built",
+            S::NAME
+        );
+        self.built = Some(Built {
+            mesh,
+            materials,
+            solver,
+            state: NodeState::at_rest(n),
+            bc,
+            gravity,
+            u32: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+        });
+        Ok(())
+    }
+
+    fn built(&self) -> Result<&Built<S>, ModelError> {
+        self.built
+            .as_ref()
+            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))
+    }
+
+    /// The proxy (after `init`).
+    pub fn mesh(&self) -> Option<&TetMesh> {
+        self.built.as_ref().map(|b| &b.mesh)
+    }
+
+    /// The nodes' displacements (mm) and velocities (mm/s), after `init`.
+    pub fn state(&self) -> Option<&NodeState> {
+        self.built.as_ref().map(|b| &b.state)
+    }
+
+    /// Puts the nodes at displacements `u` (mm), at rest (zero velocity):
+    /// for programs and tests that start from a deformed state.
+    pub fn set_displacements(&mut self, u: &[DVec3]) -> Result<(), ModelError> {
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
+        if u.len() != b.state.u.len() || u.iter().any(|v| !v.is_finite()) {
+            return Err(ModelError(format!(
+                "{}: {} displacements given for {} nodes (all must be finite)",
+                S::NAME,
+                u.len(),
+                b.state.u.len()
+            )));
+        }
+        b.state.u.copy_from_slice(u);
+        b.state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
+        self.unmapped = true;
+        Ok(())
+    }
+
+    /// The solver (after `init`).
+    pub fn solver(&self) -> Option<&S> {
+        self.built.as_ref().map(|b| &b.solver)
+    }
+
+    /// What the last step's solve did.
+    pub fn last_solve(&self) -> SolveReport {
+        self.last
+    }
+
+    /// Builds the proxy and materials the scene asks for from `volume`.
+    fn proxy(
+        &self,
+        volume: VolumeView<'_>,
+    ) -> Result<(TetMesh, Vec<ElasticMaterial>, Vec<HangingNode>), ModelError> {
+        let name = S::NAME;
+        let specs = &self.params.materials;
+        let materials: Vec<ElasticMaterial> =
+            specs.iter().map(ElasticMaterial::from_spec).collect();
+        let mesh_error = |e: crate::error::MeshError| ModelError(format!("{name}: {e}"));
+        match &self.params.proxy {
+            ProxySpec::File { path } => {
+                let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+                let mut mesh = match ext {
+                    "msh" => read_msh(path),
+                    "node" => read_tetgen(path),
+                    _ => {
+                        return Err(ModelError(format!(
+                            "{name} proxy: {} is neither a Gmsh `.msh` nor a TetGen `.node` file",
+                            path.display()
+                        )));
+                    }
+                }
+                .map_err(|e| ModelError(format!("{name} proxy: {e}")))?;
+                for l in mesh.labels.iter_mut() {
+                    let m = specs
+                        .iter()
+                        .position(|s| s.label == Some(*l))
+                        .ok_or_else(|| {
+                            ModelError(format!(
+                                "{name} proxy: {} has tetrahedra tagged {l} but no material has \
+                             `label = {l}`; add one to `materials`",
+                                path.display()
+                            ))
+                        })?;
+                    *l = m as u16;
+                }
+                Ok((mesh, materials, Vec::new()))
+            }
+            proxy => {
+                let labels = voxel_materials(volume, specs);
+                let g = volume.grid;
+                let label = |v: [usize; 3]| {
+                    let l = labels[g.linear(v[0], v[1], v[2])];
+                    (l != u16::MAX).then_some(l)
+                };
+                match proxy {
+                    ProxySpec::Uniform { step } => {
+                        let mesh = uniform_proxy(&g, *step, label).map_err(mesh_error)?;
+                        Ok((mesh, materials, Vec::new()))
+                    }
+                    ProxySpec::Octree { max_cell } => {
+                        let p = octree_proxy(&g, *max_cell, label).map_err(mesh_error)?;
+                        Ok((p.mesh, materials, p.hanging))
+                    }
+                    ProxySpec::File { .. } => unreachable!("handled above"),
+                }
+            }
+        }
+    }
+
+    /// The nodes within `[lo, hi]` (rest positions, mm).
+    fn nodes_in(mesh: &TetMesh, lo: DVec3, hi: DVec3) -> Vec<u32> {
+        (0..mesh.nodes.len() as u32)
+            .filter(|&n| {
+                let p = mesh.nodes[n as usize];
+                p.cmpge(lo).all() && p.cmple(hi).all()
+            })
+            .collect()
+    }
+
+    fn apply(&mut self, spec: &InteractionSpec) -> Result<(), ModelError> {
+        let name = S::NAME;
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        match spec {
+            InteractionSpec::Grab { point, .. } => {
+                // The node nearest the point where it is now.
+                let p = DVec3::from_array(*point);
+                let node = (0..b.mesh.nodes.len())
+                    .min_by(|&x, &y| {
+                        let dx = (b.mesh.nodes[x] + b.state.u[x] - p).length_squared();
+                        let dy = (b.mesh.nodes[y] + b.state.u[y] - p).length_squared();
+                        dx.total_cmp(&dy)
+                    })
+                    .ok_or_else(|| ModelError(format!("{name} grab: the proxy has no node")))?;
+                let now = b.mesh.nodes[node] + b.state.u[node];
+                let motion = GrabMotion::new(spec, now).expect("a grab has a motion");
+                let held = b.state.u[node];
+                self.grabs.retain(|g| g.node != node as u32);
+                self.grabs.push(Grab {
+                    node: node as u32,
+                    motion,
+                    held,
+                });
+            }
+            InteractionSpec::Fix { min, max, material } => {
+                let mat = match material {
+                    Some(m) => Some(
+                        b.materials
+                            .iter()
+                            .position(|x| x.name.as_deref() == Some(m.as_str()))
+                            .ok_or_else(|| {
+                                ModelError(format!("{name} fix: no material is named `{m}`"))
+                            })? as u16,
+                    ),
+                    None => None,
+                };
+                let mut of_material = vec![mat.is_none(); b.mesh.nodes.len()];
+                if let Some(m) = mat {
+                    for (t, tet) in b.mesh.tets.iter().enumerate() {
+                        if b.mesh.labels[t] == m {
+                            for &n in tet {
+                                of_material[n as usize] = true;
+                            }
+                        }
+                    }
+                }
+                let inside = |p: DVec3| match (min, max) {
+                    (Some(lo), Some(hi)) => {
+                        p.cmpge(DVec3::from_array(*lo)).all()
+                            && p.cmple(DVec3::from_array(*hi)).all()
+                    }
+                    _ => true,
+                };
+                let mut fixed = 0;
+                for (n, &of) in of_material.iter().enumerate() {
+                    if of && inside(b.mesh.nodes[n]) {
+                        b.bc.fixed[n] = true;
+                        b.state.u[n] = DVec3::ZERO;
+                        b.state.v[n] = DVec3::ZERO;
+                        fixed += 1;
+                    }
+                }
+                if fixed == 0 {
+                    tracing::warn!("{name} fix: no node lies in the region");
+                }
+            }
+            InteractionSpec::Release => self.grabs.clear(),
+            InteractionSpec::Load {
+                min,
+                max,
+                traction,
+                force,
+                frames,
+            } => {
+                let (lo, hi) = (DVec3::from_array(*min), DVec3::from_array(*max));
+                let mut forces = vec![DVec3::ZERO; b.mesh.nodes.len()];
+                match (traction, force) {
+                    (Some(t), _) => {
+                        let faces =
+                            traction_forces(&b.mesh, lo, hi, DVec3::from_array(*t), &mut forces);
+                        if faces == 0 {
+                            return Err(ModelError(format!(
+                                "{name} load: no boundary face of the proxy has its centre in \
+                                 the box {min:?}..{max:?} (mm)"
+                            )));
+                        }
+                    }
+                    (None, Some(f)) => {
+                        let nodes = Self::nodes_in(&b.mesh, lo, hi);
+                        if nodes.is_empty() {
+                            return Err(ModelError(format!(
+                                "{name} load: no node of the proxy lies in the box \
+                                 {min:?}..{max:?} (mm)"
+                            )));
+                        }
+                        // N → µN, shared equally.
+                        let each = DVec3::from_array(*f) * 1e6 / nodes.len() as f64;
+                        for n in nodes {
+                            forces[n as usize] = each;
+                        }
+                    }
+                    (None, None) => unreachable!("validated by InteractionSpec::from_toml"),
+                }
+                self.loads.push(Load {
+                    forces,
+                    frames: *frames,
+                    done: 0,
+                });
+            }
+            InteractionSpec::Cut { .. } | InteractionSpec::Carve { .. } => {
+                return Err(ModelError(format!(
+                    "{name} {}: topology changes are not implemented for mesh models yet; \
+                     use the chainmail plugin to cut or carve",
+                    spec.kind()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// One frame: grabs and loads advance, the solver steps.
+    pub fn advance(&mut self, dt_s: f64) -> Result<bool, ModelError> {
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{}: step before init", S::NAME)))?;
+        b.bc.driven.clear();
+        for g in &mut self.grabs {
+            if let Some(target) = g.motion.advance() {
+                g.held = target - b.mesh.nodes[g.node as usize];
+            }
+            b.bc.driven.push((g.node, g.held));
+        }
+        b.bc.force.clone_from(&b.gravity);
+        for load in &mut self.loads {
+            load.done = (load.done + 1).min(load.frames);
+            let ramp = load.done as f64 / load.frames as f64;
+            for (f, l) in b.bc.force.iter_mut().zip(&load.forces) {
+                *f += ramp * *l;
+            }
+        }
+        let before = b.state.u.clone();
+        self.last = b.solver.step(dt_s, &b.bc, &mut b.state)?;
+        if let Some(n) = b
+            .state
+            .u
+            .iter()
+            .chain(&b.state.v)
+            .position(|v| !v.is_finite())
+        {
+            return Err(ModelError(format!(
+                "{}: the solve diverged (node {} is no longer finite); lower the time step, \
+                 raise the sub-steps or use the implicit solver",
+                S::NAME,
+                n % b.state.u.len()
+            )));
+        }
+        let moved = b
+            .state
+            .u
+            .iter()
+            .zip(&before)
+            .any(|(a, p)| (*a - *p).abs().max_element() > STILL_MM);
+        if moved {
+            for (n, u) in b.state.u.iter().enumerate() {
+                for a in 0..3 {
+                    b.u32[a][n] = u[a] as f32;
+                }
+            }
+            if let Some(path) = &self.params.vtu {
+                let u = [&b.u32[0][..], &b.u32[1][..], &b.u32[2][..]];
+                write_vtu(path, &b.mesh, Some(u))
+                    .map_err(|e| ModelError(format!("{} vtu: {e}", S::NAME)))?;
+            }
+        }
+        self.unmapped |= moved;
+        Ok(moved)
+    }
+}
+
+/// Per voxel: the index of the first material whose range holds its value
+/// (`u16::MAX` for none).
+fn voxel_materials(volume: VolumeView<'_>, specs: &[super::MaterialSpec]) -> Vec<u16> {
+    (0..volume.grid.len())
+        .map(|l| {
+            let v = volume.data.get_f32(l) as f64;
+            specs
+                .iter()
+                .position(|s| s.range.is_some_and(|r| v >= r[0] && v < r[1]))
+                .map_or(u16::MAX, |m| m as u16)
+        })
+        .collect()
+}
+
+impl<S: MeshSolver> DeformationModel for MeshModel<S> {
+    fn init(
+        &mut self,
+        volume: VolumeView<'_>,
+        backend: ExecutionBackend,
+    ) -> Result<(), ModelError> {
+        if backend == ExecutionBackend::Gpu {
+            return Err(ModelError(format!(
+                "{}: no GPU path yet; use backend = \"cpu\" (or \"auto\")",
+                S::NAME
+            )));
+        }
+        let (mesh, materials, hanging) = self.proxy(volume)?;
+        self.build(mesh, materials, hanging)
+    }
+
+    fn bind(&mut self, rest: RestPoints<'_>) -> Result<BindingId, ModelError> {
+        rest.check_finite()?;
+        let b = self.built()?;
+        let binding = BarycentricBinding::bind(&b.mesh, rest.len(), |i| rest.point(i));
+        if binding.outside > 0 {
+            tracing::info!(
+                outside = binding.outside,
+                points = binding.len(),
+                "{}: points outside the proxy follow its nearest surface",
+                S::NAME
+            );
+        }
+        self.bindings.push(binding);
+        self.unmapped = true;
+        Ok(BindingId(self.bindings.len() as u64 - 1))
+    }
+
+    fn interact(&mut self, interaction_toml: &str) -> Result<(), ModelError> {
+        let spec = InteractionSpec::from_toml(interaction_toml)?;
+        self.apply(&spec)
+    }
+
+    fn step(&mut self, frame: FrameInfo) -> Result<StepOutcome, ModelError> {
+        let changed = self.advance(frame.dt_s)?;
+        Ok(StepOutcome { changed })
+    }
+
+    fn dirty_region(&self) -> DirtyRegion {
+        if self.unmapped {
+            DirtyRegion::All
+        } else {
+            DirtyRegion::None
+        }
+    }
+
+    fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError> {
+        let b = self.built()?;
+        let bound = self
+            .bindings
+            .get(binding.0 as usize)
+            .ok_or_else(|| ModelError(format!("unknown binding id {}", binding.0)))?;
+        let DisplacementTarget::Cpu { x, y, z } = out else {
+            return Err(ModelError(format!("{}: no GPU path yet", S::NAME)));
+        };
+        if [x.len(), y.len(), z.len()]
+            .iter()
+            .any(|&l| l != bound.len())
+        {
+            return Err(ModelError(format!(
+                "displacement arrays hold {} values but the binding has {} points",
+                x.len(),
+                bound.len()
+            )));
+        }
+        let u = [&b.u32[0][..], &b.u32[1][..], &b.u32[2][..]];
+        bound.map(&b.mesh, u, [x, y, z]);
+        self.unmapped = false;
+        Ok(())
+    }
+}
