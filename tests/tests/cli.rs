@@ -90,8 +90,8 @@ fn converged_frames_skip_downstream_stages_and_a_second_run_reruns_nothing() {
 }
 
 #[test]
-fn chainmail_head_scene_runs_and_swaps_to_affine_with_one_edit() {
-    plugin_dir(&["chainmail", "affine", "raycast"]);
+fn chainmail_head_scene_runs_and_swaps_to_every_model_with_one_edit() {
+    plugin_dir(&["chainmail", "affine", "raycast", "corotational-fem", "mass-spring"]);
     let tmp = tempfile::tempdir().unwrap();
     let scene_text =
         std::fs::read_to_string(repo_root().join("configs/chainmail-head.toml")).unwrap();
@@ -137,18 +137,30 @@ fn chainmail_head_scene_runs_and_swaps_to_affine_with_one_edit() {
         );
     }
 
-    // The same scene, one line changed.
-    let swapped = scene_text.replacen("plugin = \"chainmail\"", "plugin = \"affine\"", 1);
-    assert_ne!(swapped, scene_text);
-    std::fs::write(tmp.path().join("s.toml"), &swapped).unwrap();
-    let o = voxflex(&["run", "s.toml", "--out", "af"], tmp.path());
-    assert!(o.status.success(), "{}", text(&o));
-    assert_eq!(metrics(&tmp.path().join("af"))["plugin"]["name"], "affine");
-    assert_ne!(
-        std::fs::read(tmp.path().join("af/deformed.nii.gz")).unwrap(),
-        cm,
-        "a different model must give a different volume"
-    );
+    // The same scene, one line changed, for every other model.
+    let mut volumes = vec![cm];
+    for (plugin, out) in [
+        ("affine", "af"),
+        ("corotational-fem", "fem"),
+        ("mass-spring", "ms"),
+    ] {
+        let swapped = scene_text.replacen(
+            "plugin = \"chainmail\"",
+            &format!("plugin = \"{plugin}\""),
+            1,
+        );
+        assert_ne!(swapped, scene_text);
+        std::fs::write(tmp.path().join("s.toml"), &swapped).unwrap();
+        let o = voxflex(&["run", "s.toml", "--out", out], tmp.path());
+        assert!(o.status.success(), "{plugin}: {}", text(&o));
+        assert_eq!(metrics(&tmp.path().join(out))["plugin"]["name"], plugin);
+        let v = std::fs::read(tmp.path().join(out).join("deformed.nii.gz")).unwrap();
+        assert!(
+            volumes.iter().all(|other| *other != v),
+            "{plugin}: a different model must give a different volume"
+        );
+        volumes.push(v);
+    }
 }
 
 #[test]

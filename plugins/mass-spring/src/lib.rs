@@ -1,0 +1,30 @@
+//! # voxflex-mass-spring — a mass-spring model on a tetrahedral proxy
+//!
+//! Springs on the proxy's edges with stiffness from Young's modulus and the
+//! tetrahedra's volumes, lumped masses, spring and mass damping; explicit
+//! symplectic Euler sub-stepped below the stability limit, or a linearised
+//! backward-Euler step solved by PCG (see [`solver`]).
+//!
+//! Everything but the solver — the proxy, materials, boundary conditions,
+//! interactions, binding and map — is [`voxflex_core::mesh_model`]'s, so a
+//! scene swaps between this plugin and `corotational-fem` with one line.
+//!
+//! Scene usage:
+//!
+//! ```toml
+//! [model]
+//! plugin = "mass-spring"
+//! [model.params.mass-spring]
+//! proxy = { kind = "uniform", step = 4 }
+//! materials = [{ name = "soft tissue", range = [-50, 300], youngs_modulus = 3000 }]
+//! integrator = "explicit"   # or "implicit"
+//! damping_ratio = 0.1
+//! ```
+
+pub mod solver;
+#[cfg(test)]
+mod tests;
+
+pub use solver::{Integrator, MassSpring, SpringParams};
+
+voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<MassSpring>);

@@ -1,0 +1,493 @@
+//! The mass-spring model on a tetrahedral proxy's edges.
+//!
+//! **Springs.** One spring per edge. A tetrahedron of volume `V` gives each
+//! of its six edges the stiffness `E V / (6 L²)` (`L` the edge's rest
+//! length): a spring stretched by the strain `ε` then stores `½ E ε² V/6`,
+//! the tetrahedron's uniaxial strain energy shared over its edges, so the
+//! stiffness follows the material and the mesh size. An edge shared by
+//! several tetrahedra sums their shares. Springs carry no shear or volume
+//! term: the model is softer than FEM in shear and has no Poisson effect,
+//! which is the error the mass-spring-vs-FEM comparison reports.
+//!
+//! **Damping.** Along each spring, `c = damping_ratio · 2 √(k m̄)` on the
+//! relative velocity of its ends (`m̄` the ends' reduced mass), plus mass
+//! damping `α` on every node.
+//!
+//! **Integration.**
+//! - `integrator = "explicit"`: symplectic Euler,
+//!   `v += h M⁻¹ f(x, v)`, `x += h v`, with `h` the frame's time step split
+//!   into as many sub-steps as the stability limit needs: `h ≤ 0.9 · 2 / ω`,
+//!   with `ω² ≤ max_i 2 Σ_j k_ij / m_i` (Gershgorin on `M⁻¹ K`). More than
+//!   `max_substeps` sub-steps is refused with a message saying what to do.
+//! - `integrator = "implicit"`: one linearised backward-Euler step per
+//!   frame, `(M + h D + h² K) v⁺ = M v + h f(x, v)`, `K` the springs'
+//!   tangent stiffness, solved by block-Jacobi PCG.
+
+use rayon::prelude::*;
+use serde::Deserialize;
+use std::collections::HashMap;
+use voxflex_core::error::ModelError;
+use voxflex_core::glam::{DMat3, DVec3};
+use voxflex_core::mesh_model::pcg::{self, CgSettings};
+use voxflex_core::mesh_model::{
+    BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
+};
+use voxflex_core::tet_mesh::TetMesh;
+
+/// The time integrator.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Integrator {
+    /// Symplectic Euler with a stable sub-step.
+    #[default]
+    Explicit,
+    /// One linearised backward-Euler step per frame.
+    Implicit,
+}
+
+/// The solver's keys of `[model.params.mass-spring]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpringParams {
+    /// `"explicit"` (default) or `"implicit"`.
+    #[serde(default)]
+    pub integrator: Integrator,
+    /// Spring damping as a fraction of critical (default 0.1).
+    #[serde(default = "default_damping_ratio")]
+    pub damping_ratio: f64,
+    /// Mass damping α, 1/s (default 1).
+    #[serde(default = "default_mass_damping")]
+    pub mass_damping: f64,
+    /// Most explicit sub-steps per frame before the step is refused
+    /// (default 10,000).
+    #[serde(default = "default_max_substeps")]
+    pub max_substeps: u32,
+    /// PCG relative residual of the implicit step (default 1e-6).
+    #[serde(default = "default_tolerance")]
+    pub cg_tolerance: f64,
+    /// PCG iteration cap of the implicit step (default 200).
+    #[serde(default = "default_cg_max")]
+    pub cg_max_iterations: u32,
+}
+
+fn default_damping_ratio() -> f64 {
+    0.1
+}
+fn default_mass_damping() -> f64 {
+    1.0
+}
+fn default_max_substeps() -> u32 {
+    10_000
+}
+fn default_tolerance() -> f64 {
+    1e-6
+}
+fn default_cg_max() -> u32 {
+    200
+}
+
+impl Default for SpringParams {
+    fn default() -> Self {
+        Self {
+            integrator: Integrator::default(),
+            damping_ratio: default_damping_ratio(),
+            mass_damping: default_mass_damping(),
+            max_substeps: default_max_substeps(),
+            cg_tolerance: default_tolerance(),
+            cg_max_iterations: default_cg_max(),
+        }
+    }
+}
+
+impl SpringParams {
+    fn validate(&self) -> Result<(), ModelError> {
+        let fail = |m: String| Err(ModelError(format!("mass-spring params: {m}")));
+        let valid = |d: f64| d.is_finite() && d >= 0.0;
+        if !valid(self.damping_ratio) || !valid(self.mass_damping) {
+            return fail("damping_ratio and mass_damping must be finite and ≥ 0".into());
+        }
+        if self.max_substeps == 0 || self.cg_max_iterations == 0 {
+            return fail("max_substeps and cg_max_iterations must be ≥ 1".into());
+        }
+        if !(self.cg_tolerance > 0.0 && self.cg_tolerance < 1.0) {
+            return fail(format!(
+                "cg_tolerance {} must lie in (0, 1)",
+                self.cg_tolerance
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The springs, structure of arrays.
+#[derive(Clone, Debug, Default)]
+pub struct Springs {
+    /// End nodes.
+    pub ends: Vec<[u32; 2]>,
+    /// Rest length, mm.
+    pub rest: Vec<f64>,
+    /// Stiffness, µN/mm.
+    pub k: Vec<f64>,
+    /// Damping coefficient, µN·s/mm.
+    pub c: Vec<f64>,
+}
+
+/// The mass-spring solver.
+pub struct MassSpring {
+    params: SpringParams,
+    rest: Vec<DVec3>,
+    masses: Vec<f64>,
+    springs: Springs,
+    /// Node `n`'s springs: `(spring, +1 for end 0 / −1 for end 1)` in
+    /// `incident[incident_start[n] .. incident_start[n + 1]]`.
+    incident_start: Vec<u32>,
+    incident: Vec<(u32, f64)>,
+    /// Largest stable explicit step, s.
+    stable_dt: f64,
+    /// Per tetrahedron: its six edges' springs and its share of each
+    /// stiffness (implicit assembly).
+    tet_edges: Vec<[(u32, f64); 6]>,
+    matrix: Option<BlockMatrix>,
+    /// Scratch: per-spring force on end 0, µN.
+    force: Vec<DVec3>,
+}
+
+/// The corner pairs of a tetrahedron's six edges.
+const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+
+impl MassSpring {
+    /// The springs.
+    pub fn springs(&self) -> &Springs {
+        &self.springs
+    }
+
+    /// Largest stable explicit time step, s.
+    pub fn stable_dt(&self) -> f64 {
+        self.stable_dt
+    }
+
+    /// Spring forces at positions `x` and velocities `v` into `self.force`
+    /// (force on end 0; end 1 takes the opposite).
+    fn spring_forces(&mut self, x: &[DVec3], v: &[DVec3]) {
+        let s = &self.springs;
+        self.force
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(i, f)| {
+                let [a, b] = s.ends[i].map(|n| n as usize);
+                let d = x[b] - x[a];
+                let len = d.length();
+                let dir = if len > 0.0 { d / len } else { DVec3::ZERO };
+                let stretch = s.k[i] * (len - s.rest[i]);
+                let damp = s.c[i] * (v[b] - v[a]).dot(dir);
+                *f = (stretch + damp) * dir;
+            });
+    }
+
+    /// Total force per node (springs, mass damping, external), µN.
+    fn node_forces(&mut self, x: &[DVec3], v: &[DVec3], bc: &Boundary, out: &mut [DVec3]) {
+        self.spring_forces(x, v);
+        let (start, inc, force) = (&self.incident_start, &self.incident, &self.force);
+        let (alpha, masses) = (self.params.mass_damping, &self.masses);
+        out.par_iter_mut()
+            .enumerate()
+            .with_min_len(2048)
+            .for_each(|(n, o)| {
+                let springs = inc[start[n] as usize..start[n + 1] as usize]
+                    .iter()
+                    .fold(DVec3::ZERO, |acc, &(s, sign)| {
+                        acc + sign * force[s as usize]
+                    });
+                *o = springs + bc.force[n] - alpha * masses[n] * v[n];
+            });
+    }
+
+    fn step_explicit(
+        &mut self,
+        dt: f64,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
+        let needed = (dt / self.stable_dt).ceil().max(1.0);
+        if needed > self.params.max_substeps as f64 {
+            return Err(ModelError(format!(
+                "mass-spring: the frame time step {dt} s needs {needed} explicit sub-steps of at \
+                 most {:.3e} s (the stiffest spring's limit), above max_substeps = {}; raise \
+                 max_substeps, lower the scene's dt_s, soften the stiffest material, or use \
+                 integrator = \"implicit\"",
+                self.stable_dt, self.params.max_substeps
+            )));
+        }
+        let substeps = needed as u32;
+        let h = dt / substeps as f64;
+        let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
+        let mut x: Vec<DVec3> = self
+            .rest
+            .iter()
+            .zip(&state.u)
+            .map(|(r, u)| *r + *u)
+            .collect();
+        let start_u = state.u.clone();
+        let mut f = vec![DVec3::ZERO; x.len()];
+        for s in 1..=substeps {
+            self.node_forces(&x, &state.v, bc, &mut f);
+            bc.untie(&mut f);
+            let frac = s as f64 / substeps as f64;
+            for n in 0..x.len() {
+                if free[n] {
+                    state.v[n] += h / self.masses[n] * f[n];
+                    x[n] += h * state.v[n];
+                }
+            }
+            // Imposed nodes: fixed stay, driven ones move linearly to their
+            // targets over the frame, hanging ones follow their masters.
+            for (n, fixed) in bc.fixed.iter().enumerate() {
+                if *fixed {
+                    x[n] = self.rest[n];
+                    state.v[n] = DVec3::ZERO;
+                }
+            }
+            for &(n, target) in &bc.driven {
+                let n = n as usize;
+                let u = start_u[n].lerp(target, frac);
+                state.v[n] = (u - (x[n] - self.rest[n])) / h;
+                x[n] = self.rest[n] + u;
+            }
+            let mut u: Vec<DVec3> = x.iter().zip(&self.rest).map(|(a, b)| *a - *b).collect();
+            bc.tie(&mut u);
+            bc.tie(&mut state.v);
+            for h in &bc.hanging {
+                x[h.node as usize] = self.rest[h.node as usize] + u[h.node as usize];
+            }
+        }
+        for (u, (a, b)) in state.u.iter_mut().zip(x.iter().zip(&self.rest)) {
+            *u = *a - *b;
+        }
+        bc.impose(&mut state.u);
+        Ok(SolveReport {
+            substeps,
+            iterations: 0,
+            residual: 0.0,
+        })
+    }
+
+    fn step_implicit(&mut self, dt: f64, bc: &Boundary, state: &mut NodeState) -> SolveReport {
+        // Linearised backward Euler for the velocity change Δv:
+        // (M + h C + h² K) Δv = h (f(x, v) − h K v), with K = −∂f/∂x (the
+        // springs' tangent stiffness) and C = −∂f/∂v (spring damping along
+        // the springs, and α M).
+        let h = dt;
+        let x: Vec<DVec3> = self
+            .rest
+            .iter()
+            .zip(&state.u)
+            .map(|(r, u)| *r + *u)
+            .collect();
+        let mut f = vec![DVec3::ZERO; x.len()];
+        self.node_forces(&x, &state.v, bc, &mut f);
+        let s = &self.springs;
+        // Per spring: the tangent stiffness (the transverse term clamped at
+        // zero for compressed springs, so the system stays positive
+        // definite) and the damping direction `d dᵀ`.
+        let tangents: Vec<(DMat3, DMat3)> = (0..s.ends.len())
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|i| {
+                let [a, b] = s.ends[i].map(|n| n as usize);
+                let d = x[b] - x[a];
+                let len = d.length().max(f64::MIN_POSITIVE);
+                let dir = d / len;
+                let ddt = DMat3::from_cols(dir * dir.x, dir * dir.y, dir * dir.z);
+                let transverse = (1.0 - s.rest[i] / len).max(0.0);
+                (
+                    (ddt + (DMat3::IDENTITY - ddt) * transverse) * s.k[i],
+                    ddt * s.c[i],
+                )
+            })
+            .collect();
+        let blocks: Vec<DMat3> = self
+            .tet_edges
+            .par_iter()
+            .flat_map_iter(|edges| {
+                let mut k = [DMat3::ZERO; 16];
+                for (e, &(spring, share)) in edges.iter().enumerate() {
+                    let (kk, cc) = tangents[spring as usize];
+                    let block = (kk * (h * h) + cc * h) * share;
+                    let (ca, cb) = EDGES[e];
+                    k[4 * ca + ca] += block;
+                    k[4 * cb + cb] += block;
+                    k[4 * ca + cb] -= block;
+                    k[4 * cb + ca] -= block;
+                }
+                k.into_iter()
+            })
+            .collect();
+        let alpha = self.params.mass_damping;
+        let diagonal: Vec<f64> = self.masses.iter().map(|m| (1.0 + h * alpha) * m).collect();
+        let matrix = self.matrix.as_mut().expect("implicit matrix");
+        matrix.assemble(&blocks, Some(&diagonal));
+        let mut kv = vec![DVec3::ZERO; x.len()];
+        for (i, &[a, b]) in s.ends.iter().enumerate() {
+            let t = tangents[i].0 * (state.v[a as usize] - state.v[b as usize]);
+            kv[a as usize] += t;
+            kv[b as usize] -= t;
+        }
+        let rhs: Vec<DVec3> = f
+            .iter()
+            .zip(&kv)
+            .map(|(fi, k)| h * (*fi - h * *k))
+            .collect();
+        // Imposed velocity changes: fixed nodes stop, driven ones reach
+        // their targets this step, hanging ones follow their masters.
+        let mut dv = vec![DVec3::ZERO; x.len()];
+        for (n, fixed) in bc.fixed.iter().enumerate() {
+            if *fixed {
+                dv[n] = -state.v[n];
+            }
+        }
+        for &(n, target) in &bc.driven {
+            let n = n as usize;
+            dv[n] = (target - state.u[n]) / h - state.v[n];
+        }
+        let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
+        let out = pcg::solve(
+            matrix,
+            bc,
+            &free,
+            &rhs,
+            &mut dv,
+            CgSettings {
+                tolerance: self.params.cg_tolerance,
+                max_iterations: self.params.cg_max_iterations,
+            },
+        );
+        for ((u, v), d) in state.u.iter_mut().zip(state.v.iter_mut()).zip(&dv) {
+            *v += *d;
+            *u += h * *v;
+        }
+        bc.impose(&mut state.u);
+        SolveReport {
+            substeps: 1,
+            iterations: out.iterations,
+            residual: out.residual,
+        }
+    }
+}
+
+impl MeshSolver for MassSpring {
+    const NAME: &'static str = "mass-spring";
+    const DESCRIPTION: &'static str = "mass-spring model on a tetrahedral proxy's edges (explicit with stable sub-steps, or implicit)";
+    type Params = SpringParams;
+
+    fn new(
+        mesh: &TetMesh,
+        materials: &[ElasticMaterial],
+        params: SpringParams,
+    ) -> Result<Self, ModelError> {
+        params.validate()?;
+        let masses = lumped_masses(mesh, materials);
+        let mut index: HashMap<[u32; 2], u32> = HashMap::new();
+        let mut springs = Springs::default();
+        let mut tet_edges = Vec::with_capacity(mesh.tets.len());
+        for (t, tet) in mesh.tets.iter().enumerate() {
+            let e_mod = materials[mesh.labels[t] as usize].youngs_modulus;
+            let v = mesh.volume(t);
+            let mut edges = [(0u32, 0.0f64); 6];
+            for (e, &(a, b)) in EDGES.iter().enumerate() {
+                let key = [tet[a].min(tet[b]), tet[a].max(tet[b])];
+                let len = (mesh.nodes[key[1] as usize] - mesh.nodes[key[0] as usize]).length();
+                let k = e_mod * v / (6.0 * len * len);
+                let id = *index.entry(key).or_insert_with(|| {
+                    springs.ends.push(key);
+                    springs.rest.push(len);
+                    springs.k.push(0.0);
+                    springs.ends.len() as u32 - 1
+                });
+                springs.k[id as usize] += k;
+                edges[e] = (id, k);
+            }
+            tet_edges.push(edges);
+        }
+        // Each tetrahedron's share of its edges' stiffness, as a fraction.
+        for edges in &mut tet_edges {
+            for (id, k) in edges.iter_mut() {
+                *k /= springs.k[*id as usize];
+            }
+        }
+        springs.c = springs
+            .ends
+            .iter()
+            .zip(&springs.k)
+            .map(|(&[a, b], &k)| {
+                let (ma, mb) = (masses[a as usize], masses[b as usize]);
+                let reduced = ma * mb / (ma + mb);
+                params.damping_ratio * 2.0 * (k * reduced).sqrt()
+            })
+            .collect();
+        let n = mesh.nodes.len();
+        let mut incident_start = vec![0u32; n + 1];
+        for [a, b] in &springs.ends {
+            incident_start[*a as usize + 1] += 1;
+            incident_start[*b as usize + 1] += 1;
+        }
+        for i in 0..n {
+            incident_start[i + 1] += incident_start[i];
+        }
+        let mut fill = incident_start.clone();
+        let mut incident = vec![(0u32, 0.0); 2 * springs.ends.len()];
+        for (s, [a, b]) in springs.ends.iter().enumerate() {
+            for (node, sign) in [(*a, 1.0), (*b, -1.0)] {
+                incident[fill[node as usize] as usize] = (s as u32, sign);
+                fill[node as usize] += 1;
+            }
+        }
+        // Gershgorin: ω² ≤ max_i 2 Σ_j k_ij / m_i.
+        let mut ksum = vec![0.0; n];
+        for ([a, b], k) in springs.ends.iter().zip(&springs.k) {
+            ksum[*a as usize] += k;
+            ksum[*b as usize] += k;
+        }
+        let omega2 = ksum
+            .iter()
+            .zip(&masses)
+            .map(|(k, m)| if *m > 0.0 { 2.0 * k / m } else { 0.0 })
+            .fold(0.0, f64::max);
+        let stable_dt = if omega2 > 0.0 {
+            0.9 * 2.0 / omega2.sqrt()
+        } else {
+            f64::INFINITY
+        };
+        let matrix =
+            (params.integrator == Integrator::Implicit).then(|| BlockMatrix::on_mesh(mesh));
+        Ok(Self {
+            force: vec![DVec3::ZERO; springs.ends.len()],
+            params,
+            rest: mesh.nodes.clone(),
+            masses,
+            springs,
+            incident_start,
+            incident,
+            stable_dt,
+            tet_edges,
+            matrix,
+        })
+    }
+
+    fn step(
+        &mut self,
+        dt_s: f64,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
+        if !(dt_s > 0.0 && dt_s.is_finite()) {
+            return Err(ModelError(format!(
+                "mass-spring: needs a positive frame time step (got {dt_s} s); set the scene's dt_s"
+            )));
+        }
+        match self.params.integrator {
+            Integrator::Explicit => self.step_explicit(dt_s, bc, state),
+            Integrator::Implicit => Ok(self.step_implicit(dt_s, bc, state)),
+        }
+    }
+}
