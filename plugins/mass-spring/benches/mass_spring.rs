@@ -1,1 +1,191 @@
-fn main() {}
+//! Mass-spring benchmarks (`cargo bench -p voxflex-mass-spring`).
+//!
+//! Prints, on this machine:
+//! - the explicit sub-step on ~100 k springs (a box of 32 × 32 × 16 cells
+//!   of the five-tetrahedra split): time per sub-step, from one frame of
+//!   many sub-steps;
+//! - the cantilever of `tests/reference/cantilever.json` run to rest with
+//!   the implicit integrator: time and tip deflection against the same-mesh
+//!   linear FEM reference — the error a mass-spring model makes, which
+//!   users trade against its speed.
+//!
+//! `-- substep` or `-- cantilever` runs one part.
+
+use std::time::Instant;
+use voxflex_core::deformation::{DeformationModel, FrameInfo};
+use voxflex_core::glam::DVec3;
+use voxflex_core::grid::Grid;
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::proxy::uniform_proxy;
+use voxflex_mass_spring::{Integrator, MassSpring, SpringParams};
+
+type Springs = MeshModel<MassSpring>;
+
+fn frame(dt: f64) -> FrameInfo {
+    FrameInfo {
+        frame: 0,
+        frames: 1,
+        dt_s: dt,
+    }
+}
+
+fn substep() {
+    let grid = Grid::new([33, 33, 17], DVec3::splat(2.0), DVec3::ZERO);
+    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).expect("box");
+    let nodes = mesh.nodes.len();
+    let material = ElasticMaterial::new(3000.0, 0.45, 1e-6);
+    let mut m = Springs::with_mesh(
+        mesh,
+        vec![material],
+        DVec3::new(0.0, 0.0, -9810.0),
+        SpringParams::default(),
+    )
+    .expect("model");
+    m.interact("kind = \"fix\"\nmin = [-1, -1, -1]\nmax = [0.5, 65, 33]")
+        .unwrap();
+    let springs = m.solver().unwrap().springs().ends.len();
+    let dt = m.solver().unwrap().stable_dt() * 200.0;
+    m.step(frame(dt)).unwrap(); // warm-up
+    let mut per = Vec::new();
+    for _ in 0..5 {
+        let t = Instant::now();
+        m.step(frame(dt)).unwrap();
+        per.push(t.elapsed().as_secs_f64() * 1e3 / m.last_solve().substeps as f64);
+    }
+    per.sort_by(f64::total_cmp);
+    println!(
+        "explicit sub-step, {springs} springs, {nodes} nodes: {:.3} ms (median of 5 frames of {} sub-steps; min {:.3})",
+        per[2],
+        m.last_solve().substeps,
+        per[0]
+    );
+}
+
+fn cantilever() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/reference/cantilever.json"
+    );
+    let reference: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).expect("reference")).expect("JSON");
+    println!(
+        "cantilever (E = 1000, 10 × 1 × 1, tip traction, small load; implicit steps to rest):"
+    );
+    println!(
+        "   r  springs  CG tolerance  time to rest (ms)  steps  tip u/P  error vs same-mesh FEM"
+    );
+    for level in reference["levels"].as_array().unwrap() {
+        let r = level["r"].as_u64().unwrap() as usize;
+        if r > 4 {
+            continue;
+        }
+        let expected = level["tip_uz_mean"].as_f64().unwrap();
+        for tolerance in [1e-3, 1e-6] {
+            let h = 1.0 / r as f64;
+            let grid = Grid::new([10 * r + 1, r + 1, r + 1], DVec3::splat(h), DVec3::ZERO);
+            let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
+            let params = SpringParams {
+                integrator: Integrator::Implicit,
+                cg_tolerance: tolerance,
+                cg_max_iterations: 10_000,
+                mass_damping: 200.0,
+                damping_ratio: 1.0,
+                ..SpringParams::default()
+            };
+            let mut m = Springs::with_mesh(
+                mesh,
+                vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
+                DVec3::ZERO,
+                params,
+            )
+            .unwrap();
+            let springs = m.solver().unwrap().springs().ends.len();
+            let p = 1e-4;
+            m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 1.01]")
+                .unwrap();
+            m.interact(&format!(
+                "kind = \"load\"\nmin = [9.99, -0.01, -0.01]\nmax = [10.01, 1.01, 1.01]\ntraction = [0, 0, {}]",
+                -p
+            ))
+            .unwrap();
+            let t = Instant::now();
+            let mut steps = 0;
+            // To rest: until a step moves no node by more than 1e-9 of the load's scale.
+            let mut last = 0.0;
+            while steps < 5000 {
+                m.step(frame(0.01)).unwrap();
+                steps += 1;
+                let tip = tip(&m) / p;
+                if (tip - last).abs() < 1e-7 * tip.abs() {
+                    break;
+                }
+                last = tip;
+            }
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            let tip = tip(&m) / p;
+            // The whole displacement field against the FEM one, where the
+            // reference carries it: RMS and largest node error, relative
+            // to the largest FEM displacement.
+            let field = level.get("displacements").map(|d| {
+                let d = d.as_array().unwrap();
+                let mesh = m.mesh().unwrap();
+                let u = &m.state().unwrap().u;
+                let (mut sum, mut worst, mut largest) = (0.0, 0.0f64, 0.0f64);
+                for (x, un) in mesh.nodes.iter().zip(u) {
+                    let [i, j, k] = [x.x, x.y, x.z].map(|c| (c * r as f64).round() as usize);
+                    let e = &d[i + (10 * r + 1) * (j + (r + 1) * k)];
+                    let e = DVec3::new(
+                        e[0].as_f64().unwrap(),
+                        e[1].as_f64().unwrap(),
+                        e[2].as_f64().unwrap(),
+                    );
+                    let err = (*un / p - e).length();
+                    sum += err * err;
+                    worst = worst.max(err);
+                    largest = largest.max(e.length());
+                }
+                let rms = (sum / u.len() as f64).sqrt();
+                format!(
+                    "   field: RMS {:.1} %, max {:.1} %",
+                    100.0 * rms / largest,
+                    100.0 * worst / largest
+                )
+            });
+            println!(
+                "{r:4}  {springs:7}  {tolerance:12.0e}  {ms:17.1}  {steps:5}  {tip:7.4}  {:20.1} %{}",
+                100.0 * (tip - expected) / expected.abs(),
+                field.unwrap_or_default()
+            );
+        }
+    }
+}
+
+/// Mean u_z of the nodes at x = 10.
+fn tip(m: &Springs) -> f64 {
+    let mesh = m.mesh().unwrap();
+    let u = &m.state().unwrap().u;
+    let tip: Vec<f64> = mesh
+        .nodes
+        .iter()
+        .zip(u)
+        .filter(|(x, _)| (x.x - 10.0).abs() < 1e-9)
+        .map(|(_, d)| d.z)
+        .collect();
+    tip.iter().sum::<f64>() / tip.len() as f64
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let only = |k: &str| args.iter().any(|a| a == k);
+    let all = !only("substep") && !only("cantilever");
+    println!(
+        "voxflex-mass-spring bench: threads {}",
+        rayon::current_num_threads()
+    );
+    if all || only("substep") {
+        substep();
+    }
+    if all || only("cantilever") {
+        cantilever();
+    }
+}

@@ -21,6 +21,7 @@
 //! damping_ratio = 0.1
 //! ```
 
+mod kernel;
 pub mod solver;
 #[cfg(test)]
 mod tests;

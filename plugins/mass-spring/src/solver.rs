@@ -1,13 +1,15 @@
 //! The mass-spring model on a tetrahedral proxy's edges.
 //!
-//! **Springs.** One spring per edge. A tetrahedron of volume `V` gives each
-//! of its six edges the stiffness `E V / (6 L²)` (`L` the edge's rest
-//! length): a spring stretched by the strain `ε` then stores `½ E ε² V/6`,
-//! the tetrahedron's uniaxial strain energy shared over its edges, so the
-//! stiffness follows the material and the mesh size. An edge shared by
-//! several tetrahedra sums their shares. Springs carry no shear or volume
-//! term: the model is softer than FEM in shear and has no Poisson effect,
-//! which is the error the mass-spring-vs-FEM comparison reports.
+//! **Springs.** One spring per edge, with Van Gelder's stiffness (1998,
+//! "Approximate simulation of elastic membranes by triangulated spring
+//! meshes", extended to tetrahedra): `k = E Σ V_t / L²` over the
+//! tetrahedra `t` sharing the edge, `L` its rest length — a published rule
+//! from the material and the mesh, not a fit to any reference. Springs
+//! carry no shear or volume term: the model has no Poisson effect and its
+//! bending stiffness depends on the mesh, which is the error the
+//! mass-spring-vs-FEM comparison reports. (Sharing each tetrahedron's
+//! uniaxial strain energy over its six edges instead, `E V / (6 L²)`,
+//! measured 4–8× too soft in bending on the cantilever.)
 //!
 //! **Damping.** Along each spring, `c = damping_ratio · 2 √(k m̄)` on the
 //! relative velocity of its ends (`m̄` the ends' reduced mass), plus mass
@@ -23,6 +25,7 @@
 //!   frame, `(M + h D + h² K) v⁺ = M v + h f(x, v)`, `K` the springs'
 //!   tangent stiffness, solved by block-Jacobi PCG.
 
+use crate::kernel::SpringKernel;
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::HashMap;
@@ -138,18 +141,14 @@ pub struct MassSpring {
     rest: Vec<DVec3>,
     masses: Vec<f64>,
     springs: Springs,
-    /// Node `n`'s springs: `(spring, +1 for end 0 / −1 for end 1)` in
-    /// `incident[incident_start[n] .. incident_start[n + 1]]`.
-    incident_start: Vec<u32>,
-    incident: Vec<(u32, f64)>,
     /// Largest stable explicit step, s.
     stable_dt: f64,
     /// Per tetrahedron: its six edges' springs and its share of each
     /// stiffness (implicit assembly).
     tet_edges: Vec<[(u32, f64); 6]>,
     matrix: Option<BlockMatrix>,
-    /// Scratch: per-spring force on end 0, µN.
-    force: Vec<DVec3>,
+    /// The force kernel and its f32 node state.
+    kernel: SpringKernel,
 }
 
 /// The corner pairs of a tetrahedron's six edges.
@@ -166,40 +165,20 @@ impl MassSpring {
         self.stable_dt
     }
 
-    /// Spring forces at positions `x` and velocities `v` into `self.force`
-    /// (force on end 0; end 1 takes the opposite).
-    fn spring_forces(&mut self, x: &[DVec3], v: &[DVec3]) {
-        let s = &self.springs;
-        self.force
-            .par_iter_mut()
-            .enumerate()
-            .with_min_len(4096)
-            .for_each(|(i, f)| {
-                let [a, b] = s.ends[i].map(|n| n as usize);
-                let d = x[b] - x[a];
-                let len = d.length();
-                let dir = if len > 0.0 { d / len } else { DVec3::ZERO };
-                let stretch = s.k[i] * (len - s.rest[i]);
-                let damp = s.c[i] * (v[b] - v[a]).dot(dir);
-                *f = (stretch + damp) * dir;
-            });
-    }
-
-    /// Total force per node (springs, mass damping, external), µN.
-    fn node_forces(&mut self, x: &[DVec3], v: &[DVec3], bc: &Boundary, out: &mut [DVec3]) {
-        self.spring_forces(x, v);
-        let (start, inc, force) = (&self.incident_start, &self.incident, &self.force);
-        let (alpha, masses) = (self.params.mass_damping, &self.masses);
+    /// Total force per node (springs, mass damping, external; µN) at
+    /// the kernel's current state, into `out`.
+    fn node_forces(&mut self, bc: &Boundary, out: &mut [DVec3]) {
+        self.kernel.spring_pass();
+        let (kernel, alpha, masses) = (&self.kernel, self.params.mass_damping, &self.masses);
         out.par_iter_mut()
             .enumerate()
             .with_min_len(2048)
             .for_each(|(n, o)| {
-                let springs = inc[start[n] as usize..start[n + 1] as usize]
-                    .iter()
-                    .fold(DVec3::ZERO, |acc, &(s, sign)| {
-                        acc + sign * force[s as usize]
-                    });
-                *o = springs + bc.force[n] - alpha * masses[n] * v[n];
+                let [fx, fy, fz] = kernel.node_force(n);
+                let [vx, vy, vz] = kernel.v[n];
+                let v = DVec3::new(vx as f64, vy as f64, vz as f64);
+                *o = DVec3::new(fx as f64, fy as f64, fz as f64) + bc.force[n]
+                    - alpha * masses[n] * v;
             });
     }
 
@@ -222,48 +201,64 @@ impl MassSpring {
         let substeps = needed as u32;
         let h = dt / substeps as f64;
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
-        let mut x: Vec<DVec3> = self
-            .rest
-            .iter()
-            .zip(&state.u)
-            .map(|(r, u)| *r + *u)
-            .collect();
+        let fixed: Vec<usize> = (0..free.len()).filter(|&n| bc.fixed[n]).collect();
         let start_u = state.u.clone();
-        let mut f = vec![DVec3::ZERO; x.len()];
+        self.kernel.load(&state.u, &state.v);
+        let mut f = vec![DVec3::ZERO; free.len()];
+        let ext: Vec<[f32; 3]> = bc.force.iter().map(|v| v.as_vec3().to_array()).collect();
+        let mass: Vec<f32> = self.masses.iter().map(|&m| m as f32).collect();
+        let alpha = self.params.mass_damping as f32;
         for s in 1..=substeps {
-            self.node_forces(&x, &state.v, bc, &mut f);
-            bc.untie(&mut f);
-            let frac = s as f64 / substeps as f64;
-            for n in 0..x.len() {
-                if free[n] {
-                    state.v[n] += h / self.masses[n] * f[n];
-                    x[n] += h * state.v[n];
-                }
+            if bc.hanging.is_empty() {
+                self.kernel.spring_pass();
+                self.kernel.integrate(h as f32, &ext, &mass, alpha, &free);
+            } else {
+                // Hanging nodes pass their forces to their masters first.
+                self.node_forces(bc, &mut f);
+                bc.untie(&mut f);
+                let masses = &self.masses;
+                let k = &mut self.kernel;
+                k.u.par_iter_mut()
+                    .zip(k.v.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(2048)
+                    .for_each(|(n, (u, v))| {
+                        if free[n] {
+                            let a = (f[n] * (h / masses[n])).as_vec3().to_array();
+                            for i in 0..3 {
+                                v[i] += a[i];
+                                u[i] += h as f32 * v[i];
+                            }
+                        }
+                    });
             }
+            let k = &mut self.kernel;
             // Imposed nodes: fixed stay, driven ones move linearly to their
             // targets over the frame, hanging ones follow their masters.
-            for (n, fixed) in bc.fixed.iter().enumerate() {
-                if *fixed {
-                    x[n] = self.rest[n];
-                    state.v[n] = DVec3::ZERO;
-                }
+            for &n in &fixed {
+                k.u[n] = [0.0; 3];
+                k.v[n] = [0.0; 3];
             }
+            let frac = s as f64 / substeps as f64;
             for &(n, target) in &bc.driven {
                 let n = n as usize;
                 let u = start_u[n].lerp(target, frac);
-                state.v[n] = (u - (x[n] - self.rest[n])) / h;
-                x[n] = self.rest[n] + u;
+                let now = DVec3::from_array(k.u[n].map(f64::from));
+                k.v[n] = ((u - now) / h).as_vec3().to_array();
+                k.u[n] = u.as_vec3().to_array();
             }
-            let mut u: Vec<DVec3> = x.iter().zip(&self.rest).map(|(a, b)| *a - *b).collect();
-            bc.tie(&mut u);
-            bc.tie(&mut state.v);
-            for h in &bc.hanging {
-                x[h.node as usize] = self.rest[h.node as usize] + u[h.node as usize];
+            for hn in &bc.hanging {
+                let tie = |x: &[[f32; 3]]| {
+                    hn.masters.iter().fold([0f32; 3], |acc, &(m, w)| {
+                        let xm = x[m as usize];
+                        [acc[0] + w * xm[0], acc[1] + w * xm[1], acc[2] + w * xm[2]]
+                    })
+                };
+                k.u[hn.node as usize] = tie(&k.u);
+                k.v[hn.node as usize] = tie(&k.v);
             }
         }
-        for (u, (a, b)) in state.u.iter_mut().zip(x.iter().zip(&self.rest)) {
-            *u = *a - *b;
-        }
+        self.kernel.store(&mut state.u, &mut state.v);
         bc.impose(&mut state.u);
         Ok(SolveReport {
             substeps,
@@ -285,7 +280,8 @@ impl MassSpring {
             .map(|(r, u)| *r + *u)
             .collect();
         let mut f = vec![DVec3::ZERO; x.len()];
-        self.node_forces(&x, &state.v, bc, &mut f);
+        self.kernel.load(&state.u, &state.v);
+        self.node_forces(bc, &mut f);
         let s = &self.springs;
         // Per spring: the tangent stiffness (the transverse term clamped at
         // zero for compressed springs, so the system stays positive
@@ -397,7 +393,7 @@ impl MeshSolver for MassSpring {
             for (e, &(a, b)) in EDGES.iter().enumerate() {
                 let key = [tet[a].min(tet[b]), tet[a].max(tet[b])];
                 let len = (mesh.nodes[key[1] as usize] - mesh.nodes[key[0] as usize]).length();
-                let k = e_mod * v / (6.0 * len * len);
+                let k = e_mod * v / (len * len);
                 let id = *index.entry(key).or_insert_with(|| {
                     springs.ends.push(key);
                     springs.rest.push(len);
@@ -408,6 +404,22 @@ impl MeshSolver for MassSpring {
                 edges[e] = (id, k);
             }
             tet_edges.push(edges);
+        }
+        // Springs in order of their ends, so that the force kernel reads
+        // nodes and each node gathers its springs from nearby memory.
+        let mut order: Vec<u32> = (0..springs.ends.len() as u32).collect();
+        order.sort_unstable_by_key(|&i| springs.ends[i as usize]);
+        let mut new_id = vec![0u32; order.len()];
+        for (new, &old) in order.iter().enumerate() {
+            new_id[old as usize] = new as u32;
+        }
+        springs.ends = order.iter().map(|&i| springs.ends[i as usize]).collect();
+        springs.rest = order.iter().map(|&i| springs.rest[i as usize]).collect();
+        springs.k = order.iter().map(|&i| springs.k[i as usize]).collect();
+        for edges in &mut tet_edges {
+            for (id, _) in edges.iter_mut() {
+                *id = new_id[*id as usize];
+            }
         }
         // Each tetrahedron's share of its edges' stiffness, as a fraction.
         for edges in &mut tet_edges {
@@ -426,22 +438,6 @@ impl MeshSolver for MassSpring {
             })
             .collect();
         let n = mesh.nodes.len();
-        let mut incident_start = vec![0u32; n + 1];
-        for [a, b] in &springs.ends {
-            incident_start[*a as usize + 1] += 1;
-            incident_start[*b as usize + 1] += 1;
-        }
-        for i in 0..n {
-            incident_start[i + 1] += incident_start[i];
-        }
-        let mut fill = incident_start.clone();
-        let mut incident = vec![(0u32, 0.0); 2 * springs.ends.len()];
-        for (s, [a, b]) in springs.ends.iter().enumerate() {
-            for (node, sign) in [(*a, 1.0), (*b, -1.0)] {
-                incident[fill[node as usize] as usize] = (s as u32, sign);
-                fill[node as usize] += 1;
-            }
-        }
         // Gershgorin: ω² ≤ max_i 2 Σ_j k_ij / m_i.
         let mut ksum = vec![0.0; n];
         for ([a, b], k) in springs.ends.iter().zip(&springs.k) {
@@ -461,13 +457,11 @@ impl MeshSolver for MassSpring {
         let matrix =
             (params.integrator == Integrator::Implicit).then(|| BlockMatrix::on_mesh(mesh));
         Ok(Self {
-            force: vec![DVec3::ZERO; springs.ends.len()],
+            kernel: SpringKernel::new(&springs, &mesh.nodes),
             params,
             rest: mesh.nodes.clone(),
             masses,
             springs,
-            incident_start,
-            incident,
             stable_dt,
             tet_edges,
             matrix,

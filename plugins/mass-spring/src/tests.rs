@@ -105,7 +105,7 @@ fn a_translation_stores_no_force_and_springs_follow_the_material() {
         }
     }
     assert_eq!(springs.ends.len(), edges.len());
-    // Σ k L² = E Σ V (each tetrahedron's E V/6 on each of its 6 edges).
+    // Σ k L² = 6 E Σ V (each tetrahedron's E V on each of its 6 edges).
     let total: f64 = springs
         .k
         .iter()
@@ -113,7 +113,7 @@ fn a_translation_stores_no_force_and_springs_follow_the_material() {
         .map(|(k, l)| k * l * l)
         .sum();
     let volume: f64 = (0..mesh.tets.len()).map(|t| mesh.volume(t)).sum();
-    assert!((total - 1000.0 * volume).abs() < 1e-9 * total);
+    assert!((total - 6.0 * 1000.0 * volume).abs() < 1e-9 * total);
 }
 
 #[test]
