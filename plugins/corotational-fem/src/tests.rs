@@ -310,3 +310,59 @@ fn stiffness_ratios_slivers_and_random_grabs_stay_finite() {
     let u = &m.state().unwrap().u;
     assert!(u.iter().all(|v| v.is_finite()));
 }
+
+#[test]
+fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() {
+    use voxflex_core::deformation::ExecutionBackend;
+    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let vtu = dir.path().join("ring.vtu");
+    let toml = format!(
+        "proxy = {{ kind = \"octree\", max_cell = 8 }}\n\
+         materials = [{{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 }},\n\
+                      {{ name = \"hard\", range = [150, 256], youngs_modulus = 200000 }}]\n\
+         solver = \"static\"\nvtu = {:?}",
+        vtu.to_str().unwrap()
+    );
+    let mut m = Fem::from_toml(&toml).unwrap();
+    m.init(volume.view(), ExecutionBackend::Cpu).unwrap();
+    m.interact("kind = \"fix\"\nmaterial = \"hard\"").unwrap();
+    m.interact("kind = \"grab\"\npoint = [-40, 0, 0]\nby = [-5, 0, 0]")
+        .unwrap();
+    assert!(m.step(frame(0.0)).unwrap().changed);
+    let mesh = m.mesh().unwrap();
+    let u = &m.state().unwrap().u;
+    assert!(u.iter().all(|v| v.is_finite()));
+    assert!(
+        u.iter().any(|v| v.length() > 1.0),
+        "the grab moves the soft half"
+    );
+    // The proxy has level changes; its hanging nodes follow their masters.
+    let proxy = voxflex_core::proxy::octree_proxy(&volume.grid, 8, |v| {
+        let x = volume
+            .view()
+            .data
+            .get_f32(volume.grid.linear(v[0], v[1], v[2]));
+        (x > 50.0).then_some(u16::from(x > 150.0))
+    })
+    .unwrap();
+    assert_eq!(proxy.mesh.nodes.len(), mesh.nodes.len());
+    assert!(!proxy.hanging.is_empty(), "the test needs hanging nodes");
+    for h in &proxy.hanging {
+        let tied: DVec3 = h
+            .masters
+            .iter()
+            .map(|&(n, w)| w as f64 * u[n as usize])
+            .sum();
+        assert!(
+            (u[h.node as usize] - tied).length() < 1e-6,
+            "node {}",
+            h.node
+        );
+    }
+    let text = std::fs::read_to_string(&vtu).unwrap();
+    assert!(
+        text.contains("<VTKFile")
+            && text.contains(&format!("NumberOfPoints=\"{}\"", mesh.nodes.len()))
+    );
+}

@@ -150,3 +150,50 @@ fn stiffness_ratios_of_a_million_and_random_grabs_stay_finite() {
     }
     assert!(m.state().unwrap().u.iter().all(|u| u.is_finite()));
 }
+
+#[test]
+fn an_octree_proxy_runs_explicit_and_implicit_with_hanging_nodes_tied() {
+    use voxflex_core::deformation::ExecutionBackend;
+    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    for integrator in ["explicit", "implicit"] {
+        let toml = format!(
+            "proxy = {{ kind = \"octree\", max_cell = 8 }}\n\
+             materials = [{{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 }},\n\
+                          {{ name = \"hard\", range = [150, 256], youngs_modulus = 20000 }}]\n\
+             integrator = \"{integrator}\"\ngravity = [0, 0, -9810]"
+        );
+        let mut m = Springs::from_toml(&toml).unwrap();
+        m.init(volume.view(), ExecutionBackend::Cpu).unwrap();
+        m.interact("kind = \"fix\"\nmaterial = \"hard\"").unwrap();
+        for _ in 0..5 {
+            m.step(frame(1.0 / 30.0)).unwrap();
+        }
+        let u = &m.state().unwrap().u;
+        assert!(u.iter().all(|v| v.is_finite()), "{integrator}");
+        assert!(
+            u.iter().any(|v| v.z < -1e-3),
+            "{integrator}: gravity moves the soft half"
+        );
+        let proxy = voxflex_core::proxy::octree_proxy(&volume.grid, 8, |v| {
+            let x = volume
+                .view()
+                .data
+                .get_f32(volume.grid.linear(v[0], v[1], v[2]));
+            (x > 50.0).then_some(u16::from(x > 150.0))
+        })
+        .unwrap();
+        assert!(!proxy.hanging.is_empty());
+        for h in &proxy.hanging {
+            let tied: DVec3 = h
+                .masters
+                .iter()
+                .map(|&(n, w)| w as f64 * u[n as usize])
+                .sum();
+            assert!(
+                (u[h.node as usize] - tied).length() < 1e-4,
+                "{integrator}: node {}",
+                h.node
+            );
+        }
+    }
+}
