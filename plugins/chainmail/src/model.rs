@@ -8,7 +8,8 @@ use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
 use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
 use crate::relax::sweep_scalar;
 use crate::relax_passes::sweep_runs;
-use crate::removal::{carve_tets, cut_tets, segment_crosses_triangle};
+use crate::removal::{carve_tets, cut_tets};
+use voxflex_core::cut_polygon::CutPolygon;
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -467,16 +468,10 @@ impl ChainMail {
     /// Cuts the links crossing `polygon` (fanned from its first corner);
     /// returns how many.
     fn cut(&mut self, polygon: &[[f64; 3]]) -> usize {
-        let p: Vec<DVec3> = polygon.iter().map(|c| DVec3::from_array(*c)).collect();
-        let tris: Vec<[DVec3; 3]> = (1..p.len() - 1).map(|i| [p[0], p[i], p[i + 1]]).collect();
-        // Only links near the polygon can cross it.
-        let (mut lo, mut hi) = (p[0], p[0]);
-        for q in &p {
-            lo = lo.min(*q);
-            hi = hi.max(*q);
-        }
+        let cut = CutPolygon::new(polygon);
+        let (lo, hi) = (cut.lo, cut.hi);
         if !self.elements_are_voxels() {
-            let tets = cut_tets(&self.lat, &self.state, &tris);
+            let tets = cut_tets(&self.lat, &self.state, &cut);
             self.remove_source_tets(tets);
         }
         let reach = DVec3::from(self.lat.spacing) * 2.0;
@@ -500,7 +495,7 @@ impl ChainMail {
                     continue;
                 }
                 let b = self.position(e);
-                if tris.iter().any(|t| segment_crosses_triangle(a, b, t)) {
+                if cut.crosses(a, b) {
                     self.lat.cut_link(n, l);
                     // +x/+y/+z links start at `n`.
                     self.remove_tets(tets_on_edge(self.mesh_cell_dims(), c, l / 2));

@@ -16,7 +16,8 @@ use crate::lattice::ElementLattice;
 use crate::mapping;
 use crate::state::State;
 use voxflex_core::glam::DVec3;
-use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
+use voxflex_core::cut_polygon::CutPolygon;
+use voxflex_core::resample::{tets_at_vertex, tets_cut_by};
 
 /// Source voxels (inclusive index box) whose rest position lies within the
 /// world box `[lo, hi]` grown by the model's largest displacement and two
@@ -84,34 +85,14 @@ fn box_voxel(a: [usize; 3], b: [usize; 3], n: usize) -> [usize; 3] {
     [a[0] + n % sx, a[1] + (n / sx) % sy, a[2] + n / (sx * sy)]
 }
 
-/// The mesh tetrahedra on edges that cross one of `tris` (deformed
-/// positions), `(cell, bits)`.
-pub fn cut_tets(lat: &ElementLattice, state: &State, tris: &[[DVec3; 3]]) -> Vec<(usize, u8)> {
-    let (mut lo, mut hi) = (tris[0][0], tris[0][0]);
-    for p in tris.iter().flatten() {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
-    }
-    let Some((a, b)) = candidate_voxels(lat, state, lo, hi) else {
+/// The mesh tetrahedra on edges that cross `cut` (deformed positions),
+/// `(cell, bits)`.
+pub fn cut_tets(lat: &ElementLattice, state: &State, cut: &CutPolygon) -> Vec<(usize, u8)> {
+    let Some((a, b)) = candidate_voxels(lat, state, cut.lo, cut.hi) else {
         return Vec::new();
     };
     let cells = lat.source.dims.map(|d| d.saturating_sub(1));
-    let positions = deformed_box(lat, state, a, b);
-    let stride = [1, b[0] - a[0] + 1, (b[0] - a[0] + 1) * (b[1] - a[1] + 1)];
-    let mut out = Vec::new();
-    for (n, &p) in positions.iter().enumerate() {
-        let v = box_voxel(a, b, n);
-        for axis in 0..3 {
-            if v[axis] == b[axis] {
-                continue;
-            }
-            let q = positions[n + stride[axis]];
-            if tris.iter().any(|t| segment_crosses_triangle(p, q, t)) {
-                out.extend(tets_on_edge(cells, v, axis));
-            }
-        }
-    }
-    out
+    tets_cut_by(cells, (a, b), &deformed_box(lat, state, a, b), cut)
 }
 
 /// The mesh tetrahedra around vertices whose deformed position `inside`
@@ -132,29 +113,4 @@ pub fn carve_tets(
         .filter(|&(_, p)| inside(p))
         .flat_map(|(n, _)| tets_at_vertex(cells, box_voxel(a, b, n)))
         .collect()
-}
-
-/// True when segment `a → b` crosses triangle `t` (Möller–Trumbore; the
-/// segment's ends and the triangle's edges count as crossing).
-pub fn segment_crosses_triangle(a: DVec3, b: DVec3, t: &[DVec3; 3]) -> bool {
-    let d = b - a;
-    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det.abs() < 1e-12 {
-        return false;
-    }
-    let inv = 1.0 / det;
-    let s = a - t[0];
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return false;
-    }
-    let q = s.cross(e1);
-    let v = d.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return false;
-    }
-    let h = e2.dot(q) * inv;
-    (0.0..=1.0).contains(&h)
 }

@@ -14,6 +14,7 @@
 
 pub mod barycentric;
 pub mod camera;
+pub mod cut_polygon;
 pub mod deformation;
 pub mod error;
 mod fast_div;

@@ -74,7 +74,7 @@ mod tests;
 
 pub use output_grid::{OutputGrid, VoxelBox};
 pub use sampling_mesh::SamplingMesh;
-pub use tet_mask::{TetMask, tets_at_vertex, tets_on_edge};
+pub use tet_mask::{TetMask, tets_at_vertex, tets_cut_by, tets_on_edge};
 
 use crate::deformation::DirtyRegion;
 use crate::error::GpuError;

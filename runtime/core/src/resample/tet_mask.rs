@@ -3,6 +3,8 @@
 //! the voxels they covered get the background value.
 
 use super::ResampleError;
+use crate::cut_polygon::CutPolygon;
+use glam::DVec3;
 use super::sampling_mesh::{CELL_TETS, SamplingMesh, TETS_PER_CELL};
 use crate::grid::Grid;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -160,6 +162,34 @@ impl TetMask {
         }
         Ok(changed)
     }
+}
+
+/// The tetrahedra on the sampling-mesh edges that cross `cut`, among the
+/// vertices of the inclusive voxel box `[a, b]` whose current positions
+/// (world mm) are `positions` (x fastest over the box): `(linear cell
+/// index, tetrahedron bits)`. A model removes these so its cut opens in the
+/// resampled volume.
+pub fn tets_cut_by(
+    cell_dims: [usize; 3],
+    (a, b): ([usize; 3], [usize; 3]),
+    positions: &[DVec3],
+    cut: &CutPolygon,
+) -> Vec<(usize, u8)> {
+    let size = [0, 1, 2].map(|k| b[k] - a[k] + 1);
+    let stride = [1, size[0], size[0] * size[1]];
+    let mut out = Vec::new();
+    for (n, &p) in positions.iter().enumerate() {
+        let v = [a[0] + n % size[0], a[1] + (n / size[0]) % size[1], a[2] + n / stride[2]];
+        for axis in 0..3 {
+            if v[axis] == b[axis] {
+                continue;
+            }
+            if cut.crosses(p, positions[n + stride[axis]]) {
+                out.extend(tets_on_edge(cell_dims, v, axis));
+            }
+        }
+    }
+    out
 }
 
 /// The tetrahedra that have sampling-mesh vertex `v` (voxel indices) as a
