@@ -9,10 +9,10 @@ use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_fronti
 use crate::relax::sweep_scalar;
 use crate::relax_passes::sweep_runs;
 use crate::removal::{carve_tets, cut_tets};
-use voxflex_core::cut_polygon::CutPolygon;
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
 use std::sync::Arc;
+use voxflex_core::cut_polygon::CutPolygon;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferId, GpuService};

@@ -15,8 +15,8 @@
 use crate::lattice::ElementLattice;
 use crate::mapping;
 use crate::state::State;
-use voxflex_core::glam::DVec3;
 use voxflex_core::cut_polygon::CutPolygon;
+use voxflex_core::glam::DVec3;
 use voxflex_core::resample::{tets_at_vertex, tets_cut_by};
 
 /// Source voxels (inclusive index box) whose rest position lies within the

@@ -366,3 +366,64 @@ fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() 
             && text.contains(&format!("NumberOfPoints=\"{}\"", mesh.nodes.len()))
     );
 }
+
+#[test]
+fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
+    use voxflex_core::deformation::{DisplacementTarget, RestPoints};
+    // The cantilever, cut through at x = 5; a pull on the free half moves
+    // it away while the clamped half stays.
+    let mut m = cantilever(2, 0.0, static_params(1e-10));
+    let grid = Grid::new([21, 3, 3], DVec3::splat(0.5), DVec3::ZERO);
+    let id = m.bind(RestPoints::Lattice(grid)).unwrap();
+    assert!(
+        !m.removed_tetrahedra(id, &mut []).unwrap(),
+        "nothing removed yet"
+    );
+    let nodes = m.mesh().unwrap().nodes.len();
+    m.interact(
+        "kind = \"cut\"\npolygon = [[5.1, -1, -1], [5.1, 2, -1], [5.1, 2, 2], [5.1, -1, 2]]",
+    )
+    .unwrap();
+    assert!(m.mesh().unwrap().nodes.len() > nodes, "nodes duplicated");
+    m.interact("kind = \"grab\"\npoint = [10, 0.5, 0.5]\nby = [2, 0, 0]")
+        .unwrap();
+    m.step(frame(0.0)).unwrap();
+    let mesh = m.mesh().unwrap();
+    let u = &m.state().unwrap().u;
+    for (x, d) in mesh.nodes.iter().zip(u) {
+        if x.x < 5.0 {
+            assert!(d.length() < 1e-6, "the clamped half stays: {x} moved {d}");
+        } else if x.x > 5.5 {
+            // Held by one node only, the free half may also turn a little.
+            assert!(
+                (d.x - 2.0).abs() < 0.1,
+                "the free half follows the grab: {x} moved {d}"
+            );
+        }
+    }
+    // The resampler's mask: the sampling tetrahedra across x = 5.1.
+    assert!(m.removed_tetrahedra(id, &mut []).unwrap());
+    let mut bits = vec![0u8; 20 * 2 * 2];
+    assert!(m.removed_tetrahedra(id, &mut bits).unwrap());
+    for (cell, b) in bits.iter().enumerate() {
+        let i = cell % 20;
+        assert_eq!(*b != 0, i == 10, "cell {cell} (x index {i}): bits {b:#b}");
+    }
+    assert!(
+        !m.removed_tetrahedra(id, &mut bits).unwrap(),
+        "reported once"
+    );
+    let n = grid.len();
+    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+    m.map(
+        id,
+        DisplacementTarget::Cpu {
+            x: &mut x,
+            y: &mut y,
+            z: &mut z,
+        },
+    )
+    .unwrap();
+    assert!((x[grid.linear(20, 1, 1)] - 2.0).abs() < 0.1);
+    assert!(x[grid.linear(0, 1, 1)].abs() < 1e-6);
+}

@@ -71,12 +71,20 @@ mod tests {
     #[test]
     fn segments_through_the_polygon_cross_and_others_do_not() {
         // The square x = 0, −1 ≤ y, z ≤ 1.
-        let c = CutPolygon::new(&[[0.0, -1.0, -1.0], [0.0, 1.0, -1.0], [0.0, 1.0, 1.0], [0.0, -1.0, 1.0]]);
+        let c = CutPolygon::new(&[
+            [0.0, -1.0, -1.0],
+            [0.0, 1.0, -1.0],
+            [0.0, 1.0, 1.0],
+            [0.0, -1.0, 1.0],
+        ]);
         assert_eq!(c.triangles.len(), 2);
         let x = |v: f64, y: f64| DVec3::new(v, y, 0.3);
         assert!(c.crosses(x(-0.5, 0.2), x(0.5, 0.2)));
         assert!(!c.crosses(x(0.1, 0.2), x(0.5, 0.2)), "one side only");
         assert!(!c.crosses(x(-0.5, 1.5), x(0.5, 1.5)), "beside the polygon");
-        assert!(!c.crosses(DVec3::new(-1.0, 0.0, 0.0), DVec3::new(-1.0, 0.5, 0.0)), "parallel");
+        assert!(
+            !c.crosses(DVec3::new(-1.0, 0.0, 0.0), DVec3::new(-1.0, 0.5, 0.0)),
+            "parallel"
+        );
     }
 }

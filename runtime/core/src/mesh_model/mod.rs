@@ -15,6 +15,7 @@
 
 pub mod block_matrix;
 pub mod boundary;
+pub mod cut;
 pub mod material;
 mod model;
 pub mod params;
@@ -70,7 +71,7 @@ pub trait MeshSolver: Send + Sized + 'static {
     const DESCRIPTION: &'static str;
     /// The solver's own keys of the plugin's table (everything but
     /// [`MeshModelParams`]'s), refusing unknown keys.
-    type Params: serde::de::DeserializeOwned + Send;
+    type Params: serde::de::DeserializeOwned + Clone + Send;
 
     /// Builds the solver for `mesh` (rest configuration, world mm), whose
     /// tetrahedron `t` has material `materials[mesh.labels[t]]`.

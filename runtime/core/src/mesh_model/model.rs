@@ -1,18 +1,23 @@
 //! [`MeshModel`]: a [`MeshSolver`] wrapped into a whole deformation model.
 
 use super::boundary::{Boundary, traction_forces};
+use super::cut::cut_mesh;
 use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
 use super::{MeshSolver, NodeState, SolveReport};
 use crate::barycentric::BarycentricBinding;
+use crate::barycentric::unpack;
+use crate::cut_polygon::CutPolygon;
 use crate::deformation::{
     BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
     RestPoints, StepOutcome,
 };
 use crate::error::ModelError;
+use crate::grid::Grid;
 use crate::interaction::{GrabMotion, InteractionSpec};
 use crate::io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
 use crate::proxy::{HangingNode, octree_proxy, uniform_proxy};
+use crate::resample::tets_cut_by;
 use crate::tet_mesh::TetMesh;
 use crate::volume::VolumeView;
 use glam::DVec3;
@@ -43,7 +48,7 @@ pub struct MeshModel<S: MeshSolver> {
     params: MeshModelParams,
     solver_params: Option<S::Params>,
     built: Option<Built<S>>,
-    bindings: Vec<BarycentricBinding>,
+    bindings: Vec<Bound>,
     grabs: Vec<Grab>,
     loads: Vec<Load>,
     /// The field changed since the last `map`.
@@ -51,11 +56,24 @@ pub struct MeshModel<S: MeshSolver> {
     last: SolveReport,
 }
 
+/// A binding, and for a lattice of voxel centres its grid and the
+/// sampling-mesh tetrahedra the model's cuts removed.
+struct Bound {
+    binding: BarycentricBinding,
+    lattice: Option<Grid>,
+    /// `(cell, tetrahedron bits)` removed by cuts.
+    removed: Vec<(usize, u8)>,
+    /// Removed tetrahedra not yet reported to the host.
+    unreported: bool,
+}
+
 /// What `init` builds.
-struct Built<S> {
+struct Built<S: MeshSolver> {
     mesh: TetMesh,
     materials: Vec<ElasticMaterial>,
     solver: S,
+    /// The solver's parameters, to rebuild it after a cut.
+    solver_params: S::Params,
     state: NodeState,
     /// Fixed nodes and hanging ties (forces and drives are set per step).
     bc: Boundary,
@@ -127,7 +145,7 @@ impl<S: MeshSolver> MeshModel<S> {
             .solver_params
             .take()
             .ok_or_else(|| ModelError(format!("{}: init called twice", S::NAME)))?;
-        let solver = S::new(&mesh, &materials, params)?;
+        let solver = S::new(&mesh, &materials, params.clone())?;
         let n = mesh.nodes.len();
         let g = DVec3::from_array(self.params.gravity);
         let gravity = lumped_masses(&mesh, &materials)
@@ -147,6 +165,7 @@ impl<S: MeshSolver> MeshModel<S> {
             mesh,
             materials,
             solver,
+            solver_params: params,
             state: NodeState::at_rest(n),
             bc,
             gravity,
@@ -385,14 +404,111 @@ impl<S: MeshSolver> MeshModel<S> {
                     done: 0,
                 });
             }
-            InteractionSpec::Cut { .. } | InteractionSpec::Carve { .. } => {
+            InteractionSpec::Cut { polygon } => {
+                let cut = CutPolygon::new(polygon);
+                self.cut(&cut)?;
+            }
+            InteractionSpec::Carve { .. } => {
                 return Err(ModelError(format!(
-                    "{name} {}: topology changes are not implemented for mesh models yet; \
-                     use the chainmail plugin to cut or carve",
-                    spec.kind()
+                    "{name} carve: removing tissue is not implemented for mesh models yet; \
+                     use the chainmail plugin to carve, or `cut` here"
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// Cuts the proxy along `cut` (current positions) by duplicating nodes,
+    /// rebuilds the solver on the cut mesh, and marks the sampling-mesh
+    /// tetrahedra of every lattice binding that the cut crosses.
+    fn cut(&mut self, cut: &CutPolygon) -> Result<(), ModelError> {
+        let name = S::NAME;
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        // The lattice bindings' removed tetrahedra, from the positions
+        // before the cut (both sides still coincide there).
+        let max_u = b
+            .state
+            .u
+            .iter()
+            .map(|u| u.abs().max_element())
+            .fold(0.0, f64::max);
+        for bound in &mut self.bindings {
+            let Some(g) = bound.lattice else { continue };
+            let grow = DVec3::splat(max_u) + g.spacing.abs() * 2.0;
+            let (a, c) = (
+                g.world_to_index(cut.lo - grow),
+                g.world_to_index(cut.hi + grow),
+            );
+            let (lo, hi) = (a.min(c), a.max(c));
+            let last = g.dims.map(|d| d as f64 - 1.0);
+            if (0..3).any(|k| hi[k] < 0.0 || lo[k] > last[k]) {
+                continue;
+            }
+            let first = [0, 1, 2].map(|k| lo[k].floor().max(0.0) as usize);
+            let end = [0, 1, 2].map(|k| hi[k].ceil().min(last[k]) as usize);
+            let mut positions = Vec::new();
+            for k in first[2]..=end[2] {
+                for j in first[1]..=end[1] {
+                    for i in first[0]..=end[0] {
+                        let p = g.linear(i, j, k);
+                        let w = unpack(bound.binding.weights[p]);
+                        let tet = b.mesh.tets[bound.binding.tet[p] as usize];
+                        let u: DVec3 = (0..4)
+                            .map(|c| w[c] as f64 * b.state.u[tet[c] as usize])
+                            .sum();
+                        let rest = g.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+                        positions.push(rest + u);
+                    }
+                }
+            }
+            let cells = g.dims.map(|d| d.saturating_sub(1));
+            let removed = tets_cut_by(cells, (first, end), &positions, cut);
+            bound.unreported |= !removed.is_empty();
+            bound.removed.extend(removed);
+        }
+        let x: Vec<DVec3> = b
+            .mesh
+            .nodes
+            .iter()
+            .zip(&b.state.u)
+            .map(|(r, u)| *r + *u)
+            .collect();
+        let result = cut_mesh(&mut b.mesh, &x, cut);
+        if result.faces == 0 {
+            tracing::warn!("{name} cut: the polygon crosses no face of the proxy");
+            return Ok(());
+        }
+        for &n in &result.origin {
+            let n = n as usize;
+            b.state.u.push(b.state.u[n]);
+            b.state.v.push(b.state.v[n]);
+            b.bc.fixed.push(b.bc.fixed[n]);
+            for a in 0..3 {
+                b.u32[a].push(b.u32[a][n]);
+            }
+        }
+        let nodes = b.mesh.nodes.len();
+        b.bc.force.resize(nodes, DVec3::ZERO);
+        let g = DVec3::from_array(self.params.gravity);
+        b.gravity = lumped_masses(&b.mesh, &b.materials)
+            .into_iter()
+            .map(|m| m * g)
+            .collect();
+        // A load keeps acting on the nodes it was defined on; copies start
+        // without it.
+        for load in &mut self.loads {
+            load.forces.resize(nodes, DVec3::ZERO);
+        }
+        b.solver = S::new(&b.mesh, &b.materials, b.solver_params.clone())?;
+        tracing::info!(
+            faces = result.faces,
+            new_nodes = result.origin.len(),
+            "{name}: proxy cut"
+        );
+        self.unmapped = true;
         Ok(())
     }
 
@@ -498,7 +614,15 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
                 S::NAME
             );
         }
-        self.bindings.push(binding);
+        self.bindings.push(Bound {
+            binding,
+            lattice: match rest {
+                RestPoints::Lattice(g) => Some(g),
+                RestPoints::Points(_) => None,
+            },
+            removed: Vec::new(),
+            unreported: false,
+        });
         self.unmapped = true;
         Ok(BindingId(self.bindings.len() as u64 - 1))
     }
@@ -521,12 +645,39 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         }
     }
 
-    fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError> {
-        let b = self.built()?;
+    fn removed_tetrahedra(
+        &mut self,
+        binding: BindingId,
+        cell_bits: &mut [u8],
+    ) -> Result<bool, ModelError> {
         let bound = self
             .bindings
-            .get(binding.0 as usize)
+            .get_mut(binding.0 as usize)
             .ok_or_else(|| ModelError(format!("unknown binding id {}", binding.0)))?;
+        if cell_bits.is_empty() {
+            return Ok(!bound.removed.is_empty());
+        }
+        if !bound.unreported {
+            return Ok(false);
+        }
+        let mut changed = false;
+        for &(cell, bits) in &bound.removed {
+            if let Some(c) = cell_bits.get_mut(cell) {
+                changed |= *c & bits != bits;
+                *c |= bits;
+            }
+        }
+        bound.unreported = false;
+        Ok(changed)
+    }
+
+    fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError> {
+        let b = self.built()?;
+        let bound = &self
+            .bindings
+            .get(binding.0 as usize)
+            .ok_or_else(|| ModelError(format!("unknown binding id {}", binding.0)))?
+            .binding;
         let DisplacementTarget::Cpu { x, y, z } = out else {
             return Err(ModelError(format!("{}: no GPU path yet", S::NAME)));
         };

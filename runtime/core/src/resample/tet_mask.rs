@@ -3,10 +3,10 @@
 //! the voxels they covered get the background value.
 
 use super::ResampleError;
-use crate::cut_polygon::CutPolygon;
-use glam::DVec3;
 use super::sampling_mesh::{CELL_TETS, SamplingMesh, TETS_PER_CELL};
+use crate::cut_polygon::CutPolygon;
 use crate::grid::Grid;
+use glam::DVec3;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Source of [`TetMask::generation`] values, unique across all masks of a
@@ -179,7 +179,11 @@ pub fn tets_cut_by(
     let stride = [1, size[0], size[0] * size[1]];
     let mut out = Vec::new();
     for (n, &p) in positions.iter().enumerate() {
-        let v = [a[0] + n % size[0], a[1] + (n / size[0]) % size[1], a[2] + n / stride[2]];
+        let v = [
+            a[0] + n % size[0],
+            a[1] + (n / size[0]) % size[1],
+            a[2] + n / stride[2],
+        ];
         for axis in 0..3 {
             if v[axis] == b[axis] {
                 continue;
