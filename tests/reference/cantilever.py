@@ -6,8 +6,8 @@ Solves small-strain isotropic linear elasticity with P1 tetrahedra on the
 solve, and writes `cantilever.json` beside this script.
 
 Run from the repository root:
-    python3 -m venv /tmp/fem && /tmp/fem/bin/pip install -r tests/reference/requirements.txt
-    /tmp/fem/bin/python tests/reference/cantilever.py
+    python3 -m venv /tmp/venv && /tmp/venv/bin/pip install -r tests/reference/requirements.txt
+    /tmp/venv/bin/python tests/reference/cantilever.py
 
 Problem: the box [0, 10] x [0, 1] x [0, 1]; E = 1000, nu = 0.3; every node
 with x = 0 clamped; a uniform traction of 1 in -z on the face x = 10 (total
@@ -58,7 +58,24 @@ def mesh(r):
     x = p[:, t]
     vol = np.einsum("ij,ij->j", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0], axis=0))
     t[[1, 2]] = np.where(vol < 0, t[[2, 1]], t[[1, 2]])
-    return MeshTet(p, t)
+    check_conforming(p, t)
+    return MeshTet(p, np.ascontiguousarray(t))
+
+
+def check_conforming(p, t):
+    """The mirrored pattern must make neighbouring cells cut their shared
+    square face along the same diagonal. Then every triangle is a face of one
+    tetrahedron (boundary) or two (interior), and the boundary triangles tile
+    exactly the surface of the box; a mismatched diagonal would leave
+    unpaired triangles inside and overshoot the surface area."""
+    faces = np.sort(t.T[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
+    unique, count = np.unique(faces, axis=0, return_counts=True)
+    assert count.max() <= 2, "no triangle is shared by three tetrahedra"
+    b = unique[count == 1]
+    x = p[:, b]  # (coordinate, triangle, corner)
+    area = 0.5 * np.linalg.norm(np.cross(x[:, :, 1] - x[:, :, 0], x[:, :, 2] - x[:, :, 0], axis=0), axis=0).sum()
+    surface = 2 * (LENGTH * WIDTH + LENGTH * HEIGHT + WIDTH * HEIGHT)
+    assert abs(area - surface) < 1e-9, "boundary triangles tile the box surface: the mesh is conforming"
 
 
 def solve_level(r):

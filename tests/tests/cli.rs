@@ -91,7 +91,13 @@ fn converged_frames_skip_downstream_stages_and_a_second_run_reruns_nothing() {
 
 #[test]
 fn chainmail_head_scene_runs_and_swaps_to_every_model_with_one_edit() {
-    plugin_dir(&["chainmail", "affine", "raycast", "corotational-fem", "mass-spring"]);
+    plugin_dir(&[
+        "chainmail",
+        "affine",
+        "raycast",
+        "corotational-fem",
+        "mass-spring",
+    ]);
     let tmp = tempfile::tempdir().unwrap();
     let scene_text =
         std::fs::read_to_string(repo_root().join("configs/chainmail-head.toml")).unwrap();

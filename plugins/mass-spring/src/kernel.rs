@@ -41,6 +41,16 @@ pub struct SpringKernel {
 
 const END_B: u32 = 1 << 31;
 
+/// The springs as the GPU twin's buffers hold them.
+pub struct SpringTable {
+    /// Rest vector `X_b − X_a` (mm) and rest length (mm).
+    pub geometry: Vec<[f32; 4]>,
+    /// End nodes.
+    pub ends: Vec<[u32; 2]>,
+    /// Stiffness (µN/mm) and damping (µN·s/mm).
+    pub kc: Vec<[f32; 2]>,
+}
+
 impl SpringKernel {
     /// The kernel's arrays for `springs` between `rest` node positions.
     pub fn new(springs: &Springs, rest: &[DVec3]) -> Self {
@@ -100,6 +110,28 @@ impl SpringKernel {
         let f32s = |p: &DVec3| p.as_vec3().to_array();
         self.u.iter_mut().zip(u).for_each(|(d, s)| *d = f32s(s));
         self.v.iter_mut().zip(v).for_each(|(d, s)| *d = f32s(s));
+    }
+
+    /// Springs (unpadded count).
+    pub fn springs(&self) -> usize {
+        self.incident.len() / 2
+    }
+
+    /// The GPU twin's spring buffers.
+    pub fn spring_table(&self) -> SpringTable {
+        let n = self.springs();
+        SpringTable {
+            geometry: (0..n)
+                .map(|s| [self.e[0][s], self.e[1][s], self.e[2][s], self.rest[s]])
+                .collect(),
+            ends: (0..n).map(|s| [self.a[s], self.b[s]]).collect(),
+            kc: (0..n).map(|s| [self.k[s], self.c[s]]).collect(),
+        }
+    }
+
+    /// The node → spring incidence (`start`, `incident`; see the fields).
+    pub fn incidence(&self) -> (&[u32], &[u32]) {
+        (&self.incident_start, &self.incident)
     }
 
     /// Stores displacements (mm) and velocities (mm/s) back.

@@ -21,6 +21,9 @@
 //! damping_ratio = 0.1
 //! ```
 
+mod gpu;
+#[cfg(test)]
+mod gpu_tests;
 mod kernel;
 pub mod solver;
 #[cfg(test)]

@@ -25,12 +25,15 @@
 //!   frame, `(M + h D + h² K) v⁺ = M v + h f(x, v)`, `K` the springs'
 //!   tangent stiffness, solved by block-Jacobi PCG.
 
+use crate::gpu::GpuSprings;
 use crate::kernel::SpringKernel;
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::HashMap;
+use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
+use voxflex_core::gpu::GpuService;
 use voxflex_core::mesh_model::pcg::{self, CgSettings};
 use voxflex_core::mesh_model::{
     BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
@@ -149,6 +152,8 @@ pub struct MassSpring {
     matrix: Option<BlockMatrix>,
     /// The force kernel and its f32 node state.
     kernel: SpringKernel,
+    /// The explicit integrator's WGSL twin, on the GPU backend.
+    gpu: Option<GpuSprings>,
 }
 
 /// The corner pairs of a tetrahedron's six edges.
@@ -200,6 +205,27 @@ impl MassSpring {
         }
         let substeps = needed as u32;
         let h = dt / substeps as f64;
+        if let Some(gpu) = &self.gpu {
+            if !bc.hanging.is_empty() {
+                return Err(ModelError::new(
+                    "mass-spring (GPU): octree proxies with hanging nodes run on the CPU for now; \
+                     use a uniform proxy or backend = \"cpu\"",
+                ));
+            }
+            gpu.frame(
+                substeps,
+                h,
+                self.params.mass_damping,
+                &self.masses,
+                bc,
+                state,
+            )?;
+            return Ok(SolveReport {
+                substeps,
+                iterations: 0,
+                residual: 0.0,
+            });
+        }
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
         let fixed: Vec<usize> = (0..free.len()).filter(|&n| bc.fixed[n]).collect();
         let start_u = state.u.clone();
@@ -458,6 +484,7 @@ impl MeshSolver for MassSpring {
             (params.integrator == Integrator::Implicit).then(|| BlockMatrix::on_mesh(mesh));
         Ok(Self {
             kernel: SpringKernel::new(&springs, &mesh.nodes),
+            gpu: None,
             params,
             rest: mesh.nodes.clone(),
             masses,
@@ -466,6 +493,19 @@ impl MeshSolver for MassSpring {
             tet_edges,
             matrix,
         })
+    }
+
+    const GPU: bool = true;
+
+    fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        if self.params.integrator == Integrator::Implicit {
+            return Err(ModelError::new(
+                "mass-spring: the implicit integrator runs on the CPU only; use \
+                 integrator = \"explicit\" on the GPU, or backend = \"cpu\"",
+            ));
+        }
+        self.gpu = Some(GpuSprings::new(gpu, &self.kernel, self.rest.len())?);
+        Ok(())
     }
 
     fn step(

@@ -545,9 +545,14 @@ impl<S: voxflex_core::mesh_model::MeshSolver> DeformationPlugin
 {
     const NAME: &'static str = S::NAME;
     const DESCRIPTION: &'static str = S::DESCRIPTION;
-    const CAPABILITIES: u32 = crate::ffi::CAPABILITY_CPU;
+    const CAPABILITIES: u32 = crate::ffi::CAPABILITY_CPU
+        | if S::GPU {
+            crate::ffi::CAPABILITY_GPU
+        } else {
+            0
+        };
 
-    fn create(params_toml: &str, _host: HostContext) -> Result<Self, ModelError> {
-        Self::from_toml(params_toml)
+    fn create(params_toml: &str, host: HostContext) -> Result<Self, ModelError> {
+        Ok(Self::from_toml(params_toml)?.with_gpu(host.gpu()))
     }
 }

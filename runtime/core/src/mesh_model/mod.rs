@@ -29,8 +29,10 @@ pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
 pub use pcg::{CgOutcome, CgSettings};
 
 use crate::error::ModelError;
+use crate::gpu::GpuService;
 use crate::tet_mesh::TetMesh;
 use glam::DVec3;
+use std::sync::Arc;
 
 /// The nodes' state: displacement (mm) and velocity (mm/s) per node.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -80,6 +82,19 @@ pub trait MeshSolver: Send + Sized + 'static {
         materials: &[ElasticMaterial],
         params: Self::Params,
     ) -> Result<Self, ModelError>;
+
+    /// True when [`MeshSolver::use_gpu`] can move the solver onto a GPU.
+    const GPU: bool = false;
+
+    /// Moves the solver's steps onto `gpu` (its WGSL twins); the default
+    /// refuses. Called again after a cut rebuilds the solver.
+    fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        let _ = gpu;
+        Err(ModelError(format!(
+            "{}: no GPU path; use backend = \"cpu\" (or \"auto\")",
+            Self::NAME
+        )))
+    }
 
     /// Advances `state` by `dt_s` seconds under `bc` (a static solver finds
     /// the equilibrium instead). On return the imposed displacements of

@@ -5,14 +5,15 @@ use super::cut::cut_mesh;
 use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
 use super::{MeshSolver, NodeState, SolveReport};
-use crate::barycentric::BarycentricBinding;
 use crate::barycentric::unpack;
+use crate::barycentric::{BarycentricBinding, GpuBinding};
 use crate::cut_polygon::CutPolygon;
 use crate::deformation::{
     BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
     RestPoints, StepOutcome,
 };
 use crate::error::ModelError;
+use crate::gpu::{BufferId, GpuService};
 use crate::grid::Grid;
 use crate::interaction::{GrabMotion, InteractionSpec};
 use crate::io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
@@ -21,6 +22,7 @@ use crate::resample::tets_cut_by;
 use crate::tet_mesh::TetMesh;
 use crate::volume::VolumeView;
 use glam::DVec3;
+use std::sync::Arc;
 
 /// A node moved by less than this (mm) in a step does not count as a
 /// change (downstream stages skip a frame where nothing moved more).
@@ -54,6 +56,18 @@ pub struct MeshModel<S: MeshSolver> {
     /// The field changed since the last `map`.
     unmapped: bool,
     last: SolveReport,
+    /// The host's GPU service, if it offered one.
+    gpu: Option<Arc<dyn GpuService>>,
+    /// On the GPU backend: the node displacements as `[x, y, z, 0]` and
+    /// each binding on the device (re-uploaded after a cut).
+    device: Option<DeviceMap>,
+}
+
+/// The device side of `map` on the GPU backend.
+struct DeviceMap {
+    nodes: BufferId,
+    node_count: usize,
+    bindings: Vec<Option<GpuBinding>>,
 }
 
 /// A binding, and for a lattice of voxel centres its grid and the
@@ -103,7 +117,15 @@ impl<S: MeshSolver> MeshModel<S> {
             loads: Vec::new(),
             unmapped: true,
             last: SolveReport::default(),
+            gpu: None,
+            device: None,
         }
+    }
+
+    /// The host's GPU service, for `backend = "gpu"`.
+    pub fn with_gpu(mut self, gpu: Option<Arc<dyn GpuService>>) -> Self {
+        self.gpu = gpu;
+        self
     }
 
     /// Builds the model on a given mesh (labels are material indices) with
@@ -280,6 +302,70 @@ impl<S: MeshSolver> MeshModel<S> {
                 }
             }
         }
+    }
+
+    /// Moves the solver and `map` onto the host's GPU.
+    pub fn use_gpu(&mut self) -> Result<(), ModelError> {
+        let gpu = self.gpu.clone().ok_or_else(|| {
+            ModelError(format!(
+                "{}: backend is gpu but the host offered no GPU service",
+                S::NAME
+            ))
+        })?;
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
+        b.solver.use_gpu(gpu)?;
+        self.device = Some(DeviceMap {
+            nodes: BufferId(u64::MAX),
+            node_count: 0,
+            bindings: Vec::new(),
+        });
+        Ok(())
+    }
+
+    /// Maps a binding into device buffers: the node displacements go up
+    /// (16 B per node) and the barycentric map runs on the device.
+    fn map_on_device(&mut self, binding: usize, out: [BufferId; 3]) -> Result<(), ModelError> {
+        let name = S::NAME;
+        let gpu = self
+            .gpu
+            .clone()
+            .ok_or_else(|| ModelError(format!("{name}: a GPU target needs the GPU backend")))?;
+        let b = self
+            .built
+            .as_ref()
+            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        let device = self
+            .device
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{name}: a GPU target needs backend = \"gpu\"")))?;
+        let n = b.mesh.nodes.len();
+        if device.node_count != n {
+            if device.node_count != 0 {
+                gpu.destroy_buffer(device.nodes);
+            }
+            device.nodes = gpu.create_buffer(16 * n as u64, "mesh model nodes")?;
+            device.node_count = n;
+            // The tetrahedra changed too (a cut): upload the bindings again.
+            for old in device.bindings.drain(..).flatten() {
+                old.release(&*gpu);
+            }
+        }
+        let nodes: Vec<[f32; 4]> = (0..n)
+            .map(|i| [b.u32[0][i], b.u32[1][i], b.u32[2][i], 0.0])
+            .collect();
+        gpu.write_buffer(device.nodes, 0, bytemuck::cast_slice(&nodes))?;
+        if device.bindings.len() <= binding {
+            device.bindings.resize_with(binding + 1, || None);
+        }
+        if device.bindings[binding].is_none() {
+            device.bindings[binding] = Some(self.bindings[binding].binding.upload(&b.mesh, &*gpu)?);
+        }
+        let bound = device.bindings[binding].as_ref().expect("uploaded above");
+        bound.map(&*gpu, device.nodes, out)?;
+        Ok(())
     }
 
     /// The nodes within `[lo, hi]` (rest positions, mm).
@@ -503,6 +589,11 @@ impl<S: MeshSolver> MeshModel<S> {
             load.forces.resize(nodes, DVec3::ZERO);
         }
         b.solver = S::new(&b.mesh, &b.materials, b.solver_params.clone())?;
+        if self.device.is_some()
+            && let Some(gpu) = self.gpu.clone()
+        {
+            b.solver.use_gpu(gpu)?;
+        }
         tracing::info!(
             faces = result.faces,
             new_nodes = result.origin.len(),
@@ -569,6 +660,19 @@ impl<S: MeshSolver> MeshModel<S> {
         }
         self.unmapped |= moved;
         Ok(moved)
+    }
+}
+
+impl<S: MeshSolver> Drop for MeshModel<S> {
+    fn drop(&mut self) {
+        if let (Some(device), Some(gpu)) = (self.device.take(), &self.gpu) {
+            if device.node_count != 0 {
+                gpu.destroy_buffer(device.nodes);
+            }
+            for b in device.bindings.into_iter().flatten() {
+                b.release(&**gpu);
+            }
+        }
     }
 }
 
@@ -678,8 +782,13 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
             .get(binding.0 as usize)
             .ok_or_else(|| ModelError(format!("unknown binding id {}", binding.0)))?
             .binding;
-        let DisplacementTarget::Cpu { x, y, z } = out else {
-            return Err(ModelError(format!("{}: no GPU path yet", S::NAME)));
+        let (x, y, z) = match out {
+            DisplacementTarget::Cpu { x, y, z } => (x, y, z),
+            DisplacementTarget::Gpu { x, y, z } => {
+                self.map_on_device(binding.0 as usize, [x, y, z])?;
+                self.unmapped = false;
+                return Ok(());
+            }
         };
         if [x.len(), y.len(), z.len()]
             .iter()

@@ -1,0 +1,221 @@
+//! The WGSL path of the explicit integrator: the springs, the node →
+//! spring incidence and the node state mirrored in GPU buffers, and the two
+//! kernels of `shaders/mass-spring/springs.wgsl` (the twins of
+//! [`crate::kernel::SpringKernel::spring_pass`] and `integrate`) dispatched
+//! once each per sub-step. The state goes up at the start of a frame and
+//! comes back at its end (24 B per node each way), so interactions, the
+//! change test and the `.vtu` export work on the CPU copy as on the rayon
+//! path; a frame's sub-steps never leave the device except for their
+//! 32-byte parameter block.
+
+use crate::kernel::SpringKernel;
+use std::sync::Arc;
+use voxflex_core::error::ModelError;
+use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+use voxflex_core::mesh_model::{Boundary, NodeState};
+
+/// The kernels.
+pub const SPRINGS_WGSL: &str = include_str!("../../../shaders/mass-spring/springs.wgsl");
+
+fn gpu_err(e: impl std::fmt::Display) -> ModelError {
+    ModelError(format!("mass-spring (GPU): {e}"))
+}
+
+/// The model's buffers on the device.
+pub struct GpuSprings {
+    gpu: Arc<dyn GpuService>,
+    springs: usize,
+    nodes: usize,
+    params: BufferId,
+    table: BufferId,
+    ends: BufferId,
+    kc: BufferId,
+    force: BufferId,
+    start: BufferId,
+    incident: BufferId,
+    u: BufferId,
+    v: BufferId,
+    node: BufferId,
+    drive: BufferId,
+    spring_forces: PipelineId,
+    integrate: PipelineId,
+}
+
+impl GpuSprings {
+    /// Uploads the kernel's springs and incidence; refuses meshes whose
+    /// arrays exceed one storage binding.
+    pub fn new(
+        gpu: Arc<dyn GpuService>,
+        kernel: &SpringKernel,
+        nodes: usize,
+    ) -> Result<Self, ModelError> {
+        let limit = gpu.limits().max_storage_buffer_binding_size;
+        let springs = kernel.springs();
+        if 16 * springs.max(2 * nodes) as u64 > limit {
+            return Err(gpu_err(format!(
+                "{springs} springs and {nodes} nodes exceed this device's storage binding of {limit} \
+                 bytes; use a coarser proxy or backend = \"cpu\""
+            )));
+        }
+        let table = kernel.spring_table();
+        let (start, incident) = kernel.incidence();
+        let g = &*gpu;
+        let buffers = (|| {
+            Ok::<_, voxflex_core::error::GpuError>((
+                g.create_buffer(32, "mass-spring params")?,
+                g.upload(&table.geometry, "mass-spring springs")?,
+                g.upload(&table.ends, "mass-spring ends")?,
+                g.upload(&table.kc, "mass-spring stiffness and damping")?,
+                g.create_buffer(16 * springs.max(1) as u64, "mass-spring forces")?,
+                g.upload(start, "mass-spring incidence start")?,
+                g.upload(incident, "mass-spring incidence")?,
+                [
+                    g.create_buffer(16 * nodes as u64, "mass-spring u")?,
+                    g.create_buffer(16 * nodes as u64, "mass-spring v")?,
+                    g.create_buffer(16 * nodes as u64, "mass-spring node forces and masses")?,
+                    g.create_buffer(32 * nodes as u64, "mass-spring drives")?,
+                ],
+            ))
+        })()
+        .map_err(gpu_err)?;
+        let (params, table, ends, kc, force, start, incident, [u, v, node, drive]) = buffers;
+        Ok(Self {
+            spring_forces: gpu
+                .compile(SPRINGS_WGSL, "spring_forces")
+                .map_err(gpu_err)?,
+            integrate: gpu.compile(SPRINGS_WGSL, "integrate").map_err(gpu_err)?,
+            gpu,
+            springs,
+            nodes,
+            params,
+            table,
+            ends,
+            kc,
+            force,
+            start,
+            incident,
+            u,
+            v,
+            node,
+            drive,
+        })
+    }
+
+    /// One frame of `substeps` explicit sub-steps of `h` seconds, as
+    /// `MassSpring::step_explicit` takes them on the CPU.
+    #[allow(clippy::too_many_arguments)]
+    pub fn frame(
+        &self,
+        substeps: u32,
+        h: f64,
+        alpha: f64,
+        masses: &[f64],
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<(), ModelError> {
+        let g = &*self.gpu;
+        let vec4 = |v: &[DVec3]| -> Vec<[f32; 4]> {
+            v.iter()
+                .map(|p| [p.x as f32, p.y as f32, p.z as f32, 0.0])
+                .collect()
+        };
+        let node: Vec<[f32; 4]> = bc
+            .force
+            .iter()
+            .zip(masses)
+            .map(|(f, &m)| [f.x as f32, f.y as f32, f.z as f32, m as f32])
+            .collect();
+        let mut drive = vec![[0f32; 4]; 2 * self.nodes];
+        for (n, &fixed) in bc.fixed.iter().enumerate() {
+            if fixed {
+                drive[2 * n][3] = 1.0;
+            }
+        }
+        for &(n, target) in &bc.driven {
+            let (n, u) = (n as usize, state.u[n as usize]);
+            drive[2 * n] = [u.x as f32, u.y as f32, u.z as f32, 2.0];
+            drive[2 * n + 1] = [target.x as f32, target.y as f32, target.z as f32, 0.0];
+        }
+        let write =
+            |id: BufferId, data: &[[f32; 4]]| g.write_buffer(id, 0, bytemuck::cast_slice(data));
+        write(self.u, &vec4(&state.u)).map_err(gpu_err)?;
+        write(self.v, &vec4(&state.v)).map_err(gpu_err)?;
+        write(self.node, &node).map_err(gpu_err)?;
+        write(self.drive, &drive).map_err(gpu_err)?;
+        let bind = |i: u32, id: BufferId| BufferBinding::whole(i, id);
+        // Each pipeline's layout holds only the bindings its entry point uses.
+        let spring_bindings = [
+            bind(0, self.params),
+            bind(1, self.table),
+            bind(2, self.ends),
+            bind(3, self.kc),
+            bind(4, self.force),
+            bind(7, self.u),
+            bind(8, self.v),
+        ];
+        let node_bindings = [
+            bind(0, self.params),
+            bind(4, self.force),
+            bind(5, self.start),
+            bind(6, self.incident),
+            bind(7, self.u),
+            bind(8, self.v),
+            bind(9, self.node),
+            bind(10, self.drive),
+        ];
+        let spring_groups = g.workgroups_for(self.springs as u64, 64).map_err(gpu_err)?;
+        let node_groups = g.workgroups_for(self.nodes as u64, 64).map_err(gpu_err)?;
+        for s in 1..=substeps {
+            let frac = s as f32 / substeps as f32;
+            let params: [u32; 8] = [
+                self.springs as u32,
+                self.nodes as u32,
+                (h as f32).to_bits(),
+                (alpha as f32).to_bits(),
+                frac.to_bits(),
+                0,
+                0,
+                0,
+            ];
+            g.write_buffer(self.params, 0, bytemuck::cast_slice(&params))
+                .map_err(gpu_err)?;
+            g.dispatch(self.spring_forces, &spring_bindings, spring_groups)
+                .map_err(gpu_err)?;
+            g.dispatch(self.integrate, &node_bindings, node_groups)
+                .map_err(gpu_err)?;
+        }
+        let mut out = vec![[0f32; 4]; self.nodes];
+        let read =
+            |id: BufferId, out: &mut [[f32; 4]], dst: &mut [DVec3]| -> Result<(), ModelError> {
+                g.download(id, out).map_err(gpu_err)?;
+                for (d, s) in dst.iter_mut().zip(out.iter()) {
+                    *d = DVec3::new(s[0] as f64, s[1] as f64, s[2] as f64);
+                }
+                Ok(())
+            };
+        read(self.u, &mut out, &mut state.u)?;
+        read(self.v, &mut out, &mut state.v)?;
+        Ok(())
+    }
+}
+
+impl Drop for GpuSprings {
+    fn drop(&mut self) {
+        for id in [
+            self.params,
+            self.table,
+            self.ends,
+            self.kc,
+            self.force,
+            self.start,
+            self.incident,
+            self.u,
+            self.v,
+            self.node,
+            self.drive,
+        ] {
+            self.gpu.destroy_buffer(id);
+        }
+    }
+}

@@ -1,0 +1,149 @@
+//! CPU (rayon) vs GPU (WGSL, lavapipe in CI) on the same input: the
+//! explicit sub-step kernels of `shaders/mass-spring/springs.wgsl` against
+//! their rayon twins, and the map into device buffers. Without an adapter
+//! these tests print SKIPPED, except under `CI=true`, where a missing
+//! adapter fails them.
+
+use crate::solver::{MassSpring, SpringParams};
+use std::sync::Arc;
+use voxflex_core::deformation::{DeformationModel, DisplacementTarget, FrameInfo, RestPoints};
+use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::{GpuService, GpuServiceExt};
+use voxflex_core::grid::Grid;
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::proxy::uniform_proxy;
+
+type Springs = MeshModel<MassSpring>;
+
+fn test_gpu() -> Option<Arc<dyn GpuService>> {
+    voxflex_runtime::gpu_context::testing::test_gpu().map(|g| g as Arc<dyn GpuService>)
+}
+
+/// A clamped two-material bar under gravity, grabbed at its tip.
+fn bar(gpu: Option<Arc<dyn GpuService>>) -> Springs {
+    let grid = Grid::new([9, 3, 3], DVec3::splat(0.5), DVec3::new(10.0, -3.0, 50.0));
+    let mesh = uniform_proxy(&grid, 1, |v| Some(u16::from(v[0] >= 5))).unwrap();
+    let materials = vec![
+        ElasticMaterial::new(2000.0, 0.3, 1e-3),
+        ElasticMaterial::new(8000.0, 0.3, 1e-3),
+    ];
+    let mut m = Springs::with_mesh(
+        mesh,
+        materials,
+        DVec3::new(0.0, 0.0, -9810.0),
+        SpringParams::default(),
+    )
+    .unwrap()
+    .with_gpu(gpu);
+    m.interact("kind = \"fix\"\nmin = [9.9, -3.1, 49.9]\nmax = [10.1, -1.9, 51.1]")
+        .unwrap();
+    m.interact("kind = \"grab\"\npoint = [14, -2.5, 51]\nby = [0.5, 0.3, 0.8]\nframes = 40")
+        .unwrap();
+    m
+}
+
+#[test]
+fn gpu_sub_steps_match_rayon_after_100_frames() {
+    let Some(gpu) = test_gpu() else { return };
+    let mut cpu = bar(None);
+    let mut dev = bar(Some(gpu.clone()));
+    dev.use_gpu().unwrap();
+    let frame = FrameInfo {
+        frame: 0,
+        frames: 100,
+        dt_s: 1.0 / 120.0,
+    };
+    for f in 0..100 {
+        cpu.step(frame).unwrap();
+        dev.step(frame).unwrap();
+        assert_eq!(
+            cpu.last_solve().substeps,
+            dev.last_solve().substeps,
+            "frame {f}"
+        );
+    }
+    let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
+    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
+    let worst = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max);
+    assert!(largest > 0.1, "the bar moves ({largest} mm)");
+    assert!(
+        worst <= 1e-4 * largest,
+        "GPU differs by {worst:.3e} of {largest:.3e} mm"
+    );
+    assert!(
+        cpu.last_solve().substeps > 1,
+        "the test covers sub-stepping"
+    );
+
+    // The map into device buffers equals the CPU map.
+    let points: Vec<[f32; 3]> = (0..50)
+        .map(|i| {
+            [
+                10.0 + 0.08 * i as f32,
+                -2.7 + 0.01 * i as f32,
+                50.3 + 0.005 * i as f32,
+            ]
+        })
+        .collect();
+    let (ic, id) = (
+        cpu.bind(RestPoints::Points(&points)).unwrap(),
+        dev.bind(RestPoints::Points(&points)).unwrap(),
+    );
+    let n = points.len();
+    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+    cpu.map(
+        ic,
+        DisplacementTarget::Cpu {
+            x: &mut x,
+            y: &mut y,
+            z: &mut z,
+        },
+    )
+    .unwrap();
+    let bufs = [0, 1, 2].map(|_| gpu.create_buffer(4 * n as u64, "test out").unwrap());
+    dev.map(
+        id,
+        DisplacementTarget::Gpu {
+            x: bufs[0],
+            y: bufs[1],
+            z: bufs[2],
+        },
+    )
+    .unwrap();
+    for (buf, want) in bufs.iter().zip([&x, &y, &z]) {
+        let mut got = vec![0f32; n];
+        gpu.download(*buf, &mut got).unwrap();
+        let worst = got
+            .iter()
+            .zip(want.iter())
+            .map(|(g, w)| (g - w).abs())
+            .fold(0f32, f32::max);
+        assert!(worst <= 1e-4 * largest as f32, "map differs by {worst}");
+        gpu.destroy_buffer(*buf);
+    }
+}
+
+#[test]
+fn the_gpu_path_refuses_what_it_cannot_run() {
+    let Some(gpu) = test_gpu() else { return };
+    let grid = Grid::new([3, 3, 3], DVec3::ONE, DVec3::ZERO);
+    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
+    let implicit = SpringParams {
+        integrator: crate::solver::Integrator::Implicit,
+        ..SpringParams::default()
+    };
+    let mut m = Springs::with_mesh(
+        mesh,
+        vec![ElasticMaterial::new(1000.0, 0.3, 1e-3)],
+        DVec3::ZERO,
+        implicit,
+    )
+    .unwrap()
+    .with_gpu(Some(gpu));
+    let e = m.use_gpu().unwrap_err().0;
+    assert!(e.contains("implicit") && e.contains("explicit"), "{e}");
+}

@@ -1,0 +1,122 @@
+// The mass-spring model's explicit sub-step on the GPU: the WGSL twins of
+// plugins/mass-spring/src/kernel.rs (`spring_pass`, then `integrate` with
+// the imposed nodes of solver.rs's explicit step), over the same data.
+//
+// Buffers (32-bit):
+//   springs  vec4<f32> [s]   rest vector X_b − X_a (mm), rest length (mm)
+//   ends     vec2<u32> [s]   end nodes a, b
+//   kc       vec2<f32> [s]   stiffness (µN/mm), damping (µN·s/mm)
+//   force    vec4<f32> [s]   force on end a (µN), written by spring_forces
+//   start    u32 [n + 1]     node n's springs are incident[start[n] .. start[n + 1]]
+//   incident u32 [2 s]       spring index, top bit set where the node is end b
+//   u, v     vec4<f32> [n]   displacement (mm) and velocity (mm/s)
+//   node     vec4<f32> [n]   external force xyz (µN), mass (g)
+//   drive    vec4<f32> [2 n] per node: kind (w of the first: 0 free, 1 fixed,
+//                            2 driven), start displacement (xyz of the first),
+//                            target displacement (xyz of the second), mm
+// A flat invocation index covers springs or nodes; dispatches are folded
+// into 3-D (GpuServiceExt::workgroups_for) and unfolded with num_workgroups.
+
+struct Params {
+    springs: u32,
+    nodes: u32,
+    h: f32,        // sub-step, s
+    alpha: f32,    // mass damping, 1/s
+    frac: f32,     // how far along their path driven nodes are after this sub-step
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<storage, read> p: Params;
+@group(0) @binding(1) var<storage, read> springs: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> ends: array<vec2<u32>>;
+@group(0) @binding(3) var<storage, read> kc: array<vec2<f32>>;
+@group(0) @binding(4) var<storage, read_write> force: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> start: array<u32>;
+@group(0) @binding(6) var<storage, read> incident: array<u32>;
+@group(0) @binding(7) var<storage, read_write> u: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read_write> v: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read> node: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read> drive: array<vec4<f32>>;
+
+const WG: u32 = 64u;
+const END_B: u32 = 0x80000000u;
+
+fn flat(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    let row = nwg.x * WG;
+    return gid.x + gid.y * row + gid.z * row * nwg.y;
+}
+
+// kernel.rs `spring_pass`: stretch from the ends' displacement difference,
+// (|d|² − L²) / (|d| + L), never from subtracted positions.
+@compute @workgroup_size(64)
+fn spring_forces(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let s = flat(gid, nwg);
+    if (s >= p.springs) {
+        return;
+    }
+    let e = springs[s];
+    let ab = ends[s];
+    let du = u[ab.y].xyz - u[ab.x].xyz;
+    let dv = v[ab.y].xyz - v[ab.x].xyz;
+    let d = e.xyz + du;
+    let len = sqrt(dot(d, d));
+    let grow = 2.0 * dot(e.xyz, du) + dot(du, du);
+    let sum = len + e.w;
+    var stretch = 0.0;
+    if (sum > 0.0) {
+        stretch = grow / sum;
+    }
+    var dir = vec3<f32>(0.0);
+    if (len > 0.0) {
+        dir = d * (1.0 / len);
+    }
+    let k = kc[s];
+    let mag = k.x * stretch + k.y * dot(dv, dir);
+    force[s] = vec4<f32>(mag * dir, 0.0);
+}
+
+// kernel.rs `integrate` for free nodes (symplectic Euler), then the
+// imposed nodes as solver.rs's explicit step sets them.
+@compute @workgroup_size(64)
+fn integrate(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let n = flat(gid, nwg);
+    if (n >= p.nodes) {
+        return;
+    }
+    let kind = drive[2u * n].w;
+    if (kind == 1.0) {
+        u[n] = vec4<f32>(0.0);
+        v[n] = vec4<f32>(0.0);
+        return;
+    }
+    if (kind == 2.0) {
+        let goal = mix(drive[2u * n].xyz, drive[2u * n + 1u].xyz, p.frac);
+        v[n] = vec4<f32>((goal - u[n].xyz) / p.h, 0.0);
+        u[n] = vec4<f32>(goal, 0.0);
+        return;
+    }
+    var f = vec3<f32>(0.0);
+    for (var i = start[n]; i < start[n + 1u]; i = i + 1u) {
+        let tagged = incident[i];
+        let fs = force[tagged & ~END_B].xyz;
+        if ((tagged & END_B) == 0u) {
+            f = f + fs;
+        } else {
+            f = f - fs;
+        }
+    }
+    let m = node[n].w;
+    var vn = v[n].xyz;
+    let a = (f + node[n].xyz - p.alpha * m * vn) / m;
+    vn = vn + p.h * a;
+    v[n] = vec4<f32>(vn, 0.0);
+    u[n] = vec4<f32>(u[n].xyz + p.h * vn, 0.0);
+}
