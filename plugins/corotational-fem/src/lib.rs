@@ -27,6 +27,8 @@
 //! ```
 
 pub mod element;
+#[cfg(test)]
+mod gpu_tests;
 pub mod polar;
 pub mod solver;
 #[cfg(test)]

@@ -17,9 +17,12 @@
 use crate::element::Element;
 use rayon::prelude::*;
 use serde::Deserialize;
+use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
+use voxflex_core::gpu::GpuService;
 use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings};
+use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_core::mesh_model::{
     BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
 };
@@ -142,6 +145,8 @@ pub struct CorotationalFem {
     /// Scratch: 4 force offsets per element, and summed per node.
     corner_f0: Vec<DVec3>,
     f0: Vec<DVec3>,
+    /// The PCG's WGSL twin, on the GPU backend.
+    gpu: Option<GpuPcg>,
 }
 
 impl CorotationalFem {
@@ -167,6 +172,23 @@ impl CorotationalFem {
         self.matrix.sum_corners(&self.corner_f0, &mut self.f0);
     }
 
+    /// Solves the assembled system on the GPU when there is one, else with
+    /// the rayon PCG.
+    fn solve(
+        &self,
+        bc: &Boundary,
+        free: &[bool],
+        rhs: &[DVec3],
+        x: &mut [DVec3],
+    ) -> Result<CgOutcome, ModelError> {
+        match &self.gpu {
+            Some(g) => g
+                .solve(&self.matrix, free, rhs, x, self.settings())
+                .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}"))),
+            None => Ok(pcg::solve(&self.matrix, bc, free, rhs, x, self.settings())),
+        }
+    }
+
     fn settings(&self) -> CgSettings {
         CgSettings {
             tolerance: self.params.cg_tolerance,
@@ -187,7 +209,11 @@ impl CorotationalFem {
         f
     }
 
-    fn step_static(&mut self, bc: &Boundary, state: &mut NodeState) -> SolveReport {
+    fn step_static(
+        &mut self,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
         let mut report = SolveReport {
             substeps: 1,
@@ -203,8 +229,7 @@ impl CorotationalFem {
                 .map(|(f, g)| *f + *g)
                 .collect();
             let before = state.u.clone();
-            let out: CgOutcome =
-                pcg::solve(&self.matrix, bc, &free, &rhs, &mut state.u, self.settings());
+            let out = self.solve(bc, &free, &rhs, &mut state.u)?;
             report.iterations += out.iterations;
             report.residual = out.residual;
             let change = state
@@ -218,10 +243,15 @@ impl CorotationalFem {
             }
         }
         state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
-        report
+        Ok(report)
     }
 
-    fn step_dynamic(&mut self, dt: f64, bc: &Boundary, state: &mut NodeState) -> SolveReport {
+    fn step_dynamic(
+        &mut self,
+        dt: f64,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
         let h = dt / self.params.substeps as f64;
         let (alpha, beta) = (self.params.mass_damping, self.params.stiffness_damping);
@@ -257,7 +287,7 @@ impl CorotationalFem {
             for &(n, target) in &bc.driven {
                 v[n as usize] = (target - state.u[n as usize]) / (h * remaining);
             }
-            let out = pcg::solve(&self.matrix, bc, &free, &rhs, &mut v, self.settings());
+            let out = self.solve(bc, &free, &rhs, &mut v)?;
             report.iterations += out.iterations;
             report.residual = out.residual;
             for (u, vn) in state.u.iter_mut().zip(&v) {
@@ -267,7 +297,7 @@ impl CorotationalFem {
             report.substeps += 1;
         }
         bc.impose(&mut state.u);
-        report
+        Ok(report)
     }
 }
 
@@ -276,6 +306,16 @@ impl MeshSolver for CorotationalFem {
     const DESCRIPTION: &'static str =
         "corotational linear FEM on a tetrahedral proxy (static or implicit backward Euler, PCG)";
     type Params = FemParams;
+
+    const GPU: bool = true;
+
+    fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        self.gpu = Some(
+            GpuPcg::new(gpu, &self.matrix)
+                .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}")))?,
+        );
+        Ok(())
+    }
 
     fn new(
         mesh: &TetMesh,
@@ -293,6 +333,7 @@ impl MeshSolver for CorotationalFem {
             blocks: vec![DMat3::ZERO; 16 * elements.len()],
             corner_f0: vec![DVec3::ZERO; 4 * elements.len()],
             f0: vec![DVec3::ZERO; n],
+            gpu: None,
             elements,
             params,
         })
@@ -304,8 +345,14 @@ impl MeshSolver for CorotationalFem {
         bc: &Boundary,
         state: &mut NodeState,
     ) -> Result<SolveReport, ModelError> {
+        if self.gpu.is_some() && !bc.hanging.is_empty() {
+            return Err(ModelError::new(
+                "corotational-fem (GPU): octree proxies with hanging nodes run on the CPU for \
+                 now; use a uniform proxy or backend = \"cpu\"",
+            ));
+        }
         match self.params.solver {
-            SolverKind::Static => Ok(self.step_static(bc, state)),
+            SolverKind::Static => self.step_static(bc, state),
             SolverKind::Dynamic => {
                 if !(dt_s > 0.0 && dt_s.is_finite()) {
                     return Err(ModelError(format!(
@@ -313,7 +360,7 @@ impl MeshSolver for CorotationalFem {
                          (got {dt_s} s); set the scene's time step or use solver = \"static\""
                     )));
                 }
-                Ok(self.step_dynamic(dt_s, bc, state))
+                self.step_dynamic(dt_s, bc, state)
             }
         }
     }

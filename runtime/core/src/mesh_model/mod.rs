@@ -20,6 +20,7 @@ pub mod material;
 mod model;
 pub mod params;
 pub mod pcg;
+pub mod pcg_gpu;
 
 pub use block_matrix::BlockMatrix;
 pub use boundary::Boundary;

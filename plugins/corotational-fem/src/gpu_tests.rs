@@ -1,0 +1,83 @@
+//! CPU (rayon) vs GPU (WGSL, lavapipe in CI) on the same input: the PCG of
+//! `shaders/mesh-model/pcg.wgsl` (sparse mat-vec, reductions, updates)
+//! against the rayon PCG, through whole implicit steps. Without an adapter
+//! these tests print SKIPPED, except under `CI=true`, where a missing
+//! adapter fails them.
+
+use crate::solver::{CorotationalFem, FemParams, SolverKind};
+use std::sync::Arc;
+use voxflex_core::deformation::{DeformationModel, FrameInfo};
+use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::GpuService;
+use voxflex_core::grid::Grid;
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::proxy::uniform_proxy;
+
+type Fem = MeshModel<CorotationalFem>;
+
+fn test_gpu() -> Option<Arc<dyn GpuService>> {
+    voxflex_runtime::gpu_context::testing::test_gpu().map(|g| g as Arc<dyn GpuService>)
+}
+
+/// A clamped two-material bar under gravity with a grab on its tip.
+fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind) -> Fem {
+    let grid = Grid::new([13, 4, 4], DVec3::splat(1.0), DVec3::new(-20.0, 5.0, 40.0));
+    let mesh = uniform_proxy(&grid, 1, |v| Some(u16::from(v[0] >= 6))).unwrap();
+    let materials = vec![
+        ElasticMaterial::new(3000.0, 0.45, 1e-3),
+        ElasticMaterial::new(30000.0, 0.3, 1e-3),
+    ];
+    let params = FemParams {
+        solver,
+        cg_tolerance: 1e-6,
+        cg_max_iterations: 400,
+        ..FemParams::default()
+    };
+    let mut m = Fem::with_mesh(mesh, materials, DVec3::new(0.0, 0.0, -9810.0), params)
+        .unwrap()
+        .with_gpu(gpu);
+    m.interact("kind = \"fix\"\nmin = [-20.1, 4.9, 39.9]\nmax = [-19.9, 8.1, 43.1]")
+        .unwrap();
+    m.interact("kind = \"grab\"\npoint = [-8, 8, 43]\nby = [1, 2, 3]\nframes = 50")
+        .unwrap();
+    m
+}
+
+fn compare(solver: SolverKind, frames: usize) {
+    let Some(gpu) = test_gpu() else { return };
+    let mut cpu = bar(None, solver);
+    let mut dev = bar(Some(gpu), solver);
+    dev.use_gpu().unwrap();
+    let frame = FrameInfo {
+        frame: 0,
+        frames: frames as u64,
+        dt_s: 1.0 / 30.0,
+    };
+    for _ in 0..frames {
+        cpu.step(frame).unwrap();
+        dev.step(frame).unwrap();
+    }
+    assert!(dev.last_solve().iterations > 0, "the GPU solved");
+    let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
+    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
+    let worst = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max);
+    assert!(largest > 0.1, "the bar moves ({largest} mm)");
+    assert!(
+        worst <= 1e-4 * largest,
+        "{solver:?}: GPU differs by {worst:.3e} of {largest:.3e} mm"
+    );
+}
+
+#[test]
+fn gpu_implicit_steps_match_rayon_after_100_steps() {
+    compare(SolverKind::Dynamic, 100);
+}
+
+#[test]
+fn gpu_static_solves_match_rayon() {
+    compare(SolverKind::Static, 3);
+}
