@@ -167,6 +167,35 @@ fn chainmail_head_scene_runs_and_swaps_to_every_model_with_one_edit() {
         );
         volumes.push(v);
     }
+
+    // The corotational FEM scene on the WGSL path (its PCG and the map into
+    // device buffers, through the plugin ABI's GPU service) deforms the
+    // head as the rayon path does.
+    if voxflex_runtime::gpu_context::testing::test_gpu().is_some() {
+        let fem = scene_text
+            .replacen("plugin = \"chainmail\"", "plugin = \"corotational-fem\"", 1)
+            .replacen("backend = \"auto\"", "backend = \"gpu\"", 1);
+        std::fs::write(tmp.path().join("s.toml"), &fem).unwrap();
+        let o = voxflex(&["run", "s.toml", "--out", "femg"], tmp.path());
+        assert!(o.status.success(), "{}", text(&o));
+        assert_eq!(metrics(&tmp.path().join("femg"))["backend"], "gpu");
+        let read = |p: &str| {
+            voxflex_core::io::read_volume(&tmp.path().join(p), &Default::default()).unwrap()
+        };
+        let (a, b) = (read("fem/deformed.nii.gz"), read("femg/deformed.nii.gz"));
+        assert_eq!(a.grid, b.grid);
+        let (a, b) = (a.view().data.to_f32_vec(), b.view().data.to_f32_vec());
+        let differ = a
+            .iter()
+            .zip(&b)
+            .filter(|(x, y)| (*x - *y).abs() > 1.0)
+            .count();
+        assert!(
+            differ * 1000 < a.len(),
+            "{differ} of {} voxels differ",
+            a.len()
+        );
+    }
 }
 
 #[test]

@@ -696,14 +696,12 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         volume: VolumeView<'_>,
         backend: ExecutionBackend,
     ) -> Result<(), ModelError> {
-        if backend == ExecutionBackend::Gpu {
-            return Err(ModelError(format!(
-                "{}: no GPU path yet; use backend = \"cpu\" (or \"auto\")",
-                S::NAME
-            )));
-        }
         let (mesh, materials, hanging) = self.proxy(volume)?;
-        self.build(mesh, materials, hanging)
+        self.build(mesh, materials, hanging)?;
+        if backend == ExecutionBackend::Gpu {
+            self.use_gpu()?;
+        }
+        Ok(())
     }
 
     fn bind(&mut self, rest: RestPoints<'_>) -> Result<BindingId, ModelError> {
