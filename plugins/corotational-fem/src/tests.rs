@@ -427,3 +427,45 @@ fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
     assert!((x[grid.linear(20, 1, 1)] - 2.0).abs() < 0.1);
     assert!(x[grid.linear(0, 1, 1)].abs() < 1e-6);
 }
+
+#[test]
+fn a_mesh_file_proxy_maps_its_tags_to_materials_and_hostile_files_are_refused() {
+    use voxflex_core::deformation::ExecutionBackend;
+    let dir = tempfile::tempdir().unwrap();
+    // Two tetrahedra of a unit cube's corner, tagged 7 and 9 (TetGen).
+    let node = "5 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n";
+    let ele = "2 4 1\n1 1 2 3 4 7\n2 2 3 4 5 9\n";
+    std::fs::write(dir.path().join("m.node"), node).unwrap();
+    std::fs::write(dir.path().join("m.ele"), ele).unwrap();
+    let volume = voxflex_core::phantom::phantom("cube", [8, 8, 8]).unwrap();
+    let scene = |materials: &str| {
+        format!(
+            "proxy = {{ kind = \"file\", path = {:?} }}\nmaterials = [{materials}]\nsolver = \"static\"",
+            dir.path().join("m.node").to_str().unwrap()
+        )
+    };
+    let both = "{ label = 7, youngs_modulus = 1000 }, { label = 9, youngs_modulus = 5000 }";
+    let mut m = Fem::from_toml(&scene(both)).unwrap();
+    m.init(volume.view(), ExecutionBackend::Cpu).unwrap();
+    let mesh = m.mesh().unwrap();
+    assert_eq!(mesh.tets.len(), 2);
+    let mut labels = mesh.labels.clone();
+    labels.sort_unstable();
+    assert_eq!(labels, vec![0, 1], "tags 7 and 9 became materials 0 and 1");
+
+    let mut m = Fem::from_toml(&scene("{ label = 7, youngs_modulus = 1000 }")).unwrap();
+    let e = m.init(volume.view(), ExecutionBackend::Cpu).unwrap_err().0;
+    assert!(
+        e.contains("tagged 9") && e.contains("label = 9") && e.contains("m.node"),
+        "{e}"
+    );
+
+    std::fs::write(
+        dir.path().join("m.node"),
+        node.replace("5 1 1 1", "5 1 nan 1"),
+    )
+    .unwrap();
+    let mut m = Fem::from_toml(&scene(both)).unwrap();
+    let e = m.init(volume.view(), ExecutionBackend::Cpu).unwrap_err().0;
+    assert!(e.contains("m.node") && e.contains("finite"), "{e}");
+}

@@ -120,6 +120,13 @@ fn parse_tetgen(
             number(node_path, line, f[2])?,
             number(node_path, line, f[3])?,
         ];
+        if c.iter().any(|v| !v.is_finite()) {
+            return Err(corrupt(
+                node_path,
+                line,
+                format!("point {index} has a non-finite coordinate {c:?} (mm); fix or remove it"),
+            ));
+        }
         nodes.push(DVec3::from_array(c));
     }
     let base = first_index.unwrap_or(0);
