@@ -80,7 +80,8 @@ fn spring_forces(
     force[s] = vec4<f32>(mag * dir, 0.0);
 }
 
-// kernel.rs `integrate` for free nodes (symplectic Euler), then the
+// kernel.rs `integrate` for free nodes (symplectic Euler,
+// v += h ((f + ext) / m − α v), u += h v), then the
 // imposed nodes as solver.rs's explicit step sets them.
 @compute @workgroup_size(64)
 fn integrate(
@@ -115,7 +116,7 @@ fn integrate(
     }
     let m = node[n].w;
     var vn = v[n].xyz;
-    let a = (f + node[n].xyz - p.alpha * m * vn) / m;
+    let a = (f + node[n].xyz) * (1.0 / m) - p.alpha * vn;
     vn = vn + p.h * a;
     v[n] = vec4<f32>(vn, 0.0);
     u[n] = vec4<f32>(u[n].xyz + p.h * vn, 0.0);

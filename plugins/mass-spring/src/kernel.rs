@@ -18,7 +18,8 @@ const CHUNK: usize = 4096;
 
 /// The springs and node state as f32 structure-of-arrays.
 pub struct SpringKernel {
-    /// Ends of each spring (padded to a multiple of 8 with zero springs).
+    /// Ends of each spring as state slots (see `slot_of`; padded to a
+    /// multiple of 8 with zero springs).
     a: Vec<u32>,
     b: Vec<u32>,
     /// Rest vector `X_b − X_a` (mm), rest length (mm), stiffness (µN/mm),
@@ -32,17 +33,24 @@ pub struct SpringKernel {
     /// the spring index, with the top bit set where `n` is its end `b`.
     incident_start: Vec<u32>,
     incident: Vec<u32>,
-    /// Node `n`'s springs as end `a`: `a_start[n] .. a_start[n + 1]` (the
-    /// springs are sorted by end `a`); as end `b`: the spring indices
-    /// `b_list[b_start[n] .. b_start[n + 1]]` (8 words of padding at the
-    /// end, for 8-wide reads).
-    a_start: Vec<u32>,
-    b_start: Vec<u32>,
-    b_list: Vec<u32>,
-    /// Displacement per node, mm.
-    pub u: Vec<[f32; 3]>,
-    /// Velocity per node, mm/s.
-    pub v: Vec<[f32; 3]>,
+    /// The nodes' springs for the CPU gather, eight nodes at a time: group
+    /// `g` (nodes `8g .. 8g + 8`) has `width[g]` rows of 8 tagged spring
+    /// indices (as in `incident`) starting at `table[8 · row[g]]`, lane `l`
+    /// holding node `8g + l`'s springs; short lanes are padded with
+    /// `zero_spring`, whose force is always zero.
+    group_row: Vec<u32>,
+    group_width: Vec<u32>,
+    table: Vec<u32>,
+    /// Displacement per axis and node, mm (padded to a multiple of 8
+    /// nodes).
+    u: [Vec<f32>; 3],
+    /// Velocity per axis and node, mm/s (padded likewise).
+    v: [Vec<f32>; 3],
+    /// Nodes (unpadded).
+    nodes: usize,
+    /// The state arrays' slot of each node, and the node in each slot.
+    slot_of: Vec<u32>,
+    node_at: Vec<u32>,
     /// Per spring: the force on end `a`, µN, per axis.
     f: [Vec<f32>; 3],
 }
@@ -62,7 +70,10 @@ pub struct SpringTable {
 impl SpringKernel {
     /// The kernel's arrays for `springs` between `rest` node positions.
     pub fn new(springs: &Springs, rest: &[DVec3]) -> Self {
-        let m = springs.ends.len().next_multiple_of(8);
+        // At least one padding spring: its force is zero (both ends node 0,
+        // no rest vector, no stiffness), and the gather table's short lanes
+        // point at it.
+        let m = (springs.ends.len() + 1).next_multiple_of(8);
         let pad = |mut v: Vec<f32>| {
             v.resize(m, 0.0);
             v
@@ -74,13 +85,13 @@ impl SpringKernel {
         };
         let (a, b) = (ends(0), ends(1));
         assert!(
-            3 * rest.len() < i32::MAX as usize
+            rest.len() < i32::MAX as usize
                 && springs
                     .ends
                     .iter()
                     .flatten()
                     .all(|&n| (n as usize) < rest.len()),
-            "spring ends must be nodes, and 3 × nodes must fit an i32 gather index"
+            "spring ends must be nodes, and node indices must fit an i32 gather index"
         );
         let e = [0, 1, 2].map(|axis| {
             pad(springs
@@ -106,27 +117,55 @@ impl SpringKernel {
                 fill[node as usize] += 1;
             }
         }
-        // For the CPU gather: the springs are sorted by their end `a`, so a
-        // node's `a`-end springs are one range; its `b`-end springs a list.
-        assert!(
-            springs.ends.windows(2).all(|w| w[0] <= w[1]),
-            "springs sorted by their ends"
+        // Slots: within each run of 16 nodes, the nodes ordered by their
+        // number of springs, so the 8 nodes of a gather group have about as
+        // many springs and the table's rows are nearly full (in the
+        // five-tetrahedra split, alternate nodes have 18 and 6 springs),
+        // while nodes stay near their mesh neighbours in memory (sorting
+        // the whole list by degree measured slower: the spring pass's
+        // gathers lose their locality).
+        let degree = |node: usize| incident_start[node + 1] - incident_start[node];
+        let mut node_at: Vec<u32> = (0..n as u32).collect();
+        node_at.sort_by_key(|&node| (node / 16, std::cmp::Reverse(degree(node as usize))));
+        let mut slot_of = vec![0u32; n];
+        for (slot, &node) in node_at.iter().enumerate() {
+            slot_of[node as usize] = slot as u32;
+        }
+        let (a, b) = (
+            a.iter()
+                .map(|&x| slot_of.get(x as usize).copied().unwrap_or(0))
+                .collect::<Vec<u32>>(),
+            b.iter()
+                .map(|&x| slot_of.get(x as usize).copied().unwrap_or(0))
+                .collect::<Vec<u32>>(),
         );
-        let mut a_start = vec![0u32; n + 1];
-        let mut b_start = vec![0u32; n + 1];
-        for [p, q] in &springs.ends {
-            a_start[*p as usize + 1] += 1;
-            b_start[*q as usize + 1] += 1;
-        }
-        for i in 0..n {
-            a_start[i + 1] += a_start[i];
-            b_start[i + 1] += b_start[i];
-        }
-        let mut fill = b_start.clone();
-        let mut b_list = vec![0u32; springs.ends.len() + 8];
-        for (s, [_, q]) in springs.ends.iter().enumerate() {
-            b_list[fill[*q as usize] as usize] = s as u32;
-            fill[*q as usize] += 1;
+        // The gather table (see the fields), over slots.
+        let zero_spring = springs.ends.len() as u32;
+        let groups = n.div_ceil(8);
+        let (mut group_row, mut group_width, mut table) = (Vec::new(), Vec::new(), Vec::new());
+        for g in 0..groups {
+            let nodes = (8 * g..(8 * g + 8).min(n)).map(|slot| node_at[slot] as usize);
+            let list = |node: usize| {
+                &incident[incident_start[node] as usize..incident_start[node + 1] as usize]
+            };
+            let width = nodes
+                .clone()
+                .map(|node| list(node).len())
+                .max()
+                .unwrap_or(0);
+            group_row.push((table.len() / 8) as u32);
+            group_width.push(width as u32);
+            for j in 0..width {
+                for l in 0..8 {
+                    let slot = 8 * g + l;
+                    let tag = if slot < n {
+                        list(node_at[slot] as usize).get(j).copied()
+                    } else {
+                        None
+                    };
+                    table.push(tag.unwrap_or(zero_spring));
+                }
+            }
         }
         let f32s = |v: &[f64]| pad(v.iter().map(|&x| x as f32).collect());
         Self {
@@ -138,20 +177,68 @@ impl SpringKernel {
             c: f32s(&springs.c),
             incident_start,
             incident,
-            a_start,
-            b_start,
-            b_list,
-            u: vec![[0.0; 3]; n],
-            v: vec![[0.0; 3]; n],
+            group_row,
+            group_width,
+            table,
+            slot_of,
+            node_at,
+            u: [0, 1, 2].map(|_| vec![0.0; n.next_multiple_of(8)]),
+            v: [0, 1, 2].map(|_| vec![0.0; n.next_multiple_of(8)]),
+            nodes: n,
             f: [vec![0.0; m], vec![0.0; m], vec![0.0; m]],
         }
     }
 
     /// Loads displacements (mm) and velocities (mm/s).
     pub fn load(&mut self, u: &[DVec3], v: &[DVec3]) {
-        let f32s = |p: &DVec3| p.as_vec3().to_array();
-        self.u.iter_mut().zip(u).for_each(|(d, s)| *d = f32s(s));
-        self.v.iter_mut().zip(v).for_each(|(d, s)| *d = f32s(s));
+        for (n, (un, vn)) in u.iter().zip(v).enumerate() {
+            self.set_node(n, un.as_vec3().to_array(), vn.as_vec3().to_array());
+        }
+    }
+
+    /// Stores displacements (mm) and velocities (mm/s) back.
+    pub fn store(&self, u: &mut [DVec3], v: &mut [DVec3]) {
+        for (n, (un, vn)) in u.iter_mut().zip(v.iter_mut()).enumerate() {
+            let (a, b) = self.node(n);
+            *un = DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+            *vn = DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64);
+        }
+    }
+
+    /// Node `n`'s displacement (mm) and velocity (mm/s).
+    #[inline]
+    pub fn node(&self, n: usize) -> ([f32; 3], [f32; 3]) {
+        let n = self.slot_of[n] as usize;
+        (
+            [self.u[0][n], self.u[1][n], self.u[2][n]],
+            [self.v[0][n], self.v[1][n], self.v[2][n]],
+        )
+    }
+
+    /// Sets node `n`'s displacement (mm) and velocity (mm/s).
+    #[inline]
+    pub fn set_node(&mut self, n: usize, u: [f32; 3], v: [f32; 3]) {
+        let n = self.slot_of[n] as usize;
+        for k in 0..3 {
+            self.u[k][n] = u[k];
+            self.v[k][n] = v[k];
+        }
+    }
+
+    /// Applies the forces `f` (µN) to the `free` nodes for `h` seconds
+    /// (symplectic Euler): the general path, when forces were summed and
+    /// moved off hanging nodes on the CPU.
+    pub fn apply(&mut self, f: &[DVec3], h: f64, masses: &[f64], free: &[bool]) {
+        for (n, fn_) in f.iter().enumerate() {
+            if free[n] {
+                let a = (*fn_ * (h / masses[n])).as_vec3().to_array();
+                let slot = self.slot_of[n] as usize;
+                for k in 0..3 {
+                    self.v[k][slot] += a[k];
+                    self.u[k][slot] += h as f32 * self.v[k][slot];
+                }
+            }
+        }
     }
 
     /// Springs (unpadded count).
@@ -166,7 +253,14 @@ impl SpringKernel {
             geometry: (0..n)
                 .map(|s| [self.e[0][s], self.e[1][s], self.e[2][s], self.rest[s]])
                 .collect(),
-            ends: (0..n).map(|s| [self.a[s], self.b[s]]).collect(),
+            ends: (0..n)
+                .map(|s| {
+                    [
+                        self.node_at[self.a[s] as usize],
+                        self.node_at[self.b[s] as usize],
+                    ]
+                })
+                .collect(),
             kc: (0..n).map(|s| [self.k[s], self.c[s]]).collect(),
         }
     }
@@ -174,13 +268,6 @@ impl SpringKernel {
     /// The node → spring incidence (`start`, `incident`; see the fields).
     pub fn incidence(&self) -> (&[u32], &[u32]) {
         (&self.incident_start, &self.incident)
-    }
-
-    /// Stores displacements (mm) and velocities (mm/s) back.
-    pub fn store(&self, u: &mut [DVec3], v: &mut [DVec3]) {
-        let f64s = |p: &[f32; 3]| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-        u.iter_mut().zip(&self.u).for_each(|(d, s)| *d = f64s(s));
-        v.iter_mut().zip(&self.v).for_each(|(d, s)| *d = f64s(s));
     }
 
     /// Per spring: the force on its end `a` (stretch and damping along it).
@@ -226,133 +313,144 @@ impl SpringKernel {
     }
 
     /// The springs' force on node `n` (µN), after [`SpringKernel::spring_pass`].
-    #[inline]
     pub fn node_force(&self, n: usize) -> [f32; 3] {
-        gather(&self.node_springs(), &self.f, n)
-    }
-
-    fn node_springs(&self) -> NodeSprings<'_> {
-        NodeSprings {
-            a_start: &self.a_start,
-            b_start: &self.b_start,
-            b_list: &self.b_list,
+        let slot = self.slot_of[n] as usize;
+        let (g, lane) = (slot / 8, slot % 8);
+        let row = self.group_row[g] as usize;
+        let mut acc = [0f32; 3];
+        for j in 0..self.group_width[g] as usize {
+            let tagged = self.table[8 * (row + j) + lane];
+            let s = (tagged & !END_B) as usize;
+            let sign = if tagged & END_B == 0 { 1.0 } else { -1.0 };
+            for (k, a) in acc.iter_mut().enumerate() {
+                *a += sign * self.f[k][s];
+            }
         }
+        acc
     }
 
     /// One symplectic Euler step of `h` seconds for the `free` nodes, after
-    /// [`SpringKernel::spring_pass`]: `v += h (f_springs + ext − α m v) / m`,
-    /// `u += h v`, with `ext` the external force (µN), `mass` (g) and
-    /// `alpha` the mass damping (1/s).
-    pub fn integrate(&mut self, h: f32, ext: &[[f32; 3]], mass: &[f32], alpha: f32, free: &[bool]) {
-        let springs = NodeSprings {
-            a_start: &self.a_start,
-            b_start: &self.b_start,
-            b_list: &self.b_list,
-        };
-        let f = &self.f;
-        self.u
-            .par_iter_mut()
-            .zip(self.v.par_iter_mut())
+    /// [`SpringKernel::spring_pass`]: `v += h ((f_springs + ext) / m − α v)`,
+    /// `u += h v`, with `ext` the external force (µN) and `inv_mass` (1/g)
+    /// per axis and slot ([`SpringKernel::in_slot_order`]), `free` all ones on the
+    /// nodes to move, and `alpha` the mass damping (1/s). Eight nodes at a
+    /// time: each row of their gather table is one 8-wide gather per axis.
+    pub fn integrate(
+        &mut self,
+        h: f32,
+        ext: &[Vec<f32>; 3],
+        inv_mass: &[f32],
+        free: &[u32],
+        alpha: f32,
+    ) {
+        let (rows, widths, table, f) = (&self.group_row, &self.group_width, &self.table, &self.f);
+        let [u0, u1, u2] = &mut self.u;
+        let [v0, v1, v2] = &mut self.v;
+        let (h, alpha) = (f32x8::splat(h), f32x8::splat(alpha));
+        u0.par_chunks_mut(8)
+            .zip(u1.par_chunks_mut(8))
+            .zip(u2.par_chunks_mut(8))
+            .zip(
+                v0.par_chunks_mut(8)
+                    .zip(v1.par_chunks_mut(8))
+                    .zip(v2.par_chunks_mut(8)),
+            )
             .enumerate()
-            .with_min_len(512)
-            .for_each(|(n, (un, vn))| {
-                if !free[n] {
-                    return;
-                }
-                let fs = gather(&springs, f, n);
-                for i in 0..3 {
-                    let a = (fs[i] + ext[n][i] - alpha * mass[n] * vn[i]) / mass[n];
-                    vn[i] += h * a;
-                    un[i] += h * vn[i];
+            .with_min_len(64)
+            .for_each(|(g, (((u0, u1), u2), ((v0, v1), v2)))| {
+                let row = rows[g] as usize;
+                let forces = gather8(&table[8 * row..8 * (row + widths[g] as usize)], f);
+                let at =
+                    |a: &[f32]| f32x8::from(<[f32; 8]>::try_from(&a[8 * g..8 * g + 8]).expect("8"));
+                let inv_m = at(inv_mass);
+                let moves: f32x8 =
+                    bytemuck::cast(<[u32; 8]>::try_from(&free[8 * g..8 * g + 8]).expect("8"));
+                for (k, (u, v)) in [(u0, v0), (u1, v1), (u2, v2)].into_iter().enumerate() {
+                    let (uk, vk) = (
+                        f32x8::from(<[f32; 8]>::try_from(&*u).expect("8")),
+                        f32x8::from(<[f32; 8]>::try_from(&*v).expect("8")),
+                    );
+                    let a = (f32x8::from(forces[k]) + at(&ext[k])) * inv_m - alpha * vk;
+                    let vn = vk + h * a;
+                    let un = uk + h * vn;
+                    u.copy_from_slice(&moves.select(un, uk).to_array());
+                    v.copy_from_slice(&moves.select(vn, vk).to_array());
                 }
             });
     }
+
+    /// Per-node values (node order) in slot order, padded with `pad` to a
+    /// multiple of 8: the per-node arrays [`SpringKernel::integrate`] takes.
+    pub fn in_slot_order<T: Copy>(&self, per_node: &[T], pad: T) -> Vec<T> {
+        let mut out: Vec<T> = self.node_at.iter().map(|&n| per_node[n as usize]).collect();
+        out.resize(self.nodes.next_multiple_of(8), pad);
+        out
+    }
 }
 
-/// Where each node's springs are (see the fields of [`SpringKernel`]).
-struct NodeSprings<'a> {
-    a_start: &'a [u32],
-    b_start: &'a [u32],
-    b_list: &'a [u32],
-}
-
-/// Node `n`'s spring force: the forces of the springs it is end `a` of
-/// (one contiguous range), minus those of the springs it is end `b` of.
+/// The spring forces of 8 nodes from their gather-table rows (8 tagged
+/// spring indices each): per axis, per lane.
 #[inline]
-fn gather(springs: &NodeSprings<'_>, f: &[Vec<f32>; 3], n: usize) -> [f32; 3] {
-    let (a0, a1) = (springs.a_start[n] as usize, springs.a_start[n + 1] as usize);
-    let mut acc = [0, 1, 2].map(|k| f[k][a0..a1].iter().sum::<f32>());
-    let (first, end) = (springs.b_start[n] as usize, springs.b_start[n + 1] as usize);
+fn gather8(rows: &[u32], f: &[Vec<f32>; 3]) -> [[f32; 8]; 3] {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
         use std::arch::x86_64::{
-            __m256, __m256i, _mm256_add_ps, _mm256_castsi256_ps, _mm256_cmpgt_epi32,
-            _mm256_loadu_si256, _mm256_mask_i32gather_ps, _mm256_set1_epi32, _mm256_setr_epi32,
-            _mm256_setzero_ps,
+            __m256, __m256i, _mm256_add_ps, _mm256_and_si256, _mm256_castsi256_ps,
+            _mm256_i32gather_ps, _mm256_loadu_si256, _mm256_set1_epi32, _mm256_setzero_ps,
+            _mm256_xor_ps,
         };
-        // SAFETY: AVX2 is enabled at compile time (this block's cfg); the
-        // index loads read 8 words from `first + i`, inside `b_list`, which
-        // carries 8 words of padding; lanes past `end` are masked out of
-        // the gathers; every listed spring index is below the length of the
-        // force arrays.
+        // SAFETY: AVX2 is enabled at compile time (this block's cfg); each
+        // row is 8 words of `rows`; every spring index in the table (the
+        // padding's included) is below the length of the force arrays.
         unsafe {
-            let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-            let mut sums = [_mm256_setzero_ps(); 3];
-            let mut i = first;
-            while i < end {
-                let count = _mm256_set1_epi32((end - i) as i32);
-                let mask = _mm256_castsi256_ps(_mm256_cmpgt_epi32(count, lanes));
-                let index = _mm256_loadu_si256(springs.b_list.as_ptr().add(i) as *const __m256i);
-                for (k, sum) in sums.iter_mut().enumerate() {
-                    let g: __m256 = _mm256_mask_i32gather_ps::<4>(
-                        _mm256_setzero_ps(),
-                        f[k].as_ptr(),
-                        index,
-                        mask,
-                    );
-                    *sum = _mm256_add_ps(*sum, g);
+            let index_bits = _mm256_set1_epi32(!END_B as i32);
+            let sign_bit = _mm256_set1_epi32(END_B as i32);
+            let mut acc = [_mm256_setzero_ps(); 3];
+            for row in rows.chunks_exact(8) {
+                let tags = _mm256_loadu_si256(row.as_ptr() as *const __m256i);
+                let index = _mm256_and_si256(tags, index_bits);
+                let sign = _mm256_castsi256_ps(_mm256_and_si256(tags, sign_bit));
+                for (k, a) in acc.iter_mut().enumerate() {
+                    let g: __m256 = _mm256_i32gather_ps::<4>(f[k].as_ptr(), index);
+                    *a = _mm256_add_ps(*a, _mm256_xor_ps(g, sign));
                 }
-                i += 8;
             }
-            for (a, sum) in acc.iter_mut().zip(sums) {
-                *a -=
-                    bytemuck::cast::<[f32; 8], f32x8>(std::mem::transmute::<__m256, [f32; 8]>(sum))
-                        .reduce_add();
-            }
+            acc.map(|a| std::mem::transmute::<__m256, [f32; 8]>(a))
         }
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
-    for &s in &springs.b_list[first..end] {
-        for (k, a) in acc.iter_mut().enumerate() {
-            *a -= f[k][s as usize];
+    {
+        let mut acc = [[0f32; 8]; 3];
+        for row in rows.chunks_exact(8) {
+            for (l, &tagged) in row.iter().enumerate() {
+                let s = (tagged & !END_B) as usize;
+                let sign = if tagged & END_B == 0 { 1.0 } else { -1.0 };
+                for k in 0..3 {
+                    acc[k][l] += sign * f[k][s];
+                }
+            }
         }
+        acc
     }
-    acc
 }
 
 /// `x[b[s + l]] − x[a[s + l]]` for the 8 springs `s .. s + 8`, per axis.
 #[inline(always)]
-fn end_difference(x: &[[f32; 3]], a: &[u32], b: &[u32], s: usize) -> [f32x8; 3] {
+fn end_difference(x: &[Vec<f32>; 3], a: &[u32], b: &[u32], s: usize) -> [f32x8; 3] {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
-        use std::arch::x86_64::{
-            __m256, __m256i, _mm256_i32gather_ps, _mm256_loadu_si256, _mm256_mullo_epi32,
-            _mm256_set1_epi32,
-        };
+        use std::arch::x86_64::{__m256, __m256i, _mm256_i32gather_ps, _mm256_loadu_si256};
         let (ia, ib) = (&a[s..s + 8], &b[s..s + 8]);
         // SAFETY: AVX2 is enabled at compile time (this block's cfg); the
         // 8-word loads read `ia`/`ib`, which hold 8 `u32` each; every end
-        // is a node index below `x.len()` (checked in `SpringKernel::new`,
-        // which also keeps `3 · nodes` within `i32`), so each gathered word
-        // `3 · node + axis` lies inside `x`.
+        // is a node index below the per-axis arrays' length (checked in
+        // `SpringKernel::new`, which also keeps node indices within `i32`).
         unsafe {
-            let three = _mm256_set1_epi32(3);
-            let oa = _mm256_mullo_epi32(_mm256_loadu_si256(ia.as_ptr() as *const __m256i), three);
-            let ob = _mm256_mullo_epi32(_mm256_loadu_si256(ib.as_ptr() as *const __m256i), three);
-            let base = x.as_ptr() as *const f32;
+            let oa = _mm256_loadu_si256(ia.as_ptr() as *const __m256i);
+            let ob = _mm256_loadu_si256(ib.as_ptr() as *const __m256i);
             let axis = |k: usize| -> f32x8 {
-                let pa: __m256 = _mm256_i32gather_ps::<4>(base.add(k), oa);
-                let pb: __m256 = _mm256_i32gather_ps::<4>(base.add(k), ob);
+                let pa: __m256 = _mm256_i32gather_ps::<4>(x[k].as_ptr(), oa);
+                let pb: __m256 = _mm256_i32gather_ps::<4>(x[k].as_ptr(), ob);
                 bytemuck::cast::<[f32; 8], f32x8>(std::mem::transmute::<__m256, [f32; 8]>(pb))
                     - bytemuck::cast::<[f32; 8], f32x8>(std::mem::transmute::<__m256, [f32; 8]>(pa))
             };
@@ -361,13 +459,11 @@ fn end_difference(x: &[[f32; 3]], a: &[u32], b: &[u32], s: usize) -> [f32x8; 3] 
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
     {
-        let mut d = [[0f32; 8]; 3];
-        for l in 0..8 {
-            let (pa, pb) = (x[a[s + l] as usize], x[b[s + l] as usize]);
-            for i in 0..3 {
-                d[i][l] = pb[i] - pa[i];
-            }
-        }
-        [f32x8::from(d[0]), f32x8::from(d[1]), f32x8::from(d[2])]
+        let d = |k: usize| {
+            f32x8::from(std::array::from_fn::<f32, 8, _>(|l| {
+                x[k][b[s + l] as usize] - x[k][a[s + l] as usize]
+            }))
+        };
+        [d(0), d(1), d(2)]
     }
 }

@@ -180,7 +180,7 @@ impl MassSpring {
             .with_min_len(2048)
             .for_each(|(n, o)| {
                 let [fx, fy, fz] = kernel.node_force(n);
-                let [vx, vy, vz] = kernel.v[n];
+                let [vx, vy, vz] = kernel.node(n).1;
                 let v = DVec3::new(vx as f64, vy as f64, vz as f64);
                 *o = DVec3::new(fx as f64, fy as f64, fz as f64) + bc.force[n]
                     - alpha * masses[n] * v;
@@ -231,57 +231,55 @@ impl MassSpring {
         let start_u = state.u.clone();
         self.kernel.load(&state.u, &state.v);
         let mut f = vec![DVec3::ZERO; free.len()];
-        let ext: Vec<[f32; 3]> = bc.force.iter().map(|v| v.as_vec3().to_array()).collect();
-        let mass: Vec<f32> = self.masses.iter().map(|&m| m as f32).collect();
+        // Per-axis inputs of the 8-wide update, in the kernel's slot order.
+        let k = &self.kernel;
+        let ext: [Vec<f32>; 3] = [0, 1, 2].map(|a| {
+            let e: Vec<f32> = bc.force.iter().map(|f| f[a] as f32).collect();
+            k.in_slot_order(&e, 0.0)
+        });
+        let inv: Vec<f32> = self.masses.iter().map(|&m| (1.0 / m) as f32).collect();
+        let inv_mass = k.in_slot_order(&inv, 0.0);
+        let moving: Vec<u32> = free.iter().map(|&f| if f { u32::MAX } else { 0 }).collect();
+        let moves = k.in_slot_order(&moving, 0);
         let alpha = self.params.mass_damping as f32;
         for s in 1..=substeps {
             if bc.hanging.is_empty() {
                 self.kernel.spring_pass();
-                self.kernel.integrate(h as f32, &ext, &mass, alpha, &free);
+                self.kernel
+                    .integrate(h as f32, &ext, &inv_mass, &moves, alpha);
             } else {
                 // Hanging nodes pass their forces to their masters first.
                 self.node_forces(bc, &mut f);
                 bc.untie(&mut f);
-                let masses = &self.masses;
-                let k = &mut self.kernel;
-                k.u.par_iter_mut()
-                    .zip(k.v.par_iter_mut())
-                    .enumerate()
-                    .with_min_len(2048)
-                    .for_each(|(n, (u, v))| {
-                        if free[n] {
-                            let a = (f[n] * (h / masses[n])).as_vec3().to_array();
-                            for i in 0..3 {
-                                v[i] += a[i];
-                                u[i] += h as f32 * v[i];
-                            }
-                        }
-                    });
+                self.kernel.apply(&f, h, &self.masses, &free);
             }
             let k = &mut self.kernel;
             // Imposed nodes: fixed stay, driven ones move linearly to their
             // targets over the frame, hanging ones follow their masters.
             for &n in &fixed {
-                k.u[n] = [0.0; 3];
-                k.v[n] = [0.0; 3];
+                k.set_node(n, [0.0; 3], [0.0; 3]);
             }
             let frac = s as f64 / substeps as f64;
             for &(n, target) in &bc.driven {
                 let n = n as usize;
                 let u = start_u[n].lerp(target, frac);
-                let now = DVec3::from_array(k.u[n].map(f64::from));
-                k.v[n] = ((u - now) / h).as_vec3().to_array();
-                k.u[n] = u.as_vec3().to_array();
+                let now = DVec3::from_array(k.node(n).0.map(f64::from));
+                k.set_node(
+                    n,
+                    u.as_vec3().to_array(),
+                    ((u - now) / h).as_vec3().to_array(),
+                );
             }
             for hn in &bc.hanging {
-                let tie = |x: &[[f32; 3]]| {
-                    hn.masters.iter().fold([0f32; 3], |acc, &(m, w)| {
-                        let xm = x[m as usize];
-                        [acc[0] + w * xm[0], acc[1] + w * xm[1], acc[2] + w * xm[2]]
-                    })
-                };
-                k.u[hn.node as usize] = tie(&k.u);
-                k.v[hn.node as usize] = tie(&k.v);
+                let (mut u, mut v) = ([0f32; 3], [0f32; 3]);
+                for &(m, w) in &hn.masters {
+                    let (um, vm) = k.node(m as usize);
+                    for i in 0..3 {
+                        u[i] += w * um[i];
+                        v[i] += w * vm[i];
+                    }
+                }
+                k.set_node(hn.node as usize, u, v);
             }
         }
         self.kernel.store(&mut state.u, &mut state.v);
