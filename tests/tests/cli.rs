@@ -168,33 +168,43 @@ fn chainmail_head_scene_runs_and_swaps_to_every_model_with_one_edit() {
         volumes.push(v);
     }
 
-    // The corotational FEM scene on the WGSL path (its PCG and the map into
-    // device buffers, through the plugin ABI's GPU service) deforms the
-    // head as the rayon path does.
+    // The mesh models on the WGSL path (corotational FEM's PCG, the
+    // implicit mass-spring's, and the map into device buffers, through the
+    // plugin ABI's GPU service) deform the head as their rayon paths do.
     if voxflex_runtime::gpu_context::testing::test_gpu().is_some() {
-        let fem = scene_text
-            .replacen("plugin = \"chainmail\"", "plugin = \"corotational-fem\"", 1)
-            .replacen("backend = \"auto\"", "backend = \"gpu\"", 1);
-        std::fs::write(tmp.path().join("s.toml"), &fem).unwrap();
-        let o = voxflex(&["run", "s.toml", "--out", "femg"], tmp.path());
-        assert!(o.status.success(), "{}", text(&o));
-        assert_eq!(metrics(&tmp.path().join("femg"))["backend"], "gpu");
-        let read = |p: &str| {
-            voxflex_core::io::read_volume(&tmp.path().join(p), &Default::default()).unwrap()
-        };
-        let (a, b) = (read("fem/deformed.nii.gz"), read("femg/deformed.nii.gz"));
-        assert_eq!(a.grid, b.grid);
-        let (a, b) = (a.view().data.to_f32_vec(), b.view().data.to_f32_vec());
-        let differ = a
-            .iter()
-            .zip(&b)
-            .filter(|(x, y)| (*x - *y).abs() > 1.0)
-            .count();
-        assert!(
-            differ * 1000 < a.len(),
-            "{differ} of {} voxels differ",
-            a.len()
-        );
+        for (plugin, cpu_out) in [("corotational-fem", "fem"), ("mass-spring", "ms")] {
+            let on_gpu = scene_text
+                .replacen(
+                    "plugin = \"chainmail\"",
+                    &format!("plugin = \"{plugin}\""),
+                    1,
+                )
+                .replacen("backend = \"auto\"", "backend = \"gpu\"", 1);
+            std::fs::write(tmp.path().join("s.toml"), &on_gpu).unwrap();
+            let gpu_out = format!("{cpu_out}-gpu");
+            let o = voxflex(&["run", "s.toml", "--out", &gpu_out], tmp.path());
+            assert!(o.status.success(), "{plugin}: {}", text(&o));
+            assert_eq!(metrics(&tmp.path().join(&gpu_out))["backend"], "gpu");
+            let read = |p: String| {
+                voxflex_core::io::read_volume(&tmp.path().join(p), &Default::default()).unwrap()
+            };
+            let (a, b) = (
+                read(format!("{cpu_out}/deformed.nii.gz")),
+                read(format!("{gpu_out}/deformed.nii.gz")),
+            );
+            assert_eq!(a.grid, b.grid);
+            let (a, b) = (a.view().data.to_f32_vec(), b.view().data.to_f32_vec());
+            let differ = a
+                .iter()
+                .zip(&b)
+                .filter(|(x, y)| (*x - *y).abs() > 1.0)
+                .count();
+            assert!(
+                differ * 1000 < a.len(),
+                "{plugin}: {differ} of {} voxels differ",
+                a.len()
+            );
+        }
     }
 }
 

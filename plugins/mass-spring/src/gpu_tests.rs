@@ -128,22 +128,64 @@ fn gpu_sub_steps_match_rayon_after_100_frames() {
 }
 
 #[test]
-fn the_gpu_path_refuses_what_it_cannot_run() {
+fn gpu_implicit_steps_match_rayon_and_hanging_nodes_are_refused() {
     let Some(gpu) = test_gpu() else { return };
-    let grid = Grid::new([3, 3, 3], DVec3::ONE, DVec3::ZERO);
-    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
-    let implicit = SpringParams {
-        integrator: crate::solver::Integrator::Implicit,
-        ..SpringParams::default()
+    let implicit = |gpu: Option<Arc<dyn GpuService>>| {
+        let grid = Grid::new([9, 3, 3], DVec3::splat(0.5), DVec3::ZERO);
+        let mesh = uniform_proxy(&grid, 1, |v| Some(u16::from(v[0] >= 5))).unwrap();
+        let materials = vec![
+            ElasticMaterial::new(2000.0, 0.3, 1e-3),
+            ElasticMaterial::new(8000.0, 0.3, 1e-3),
+        ];
+        let params = SpringParams {
+            integrator: crate::solver::Integrator::Implicit,
+            cg_tolerance: 1e-6,
+            ..SpringParams::default()
+        };
+        let mut m = Springs::with_mesh(mesh, materials, DVec3::new(0.0, 0.0, -9810.0), params)
+            .unwrap()
+            .with_gpu(gpu);
+        m.interact("kind = \"fix\"\nmin = [-0.1, -0.1, -0.1]\nmax = [0.1, 1.1, 1.1]")
+            .unwrap();
+        m.interact("kind = \"grab\"\npoint = [4, 0.5, 1]\nby = [0.3, 0.2, 0.5]\nframes = 40")
+            .unwrap();
+        m
     };
-    let mut m = Springs::with_mesh(
-        mesh,
-        vec![ElasticMaterial::new(1000.0, 0.3, 1e-3)],
-        DVec3::ZERO,
-        implicit,
+    let (mut cpu, mut dev) = (implicit(None), implicit(Some(gpu.clone())));
+    dev.use_gpu().unwrap();
+    let frame = FrameInfo {
+        frame: 0,
+        frames: 100,
+        dt_s: 1.0 / 60.0,
+    };
+    for _ in 0..100 {
+        cpu.step(frame).unwrap();
+        dev.step(frame).unwrap();
+    }
+    let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
+    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
+    let worst = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max);
+    assert!(largest > 0.1 && dev.last_solve().iterations > 0);
+    assert!(
+        worst <= 1e-4 * largest,
+        "GPU differs by {worst:.3e} of {largest:.3e} mm"
+    );
+
+    // An octree proxy with hanging nodes is refused on the GPU, saying why.
+    use voxflex_core::deformation::ExecutionBackend;
+    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let mut m = Springs::from_toml(
+        "proxy = { kind = \"octree\", max_cell = 8 }\n\
+         materials = [{ range = [50, 150], youngs_modulus = 2000 }, \
+                      { range = [150, 256], youngs_modulus = 20000 }]",
     )
     .unwrap()
     .with_gpu(Some(gpu));
-    let e = m.use_gpu().unwrap_err().0;
-    assert!(e.contains("implicit") && e.contains("explicit"), "{e}");
+    m.init(volume.view(), ExecutionBackend::Gpu).unwrap();
+    let e = m.step(frame).unwrap_err().0;
+    assert!(e.contains("hanging") && e.contains("cpu"), "{e}");
 }

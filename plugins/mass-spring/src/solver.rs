@@ -35,6 +35,7 @@ use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
 use voxflex_core::mesh_model::pcg::{self, CgSettings};
+use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_core::mesh_model::{
     BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
 };
@@ -154,6 +155,8 @@ pub struct MassSpring {
     kernel: SpringKernel,
     /// The explicit integrator's WGSL twin, on the GPU backend.
     gpu: Option<GpuSprings>,
+    /// The implicit integrator's PCG on the GPU backend.
+    gpu_pcg: Option<GpuPcg>,
 }
 
 /// The corner pairs of a tetrahedron's six edges.
@@ -291,7 +294,18 @@ impl MassSpring {
         })
     }
 
-    fn step_implicit(&mut self, dt: f64, bc: &Boundary, state: &mut NodeState) -> SolveReport {
+    fn step_implicit(
+        &mut self,
+        dt: f64,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
+        if self.gpu_pcg.is_some() && !bc.hanging.is_empty() {
+            return Err(ModelError::new(
+                "mass-spring (GPU): octree proxies with hanging nodes run on the CPU for now; \
+                 use a uniform proxy or backend = \"cpu\"",
+            ));
+        }
         // Linearised backward Euler for the velocity change Δv:
         // (M + h C + h² K) Δv = h (f(x, v) − h K v), with K = −∂f/∂x (the
         // springs' tangent stiffness) and C = −∂f/∂v (spring damping along
@@ -371,27 +385,26 @@ impl MassSpring {
             dv[n] = (target - state.u[n]) / h - state.v[n];
         }
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
-        let out = pcg::solve(
-            matrix,
-            bc,
-            &free,
-            &rhs,
-            &mut dv,
-            CgSettings {
-                tolerance: self.params.cg_tolerance,
-                max_iterations: self.params.cg_max_iterations,
-            },
-        );
+        let settings = CgSettings {
+            tolerance: self.params.cg_tolerance,
+            max_iterations: self.params.cg_max_iterations,
+        };
+        let out = match &self.gpu_pcg {
+            Some(g) => g
+                .solve(matrix, &free, &rhs, &mut dv, settings)
+                .map_err(|e| ModelError(format!("mass-spring (GPU): {e}")))?,
+            None => pcg::solve(matrix, bc, &free, &rhs, &mut dv, settings),
+        };
         for ((u, v), d) in state.u.iter_mut().zip(state.v.iter_mut()).zip(&dv) {
             *v += *d;
             *u += h * *v;
         }
         bc.impose(&mut state.u);
-        SolveReport {
+        Ok(SolveReport {
             substeps: 1,
             iterations: out.iterations,
             residual: out.residual,
-        }
+        })
     }
 }
 
@@ -483,6 +496,7 @@ impl MeshSolver for MassSpring {
         Ok(Self {
             kernel: SpringKernel::new(&springs, &mesh.nodes),
             gpu: None,
+            gpu_pcg: None,
             params,
             rest: mesh.nodes.clone(),
             masses,
@@ -496,13 +510,15 @@ impl MeshSolver for MassSpring {
     const GPU: bool = true;
 
     fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
-        if self.params.integrator == Integrator::Implicit {
-            return Err(ModelError::new(
-                "mass-spring: the implicit integrator runs on the CPU only; use \
-                 integrator = \"explicit\" on the GPU, or backend = \"cpu\"",
-            ));
+        match (&self.params.integrator, &self.matrix) {
+            (Integrator::Implicit, Some(matrix)) => {
+                self.gpu_pcg = Some(
+                    GpuPcg::new(gpu, matrix)
+                        .map_err(|e| ModelError(format!("mass-spring (GPU): {e}")))?,
+                );
+            }
+            _ => self.gpu = Some(GpuSprings::new(gpu, &self.kernel, self.rest.len())?),
         }
-        self.gpu = Some(GpuSprings::new(gpu, &self.kernel, self.rest.len())?);
         Ok(())
     }
 
@@ -519,7 +535,7 @@ impl MeshSolver for MassSpring {
         }
         match self.params.integrator {
             Integrator::Explicit => self.step_explicit(dt_s, bc, state),
-            Integrator::Implicit => Ok(self.step_implicit(dt_s, bc, state)),
+            Integrator::Implicit => self.step_implicit(dt_s, bc, state),
         }
     }
 }
