@@ -233,8 +233,8 @@ impl SpringKernel {
             if free[n] {
                 let a = (*fn_ * (h / masses[n])).as_vec3().to_array();
                 let slot = self.slot_of[n] as usize;
-                for k in 0..3 {
-                    self.v[k][slot] += a[k];
+                for (k, ak) in a.into_iter().enumerate() {
+                    self.v[k][slot] += ak;
                     self.u[k][slot] += h as f32 * self.v[k][slot];
                 }
             }
