@@ -15,7 +15,7 @@ use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
 use voxflex_core::proxy::uniform_proxy;
 use voxflex_corotational_fem::{CorotationalFem, FemParams, SolverKind};
 
@@ -105,10 +105,6 @@ fn cantilever() {
 /// One static cantilever solve at level `r`: (ms, mean tip u_z / P, CG
 /// iterations, tetrahedra).
 fn solve(r: usize, tolerance: f64) -> (f64, f64, u32, usize) {
-    let h = 1.0 / r as f64;
-    let grid = Grid::new([10 * r + 1, r + 1, r + 1], DVec3::splat(h), DVec3::ZERO);
-    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
-    let tets = mesh.tets.len();
     let params = FemParams {
         solver: SolverKind::Static,
         cg_tolerance: tolerance,
@@ -116,34 +112,13 @@ fn solve(r: usize, tolerance: f64) -> (f64, f64, u32, usize) {
         static_iterations: 2,
         ..FemParams::default()
     };
-    let mut m = Fem::with_mesh(
-        mesh,
-        vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
-        DVec3::ZERO,
-        params,
-    )
-    .unwrap();
     let p = 1e-4;
-    m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 1.01]")
-        .unwrap();
-    m.interact(&format!(
-        "kind = \"load\"\nmin = [9.99, -0.01, -0.01]\nmax = [10.01, 1.01, 1.01]\ntraction = [0, 0, {}]",
-        -p
-    ))
-    .unwrap();
+    let mut m = cantilever::model::<CorotationalFem>(r, p, params);
+    let tets = m.mesh().unwrap().tets.len();
     let t = Instant::now();
     m.step(frame(0.0)).unwrap();
     let ms = t.elapsed().as_secs_f64() * 1e3;
-    let mesh = m.mesh().unwrap();
-    let u = &m.state().unwrap().u;
-    let tip: Vec<f64> = mesh
-        .nodes
-        .iter()
-        .zip(u)
-        .filter(|(x, _)| (x.x - 10.0).abs() < 1e-9)
-        .map(|(_, d)| d.z / p)
-        .collect();
-    let tip = tip.iter().sum::<f64>() / tip.len() as f64;
+    let tip = cantilever::tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u) / p;
     (ms, tip, m.last_solve().iterations, tets)
 }
 

@@ -10,7 +10,7 @@ use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, largest_and_difference};
 use voxflex_core::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
@@ -59,12 +59,7 @@ fn compare(solver: SolverKind, frames: usize) {
     }
     assert!(dev.last_solve().iterations > 0, "the GPU solved");
     let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
-    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
-    let worst = a
-        .iter()
-        .zip(b)
-        .map(|(p, q)| (*p - *q).length())
-        .fold(0.0, f64::max);
+    let (largest, worst) = largest_and_difference(a, b);
     assert!(largest > 0.1, "the bar moves ({largest} mm)");
     assert!(
         worst <= 1e-4 * largest,

@@ -47,10 +47,10 @@ pub struct FemParams {
     #[serde(default)]
     pub solver: SolverKind,
     /// PCG stops at this relative residual (default 1e-6).
-    #[serde(default = "default_tolerance")]
+    #[serde(default = "pcg::default_tolerance")]
     pub cg_tolerance: f64,
     /// PCG iteration cap per solve (default 200).
-    #[serde(default = "default_cg_max")]
+    #[serde(default = "pcg::default_max_iterations")]
     pub cg_max_iterations: u32,
     /// Re-linearisations per frame of the static solve (default 8).
     #[serde(default = "default_static_iterations")]
@@ -70,12 +70,6 @@ pub struct FemParams {
     pub stiffness_damping: f64,
 }
 
-fn default_tolerance() -> f64 {
-    1e-6
-}
-fn default_cg_max() -> u32 {
-    200
-}
 fn default_static_iterations() -> u32 {
     8
 }
@@ -96,8 +90,8 @@ impl Default for FemParams {
     fn default() -> Self {
         Self {
             solver: SolverKind::default(),
-            cg_tolerance: default_tolerance(),
-            cg_max_iterations: default_cg_max(),
+            cg_tolerance: pcg::default_tolerance(),
+            cg_max_iterations: pcg::default_max_iterations(),
             static_iterations: default_static_iterations(),
             static_tolerance: default_static_tolerance(),
             substeps: one(),
@@ -110,15 +104,10 @@ impl Default for FemParams {
 impl FemParams {
     fn validate(&self) -> Result<(), ModelError> {
         let fail = |m: String| Err(ModelError(format!("corotational-fem params: {m}")));
-        if !(self.cg_tolerance > 0.0 && self.cg_tolerance < 1.0) {
-            // (NaN fails both comparisons.)
-            return fail(format!(
-                "cg_tolerance {} must lie in (0, 1)",
-                self.cg_tolerance
-            ));
-        }
-        if self.cg_max_iterations == 0 || self.static_iterations == 0 || self.substeps == 0 {
-            return fail("cg_max_iterations, static_iterations and substeps must be ≥ 1".into());
+        CgSettings::checked(self.cg_tolerance, self.cg_max_iterations)
+            .map_err(|m| ModelError(format!("corotational-fem params: {m}")))?;
+        if self.static_iterations == 0 || self.substeps == 0 {
+            return fail("static_iterations and substeps must be ≥ 1".into());
         }
         if self.static_tolerance.is_nan() || self.static_tolerance <= 0.0 {
             return fail(format!(

@@ -5,44 +5,15 @@ use crate::solver::{CorotationalFem, FemParams, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::{DMat3, DQuat, DVec3};
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
 use voxflex_core::proxy::uniform_proxy;
 use voxflex_core::tet_mesh::TetMesh;
 
 type Fem = MeshModel<CorotationalFem>;
 
-/// The cantilever box [0, 10] × [0, 1] × [0, 1] with cells of 1/r (the
-/// mesh rule of `tests/reference/cantilever.py`).
-pub(crate) fn cantilever_mesh(r: usize) -> TetMesh {
-    let h = 1.0 / r as f64;
-    let grid = Grid::new([10 * r + 1, r + 1, r + 1], DVec3::splat(h), DVec3::ZERO);
-    uniform_proxy(&grid, 1, |_| Some(0)).expect("cantilever mesh")
-}
-
-/// The reference's node index of a position (x fastest).
-fn reference_index(p: DVec3, r: usize) -> usize {
-    let [i, j, k] = [p.x, p.y, p.z].map(|c| (c * r as f64).round() as usize);
-    i + (10 * r + 1) * (j + (r + 1) * k)
-}
-
-/// A static cantilever model, clamped at x = 0, with a traction of `load`
-/// (Pa, −z) on the face x = 10.
+/// The cantilever (`mesh_model::cantilever`) on this solver.
 pub(crate) fn cantilever(r: usize, load: f64, params: FemParams) -> Fem {
-    let mut m = Fem::with_mesh(
-        cantilever_mesh(r),
-        vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
-        DVec3::ZERO,
-        params,
-    )
-    .unwrap();
-    m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 1.01]")
-        .unwrap();
-    m.interact(&format!(
-        "kind = \"load\"\nmin = [9.99, -0.01, -0.01]\nmax = [10.01, 1.01, 1.01]\ntraction = [0, 0, {}]",
-        -load
-    ))
-    .unwrap();
-    m
+    voxflex_core::mesh_model::cantilever::model::<CorotationalFem>(r, load, params)
 }
 
 pub(crate) fn static_params(tolerance: f64) -> FemParams {
@@ -89,7 +60,7 @@ fn cantilever_matches_an_independent_linear_solution_on_the_same_mesh() {
         let mut worst = 0f64;
         let mut largest = 0f64;
         for (n, x) in mesh.nodes.iter().enumerate() {
-            let e = &expected[reference_index(*x, r)];
+            let e = &expected[cantilever::reference_node(*x, r)];
             let e = DVec3::new(
                 e[0].as_f64().unwrap(),
                 e[1].as_f64().unwrap(),
@@ -108,7 +79,7 @@ fn cantilever_matches_an_independent_linear_solution_on_the_same_mesh() {
 
 #[test]
 fn a_rigidly_rotated_rest_state_has_no_elastic_force() {
-    let mesh = cantilever_mesh(2);
+    let mesh = cantilever::mesh(2);
     let fem = Fem::with_mesh(
         mesh.clone(),
         vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
@@ -338,17 +309,8 @@ fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() 
         "the grab moves the soft half"
     );
     // The proxy has level changes; its hanging nodes follow their masters.
-    let proxy = voxflex_core::proxy::octree_proxy(&volume.grid, 8, |v| {
-        let x = volume
-            .view()
-            .data
-            .get_f32(volume.grid.linear(v[0], v[1], v[2]));
-        (x > 50.0).then_some(u16::from(x > 150.0))
-    })
-    .unwrap();
-    assert_eq!(proxy.mesh.nodes.len(), mesh.nodes.len());
-    assert!(!proxy.hanging.is_empty(), "the test needs hanging nodes");
-    for h in &proxy.hanging {
+    assert!(!m.hanging().is_empty(), "the test needs hanging nodes");
+    for h in m.hanging() {
         let tied: DVec3 = h
             .masters
             .iter()

@@ -15,7 +15,7 @@ use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
 use voxflex_core::proxy::uniform_proxy;
 use voxflex_mass_spring::{Integrator, MassSpring, SpringParams};
 
@@ -81,9 +81,6 @@ fn cantilever() {
         }
         let expected = level["tip_uz_mean"].as_f64().unwrap();
         for tolerance in [1e-3, 1e-6] {
-            let h = 1.0 / r as f64;
-            let grid = Grid::new([10 * r + 1, r + 1, r + 1], DVec3::splat(h), DVec3::ZERO);
-            let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
             let params = SpringParams {
                 integrator: Integrator::Implicit,
                 cg_tolerance: tolerance,
@@ -92,22 +89,9 @@ fn cantilever() {
                 damping_ratio: 1.0,
                 ..SpringParams::default()
             };
-            let mut m = Springs::with_mesh(
-                mesh,
-                vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
-                DVec3::ZERO,
-                params,
-            )
-            .unwrap();
-            let springs = m.solver().unwrap().springs().ends.len();
             let p = 1e-4;
-            m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 1.01]")
-                .unwrap();
-            m.interact(&format!(
-                "kind = \"load\"\nmin = [9.99, -0.01, -0.01]\nmax = [10.01, 1.01, 1.01]\ntraction = [0, 0, {}]",
-                -p
-            ))
-            .unwrap();
+            let mut m = cantilever::model::<MassSpring>(r, p, params);
+            let springs = m.solver().unwrap().springs().ends.len();
             let t = Instant::now();
             let mut steps = 0;
             // To rest: until a step moves no node by more than 1e-9 of the load's scale.
@@ -132,8 +116,7 @@ fn cantilever() {
                 let u = &m.state().unwrap().u;
                 let (mut sum, mut worst, mut largest) = (0.0, 0.0f64, 0.0f64);
                 for (x, un) in mesh.nodes.iter().zip(u) {
-                    let [i, j, k] = [x.x, x.y, x.z].map(|c| (c * r as f64).round() as usize);
-                    let e = &d[i + (10 * r + 1) * (j + (r + 1) * k)];
+                    let e = &d[cantilever::reference_node(*x, r)];
                     let e = DVec3::new(
                         e[0].as_f64().unwrap(),
                         e[1].as_f64().unwrap(),
@@ -162,16 +145,7 @@ fn cantilever() {
 
 /// Mean u_z of the nodes at x = 10.
 fn tip(m: &Springs) -> f64 {
-    let mesh = m.mesh().unwrap();
-    let u = &m.state().unwrap().u;
-    let tip: Vec<f64> = mesh
-        .nodes
-        .iter()
-        .zip(u)
-        .filter(|(x, _)| (x.x - 10.0).abs() < 1e-9)
-        .map(|(_, d)| d.z)
-        .collect();
-    tip.iter().sum::<f64>() / tip.len() as f64
+    cantilever::tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u)
 }
 
 fn main() {

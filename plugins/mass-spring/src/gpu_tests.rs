@@ -10,7 +10,7 @@ use voxflex_core::deformation::{DeformationModel, DisplacementTarget, FrameInfo,
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{GpuService, GpuServiceExt};
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, largest_and_difference};
 use voxflex_core::proxy::uniform_proxy;
 
 type Springs = MeshModel<MassSpring>;
@@ -63,12 +63,7 @@ fn gpu_sub_steps_match_rayon_after_100_frames() {
         );
     }
     let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
-    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
-    let worst = a
-        .iter()
-        .zip(b)
-        .map(|(p, q)| (*p - *q).length())
-        .fold(0.0, f64::max);
+    let (largest, worst) = largest_and_difference(a, b);
     assert!(largest > 0.1, "the bar moves ({largest} mm)");
     assert!(
         worst <= 1e-4 * largest,
@@ -163,12 +158,7 @@ fn gpu_implicit_steps_match_rayon_and_hanging_nodes_are_refused() {
         dev.step(frame).unwrap();
     }
     let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
-    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
-    let worst = a
-        .iter()
-        .zip(b)
-        .map(|(p, q)| (*p - *q).length())
-        .fold(0.0, f64::max);
+    let (largest, worst) = largest_and_difference(a, b);
     assert!(largest > 0.1 && dev.last_solve().iterations > 0);
     assert!(
         worst <= 1e-4 * largest,

@@ -70,10 +70,10 @@ pub struct SpringParams {
     #[serde(default = "default_max_substeps")]
     pub max_substeps: u32,
     /// PCG relative residual of the implicit step (default 1e-6).
-    #[serde(default = "default_tolerance")]
+    #[serde(default = "pcg::default_tolerance")]
     pub cg_tolerance: f64,
     /// PCG iteration cap of the implicit step (default 200).
-    #[serde(default = "default_cg_max")]
+    #[serde(default = "pcg::default_max_iterations")]
     pub cg_max_iterations: u32,
 }
 
@@ -86,12 +86,6 @@ fn default_mass_damping() -> f64 {
 fn default_max_substeps() -> u32 {
     10_000
 }
-fn default_tolerance() -> f64 {
-    1e-6
-}
-fn default_cg_max() -> u32 {
-    200
-}
 
 impl Default for SpringParams {
     fn default() -> Self {
@@ -100,8 +94,8 @@ impl Default for SpringParams {
             damping_ratio: default_damping_ratio(),
             mass_damping: default_mass_damping(),
             max_substeps: default_max_substeps(),
-            cg_tolerance: default_tolerance(),
-            cg_max_iterations: default_cg_max(),
+            cg_tolerance: pcg::default_tolerance(),
+            cg_max_iterations: pcg::default_max_iterations(),
         }
     }
 }
@@ -113,15 +107,11 @@ impl SpringParams {
         if !valid(self.damping_ratio) || !valid(self.mass_damping) {
             return fail("damping_ratio and mass_damping must be finite and ≥ 0".into());
         }
-        if self.max_substeps == 0 || self.cg_max_iterations == 0 {
-            return fail("max_substeps and cg_max_iterations must be ≥ 1".into());
+        if self.max_substeps == 0 {
+            return fail("max_substeps must be ≥ 1".into());
         }
-        if !(self.cg_tolerance > 0.0 && self.cg_tolerance < 1.0) {
-            return fail(format!(
-                "cg_tolerance {} must lie in (0, 1)",
-                self.cg_tolerance
-            ));
-        }
+        CgSettings::checked(self.cg_tolerance, self.cg_max_iterations)
+            .map_err(|m| ModelError(format!("mass-spring params: {m}")))?;
         Ok(())
     }
 }

@@ -174,16 +174,8 @@ fn an_octree_proxy_runs_explicit_and_implicit_with_hanging_nodes_tied() {
             u.iter().any(|v| v.z < -1e-3),
             "{integrator}: gravity moves the soft half"
         );
-        let proxy = voxflex_core::proxy::octree_proxy(&volume.grid, 8, |v| {
-            let x = volume
-                .view()
-                .data
-                .get_f32(volume.grid.linear(v[0], v[1], v[2]));
-            (x > 50.0).then_some(u16::from(x > 150.0))
-        })
-        .unwrap();
-        assert!(!proxy.hanging.is_empty());
-        for h in &proxy.hanging {
+        assert!(!m.hanging().is_empty());
+        for h in m.hanging() {
             let tied: DVec3 = h
                 .masters
                 .iter()

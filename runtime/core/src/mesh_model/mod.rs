@@ -15,6 +15,7 @@
 
 pub mod block_matrix;
 pub mod boundary;
+pub mod cantilever;
 pub mod cut;
 pub mod material;
 mod model;
@@ -52,6 +53,18 @@ impl NodeState {
             v: vec![DVec3::ZERO; nodes],
         }
     }
+}
+
+/// The largest displacement of `a` and the largest difference between
+/// `a` and `b` (mm): how parity and accuracy tests compare two fields.
+pub fn largest_and_difference(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
+    let largest = a.iter().map(|u| u.length()).fold(0.0, f64::max);
+    let worst = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max);
+    (largest, worst)
 }
 
 /// What a solver's step did, for metrics and tests.

@@ -233,6 +233,11 @@ impl<S: MeshSolver> MeshModel<S> {
         Ok(())
     }
 
+    /// The hanging-node ties of an octree proxy (after `init`).
+    pub fn hanging(&self) -> &[HangingNode] {
+        self.built.as_ref().map_or(&[], |b| &b.bc.hanging)
+    }
+
     /// The solver (after `init`).
     pub fn solver(&self) -> Option<&S> {
         self.built.as_ref().map(|b| &b.solver)

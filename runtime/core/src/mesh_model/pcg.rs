@@ -22,6 +22,33 @@ pub struct CgSettings {
     pub max_iterations: u32,
 }
 
+/// The mesh solvers' default `cg_tolerance`.
+pub fn default_tolerance() -> f64 {
+    1e-6
+}
+
+/// The mesh solvers' default `cg_max_iterations`.
+pub fn default_max_iterations() -> u32 {
+    200
+}
+
+impl CgSettings {
+    /// Settings from a scene's `cg_tolerance` and `cg_max_iterations`; the
+    /// error names the key and the value.
+    pub fn checked(tolerance: f64, max_iterations: u32) -> Result<Self, String> {
+        if !(tolerance > 0.0 && tolerance < 1.0) {
+            return Err(format!("cg_tolerance {tolerance} must lie in (0, 1)"));
+        }
+        if max_iterations == 0 {
+            return Err("cg_max_iterations must be ≥ 1".into());
+        }
+        Ok(Self {
+            tolerance,
+            max_iterations,
+        })
+    }
+}
+
 /// How a solve ended.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CgOutcome {
