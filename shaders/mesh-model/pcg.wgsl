@@ -3,7 +3,11 @@
 // is the CPU's assembled block-sparse matrix in f32: row i's 3 × 3 blocks
 // are blocks[row_start[i] .. row_start[i + 1]], of the nodes col[k], each
 // stored as three vec4 columns. Vectors hold one vec4 per node (xyz used).
-// Constrained nodes (free[i] == 0) keep x and carry zero r, z, p, q.
+// free[i]: 0 for a constrained node (fixed or driven: keeps x, carries zero
+// r, z, p), 1 for a free node, 2 for a hanging node, tied to its masters
+// (x and p follow them; its rows of A p and b − A x are moved onto them
+// before they are used: the system is Pᵀ A P on the free nodes, as in
+// runtime/core/src/mesh_model/pcg.rs).
 // Dot products reduce in two passes (per workgroup, then one workgroup)
 // into scalar slots, and the updates read α and β from those slots on the
 // device, so an iteration needs no read-back.
@@ -35,6 +39,13 @@ const RR: u32 = 192u;   // r·r, for the stopping test
 @group(0) @binding(11) var<storage, read_write> scalars: array<f32>;
 @group(0) @binding(12) var<storage, read_write> partial: array<f32>;
 @group(0) @binding(13) var<storage, read> b: array<vec4<f32>>;
+// Ties: hanging node n's masters are tie_list[tie_start[n] .. tie_start[n + 1]]
+// and the hanging nodes master n carries are untie_list[untie_start[n] ..],
+// each as (node, weight as f32 bits).
+@group(0) @binding(14) var<storage, read> tie_start: array<u32>;
+@group(0) @binding(15) var<storage, read> tie_list: array<vec2<u32>>;
+@group(0) @binding(16) var<storage, read> untie_start: array<u32>;
+@group(0) @binding(17) var<storage, read> untie_list: array<vec2<u32>>;
 
 const WG: u32 = 64u;
 const RED: u32 = 256u;
@@ -65,7 +76,8 @@ fn row_times(i: u32, of_p: bool) -> vec3<f32> {
     return acc;
 }
 
-// r = b − A x on free nodes; z = M⁻¹ r; p = z.
+// r = b − A x on free and hanging nodes (the hanging rows are moved onto
+// their masters by `untie_r`, then cleared by `begin_search`).
 @compute @workgroup_size(64)
 fn start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = flat(gid, nwg);
@@ -76,13 +88,74 @@ fn start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
     if (free[i] != 0u) {
         ri = b[i].xyz - row_times(i, false);
     }
+    r[i] = vec4<f32>(ri, 0.0);
+}
+
+// r on free nodes only; z = M⁻¹ r; p = z (then `tie_p`).
+@compute @workgroup_size(64)
+fn begin_search(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat(gid, nwg);
+    if (i >= p_.nodes) {
+        return;
+    }
+    var ri = r[i].xyz;
+    if (free[i] != 1u) {
+        ri = vec3<f32>(0.0);
+    }
     let zi = precondition(i, ri);
     r[i] = vec4<f32>(ri, 0.0);
     z[i] = vec4<f32>(zi, 0.0);
     p[i] = vec4<f32>(zi, 0.0);
 }
 
-// q = A p on free nodes.
+// The hanging rows onto their free masters: v[m] += Σ w v[h] (Pᵀ).
+fn untie_into(i: u32, v: vec3<f32>, of_q: bool) -> vec3<f32> {
+    var acc = v;
+    for (var k = untie_start[i]; k < untie_start[i + 1u]; k = k + 1u) {
+        let e = untie_list[k];
+        var vh = r[e.x].xyz;
+        if (of_q) {
+            vh = q[e.x].xyz;
+        }
+        acc = acc + bitcast<f32>(e.y) * vh;
+    }
+    return acc;
+}
+
+@compute @workgroup_size(64)
+fn untie_r(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat(gid, nwg);
+    if (i >= p_.nodes || free[i] != 1u) {
+        return;
+    }
+    r[i] = vec4<f32>(untie_into(i, r[i].xyz, false), 0.0);
+}
+
+@compute @workgroup_size(64)
+fn untie_q(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat(gid, nwg);
+    if (i >= p_.nodes || free[i] != 1u) {
+        return;
+    }
+    q[i] = vec4<f32>(untie_into(i, q[i].xyz, true), 0.0);
+}
+
+// Hanging nodes of p follow their masters (P).
+@compute @workgroup_size(64)
+fn tie_p(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat(gid, nwg);
+    if (i >= p_.nodes || free[i] != 2u) {
+        return;
+    }
+    var acc = vec3<f32>(0.0);
+    for (var k = tie_start[i]; k < tie_start[i + 1u]; k = k + 1u) {
+        let e = tie_list[k];
+        acc = acc + bitcast<f32>(e.y) * p[e.x].xyz;
+    }
+    p[i] = vec4<f32>(acc, 0.0);
+}
+
+// q = A p on free and hanging nodes.
 @compute @workgroup_size(64)
 fn spmv(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = flat(gid, nwg);
@@ -108,7 +181,12 @@ fn update_xr(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     if (scalars[PQ] > 0.0) {
         alpha = scalars[RZ] / scalars[PQ];
     }
+    // x follows p everywhere (p is zero on constrained nodes and tied on
+    // hanging ones); r and z live on free nodes only.
     x[i] = vec4<f32>(x[i].xyz + alpha * p[i].xyz, 0.0);
+    if (free[i] != 1u) {
+        return;
+    }
     let ri = r[i].xyz - alpha * q[i].xyz;
     r[i] = vec4<f32>(ri, 0.0);
     z[i] = vec4<f32>(precondition(i, ri), 0.0);
@@ -152,6 +230,9 @@ fn reduce_into(lid: u32, value: f32) -> f32 {
 fn dot_partial(wg: u32, lid: u32, which: u32) {
     var acc = 0.0;
     for (var i = wg * RED + lid; i < p_.nodes; i = i + RED * p_.partials) {
+        if (free[i] != 1u) {
+            continue;
+        }
         var a = vec3<f32>(0.0);
         var c = vec3<f32>(0.0);
         if (which == 0u) {

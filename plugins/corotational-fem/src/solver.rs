@@ -172,7 +172,7 @@ impl CorotationalFem {
     ) -> Result<CgOutcome, ModelError> {
         match &self.gpu {
             Some(g) => g
-                .solve(&self.matrix, free, rhs, x, self.settings())
+                .solve(&self.matrix, free, &bc.hanging, rhs, x, self.settings())
                 .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}"))),
             None => Ok(pcg::solve(&self.matrix, bc, free, rhs, x, self.settings())),
         }
@@ -334,12 +334,6 @@ impl MeshSolver for CorotationalFem {
         bc: &Boundary,
         state: &mut NodeState,
     ) -> Result<SolveReport, ModelError> {
-        if self.gpu.is_some() && !bc.hanging.is_empty() {
-            return Err(ModelError::new(
-                "corotational-fem (GPU): octree proxies with hanging nodes run on the CPU for \
-                 now; use a uniform proxy or backend = \"cpu\"",
-            ));
-        }
         match self.params.solver {
             SolverKind::Static => self.step_static(bc, state),
             SolverKind::Dynamic => {

@@ -290,12 +290,6 @@ impl MassSpring {
         bc: &Boundary,
         state: &mut NodeState,
     ) -> Result<SolveReport, ModelError> {
-        if self.gpu_pcg.is_some() && !bc.hanging.is_empty() {
-            return Err(ModelError::new(
-                "mass-spring (GPU): octree proxies with hanging nodes run on the CPU for now; \
-                 use a uniform proxy or backend = \"cpu\"",
-            ));
-        }
         // Linearised backward Euler for the velocity change Δv:
         // (M + h C + h² K) Δv = h (f(x, v) − h K v), with K = −∂f/∂x (the
         // springs' tangent stiffness) and C = −∂f/∂v (spring damping along
@@ -381,7 +375,7 @@ impl MassSpring {
         };
         let out = match &self.gpu_pcg {
             Some(g) => g
-                .solve(matrix, &free, &rhs, &mut dv, settings)
+                .solve(matrix, &free, &bc.hanging, &rhs, &mut dv, settings)
                 .map_err(|e| ModelError(format!("mass-spring (GPU): {e}")))?,
             None => pcg::solve(matrix, bc, &free, &rhs, &mut dv, settings),
         };

@@ -7,13 +7,16 @@
 //! side and the start vector; the structure (row starts, columns) goes up
 //! once. An iteration is seven dispatches and no read-back; the residual is
 //! read every [`CHECK_EVERY`] iterations for the stopping test. Hanging
-//! nodes (octree proxies) are not supported here: solvers refuse the GPU
-//! for such meshes.
+//! nodes (octree proxies) are handled as on the CPU: their rows of `A p`
+//! and `b − A x` are moved onto their masters (`untie_*`) and `p` follows
+//! the masters (`tie_p`), three more dispatches per iteration only when a
+//! mesh has them.
 
 use super::block_matrix::BlockMatrix;
 use super::pcg::{CgOutcome, CgSettings};
 use crate::error::GpuError;
 use crate::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+use crate::proxy::HangingNode;
 use glam::{DMat3, DVec3};
 use std::sync::Arc;
 
@@ -56,6 +59,10 @@ struct Buffers {
 
 struct Kernels {
     start: PipelineId,
+    begin_search: PipelineId,
+    untie_r: PipelineId,
+    untie_q: PipelineId,
+    tie_p: PipelineId,
     spmv: PipelineId,
     update_xr: PipelineId,
     update_p: PipelineId,
@@ -112,6 +119,10 @@ impl GpuPcg {
         let k = |entry: &str| g.compile(PCG_WGSL, entry);
         let kernels = Kernels {
             start: k("start")?,
+            begin_search: k("begin_search")?,
+            untie_r: k("untie_r")?,
+            untie_q: k("untie_q")?,
+            tie_p: k("tie_p")?,
             spmv: k("spmv")?,
             update_xr: k("update_xr")?,
             update_p: k("update_p")?,
@@ -131,12 +142,13 @@ impl GpuPcg {
         })
     }
 
-    /// Solves `A x = b` for the free nodes from the given `x`, as
-    /// [`super::pcg::solve`] does for a boundary without hanging nodes.
+    /// Solves `A x = b` for the free nodes from the given `x`, with the
+    /// hanging nodes tied to their masters, as [`super::pcg::solve`] does.
     pub fn solve(
         &self,
         a: &BlockMatrix,
         free: &[bool],
+        hanging: &[HangingNode],
         b: &[DVec3],
         x: &mut [DVec3],
         settings: CgSettings,
@@ -158,17 +170,72 @@ impl GpuPcg {
                 }
             })
             .collect();
-        let free_words: Vec<u32> = free.iter().map(|&f| u32::from(f)).collect();
-        let restricted: Vec<DVec3> = b
+        // 0 constrained, 1 free, 2 hanging (see the shader).
+        let mut free_words: Vec<u32> = free.iter().map(|&f| u32::from(f)).collect();
+        for h in hanging {
+            free_words[h.node as usize] = 2;
+        }
+        // The ties both ways, as (node, weight bits) lists per node.
+        let csr = |lists: &[Vec<[u32; 2]>]| -> (Vec<u32>, Vec<[u32; 2]>) {
+            let mut start = vec![0u32];
+            let mut list = Vec::new();
+            for l in lists {
+                list.extend_from_slice(l);
+                start.push(list.len() as u32);
+            }
+            list.push([0, 0]); // never empty
+            (start, list)
+        };
+        let mut masters = vec![Vec::new(); n];
+        let mut carried = vec![Vec::new(); n];
+        for h in hanging {
+            for &(m, w) in &h.masters {
+                masters[h.node as usize].push([m, w.to_bits()]);
+                carried[m as usize].push([h.node, w.to_bits()]);
+            }
+        }
+        let ties = if hanging.is_empty() {
+            None
+        } else {
+            let ((ts, tl), (us, ul)) = (csr(&masters), csr(&carried));
+            Some([
+                g.upload(&ts, "pcg tie starts")?,
+                g.upload(&tl, "pcg ties")?,
+                g.upload(&us, "pcg untie starts")?,
+                g.upload(&ul, "pcg unties")?,
+            ])
+        };
+        let mut tied = x.to_vec();
+        for h in hanging {
+            tied[h.node as usize] = h
+                .masters
+                .iter()
+                .map(|&(m, w)| w as f64 * tied[m as usize])
+                .sum();
+        }
+        let x_start = tied;
+        // The right-hand side as the solve sees it (`Pᵀ b` on the free
+        // nodes), for the stopping test's scale; the device gets `b` on the
+        // free and hanging nodes and moves the hanging rows itself.
+        let mut untied = b.to_vec();
+        for h in hanging.iter().rev() {
+            let v = std::mem::take(&mut untied[h.node as usize]);
+            for &(m, w) in &h.masters {
+                untied[m as usize] += w as f64 * v;
+            }
+        }
+        let b_norm = untied
             .iter()
             .zip(free)
-            .map(|(v, &f)| if f { *v } else { DVec3::ZERO })
-            .collect();
-        let b_norm = restricted
-            .iter()
-            .map(|v| v.length_squared())
+            .filter(|(_, f)| **f)
+            .map(|(v, _)| v.length_squared())
             .sum::<f64>()
             .sqrt();
+        let restricted: Vec<DVec3> = b
+            .iter()
+            .zip(&free_words)
+            .map(|(v, &kind)| if kind != 0 { *v } else { DVec3::ZERO })
+            .collect();
         let scale = if b_norm > 0.0 { b_norm } else { 1.0 };
         let partials = (n as u64).div_ceil(RED).clamp(1, MAX_PARTIALS);
         g.write_buffer(
@@ -180,7 +247,7 @@ impl GpuPcg {
         g.write_buffer(self.bufs.inv, 0, bytemuck::cast_slice(&inv))?;
         g.write_buffer(self.bufs.free, 0, bytemuck::cast_slice(&free_words))?;
         g.write_buffer(self.bufs.b, 0, bytemuck::cast_slice(&vec4s(&restricted)))?;
-        g.write_buffer(self.bufs.x, 0, bytemuck::cast_slice(&vec4s(x)))?;
+        g.write_buffer(self.bufs.x, 0, bytemuck::cast_slice(&vec4s(&x_start)))?;
 
         let bb = &self.bufs;
         let w = |i: u32, id: BufferId| BufferBinding::whole(i, id);
@@ -192,6 +259,7 @@ impl GpuPcg {
         };
         let dots = [
             w(0, bb.params),
+            w(5, bb.free),
             w(7, bb.r),
             w(8, bb.z),
             w(9, bb.p),
@@ -200,6 +268,25 @@ impl GpuPcg {
         ];
         let finals = [w(0, bb.params), w(11, bb.scalars), w(12, bb.partial)];
         let scalars = [w(11, bb.scalars)];
+        let tie_bindings = ties.map(|[ts, tl, us, ul]| {
+            (
+                [
+                    w(0, bb.params),
+                    w(5, bb.free),
+                    w(7, bb.r),
+                    w(10, bb.q),
+                    w(16, us),
+                    w(17, ul),
+                ],
+                [
+                    w(0, bb.params),
+                    w(5, bb.free),
+                    w(9, bb.p),
+                    w(14, ts),
+                    w(15, tl),
+                ],
+            )
+        });
         run(
             k.start,
             &[
@@ -207,16 +294,32 @@ impl GpuPcg {
                 w(1, bb.row_start),
                 w(2, bb.col),
                 w(3, bb.blocks),
-                w(4, bb.inv),
                 w(5, bb.free),
                 w(6, bb.x),
                 w(7, bb.r),
-                w(8, bb.z),
                 w(9, bb.p),
                 w(13, bb.b),
             ],
             nodes_groups,
         )?;
+        if let Some((untie, _)) = &tie_bindings {
+            run(k.untie_r, untie, nodes_groups)?;
+        }
+        run(
+            k.begin_search,
+            &[
+                w(0, bb.params),
+                w(4, bb.inv),
+                w(5, bb.free),
+                w(7, bb.r),
+                w(8, bb.z),
+                w(9, bb.p),
+            ],
+            nodes_groups,
+        )?;
+        if let Some((_, tie)) = &tie_bindings {
+            run(k.tie_p, tie, nodes_groups)?;
+        }
         run(k.dot_rz, &dots, red_groups)?;
         run(k.dot_rr, &dots, red_groups)?;
         run(k.dot_final, &finals, [1, 1, 1])?;
@@ -245,6 +348,7 @@ impl GpuPcg {
         let update_xr = [
             w(0, bb.params),
             w(4, bb.inv),
+            w(5, bb.free),
             w(6, bb.x),
             w(7, bb.r),
             w(8, bb.z),
@@ -257,6 +361,9 @@ impl GpuPcg {
             let batch = CHECK_EVERY.min(settings.max_iterations - iterations);
             for _ in 0..batch {
                 run(k.spmv, &spmv, nodes_groups)?;
+                if let Some((untie, _)) = &tie_bindings {
+                    run(k.untie_q, untie, nodes_groups)?;
+                }
                 run(k.dot_pq, &dots, red_groups)?;
                 run(k.dot_final, &finals, [1, 1, 1])?;
                 run(k.update_xr, &update_xr, nodes_groups)?;
@@ -264,6 +371,9 @@ impl GpuPcg {
                 run(k.dot_rr, &dots, red_groups)?;
                 run(k.dot_final, &finals, [1, 1, 1])?;
                 run(k.update_p, &update_p, nodes_groups)?;
+                if let Some((_, tie)) = &tie_bindings {
+                    run(k.tie_p, tie, nodes_groups)?;
+                }
                 run(k.advance, &scalars, [1, 1, 1])?;
             }
             iterations += batch;
@@ -276,6 +386,18 @@ impl GpuPcg {
         g.download(bb.x, &mut out)?;
         for (xi, o) in x.iter_mut().zip(&out) {
             *xi = DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64);
+        }
+        for h in hanging {
+            x[h.node as usize] = h
+                .masters
+                .iter()
+                .map(|&(m, w)| w as f64 * x[m as usize])
+                .sum();
+        }
+        if let Some(buffers) = ties {
+            for id in buffers {
+                g.destroy_buffer(id);
+            }
         }
         Ok(CgOutcome {
             iterations,
