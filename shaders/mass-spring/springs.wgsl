@@ -12,8 +12,16 @@
 //   u, v     vec4<f32> [n]   displacement (mm) and velocity (mm/s)
 //   node     vec4<f32> [n]   external force xyz (µN), mass (g)
 //   drive    vec4<f32> [2 n] per node: kind (w of the first: 0 free, 1 fixed,
-//                            2 driven), start displacement (xyz of the first),
-//                            target displacement (xyz of the second), mm
+//                            2 driven, 3 hanging), start displacement (xyz of
+//                            the first), target displacement (xyz of the
+//                            second), mm
+//   fnode    vec4<f32> [n]   total force per node (µN), when there are ties
+//   tie_*, untie_*           a hanging node's masters, a master's hanging
+//                            nodes: (node, weight bits) lists per node
+// Without hanging nodes a sub-step is spring_forces, integrate. With them it
+// is spring_forces, node_forces, integrate_tied (each free node adds the
+// forces of the hanging nodes it carries, Pᵀ f), tie_state (P u, P v): the
+// CPU's general path.
 // A flat invocation index covers springs or nodes; dispatches are folded
 // into 3-D (GpuServiceExt::workgroups_for) and unfolded with num_workgroups.
 
@@ -39,6 +47,11 @@ struct Params {
 @group(0) @binding(8) var<storage, read_write> v: array<vec4<f32>>;
 @group(0) @binding(9) var<storage, read> node: array<vec4<f32>>;
 @group(0) @binding(10) var<storage, read> drive: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read_write> fnode: array<vec4<f32>>;
+@group(0) @binding(12) var<storage, read> tie_start: array<u32>;
+@group(0) @binding(13) var<storage, read> tie_list: array<vec2<u32>>;
+@group(0) @binding(14) var<storage, read> untie_start: array<u32>;
+@group(0) @binding(15) var<storage, read> untie_list: array<vec2<u32>>;
 
 const WG: u32 = 64u;
 const END_B: u32 = 0x80000000u;
@@ -80,30 +93,8 @@ fn spring_forces(
     force[s] = vec4<f32>(mag * dir, 0.0);
 }
 
-// kernel.rs `integrate` for free nodes (symplectic Euler,
-// v += h ((f + ext) / m − α v), u += h v), then the
-// imposed nodes as solver.rs's explicit step sets them.
-@compute @workgroup_size(64)
-fn integrate(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-) {
-    let n = flat(gid, nwg);
-    if (n >= p.nodes) {
-        return;
-    }
-    let kind = drive[2u * n].w;
-    if (kind == 1.0) {
-        u[n] = vec4<f32>(0.0);
-        v[n] = vec4<f32>(0.0);
-        return;
-    }
-    if (kind == 2.0) {
-        let goal = mix(drive[2u * n].xyz, drive[2u * n + 1u].xyz, p.frac);
-        v[n] = vec4<f32>((goal - u[n].xyz) / p.h, 0.0);
-        u[n] = vec4<f32>(goal, 0.0);
-        return;
-    }
+// The springs' force on node n (µN).
+fn spring_sum(n: u32) -> vec3<f32> {
     var f = vec3<f32>(0.0);
     for (var i = start[n]; i < start[n + 1u]; i = i + 1u) {
         let tagged = incident[i];
@@ -114,6 +105,96 @@ fn integrate(
             f = f - fs;
         }
     }
+    return f;
+}
+
+// Imposed nodes (fixed, driven) as solver.rs's explicit step sets them;
+// returns true when node n was one.
+fn impose(n: u32) -> bool {
+    let kind = drive[2u * n].w;
+    if (kind == 1.0) {
+        u[n] = vec4<f32>(0.0);
+        v[n] = vec4<f32>(0.0);
+        return true;
+    }
+    if (kind == 2.0) {
+        let goal = mix(drive[2u * n].xyz, drive[2u * n + 1u].xyz, p.frac);
+        v[n] = vec4<f32>((goal - u[n].xyz) / p.h, 0.0);
+        u[n] = vec4<f32>(goal, 0.0);
+        return true;
+    }
+    return kind == 3.0;
+}
+
+// With ties: every node's total force (springs, external, mass damping).
+@compute @workgroup_size(64)
+fn node_forces(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let n = flat(gid, nwg);
+    if (n >= p.nodes) {
+        return;
+    }
+    fnode[n] = vec4<f32>(spring_sum(n) + node[n].xyz - p.alpha * node[n].w * v[n].xyz, 0.0);
+}
+
+// With ties: free nodes take their own force plus that of the hanging
+// nodes they carry (solver.rs's general path: untie, then apply).
+@compute @workgroup_size(64)
+fn integrate_tied(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let n = flat(gid, nwg);
+    if (n >= p.nodes || impose(n)) {
+        return;
+    }
+    var f = fnode[n].xyz;
+    for (var k = untie_start[n]; k < untie_start[n + 1u]; k = k + 1u) {
+        let e = untie_list[k];
+        f = f + bitcast<f32>(e.y) * fnode[e.x].xyz;
+    }
+    let vn = v[n].xyz + f * (p.h / node[n].w);
+    v[n] = vec4<f32>(vn, 0.0);
+    u[n] = vec4<f32>(u[n].xyz + p.h * vn, 0.0);
+}
+
+// With ties: hanging nodes follow their masters.
+@compute @workgroup_size(64)
+fn tie_state(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let n = flat(gid, nwg);
+    if (n >= p.nodes || drive[2u * n].w != 3.0) {
+        return;
+    }
+    var un = vec3<f32>(0.0);
+    var vn = vec3<f32>(0.0);
+    for (var k = tie_start[n]; k < tie_start[n + 1u]; k = k + 1u) {
+        let e = tie_list[k];
+        let w = bitcast<f32>(e.y);
+        un = un + w * u[e.x].xyz;
+        vn = vn + w * v[e.x].xyz;
+    }
+    u[n] = vec4<f32>(un, 0.0);
+    v[n] = vec4<f32>(vn, 0.0);
+}
+
+// kernel.rs `integrate` for free nodes (symplectic Euler,
+// v += h ((f + ext) / m − α v), u += h v), then the
+// imposed nodes as solver.rs's explicit step sets them.
+@compute @workgroup_size(64)
+fn integrate(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let n = flat(gid, nwg);
+    if (n >= p.nodes || impose(n)) {
+        return;
+    }
+    let f = spring_sum(n);
     let m = node[n].w;
     var vn = v[n].xyz;
     let a = (f + node[n].xyz) * (1.0 / m) - p.alpha * vn;

@@ -13,6 +13,7 @@ use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+use voxflex_core::mesh_model::boundary::TieTables;
 use voxflex_core::mesh_model::{Boundary, NodeState};
 
 /// The kernels.
@@ -40,6 +41,11 @@ pub struct GpuSprings {
     drive: BufferId,
     spring_forces: PipelineId,
     integrate: PipelineId,
+    node_forces: PipelineId,
+    integrate_tied: PipelineId,
+    tie_state: PipelineId,
+    /// Total force per node, for meshes with hanging nodes.
+    fnode: BufferId,
 }
 
 impl GpuSprings {
@@ -85,6 +91,14 @@ impl GpuSprings {
                 .compile(SPRINGS_WGSL, "spring_forces")
                 .map_err(gpu_err)?,
             integrate: gpu.compile(SPRINGS_WGSL, "integrate").map_err(gpu_err)?,
+            node_forces: gpu.compile(SPRINGS_WGSL, "node_forces").map_err(gpu_err)?,
+            integrate_tied: gpu
+                .compile(SPRINGS_WGSL, "integrate_tied")
+                .map_err(gpu_err)?,
+            tie_state: gpu.compile(SPRINGS_WGSL, "tie_state").map_err(gpu_err)?,
+            fnode: gpu
+                .create_buffer(16 * nodes.max(1) as u64, "mass-spring node forces")
+                .map_err(gpu_err)?,
             gpu,
             springs,
             nodes,
@@ -132,6 +146,9 @@ impl GpuSprings {
                 drive[2 * n][3] = 1.0;
             }
         }
+        for h in &bc.hanging {
+            drive[2 * h.node as usize][3] = 3.0;
+        }
         for &(n, target) in &bc.driven {
             let (n, u) = (n as usize, state.u[n as usize]);
             drive[2 * n] = [u.x as f32, u.y as f32, u.z as f32, 2.0];
@@ -164,6 +181,24 @@ impl GpuSprings {
             bind(9, self.node),
             bind(10, self.drive),
         ];
+        let ties = if bc.hanging.is_empty() {
+            None
+        } else {
+            let t = TieTables::new(&bc.hanging, self.nodes);
+            Some(
+                [
+                    g.upload(&t.tie_start, "mass-spring tie starts"),
+                    g.upload(&t.tie_list, "mass-spring ties"),
+                    g.upload(&t.untie_start, "mass-spring untie starts"),
+                    g.upload(&t.untie_list, "mass-spring unties"),
+                ]
+                .map(|r| r.map_err(gpu_err)),
+            )
+        };
+        let ties = match ties {
+            Some([a, b, c, d]) => Some([a?, b?, c?, d?]),
+            None => None,
+        };
         let spring_groups = g.workgroups_for(self.springs as u64, 64).map_err(gpu_err)?;
         let node_groups = g.workgroups_for(self.nodes as u64, 64).map_err(gpu_err)?;
         for s in 1..=substeps {
@@ -182,8 +217,52 @@ impl GpuSprings {
                 .map_err(gpu_err)?;
             g.dispatch(self.spring_forces, &spring_bindings, spring_groups)
                 .map_err(gpu_err)?;
-            g.dispatch(self.integrate, &node_bindings, node_groups)
-                .map_err(gpu_err)?;
+            match ties {
+                None => g
+                    .dispatch(self.integrate, &node_bindings, node_groups)
+                    .map_err(gpu_err)?,
+                Some([ts, tl, us, ul]) => {
+                    let forces = [
+                        bind(0, self.params),
+                        bind(4, self.force),
+                        bind(5, self.start),
+                        bind(6, self.incident),
+                        bind(8, self.v),
+                        bind(9, self.node),
+                        bind(11, self.fnode),
+                    ];
+                    let tied = [
+                        bind(0, self.params),
+                        bind(7, self.u),
+                        bind(8, self.v),
+                        bind(9, self.node),
+                        bind(10, self.drive),
+                        bind(11, self.fnode),
+                        bind(14, us),
+                        bind(15, ul),
+                    ];
+                    let tie = [
+                        bind(0, self.params),
+                        bind(7, self.u),
+                        bind(8, self.v),
+                        bind(10, self.drive),
+                        bind(12, ts),
+                        bind(13, tl),
+                    ];
+                    for (pipeline, b) in [
+                        (self.node_forces, &forces[..]),
+                        (self.integrate_tied, &tied[..]),
+                        (self.tie_state, &tie[..]),
+                    ] {
+                        g.dispatch(pipeline, b, node_groups).map_err(gpu_err)?;
+                    }
+                }
+            }
+        }
+        if let Some(buffers) = ties {
+            for id in buffers {
+                g.destroy_buffer(id);
+            }
         }
         let mut out = vec![[0f32; 4]; self.nodes];
         let read =
@@ -214,6 +293,7 @@ impl Drop for GpuSprings {
             self.v,
             self.node,
             self.drive,
+            self.fnode,
         ] {
             self.gpu.destroy_buffer(id);
         }

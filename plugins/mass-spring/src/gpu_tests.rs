@@ -123,7 +123,7 @@ fn gpu_sub_steps_match_rayon_after_100_frames() {
 }
 
 #[test]
-fn gpu_implicit_steps_match_rayon_and_hanging_nodes_are_refused() {
+fn gpu_implicit_steps_and_octree_proxies_match_rayon() {
     let Some(gpu) = test_gpu() else { return };
     let implicit = |gpu: Option<Arc<dyn GpuService>>| {
         let grid = Grid::new([9, 3, 3], DVec3::splat(0.5), DVec3::ZERO);
@@ -165,17 +165,49 @@ fn gpu_implicit_steps_match_rayon_and_hanging_nodes_are_refused() {
         "GPU differs by {worst:.3e} of {largest:.3e} mm"
     );
 
-    // An octree proxy with hanging nodes is refused on the GPU, saying why.
+    // An octree proxy: the explicit sub-steps tie the hanging nodes on the
+    // device as the CPU does.
     use voxflex_core::deformation::ExecutionBackend;
     let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
-    let mut m = Springs::from_toml(
-        "proxy = { kind = \"octree\", max_cell = 8 }\n\
-         materials = [{ range = [50, 150], youngs_modulus = 2000 }, \
-                      { range = [150, 256], youngs_modulus = 20000 }]",
-    )
-    .unwrap()
-    .with_gpu(Some(gpu));
-    m.init(volume.view(), ExecutionBackend::Gpu).unwrap();
-    let e = m.step(frame).unwrap_err().0;
-    assert!(e.contains("hanging") && e.contains("cpu"), "{e}");
+    let make = |gpu: Option<Arc<dyn GpuService>>, backend| {
+        let mut m = Springs::from_toml(
+            "proxy = { kind = \"octree\", max_cell = 8 }\n\
+             materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 }, \
+                          { name = \"hard\", range = [150, 256], youngs_modulus = 20000 }]\n\
+             gravity = [0, 0, -9810]",
+        )
+        .unwrap()
+        .with_gpu(gpu);
+        m.init(volume.view(), backend).unwrap();
+        m.interact("kind = \"fix\"\nmaterial = \"hard\"").unwrap();
+        m
+    };
+    let (mut cpu, mut dev) = (
+        make(None, ExecutionBackend::Cpu),
+        make(Some(gpu), ExecutionBackend::Gpu),
+    );
+    assert!(!dev.hanging().is_empty(), "the test needs hanging nodes");
+    for _ in 0..10 {
+        cpu.step(frame).unwrap();
+        dev.step(frame).unwrap();
+    }
+    let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
+    let (largest, worst) = largest_and_difference(a, b);
+    assert!(largest > 1e-3, "gravity moves the soft half ({largest} mm)");
+    assert!(
+        worst <= 1e-4 * largest,
+        "octree: GPU differs by {worst:.3e} of {largest:.3e} mm"
+    );
+    for h in dev.hanging() {
+        let tied: DVec3 = h
+            .masters
+            .iter()
+            .map(|&(n, w)| w as f64 * b[n as usize])
+            .sum();
+        assert!(
+            (b[h.node as usize] - tied).length() < 1e-6,
+            "node {}",
+            h.node
+        );
+    }
 }

@@ -199,12 +199,6 @@ impl MassSpring {
         let substeps = needed as u32;
         let h = dt / substeps as f64;
         if let Some(gpu) = &self.gpu {
-            if !bc.hanging.is_empty() {
-                return Err(ModelError::new(
-                    "mass-spring (GPU): octree proxies with hanging nodes run on the CPU for now; \
-                     use a uniform proxy or backend = \"cpu\"",
-                ));
-            }
             gpu.frame(
                 substeps,
                 h,
@@ -213,6 +207,7 @@ impl MassSpring {
                 bc,
                 state,
             )?;
+            bc.impose(&mut state.u);
             return Ok(SolveReport {
                 substeps,
                 iterations: 0,

@@ -81,6 +81,55 @@ impl Boundary {
     }
 }
 
+/// The hanging-node ties as tables for GPU kernels: per node, the masters
+/// it is tied to (`tie_*`, for hanging nodes) and the hanging nodes it
+/// carries (`untie_*`, for masters), each list a range of `(node, weight as
+/// f32 bits)` pairs. The lists never come out empty (a kernel buffer needs
+/// a word), so `*_start` is what delimits them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TieTables {
+    /// Node `n`'s masters are `tie_list[tie_start[n] .. tie_start[n + 1]]`.
+    pub tie_start: Vec<u32>,
+    /// `(master, weight bits)`.
+    pub tie_list: Vec<[u32; 2]>,
+    /// The hanging nodes master `n` carries are
+    /// `untie_list[untie_start[n] .. untie_start[n + 1]]`.
+    pub untie_start: Vec<u32>,
+    /// `(hanging node, weight bits)`.
+    pub untie_list: Vec<[u32; 2]>,
+}
+
+impl TieTables {
+    /// The tables of `hanging` over `nodes` nodes.
+    pub fn new(hanging: &[HangingNode], nodes: usize) -> Self {
+        let mut masters = vec![Vec::new(); nodes];
+        let mut carried = vec![Vec::new(); nodes];
+        for h in hanging {
+            for &(m, w) in &h.masters {
+                masters[h.node as usize].push([m, w.to_bits()]);
+                carried[m as usize].push([h.node, w.to_bits()]);
+            }
+        }
+        let csr = |lists: Vec<Vec<[u32; 2]>>| {
+            let mut start = vec![0u32];
+            let mut list = Vec::new();
+            for l in lists {
+                list.extend(l);
+                start.push(list.len() as u32);
+            }
+            list.push([0, 0]);
+            (start, list)
+        };
+        let ((tie_start, tie_list), (untie_start, untie_list)) = (csr(masters), csr(carried));
+        Self {
+            tie_start,
+            tie_list,
+            untie_start,
+            untie_list,
+        }
+    }
+}
+
 /// Nodal forces (µN) of a uniform traction `t` (Pa) on the boundary faces
 /// of `mesh` whose centroids lie in the box `[lo, hi]` (mm): each face of
 /// area `A` gives `A t / 3` to each corner (the consistent load of linear

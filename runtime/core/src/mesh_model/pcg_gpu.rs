@@ -13,6 +13,7 @@
 //! mesh has them.
 
 use super::block_matrix::BlockMatrix;
+use super::boundary::TieTables;
 use super::pcg::{CgOutcome, CgSettings};
 use crate::error::GpuError;
 use crate::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
@@ -175,34 +176,15 @@ impl GpuPcg {
         for h in hanging {
             free_words[h.node as usize] = 2;
         }
-        // The ties both ways, as (node, weight bits) lists per node.
-        let csr = |lists: &[Vec<[u32; 2]>]| -> (Vec<u32>, Vec<[u32; 2]>) {
-            let mut start = vec![0u32];
-            let mut list = Vec::new();
-            for l in lists {
-                list.extend_from_slice(l);
-                start.push(list.len() as u32);
-            }
-            list.push([0, 0]); // never empty
-            (start, list)
-        };
-        let mut masters = vec![Vec::new(); n];
-        let mut carried = vec![Vec::new(); n];
-        for h in hanging {
-            for &(m, w) in &h.masters {
-                masters[h.node as usize].push([m, w.to_bits()]);
-                carried[m as usize].push([h.node, w.to_bits()]);
-            }
-        }
         let ties = if hanging.is_empty() {
             None
         } else {
-            let ((ts, tl), (us, ul)) = (csr(&masters), csr(&carried));
+            let t = TieTables::new(hanging, n);
             Some([
-                g.upload(&ts, "pcg tie starts")?,
-                g.upload(&tl, "pcg ties")?,
-                g.upload(&us, "pcg untie starts")?,
-                g.upload(&ul, "pcg unties")?,
+                g.upload(&t.tie_start, "pcg tie starts")?,
+                g.upload(&t.tie_list, "pcg ties")?,
+                g.upload(&t.untie_start, "pcg untie starts")?,
+                g.upload(&t.untie_list, "pcg unties")?,
             ])
         };
         let mut tied = x.to_vec();
