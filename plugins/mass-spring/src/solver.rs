@@ -219,22 +219,18 @@ impl MassSpring {
         let start_u = state.u.clone();
         self.kernel.load(&state.u, &state.v);
         let mut f = vec![DVec3::ZERO; free.len()];
-        // Per-axis inputs of the 8-wide update, in the kernel's slot order.
-        let k = &self.kernel;
-        let ext: [Vec<f32>; 3] = [0, 1, 2].map(|a| {
-            let e: Vec<f32> = bc.force.iter().map(|f| f[a] as f32).collect();
-            k.in_slot_order(&e, 0.0)
-        });
-        let inv: Vec<f32> = self.masses.iter().map(|&m| (1.0 / m) as f32).collect();
-        let inv_mass = k.in_slot_order(&inv, 0.0);
-        let moving: Vec<u32> = free.iter().map(|&f| if f { u32::MAX } else { 0 }).collect();
-        let moves = k.in_slot_order(&moving, 0);
+        let ext: Vec<[f32; 4]> = bc
+            .force
+            .iter()
+            .map(|f| [f.x as f32, f.y as f32, f.z as f32, 0.0])
+            .collect();
+        let inv_mass: Vec<f32> = self.masses.iter().map(|&m| (1.0 / m) as f32).collect();
         let alpha = self.params.mass_damping as f32;
         for s in 1..=substeps {
             if bc.hanging.is_empty() {
                 self.kernel.spring_pass();
                 self.kernel
-                    .integrate(h as f32, &ext, &inv_mass, &moves, alpha);
+                    .integrate(h as f32, &ext, &inv_mass, &free, alpha);
             } else {
                 // Hanging nodes pass their forces to their masters first.
                 self.node_forces(bc, &mut f);
