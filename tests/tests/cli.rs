@@ -165,7 +165,30 @@ fn chainmail_head_scene_runs_and_swaps_to_every_model_with_one_edit() {
         std::fs::write(tmp.path().join("s.toml"), &swapped).unwrap();
         let o = voxflex(&["run", "s.toml", "--out", out], tmp.path());
         assert!(o.status.success(), "{plugin}: {}", text(&o));
-        assert_eq!(metrics(&tmp.path().join(out))["plugin"]["name"], plugin);
+        let m = metrics(&tmp.path().join(out));
+        assert_eq!(m["plugin"]["name"], plugin);
+        if plugin != "affine" {
+            // The mesh models report their work through the plugin
+            // boundary: every voxel bound, how many of them outside the
+            // proxy, and the implicit solves' CG iterations.
+            let notes = &m["stages"]["model"]["notes"];
+            let voxels: u64 = m["source_dims"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|d| d.as_u64().unwrap())
+                .product();
+            assert_eq!(notes["bound_points"].as_f64(), Some(voxels as f64), "{m}");
+            let outside = notes["bound_points_outside_proxy"].as_f64().unwrap();
+            assert!((0.0..voxels as f64).contains(&outside), "{m}");
+            assert_eq!(
+                notes["steps"].as_f64(),
+                m["stages"]["model"]["runs"].as_f64(),
+                "{m}"
+            );
+            assert!(notes["solver_iterations"].as_f64().unwrap() > 0.0, "{m}");
+            assert!(notes["proxy_tetrahedra"].as_f64().unwrap() > 0.0, "{m}");
+        }
         let v = std::fs::read(tmp.path().join(out).join("deformed.nii.gz")).unwrap();
         assert!(
             volumes.iter().all(|other| *other != v),

@@ -431,3 +431,30 @@ fn a_mesh_file_proxy_maps_its_tags_to_materials_and_hostile_files_are_refused() 
     let e = m.init(volume.view(), ExecutionBackend::Cpu).unwrap_err().0;
     assert!(e.contains("m.node") && e.contains("finite"), "{e}");
 }
+
+#[test]
+fn notes_count_points_bound_outside_the_proxy_and_the_solver_work() {
+    use voxflex_core::deformation::RestPoints;
+    let mut fem = cantilever(1, 0.01, static_params(1e-9));
+    let notes = fem.notes().unwrap();
+    assert_eq!(notes["steps"], 0.0);
+    assert_eq!(notes["bound_points"], 0.0);
+    // Two points inside the 10 × 1 × 1 beam, three outside it.
+    let points = [
+        [5.0, 0.5, 0.5],
+        [0.1, 0.1, 0.9],
+        [-3.0, 0.5, 0.5],
+        [5.0, 2.0, 0.5],
+        [11.0, -1.0, 4.0],
+    ];
+    fem.bind(RestPoints::Points(&points)).unwrap();
+    fem.step(frame(0.01)).unwrap();
+    fem.step(frame(0.01)).unwrap();
+    let notes = fem.notes().unwrap();
+    assert_eq!(notes["bound_points"], 5.0);
+    assert_eq!(notes["bound_points_outside_proxy"], 3.0);
+    assert_eq!(notes["steps"], 2.0);
+    assert!(notes["solver_iterations"] > 0.0, "{notes:?}");
+    assert!(notes["last_residual"] <= 1e-9, "{notes:?}");
+    assert_eq!(notes["proxy_tetrahedra"], 50.0);
+}

@@ -325,6 +325,11 @@ pub struct DeformationVTable {
         out_changed: *mut u32,
         err: *mut ErrorBuf,
     ) -> i32,
+    /// `DeformationModel::notes`, written into the host's `out` buffer as
+    /// UTF-8 lines `name<TAB>value` (value as Rust prints an `f64`); fails
+    /// with an error instead of truncating when they do not fit.
+    pub notes:
+        unsafe extern "C" fn(instance: Instance, out: *mut ErrorBuf, err: *mut ErrorBuf) -> i32,
 }
 
 /// Log levels for [`HostApi::log`].

@@ -11,7 +11,7 @@ use std::ffi::c_void;
 use std::sync::Arc;
 use voxflex_core::deformation::{
     BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
-    RestPoints, StepOutcome,
+    ModelNotes, RestPoints, StepOutcome,
 };
 use voxflex_core::error::ModelError;
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, PipelineId};
@@ -477,5 +477,21 @@ impl DeformationModel for DeformationProxy {
             )
         })?;
         Ok(changed != 0)
+    }
+
+    fn notes(&mut self) -> Result<ModelNotes, ModelError> {
+        let vt = self.vtable;
+        let inst = self.instance;
+        let mut storage = vec![0u8; crate::notes_text::HOST_CAPACITY];
+        let mut out = ErrorBuf {
+            ptr: storage.as_mut_ptr(),
+            cap: storage.len(),
+            len: 0,
+        };
+        // SAFETY: `out` points at `storage`, alive during the call.
+        self.call(|err| unsafe { (vt.notes)(inst, &mut out, err) })?;
+        storage.truncate(out.len.min(storage.len()));
+        crate::notes_text::decode(&storage)
+            .map_err(|e| ModelError(format!("plugin '{}': its notes: {e}", self.name)))
     }
 }

@@ -117,7 +117,8 @@ pub const fn compute() -> u64 {
             dirty_region,
             map_cpu,
             map_gpu,
-            removed_tetrahedra
+            removed_tetrahedra,
+            notes
         }
     );
     hash_type!(

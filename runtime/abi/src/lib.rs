@@ -21,6 +21,7 @@ pub mod guard;
 pub mod host_side;
 pub mod layout;
 pub mod log_bridge;
+pub mod notes_text;
 pub mod plugin;
 pub mod renderer;
 

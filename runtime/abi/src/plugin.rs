@@ -470,6 +470,34 @@ unsafe extern "C" fn removed_tetrahedra<P: DeformationPlugin>(
     })
 }
 
+unsafe extern "C" fn notes<P: DeformationPlugin>(
+    instance: Instance,
+    out: *mut ErrorBuf,
+    err: *mut ErrorBuf,
+) -> i32 {
+    guard(err, || {
+        // SAFETY: host contract.
+        let s = unsafe { state::<P>(instance) }?;
+        if out.is_null() {
+            return Err("null output buffer".into());
+        }
+        let notes = s.model.notes().map_err(|e| e.to_string())?;
+        let text = crate::notes_text::encode(&notes)?;
+        // SAFETY: checked non-null; the host passes a buffer of `cap` bytes.
+        let out = unsafe { &mut *out };
+        if text.len() > out.cap {
+            return Err(format!(
+                "the model's notes take {} bytes, more than the host's {}",
+                text.len(),
+                out.cap
+            ));
+        }
+        // SAFETY: as above; the text fits.
+        unsafe { out.write(&text) };
+        Ok(())
+    })
+}
+
 /// The vtable of plugin type `P` (used by [`crate::export_deformation_plugin!`]).
 pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
     DeformationVTable {
@@ -483,6 +511,7 @@ pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
         map_cpu: map_cpu::<P>,
         map_gpu: map_gpu::<P>,
         removed_tetrahedra: removed_tetrahedra::<P>,
+        notes: notes::<P>,
     }
 }
 

@@ -161,6 +161,12 @@ pub struct StepOutcome {
     pub changed: bool,
 }
 
+/// Figures a model reports about its own work, by name, for the run's
+/// `metrics.json` (under the `model` stage's notes): counts, iterations,
+/// residuals. Each name says its unit where it has one. Names hold no tab
+/// or line break (they cross the plugin boundary as `name<TAB>value` lines).
+pub type ModelNotes = std::collections::BTreeMap<String, f64>;
+
 /// A deformation model seen as a field that moves points.
 ///
 /// Implemented by every deformation plugin, by the host's proxy around a
@@ -196,6 +202,12 @@ pub trait DeformationModel: Send {
     ) -> Result<bool, ModelError> {
         let _ = (binding, cell_bits);
         Ok(false)
+    }
+    /// What the model reports about its work so far (see [`ModelNotes`]);
+    /// asked once at the end of a run. Models with nothing to report keep
+    /// the default (no notes).
+    fn notes(&mut self) -> Result<ModelNotes, ModelError> {
+        Ok(ModelNotes::new())
     }
 }
 

@@ -490,6 +490,15 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         }
     }
 
+    // What the model reports about its own work (iterations, points bound
+    // outside its proxy, ...), under the model stage's notes.
+    if let Some(d) = deform.as_mut() {
+        let notes = d.model.notes()?;
+        let stage = metrics.stage("model");
+        for (name, value) in notes {
+            stage.notes.insert(name, value.into());
+        }
+    }
     if let Some(mut d) = deform
         && let (Displacements::Gpu { disp, source }, Some(gpu)) = (&d.displacements, &gpu)
     {

@@ -10,7 +10,7 @@ use crate::barycentric::{BarycentricBinding, GpuBinding};
 use crate::cut_polygon::CutPolygon;
 use crate::deformation::{
     BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
-    RestPoints, StepOutcome,
+    ModelNotes, RestPoints, StepOutcome,
 };
 use crate::error::ModelError;
 use crate::gpu::{BufferId, GpuService};
@@ -56,11 +56,21 @@ pub struct MeshModel<S: MeshSolver> {
     /// The field changed since the last `map`.
     unmapped: bool,
     last: SolveReport,
+    /// Steps, sub-steps and linear-solver iterations since `init`.
+    totals: SolveTotals,
     /// The host's GPU service, if it offered one.
     gpu: Option<Arc<dyn GpuService>>,
     /// On the GPU backend: the node displacements as `[x, y, z, 0]` and
     /// each binding on the device (re-uploaded after a cut).
     device: Option<DeviceMap>,
+}
+
+/// Counts summed over a run's steps.
+#[derive(Clone, Copy, Debug, Default)]
+struct SolveTotals {
+    steps: u64,
+    substeps: u64,
+    iterations: u64,
 }
 
 /// The device side of `map` on the GPU backend.
@@ -117,6 +127,7 @@ impl<S: MeshSolver> MeshModel<S> {
             loads: Vec::new(),
             unmapped: true,
             last: SolveReport::default(),
+            totals: SolveTotals::default(),
             gpu: None,
             device: None,
         }
@@ -631,6 +642,9 @@ impl<S: MeshSolver> MeshModel<S> {
         }
         let before = b.state.u.clone();
         self.last = b.solver.step(dt_s, &b.bc, &mut b.state)?;
+        self.totals.steps += 1;
+        self.totals.substeps += u64::from(self.last.substeps);
+        self.totals.iterations += u64::from(self.last.iterations);
         if let Some(n) = b
             .state
             .u
@@ -750,6 +764,29 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         } else {
             DirtyRegion::None
         }
+    }
+
+    /// `proxy_nodes`, `proxy_tetrahedra`, `bound_points`,
+    /// `bound_points_outside_proxy` (bound to the nearest tetrahedron with
+    /// clamped weights), `steps`, `substeps` and `solver_iterations` summed
+    /// over the run, and `last_residual` (relative, of the last linear
+    /// solve; 0 for explicit steps).
+    fn notes(&mut self) -> Result<ModelNotes, ModelError> {
+        let mut notes = ModelNotes::new();
+        if let Some(b) = &self.built {
+            notes.insert("proxy_nodes".into(), b.mesh.nodes.len() as f64);
+            notes.insert("proxy_tetrahedra".into(), b.mesh.tets.len() as f64);
+        }
+        let (points, outside) = self.bindings.iter().fold((0, 0), |(p, o), b| {
+            (p + b.binding.len(), o + b.binding.outside)
+        });
+        notes.insert("bound_points".into(), points as f64);
+        notes.insert("bound_points_outside_proxy".into(), outside as f64);
+        notes.insert("steps".into(), self.totals.steps as f64);
+        notes.insert("substeps".into(), self.totals.substeps as f64);
+        notes.insert("solver_iterations".into(), self.totals.iterations as f64);
+        notes.insert("last_residual".into(), self.last.residual);
+        Ok(notes)
     }
 
     fn removed_tetrahedra(
