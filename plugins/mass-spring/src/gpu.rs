@@ -74,8 +74,8 @@ impl GpuSprings {
                 g.upload(&table.ends, "mass-spring ends")?,
                 g.upload(&table.kc, "mass-spring stiffness and damping")?,
                 g.create_buffer(16 * springs.max(1) as u64, "mass-spring forces")?,
-                g.upload(start, "mass-spring incidence start")?,
-                g.upload(incident, "mass-spring incidence")?,
+                g.upload(&start, "mass-spring incidence start")?,
+                g.upload(&incident, "mass-spring incidence")?,
                 [
                     g.create_buffer(16 * nodes as u64, "mass-spring u")?,
                     g.create_buffer(16 * nodes as u64, "mass-spring v")?,

@@ -8,8 +8,11 @@
 //! differences are transposed in registers into per-axis vectors
 //! (20 shuffles), and the 8 forces transposed back into one 16-byte row
 //! `[fx, fy, fz, 0]` per spring. Each node then sums its springs' rows,
-//! those where it is end `a` first, then those where it is end `b`
-//! (subtracted), four lanes at a time. On AVX2 this replaced 15 gathers
+//! those where it is end `a` (one contiguous run: springs are sorted by
+//! their lower end) and those where it is end `b` (an index list,
+//! subtracted), four lanes at a time. A spring's rest length is not
+//! stored but recomputed from its rest vector (one square root per 8
+//! springs is cheaper than the 4 bytes it would stream). On AVX2 this replaced 15 gathers
 //! per 8 springs and their nodes (a gather costs about as much as 8
 //! loads).
 //!
@@ -21,43 +24,98 @@
 
 use super::solver::Springs;
 use rayon::prelude::*;
+use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use voxflex_core::glam::DVec3;
 use wide::{f32x4, f32x8};
 
-/// Springs per parallel task (a multiple of 8).
+/// Springs per parallel task of [`SpringKernel::spring_pass`] (a multiple of 8).
 const CHUNK: usize = 4096;
-/// Nodes per parallel task of the update.
+/// Nodes per parallel task of `SpringKernel::integrate` (tests).
+#[cfg(test)]
 const NODE_CHUNK: usize = 512;
 
-/// The springs and node state as f32 arrays.
-pub struct SpringKernel {
-    /// Ends of each spring (padded to a multiple of 8 with zero springs
-    /// between node 0 and itself).
+/// The springs in the kernel's order: each turned so that end `a` is the
+/// lower node index, then sorted by `(a, b)`. A node's end-`a` springs are
+/// then one contiguous run (summed without an index list), and the spring
+/// pass walks the `a` rows in order.
+struct SpringArrays {
+    /// Ends of each spring, `a < b` (padded to a multiple of 8 with zero
+    /// springs between node 0 and itself).
     a: Vec<u32>,
     b: Vec<u32>,
-    /// Rest vector `X_b − X_a` (mm), rest length (mm), stiffness (µN/mm),
-    /// damping (µN·s/mm).
+    /// Rest vector `X_b − X_a` (mm; the rest length is its norm, computed
+    /// in the pass), stiffness (µN/mm), damping (µN·s/mm).
     e: [Vec<f32>; 3],
-    rest: Vec<f32>,
     k: Vec<f32>,
     c: Vec<f32>,
-    /// Node `n`'s springs in `incident[incident_start[n] .. incident_start[n + 1]]`:
-    /// the spring index, with the top bit set where `n` is its end `b`;
-    /// those where `n` is end `a` come first, up to `incident_mid[n]`.
-    incident_start: Vec<u32>,
-    incident_mid: Vec<u32>,
-    incident: Vec<u32>,
+    /// Node `n` is end `a` of springs `a_start[n] .. a_start[n + 1]`.
+    a_start: Vec<u32>,
+    /// Node `n` is end `b` of springs `b_list[b_start[n] .. b_start[n + 1]]`
+    /// (ascending).
+    b_start: Vec<u32>,
+    b_list: Vec<u32>,
+}
+
+/// The springs and the node state as f32 arrays (see the module).
+pub struct SpringKernel {
+    springs: SpringArrays,
     /// Per node: `[ux, uy, uz, 0, vx, vy, vz, 0]`, displacement (mm) and
     /// velocity (mm/s). At least one row, so the padding springs' ends
     /// exist.
     state: Vec<f32x8>,
     /// Nodes.
     nodes: usize,
-    /// Per spring: `[fx, fy, fz, 0]`, the force on end `a`, µN.
+    /// Per spring (kernel order, padded): `[fx, fy, fz, 0]`, the force on
+    /// end `a`, µN.
     f: Vec<f32x4>,
 }
 
-const END_B: u32 = 1 << 31;
+/// What one explicit sub-step applies to the free nodes (symplectic
+/// Euler): `v += h ((f_springs + ext) / m − α v)`, `u += h v`.
+pub struct Substep<'a> {
+    /// Sub-step, s.
+    pub h: f32,
+    /// External force per node (µN; the fourth lane zero).
+    pub ext: &'a [[f32; 4]],
+    /// `1 / mass` per node, 1/g.
+    pub inv_mass: &'a [f32],
+    /// The nodes the integrator moves; the others keep their rows.
+    pub free: &'a [bool],
+    /// Mass damping α, 1/s.
+    pub alpha: f32,
+}
+
+/// Sets the imposed nodes' rows after sub-step `s` (numbered from 1), on
+/// one thread while the others wait ([`SpringKernel::substeps`]).
+pub type Fixup<'a> = &'a (dyn Fn(u32, &mut NodeRows) + Sync);
+
+/// The node state rows, as [`SpringKernel::substeps`] hands them to its
+/// per-sub-step fix-up of imposed nodes.
+pub struct NodeRows<'a>(&'a mut [f32x8]);
+
+impl NodeRows<'_> {
+    /// Node `n`'s displacement (mm) and velocity (mm/s).
+    #[inline]
+    pub fn node(&self, n: usize) -> ([f32; 3], [f32; 3]) {
+        let r = self.0[n].to_array();
+        ([r[0], r[1], r[2]], [r[4], r[5], r[6]])
+    }
+
+    /// Sets node `n`'s displacement (mm) and velocity (mm/s).
+    #[inline]
+    pub fn set_node(&mut self, n: usize, u: [f32; 3], v: [f32; 3]) {
+        self.0[n] = f32x8::from([u[0], u[1], u[2], 0.0, v[0], v[1], v[2], 0.0]);
+    }
+}
+
+/// Tags an incidence entry (GPU twin) where the node is the spring's end `b`.
+pub const END_B: u32 = 1 << 31;
+
+/// A spring's rest length (mm) from its rest vector, as the pass computes it.
+fn rest_length([x, y, z]: [f32; 3]) -> f32 {
+    (x * x + y * y + z * z).sqrt()
+}
 
 /// The springs as the GPU twin's buffers hold them.
 pub struct SpringTable {
@@ -69,19 +127,250 @@ pub struct SpringTable {
     pub kc: Vec<[f32; 2]>,
 }
 
-impl SpringKernel {
-    /// The kernel's arrays for `springs` between `rest` node positions.
-    pub fn new(springs: &Springs, rest: &[DVec3]) -> Self {
-        let m = springs.ends.len().next_multiple_of(8);
-        let pad = |mut v: Vec<f32>| {
+impl SpringArrays {
+    fn new(springs: &Springs, rest: &[DVec3]) -> Self {
+        let n = rest.len();
+        // Each spring turned to `a < b`, then sorted by (a, b).
+        let mut order: Vec<(u32, u32, usize)> = springs
+            .ends
+            .iter()
+            .enumerate()
+            .map(|(s, &[p, q])| (p.min(q), p.max(q), s))
+            .collect();
+        order.sort_unstable();
+        let m = order.len().next_multiple_of(8);
+        let column = |value: &dyn Fn(&(u32, u32, usize)) -> f32| {
+            let mut v: Vec<f32> = order.iter().map(value).collect();
             v.resize(m, 0.0);
             v
         };
-        let ends = |i: usize| {
-            let mut v: Vec<u32> = springs.ends.iter().map(|e| e[i]).collect();
+        let e = [0, 1, 2].map(|axis| {
+            column(&|&(p, q, _)| (rest[q as usize][axis] - rest[p as usize][axis]) as f32)
+        });
+        let k = column(&|&(_, _, s)| springs.k[s] as f32);
+        let c = column(&|&(_, _, s)| springs.c[s] as f32);
+        let ends = |end: fn(&(u32, u32, usize)) -> u32| {
+            let mut v: Vec<u32> = order.iter().map(end).collect();
             v.resize(m, 0);
             v
         };
+        let (a, b) = (ends(|o| o.0), ends(|o| o.1));
+        let mut a_start = vec![0u32; n + 1];
+        let mut b_start = vec![0u32; n + 1];
+        for &(p, q, _) in &order {
+            a_start[p as usize + 1] += 1;
+            b_start[q as usize + 1] += 1;
+        }
+        for i in 0..n {
+            a_start[i + 1] += a_start[i];
+            b_start[i + 1] += b_start[i];
+        }
+        let mut fill = b_start.clone();
+        let mut b_list = vec![0u32; order.len()];
+        for (s, &(_, q, _)) in order.iter().enumerate() {
+            b_list[fill[q as usize] as usize] = s as u32;
+            fill[q as usize] += 1;
+        }
+        Self {
+            a,
+            b,
+            e,
+            k,
+            c,
+            a_start,
+            b_start,
+            b_list,
+        }
+    }
+
+    /// Springs, padding included.
+    fn padded(&self) -> usize {
+        self.a.len()
+    }
+
+    /// The force on end `a` of springs `first .. first + out.len()` (a
+    /// multiple of 8, `first` too) at node state `state`, into `out`.
+    fn forces(&self, state: &[f32x8], first: usize, out: &mut [f32x4]) {
+        let (a, b, e, k, c) = (&self.a, &self.b, &self.e, &self.k, &self.c);
+        for w in (0..out.len()).step_by(8) {
+            let s = first + w;
+            let [du0, du1, du2, dv0, dv1, dv2] = end_differences(state, a, b, s);
+            let load =
+                |arr: &[f32]| f32x8::from(<[f32; 8]>::try_from(&arr[s..s + 8]).expect("8 springs"));
+            let (e0, e1, e2) = (load(&e[0]), load(&e[1]), load(&e[2]));
+            let (d0, d1, d2) = (e0 + du0, e1 + du1, e2 + du2);
+            let len = (d0 * d0 + d1 * d1 + d2 * d2).sqrt();
+            // |d|² − L² without cancellation: 2 e·δ + δ·δ.
+            let grow = f32x8::splat(2.0) * (e0 * du0 + e1 * du1 + e2 * du2)
+                + du0 * du0
+                + du1 * du1
+                + du2 * du2;
+            // One division for both `grow / (|d| + L)` and `1 / |d|` (zero
+            // for a spring of zero length, whose direction is undefined: it
+            // exerts no force).
+            let rest = (e0 * e0 + e1 * e1 + e2 * e2).sqrt();
+            let sum = len + rest;
+            let q = len
+                .simd_gt(f32x8::ZERO)
+                .select(f32x8::ONE / (len * sum), f32x8::ZERO);
+            let stretch = grow * len * q;
+            let inv = sum * q;
+            let (n0, n1, n2) = (d0 * inv, d1 * inv, d2 * inv);
+            let rel = dv0 * n0 + dv1 * n1 + dv2 * n2;
+            let mag = load(k) * stretch + load(c) * rel;
+            store_rows(&mut out[w..w + 8], [mag * n0, mag * n1, mag * n2]);
+        }
+    }
+
+    /// The springs' force on node `n` (µN) from the per-spring forces `f`.
+    #[inline(always)]
+    fn node_force(&self, f: &[f32x4], n: usize) -> f32x4 {
+        // End a: one contiguous run. End b: a list. Each summed with two
+        // independent accumulators, so the loads' latency overlaps instead
+        // of queueing behind one chain of additions.
+        let run = &f[self.a_start[n] as usize..self.a_start[n + 1] as usize];
+        let (mut a0, mut a1) = (f32x4::ZERO, f32x4::ZERO);
+        let pairs = run.chunks_exact(2);
+        if let [last] = pairs.remainder() {
+            a1 = *last;
+        }
+        for pair in pairs {
+            a0 += pair[0];
+            a1 += pair[1];
+        }
+        let list = &self.b_list[self.b_start[n] as usize..self.b_start[n + 1] as usize];
+        let (mut b0, mut b1) = (f32x4::ZERO, f32x4::ZERO);
+        let pairs = list.chunks_exact(2);
+        if let [last] = pairs.remainder() {
+            b1 = f[*last as usize];
+        }
+        for pair in pairs {
+            b0 += f[pair[0] as usize];
+            b1 += f[pair[1] as usize];
+        }
+        (a0 + a1) - (b0 + b1)
+    }
+
+    /// One sub-step for the nodes `first .. first + rows.len()`, whose state
+    /// rows are `rows`, from the per-spring forces `f`.
+    fn integrate(&self, f: &[f32x4], first: usize, rows: &mut [f32x8], step: &Substep) {
+        let (h, alpha) = (f32x4::splat(step.h), f32x4::splat(step.alpha));
+        for (i, row) in rows.iter_mut().enumerate() {
+            let n = first + i;
+            if !step.free[n] {
+                continue;
+            }
+            let [u, v]: [f32x4; 2] = bytemuck::cast(*row);
+            let a = (self.node_force(f, n) + f32x4::from(step.ext[n]))
+                * f32x4::splat(step.inv_mass[n])
+                - alpha * v;
+            let v = v + h * a;
+            *row = bytemuck::cast([u + h * v, v]);
+        }
+    }
+
+    /// `parts` node ranges and the spring ranges that go with them (the
+    /// springs whose end `a` is in the node range, boundaries rounded to
+    /// 8; the last takes the padding), balanced by spring count.
+    fn partition(&self, nodes: usize, parts: usize) -> Vec<(Range<usize>, Range<usize>)> {
+        let springs = self.b_list.len();
+        let cut = |t: usize| {
+            if t == parts {
+                return (nodes, self.padded());
+            }
+            let node = self
+                .a_start
+                .partition_point(|&s| (s as usize) < springs * t / parts)
+                .min(nodes);
+            (node, (self.a_start[node] as usize / 8) * 8)
+        };
+        (0..parts)
+            .map(|t| {
+                let ((n0, s0), (n1, s1)) = (cut(t), cut(t + 1));
+                (n0..n1.max(n0), s0..s1.max(s0))
+            })
+            .collect()
+    }
+}
+
+/// An array that the threads of [`SpringKernel::substeps`] share between
+/// barriers: within one phase it is either only read, or written in
+/// disjoint ranges.
+struct Shared<T>(*mut T, usize);
+
+// SAFETY: `Shared` only hands out slices under the phase discipline its
+// methods' callers uphold (see there).
+unsafe impl<T: Send> Sync for Shared<T> {}
+
+impl<T> Shared<T> {
+    fn new(v: &mut [T]) -> Self {
+        Self(v.as_mut_ptr(), v.len())
+    }
+
+    /// The whole array, to read.
+    ///
+    /// # Safety
+    /// No thread writes the array while the slice lives.
+    unsafe fn all(&self) -> &[T] {
+        // SAFETY: the pointer and length come from a live `&mut [T]` that
+        // outlives `self`; the caller rules out writers.
+        unsafe { std::slice::from_raw_parts(self.0, self.1) }
+    }
+
+    /// `range` of the array, to write.
+    ///
+    /// # Safety
+    /// No other thread reads or writes `range` while the slice lives.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn part(&self, range: Range<usize>) -> &mut [T] {
+        assert!(range.start <= range.end && range.end <= self.1);
+        // SAFETY: in bounds (asserted); the caller rules out other access.
+        unsafe { std::slice::from_raw_parts_mut(self.0.add(range.start), range.len()) }
+    }
+}
+
+/// A reusable barrier that spins briefly, then yields: a sub-step's two
+/// phases take tens of microseconds, shorter than putting a thread to
+/// sleep and waking it (what a parallel call per phase costs: about 14 %
+/// of the sub-step in a profile).
+struct SpinBarrier {
+    threads: usize,
+    arrived: AtomicUsize,
+    generation: AtomicUsize,
+}
+
+impl SpinBarrier {
+    fn new(threads: usize) -> Self {
+        Self {
+            threads,
+            arrived: AtomicUsize::new(0),
+            generation: AtomicUsize::new(0),
+        }
+    }
+
+    /// Returns once all `threads` have called it (in this generation).
+    fn wait(&self) {
+        let generation = self.generation.load(Ordering::Acquire);
+        if self.arrived.fetch_add(1, Ordering::AcqRel) + 1 == self.threads {
+            self.arrived.store(0, Ordering::Relaxed);
+            self.generation.fetch_add(1, Ordering::Release);
+            return;
+        }
+        let mut spins = 0u32;
+        while self.generation.load(Ordering::Acquire) == generation {
+            if spins < 1 << 12 {
+                std::hint::spin_loop();
+                spins += 1;
+            } else {
+                std::thread::yield_now();
+            }
+        }
+    }
+}
+
+impl SpringKernel {
+    /// The kernel's arrays for `springs` between `rest` node positions.
+    pub fn new(springs: &Springs, rest: &[DVec3]) -> Self {
         let n = rest.len();
         assert!(
             n < (u32::MAX / 8) as usize
@@ -92,48 +381,13 @@ impl SpringKernel {
                     .all(|&node| (node as usize) < n),
             "spring ends must be nodes, and 8 × the node count must fit a u32"
         );
-        let e = [0, 1, 2].map(|axis| {
-            pad(springs
-                .ends
-                .iter()
-                .map(|[p, q]| (rest[*q as usize][axis] - rest[*p as usize][axis]) as f32)
-                .collect())
-        });
-        let mut incident_start = vec![0u32; n + 1];
-        let mut incident_mid = vec![0u32; n];
-        for [p, q] in &springs.ends {
-            incident_start[*p as usize + 1] += 1;
-            incident_start[*q as usize + 1] += 1;
-            incident_mid[*p as usize] += 1;
-        }
-        for i in 0..n {
-            incident_start[i + 1] += incident_start[i];
-            incident_mid[i] += incident_start[i];
-        }
-        // End-a entries fill from the start, end-b entries from the middle.
-        let mut fill_a = incident_start.clone();
-        let mut fill_b = incident_mid.clone();
-        let mut incident = vec![0u32; 2 * springs.ends.len()];
-        for (s, [p, q]) in springs.ends.iter().enumerate() {
-            incident[fill_a[*p as usize] as usize] = s as u32;
-            fill_a[*p as usize] += 1;
-            incident[fill_b[*q as usize] as usize] = s as u32 | END_B;
-            fill_b[*q as usize] += 1;
-        }
-        let f32s = |v: &[f64]| pad(v.iter().map(|&x| x as f32).collect());
+        let springs = SpringArrays::new(springs, rest);
+        let f = vec![f32x4::ZERO; springs.padded()];
         Self {
-            a: ends(0),
-            b: ends(1),
-            e,
-            rest: f32s(&springs.rest),
-            k: f32s(&springs.k),
-            c: f32s(&springs.c),
-            incident_start,
-            incident_mid,
-            incident,
+            springs,
             state: vec![f32x8::ZERO; n.max(1)],
             nodes: n,
-            f: vec![f32x4::ZERO; m],
+            f,
         }
     }
 
@@ -153,6 +407,11 @@ impl SpringKernel {
         }
     }
 
+    /// The node state rows.
+    pub fn rows(&mut self) -> NodeRows<'_> {
+        NodeRows(&mut self.state)
+    }
+
     /// Node `n`'s displacement (mm) and velocity (mm/s).
     #[inline]
     pub fn node(&self, n: usize) -> ([f32; 3], [f32; 3]) {
@@ -163,7 +422,7 @@ impl SpringKernel {
     /// Sets node `n`'s displacement (mm) and velocity (mm/s).
     #[inline]
     pub fn set_node(&mut self, n: usize, u: [f32; 3], v: [f32; 3]) {
-        self.state[n] = f32x8::from([u[0], u[1], u[2], 0.0, v[0], v[1], v[2], 0.0]);
+        self.rows().set_node(n, u, v);
     }
 
     /// Applies the forces `f` (µN) to the `free` nodes for `h` seconds
@@ -185,133 +444,118 @@ impl SpringKernel {
 
     /// Springs (unpadded count).
     pub fn springs(&self) -> usize {
-        self.incident.len() / 2
+        self.springs.b_list.len()
     }
 
-    /// The GPU twin's spring buffers.
+    /// The GPU twin's spring buffers, in the kernel's spring order.
     pub fn spring_table(&self) -> SpringTable {
-        let n = self.springs();
+        let (s, n) = (&self.springs, self.springs());
         SpringTable {
             geometry: (0..n)
-                .map(|s| [self.e[0][s], self.e[1][s], self.e[2][s], self.rest[s]])
+                .map(|i| {
+                    let e = [s.e[0][i], s.e[1][i], s.e[2][i]];
+                    [e[0], e[1], e[2], rest_length(e)]
+                })
                 .collect(),
-            ends: (0..n).map(|s| [self.a[s], self.b[s]]).collect(),
-            kc: (0..n).map(|s| [self.k[s], self.c[s]]).collect(),
+            ends: (0..n).map(|i| [s.a[i], s.b[i]]).collect(),
+            kc: (0..n).map(|i| [s.k[i], s.c[i]]).collect(),
         }
     }
 
-    /// The node → spring incidence (`start`, `incident`; see the fields).
-    pub fn incidence(&self) -> (&[u32], &[u32]) {
-        (&self.incident_start, &self.incident)
+    /// The node → spring incidence as the GPU twin reads it: node `n`'s
+    /// springs are `incident[start[n] .. start[n + 1]]`, each a spring
+    /// index with [`END_B`] set where `n` is its end `b`.
+    pub fn incidence(&self) -> (Vec<u32>, Vec<u32>) {
+        let s = &self.springs;
+        let mut start = Vec::with_capacity(self.nodes + 1);
+        let mut incident = Vec::with_capacity(2 * self.springs());
+        start.push(0);
+        for n in 0..self.nodes {
+            incident.extend(s.a_start[n]..s.a_start[n + 1]);
+            let bs = &s.b_list[s.b_start[n] as usize..s.b_start[n + 1] as usize];
+            incident.extend(bs.iter().map(|i| i | END_B));
+            start.push(incident.len() as u32);
+        }
+        (start, incident)
     }
 
     /// Per spring: the force on its end `a` (stretch and damping along it).
     pub fn spring_pass(&mut self) {
-        let state = &self.state;
-        let (a, b, e, rest, k, c) = (&self.a, &self.b, &self.e, &self.rest, &self.k, &self.c);
+        let (springs, state) = (&self.springs, &self.state);
         self.f
             .par_chunks_mut(CHUNK)
             .enumerate()
-            .for_each(|(chunk, out)| {
-                let first = chunk * CHUNK;
-                for w in (0..out.len()).step_by(8) {
-                    let s = first + w;
-                    let [du0, du1, du2, dv0, dv1, dv2] = end_differences(state, a, b, s);
-                    let load = |arr: &[f32]| {
-                        f32x8::from(<[f32; 8]>::try_from(&arr[s..s + 8]).expect("8 springs"))
-                    };
-                    let (e0, e1, e2) = (load(&e[0]), load(&e[1]), load(&e[2]));
-                    let (d0, d1, d2) = (e0 + du0, e1 + du1, e2 + du2);
-                    let len = (d0 * d0 + d1 * d1 + d2 * d2).sqrt();
-                    // |d|² − L² without cancellation: 2 e·δ + δ·δ.
-                    let grow = f32x8::splat(2.0) * (e0 * du0 + e1 * du1 + e2 * du2)
-                        + du0 * du0
-                        + du1 * du1
-                        + du2 * du2;
-                    // One division for both `grow / (|d| + L)` and `1 / |d|`
-                    // (zero for a spring of zero length, whose direction is
-                    // undefined: it exerts no force).
-                    let sum = len + load(rest);
-                    let q = len
-                        .simd_gt(f32x8::ZERO)
-                        .select(f32x8::ONE / (len * sum), f32x8::ZERO);
-                    let stretch = grow * len * q;
-                    let inv = sum * q;
-                    let (n0, n1, n2) = (d0 * inv, d1 * inv, d2 * inv);
-                    let rel = dv0 * n0 + dv1 * n1 + dv2 * n2;
-                    let mag = load(k) * stretch + load(c) * rel;
-                    store_rows(&mut out[w..w + 8], [mag * n0, mag * n1, mag * n2]);
-                }
-            });
-    }
-
-    /// The springs' force on node `n` (µN), after [`SpringKernel::spring_pass`].
-    #[inline(always)]
-    fn node_force4(&self, n: usize) -> f32x4 {
-        let (start, mid, end) = (
-            self.incident_start[n] as usize,
-            self.incident_mid[n] as usize,
-            self.incident_start[n + 1] as usize,
-        );
-        // Four independent sums (even/odd entries, end a/end b), so the
-        // loads' latency overlaps instead of queueing behind one chain of
-        // additions.
-        let f = &self.f;
-        let sum = |list: &[u32]| {
-            let (mut even, mut odd) = (f32x4::ZERO, f32x4::ZERO);
-            let pairs = list.chunks_exact(2);
-            if let [last] = pairs.remainder() {
-                odd = f[(last & !END_B) as usize];
-            }
-            for pair in pairs {
-                even += f[(pair[0] & !END_B) as usize];
-                odd += f[(pair[1] & !END_B) as usize];
-            }
-            even + odd
-        };
-        sum(&self.incident[start..mid]) - sum(&self.incident[mid..end])
+            .for_each(|(chunk, out)| springs.forces(state, chunk * CHUNK, out));
     }
 
     /// The springs' force on node `n` (µN), after [`SpringKernel::spring_pass`].
     pub fn node_force(&self, n: usize) -> [f32; 3] {
-        let f = self.node_force4(n).to_array();
+        let f = self.springs.node_force(&self.f, n).to_array();
         [f[0], f[1], f[2]]
     }
 
-    /// One symplectic Euler step of `h` seconds for the `free` nodes, after
-    /// [`SpringKernel::spring_pass`]: `v += h ((f_springs + ext) / m − α v)`,
-    /// `u += h v`, with `ext` the external force per node (µN, the fourth
-    /// lane zero), `inv_mass` per node (1/g) and `alpha` the mass damping
-    /// (1/s).
-    pub fn integrate(
-        &mut self,
-        h: f32,
-        ext: &[[f32; 4]],
-        inv_mass: &[f32],
-        free: &[bool],
-        alpha: f32,
-    ) {
-        let (h, alpha) = (f32x4::splat(h), f32x4::splat(alpha));
-        let mut state = std::mem::take(&mut self.state);
-        let this = &*self;
-        state[..self.nodes]
+    /// One sub-step of the free nodes, after [`SpringKernel::spring_pass`]
+    /// (what [`SpringKernel::substeps`] does per sub-step; its reference in
+    /// tests).
+    #[cfg(test)]
+    pub fn integrate(&mut self, step: &Substep) {
+        let (springs, f) = (&self.springs, &self.f);
+        self.state[..self.nodes]
             .par_chunks_mut(NODE_CHUNK)
             .enumerate()
-            .for_each(|(chunk, rows)| {
-                let first = chunk * NODE_CHUNK;
-                for (i, row) in rows.iter_mut().enumerate() {
-                    let n = first + i;
-                    if !free[n] {
-                        continue;
+            .for_each(|(chunk, rows)| springs.integrate(f, chunk * NODE_CHUNK, rows, step));
+    }
+
+    /// `count` sub-steps (spring pass, then integration), numbered from 1;
+    /// after each, `fixup` (if any) sets the imposed nodes' rows on one
+    /// thread. The same as a [`SpringKernel::spring_pass`] and an
+    /// integration of every free node per sub-step (bit for bit, tested),
+    /// in one parallel region:
+    /// each thread keeps one range of springs and the nodes they start
+    /// from (so the forces it writes are mostly the ones it reads back),
+    /// and the phases meet at a spinning barrier instead of parking the
+    /// threads twice per sub-step.
+    pub fn substeps(&mut self, count: u32, step: &Substep, fixup: Option<Fixup>) {
+        let threads = rayon::current_num_threads().max(1);
+        let parts = self.springs.partition(self.nodes, threads);
+        let barrier = SpinBarrier::new(threads);
+        let springs = &self.springs;
+        let nodes = self.nodes;
+        let (state, f) = (Shared::new(&mut self.state), Shared::new(&mut self.f));
+        rayon::broadcast(|ctx| {
+            let (node_range, spring_range) = parts[ctx.index()].clone();
+            for s in 1..=count {
+                // SAFETY (both phases and the fix-up): the barriers separate
+                // them; in the spring phase `state` is only read and each
+                // thread writes its own range of `f`; in the node phase `f`
+                // is only read and each thread writes its own range of
+                // `state` (the ranges are disjoint: `partition`); the
+                // fix-up runs on one thread while the others wait.
+                unsafe {
+                    springs.forces(
+                        state.all(),
+                        spring_range.start,
+                        f.part(spring_range.clone()),
+                    )
+                };
+                barrier.wait();
+                unsafe {
+                    springs.integrate(
+                        f.all(),
+                        node_range.start,
+                        state.part(node_range.clone()),
+                        step,
+                    )
+                };
+                barrier.wait();
+                if let Some(fixup) = fixup {
+                    if ctx.index() == 0 {
+                        fixup(s, &mut NodeRows(unsafe { state.part(0..nodes) }));
                     }
-                    let [u, v]: [f32x4; 2] = bytemuck::cast(*row);
-                    let a = (this.node_force4(n) + f32x4::from(ext[n])) * f32x4::splat(inv_mass[n])
-                        - alpha * v;
-                    let v = v + h * a;
-                    *row = bytemuck::cast([u + h * v, v]);
+                    barrier.wait();
                 }
-            });
-        self.state = state;
+            }
+        });
     }
 }
 
@@ -423,11 +667,18 @@ fn store_rows(out: &mut [f32x4], [fx, fy, fz]: [f32x8; 3]) {
 mod tests {
     use super::*;
 
-    /// The kernel's sub-step against the same sums in f64, one spring and
-    /// node at a time, on springs with random ends and a random state.
-    #[test]
-    fn the_vector_kernel_matches_a_spring_by_spring_step() {
-        let n = 37;
+    /// Random springs between random nodes, and a random node state.
+    struct Case {
+        rest: Vec<DVec3>,
+        springs: Springs,
+        u: Vec<DVec3>,
+        v: Vec<DVec3>,
+        ext: Vec<[f32; 4]>,
+        inv_mass: Vec<f32>,
+        free: Vec<bool>,
+    }
+
+    fn case(n: usize, springs: usize) -> Case {
         let mut seed = 0x9e37_79b9_u32;
         let mut rnd = move || {
             seed ^= seed << 13;
@@ -438,34 +689,62 @@ mod tests {
         let rest: Vec<DVec3> = (0..n)
             .map(|_| DVec3::new(rnd(), rnd(), rnd()) * 10.0)
             .collect();
-        let mut springs = Springs::default();
-        for _ in 0..61 {
+        let mut list = Springs::default();
+        for _ in 0..springs {
             let p = (rnd() * n as f64) as u32 % n as u32;
             let q = (p + 1 + (rnd() * (n - 1) as f64) as u32 % (n as u32 - 1)) % n as u32;
-            springs.ends.push([p, q]);
-            springs
-                .rest
+            list.ends.push([p, q]);
+            list.rest
                 .push((rest[q as usize] - rest[p as usize]).length());
-            springs.k.push(1.0 + rnd());
-            springs.c.push(0.1 * rnd());
+            list.k.push(1.0 + rnd());
+            list.c.push(0.1 * rnd());
         }
-        let u: Vec<DVec3> = (0..n)
-            .map(|_| DVec3::new(rnd(), rnd(), rnd()) - 0.5)
-            .collect();
-        let v: Vec<DVec3> = (0..n)
-            .map(|_| DVec3::new(rnd(), rnd(), rnd()) - 0.5)
-            .collect();
-        let ext: Vec<[f32; 4]> = (0..n)
-            .map(|_| [rnd() as f32, rnd() as f32, rnd() as f32, 0.0])
-            .collect();
-        let inv_mass: Vec<f32> = (0..n).map(|_| 1.0 + rnd() as f32).collect();
-        let free: Vec<bool> = (0..n).map(|i| i % 5 != 0).collect();
+        let mut vectors = || -> Vec<DVec3> {
+            (0..n)
+                .map(|_| DVec3::new(rnd(), rnd(), rnd()) - 0.5)
+                .collect()
+        };
+        let (u, v) = (vectors(), vectors());
+        Case {
+            rest,
+            springs: list,
+            u,
+            v,
+            ext: (0..n)
+                .map(|_| [rnd() as f32, rnd() as f32, rnd() as f32, 0.0])
+                .collect(),
+            inv_mass: (0..n).map(|_| 1.0 + rnd() as f32).collect(),
+            free: (0..n).map(|i| i % 5 != 0).collect(),
+        }
+    }
+
+    /// The kernel's sub-step against the same sums in f64, one spring and
+    /// node at a time, on springs with random ends and a random state.
+    #[test]
+    fn the_vector_kernel_matches_a_spring_by_spring_step() {
+        let n = 37;
+        let Case {
+            rest,
+            springs,
+            u,
+            v,
+            ext,
+            inv_mass,
+            free,
+        } = case(n, 61);
         let (h, alpha) = (1e-3, 0.5);
 
         let mut kernel = SpringKernel::new(&springs, &rest);
         kernel.load(&u, &v);
+        let step = Substep {
+            h: h as f32,
+            ext: &ext,
+            inv_mass: &inv_mass,
+            free: &free,
+            alpha: alpha as f32,
+        };
         kernel.spring_pass();
-        kernel.integrate(h as f32, &ext, &inv_mass, &free, alpha as f32);
+        kernel.integrate(&step);
 
         let mut force = vec![DVec3::ZERO; n];
         for (s, &[p, q]) in springs.ends.iter().enumerate() {
@@ -505,6 +784,46 @@ mod tests {
                 "node {i}: force {f} vs {}",
                 force[i]
             );
+        }
+    }
+
+    /// Sub-steps in one parallel region (static ranges, spinning barrier,
+    /// a fix-up between sub-steps) are bit-identical to a spring pass and
+    /// an integration per sub-step, for any number of threads.
+    #[test]
+    fn one_parallel_region_equals_a_pass_per_phase() {
+        let c = case(500, 2_003);
+        let step = Substep {
+            h: 1e-3,
+            ext: &c.ext,
+            inv_mass: &c.inv_mass,
+            free: &c.free,
+            alpha: 0.5,
+        };
+        let pull =
+            |s: u32, rows: &mut NodeRows| rows.set_node(0, [0.01 * s as f32, 0.0, 0.0], [0.0; 3]);
+        let mut expected = SpringKernel::new(&c.springs, &c.rest);
+        expected.load(&c.u, &c.v);
+        for s in 1..=7 {
+            expected.spring_pass();
+            expected.integrate(&step);
+            pull(s, &mut expected.rows());
+        }
+        for threads in [1, 2, 3, 5] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut kernel = SpringKernel::new(&c.springs, &c.rest);
+            kernel.load(&c.u, &c.v);
+            pool.install(|| kernel.substeps(7, &step, Some(&pull)));
+            for n in 0..c.rest.len() {
+                assert_eq!(
+                    kernel.node(n),
+                    expected.node(n),
+                    "node {n} with {threads} threads"
+                );
+            }
         }
     }
 }

@@ -26,7 +26,7 @@
 //!   tangent stiffness, solved by block-Jacobi PCG.
 
 use crate::gpu::GpuSprings;
-use crate::kernel::SpringKernel;
+use crate::kernel::{Fixup, NodeRows, SpringKernel, Substep};
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::HashMap;
@@ -218,37 +218,32 @@ impl MassSpring {
         let fixed: Vec<usize> = (0..free.len()).filter(|&n| bc.fixed[n]).collect();
         let start_u = state.u.clone();
         self.kernel.load(&state.u, &state.v);
-        let mut f = vec![DVec3::ZERO; free.len()];
         let ext: Vec<[f32; 4]> = bc
             .force
             .iter()
             .map(|f| [f.x as f32, f.y as f32, f.z as f32, 0.0])
             .collect();
         let inv_mass: Vec<f32> = self.masses.iter().map(|&m| (1.0 / m) as f32).collect();
-        let alpha = self.params.mass_damping as f32;
-        for s in 1..=substeps {
-            if bc.hanging.is_empty() {
-                self.kernel.spring_pass();
-                self.kernel
-                    .integrate(h as f32, &ext, &inv_mass, &free, alpha);
-            } else {
-                // Hanging nodes pass their forces to their masters first.
-                self.node_forces(bc, &mut f);
-                bc.untie(&mut f);
-                self.kernel.apply(&f, h, &self.masses, &free);
-            }
-            let k = &mut self.kernel;
-            // Imposed nodes: fixed stay, driven ones move linearly to their
-            // targets over the frame, hanging ones follow their masters.
-            for &n in &fixed {
-                k.set_node(n, [0.0; 3], [0.0; 3]);
-            }
+        let step = Substep {
+            h: h as f32,
+            ext: &ext,
+            inv_mass: &inv_mass,
+            free: &free,
+            alpha: self.params.mass_damping as f32,
+        };
+        // Imposed nodes: fixed ones stay (the integrator leaves them), driven
+        // ones move linearly to their targets over the frame, hanging ones
+        // follow their masters.
+        for &n in &fixed {
+            self.kernel.set_node(n, [0.0; 3], [0.0; 3]);
+        }
+        let drive = |s: u32, rows: &mut NodeRows| {
             let frac = s as f64 / substeps as f64;
             for &(n, target) in &bc.driven {
                 let n = n as usize;
                 let u = start_u[n].lerp(target, frac);
-                let now = DVec3::from_array(k.node(n).0.map(f64::from));
-                k.set_node(
+                let now = DVec3::from_array(rows.node(n).0.map(f64::from));
+                rows.set_node(
                     n,
                     u.as_vec3().to_array(),
                     ((u - now) / h).as_vec3().to_array(),
@@ -257,13 +252,26 @@ impl MassSpring {
             for hn in &bc.hanging {
                 let (mut u, mut v) = ([0f32; 3], [0f32; 3]);
                 for &(m, w) in &hn.masters {
-                    let (um, vm) = k.node(m as usize);
+                    let (um, vm) = rows.node(m as usize);
                     for i in 0..3 {
                         u[i] += w * um[i];
                         v[i] += w * vm[i];
                     }
                 }
-                k.set_node(hn.node as usize, u, v);
+                rows.set_node(hn.node as usize, u, v);
+            }
+        };
+        if bc.hanging.is_empty() {
+            let fixup: Option<Fixup> = (!bc.driven.is_empty()).then_some(&drive);
+            self.kernel.substeps(substeps, &step, fixup);
+        } else {
+            // Hanging nodes pass their forces to their masters first.
+            let mut f = vec![DVec3::ZERO; free.len()];
+            for s in 1..=substeps {
+                self.node_forces(bc, &mut f);
+                bc.untie(&mut f);
+                self.kernel.apply(&f, h, &self.masses, &free);
+                drive(s, &mut self.kernel.rows());
             }
         }
         self.kernel.store(&mut state.u, &mut state.v);
