@@ -233,13 +233,14 @@ fn main() {
 /// block.
 fn relaxation_kernels(pm: &ChainMail, ms: impl Fn(std::time::Duration) -> f64) {
     use voxflex_chainmail::blocks::Blocks;
-    use voxflex_chainmail::relax_passes::sweep_runs;
+    use voxflex_chainmail::relax_passes::{SweepScratch, sweep_runs};
     let (lat, st) = (pm.lattice(), pm.state());
     let blocks = Blocks::new(lat.dims, [8, 4, 4]);
     let all: Vec<u32> = (0..blocks.len() as u32).collect();
+    let mut scratch = SweepScratch::default();
     let t = Instant::now();
     for _ in 0..40 {
-        sweep_runs(lat, st, &blocks, &all, 1e-4);
+        sweep_runs(lat, st, &blocks, &all, 1e-4, &mut scratch);
     }
     println!(
         "relaxation over every block: {:.2} ms per sweep",

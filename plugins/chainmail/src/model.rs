@@ -7,7 +7,7 @@ use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
 use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_frontier};
 use crate::relax::sweep_scalar;
-use crate::relax_passes::sweep_runs;
+use crate::relax_passes::{SweepScratch, sweep_runs};
 use crate::removal::{carve_tets, cut_tets};
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
@@ -68,6 +68,10 @@ pub struct ChainMail {
     relax: Vec<u32>,
     /// Scratch flags for building block lists.
     seen: Vec<bool>,
+    /// Buffers the relaxation sweeps reuse.
+    sweep_scratch: SweepScratch,
+    /// Storage for merging block lists.
+    merge_scratch: Vec<u32>,
     /// Blocks changed since the last `take_dirty`.
     dirty: Vec<bool>,
     /// Blocks relaxed since the Jacobi copies were last made equal
@@ -108,6 +112,8 @@ impl ChainMail {
         Ok(Self {
             state: State::new(n),
             seen: vec![false; blocks.len()],
+            sweep_scratch: SweepScratch::default(),
+            merge_scratch: Vec::new(),
             dirty: vec![false; blocks.len()],
             unsynced: Vec::new(),
             unsynced_flag: vec![false; blocks.len()],
@@ -668,9 +674,9 @@ impl ChainMail {
         self.counts.updates += rep.updates;
         self.note_changes(&rep.blocks);
         self.active = self.blocks.next_active(&rep.blocks, &mut self.seen);
-        self.relax.extend_from_slice(&self.active);
         self.relax.sort_unstable();
         self.relax.dedup();
+        merge_sorted(&mut self.relax, &self.active, &mut self.merge_scratch);
         rep.updates > 0
     }
 
@@ -715,7 +721,14 @@ impl ChainMail {
             self.cpu_stale = true;
             self.on_device(|g, _| g.relax(cur, &set, tol))
         } else {
-            sweep_runs(&self.lat, &self.state, &self.blocks, &self.relax, tol)
+            sweep_runs(
+                &self.lat,
+                &self.state,
+                &self.blocks,
+                &self.relax,
+                tol,
+                &mut self.sweep_scratch,
+            )
         };
         self.counts.relaxation_iterations += 1;
         for &(b, _) in &rep.blocks {
@@ -804,8 +817,45 @@ impl ChainMail {
 }
 
 /// Adds a block to a short list (the grabbed elements' blocks).
+/// `list` (ascending, no repeats) merged with `more` (the same), in
+/// linear time; `scratch` is reused storage.
+fn merge_sorted(list: &mut Vec<u32>, more: &[u32], scratch: &mut Vec<u32>) {
+    scratch.clear();
+    scratch.reserve(list.len() + more.len());
+    let (mut i, mut j) = (0, 0);
+    while i < list.len() && j < more.len() {
+        let (a, b) = (list[i], more[j]);
+        scratch.push(a.min(b));
+        i += usize::from(a <= b);
+        j += usize::from(b <= a);
+    }
+    scratch.extend_from_slice(&list[i..]);
+    scratch.extend_from_slice(&more[j..]);
+    std::mem::swap(list, scratch);
+}
+
 fn push_unique(v: &mut Vec<u32>, b: u32) {
     if !v.contains(&b) {
         v.push(b);
+    }
+}
+
+#[cfg(test)]
+mod merge_tests {
+    use super::merge_sorted;
+
+    #[test]
+    fn merging_sorted_block_lists_keeps_them_sorted_and_unique() {
+        let mut scratch = Vec::new();
+        for (a, b, want) in [
+            (vec![], vec![], vec![]),
+            (vec![1, 4, 9], vec![], vec![1, 4, 9]),
+            (vec![], vec![2, 3], vec![2, 3]),
+            (vec![1, 4, 9], vec![0, 4, 5, 9, 12], vec![0, 1, 4, 5, 9, 12]),
+        ] {
+            let mut list = a;
+            merge_sorted(&mut list, &b, &mut scratch);
+            assert_eq!(list, want);
+        }
     }
 }

@@ -16,7 +16,7 @@
 use crate::blocks::{Blocks, FaceMask};
 use crate::lattice::{ElementLattice, FIXED, HELD, LINKS};
 use crate::relax_lanes::{RowBases, bytes8, lane_range, nonzero_lanes, splat_byte};
-use crate::relax_passes::{fold_runs, run_blocks, runs_by_row, walk_block_row};
+use crate::relax_passes::{RunRows, fold_runs, walk_block_row};
 use crate::row_moves::{BlockRowMoves, RowMoves};
 use crate::state::{MAX_TIME, State, arrival, earlier, wave};
 use rayon::prelude::*;
@@ -60,42 +60,36 @@ pub fn jacobi_iteration(
 ) -> IterationReport {
     let rd = state.cur;
     let st = &*state;
-    let rows = runs_by_row(blocks, active);
-    let results: Vec<BlockRowReport> = rows
-        .par_iter()
-        .map(|runs| {
-            let mut out = run_blocks(runs);
-            let mut counts = (0u64, 0u64);
-            let mut moves = RowMoves::new(lat.hx);
-            let mut acc = BlockRowMoves::new(lat.hx);
-            for colour in 0..2 {
-                walk_block_row(
-                    lat,
-                    blocks,
-                    runs,
-                    colour,
-                    &mut moves,
-                    &mut acc,
-                    |[j, k], q, moves| {
+    let rows = RunRows::new(blocks, active);
+    let mut out: Vec<(u32, FaceMask)> = active.iter().map(|&b| (b, 0)).collect();
+    let (visits, updates) = rows
+        .split(&mut out)
+        .into_par_iter()
+        .enumerate()
+        .map_init(
+            || (RowMoves::new(lat.hx), BlockRowMoves::new(lat.hx)),
+            |(moves, acc), (r, part)| {
+                let runs = rows.runs(r);
+                let mut counts = (0u64, 0u64);
+                acc.clear();
+                for colour in 0..2 {
+                    walk_block_row(lat, blocks, runs, colour, moves, acc, |[j, k], q, moves| {
                         let rows = RowBases::new(lat, colour, j, k);
                         propagate_row(lat, st, rd, &rows, q, moves, &mut counts)
-                    },
-                );
-            }
-            fold_runs(blocks, runs, &acc, &mut out);
-            (out, counts.0, counts.1)
-        })
-        .collect();
+                    });
+                }
+                fold_runs(blocks, runs, acc, part);
+                counts
+            },
+        )
+        .reduce(|| (0, 0), |x, y| (x.0 + y.0, x.1 + y.1));
     state.cur = 1 - rd;
     IterationReport {
-        visits: results.iter().map(|r| r.1).sum(),
-        updates: results.iter().map(|r| r.2).sum(),
-        blocks: results.into_iter().flat_map(|r| r.0).collect(),
+        visits,
+        updates,
+        blocks: out,
     }
 }
-
-/// One block row's `(block, face mask)` list, visits and updates.
-type BlockRowReport = (Vec<(u32, FaceMask)>, u64, u64);
 
 /// Propagates into slots `qa..qb` of one colour row: flags the updated
 /// slots in `moves` and adds `(visits, updates)` to `counts`.

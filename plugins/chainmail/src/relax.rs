@@ -180,7 +180,7 @@ pub fn energy(lat: &ElementLattice, state: &State) -> f64 {
 mod tests {
     use super::*;
     use crate::params::ChainMailParams;
-    use crate::relax_passes::{runs_by_row, sweep_runs};
+    use crate::relax_passes::{RunRows, SweepScratch, sweep_runs};
     use voxflex_core::glam::DVec3;
     use voxflex_core::grid::Grid;
     use voxflex_core::volume::{Volume, VoxelData};
@@ -260,8 +260,9 @@ mod tests {
         // Two blocks in three, so runs have gaps and windows overlap them.
         let set: Vec<u32> = (0..blocks.len() as u32).filter(|b| b % 3 != 1).collect();
         let (a, b) = (random_state(&lat), random_state(&lat));
+        let mut scratch = SweepScratch::default();
         for it in 0..6 {
-            let ra = sweep_runs(&lat, &a, &blocks, &set, 1e-3);
+            let ra = sweep_runs(&lat, &a, &blocks, &set, 1e-3, &mut scratch);
             let rb = sweep_scalar(&lat, &b, &blocks, &set, 1e-3);
             assert_eq!(ra.blocks, rb.blocks, "sweep {it}: block masks differ");
             assert!((ra.max_move - rb.max_move).abs() < 1e-5);
@@ -287,11 +288,17 @@ mod tests {
     #[test]
     fn runs_group_consecutive_blocks_per_block_row() {
         let blocks = Blocks::new([40, 8, 4], [8, 4, 4]); // 5 × 2 × 1 blocks
-        let rows = runs_by_row(&blocks, &[0, 1, 3, 4, 6]);
-        let shape: Vec<Vec<(u32, u32)>> = rows
-            .iter()
-            .map(|r| r.iter().map(|r| (r.first, r.len)).collect())
+        let set = [0, 1, 3, 4, 6];
+        let rows = RunRows::new(&blocks, &set);
+        let shape: Vec<Vec<(u32, u32)>> = (0..rows.len())
+            .map(|r| rows.runs(r).iter().map(|r| (r.first, r.len)).collect())
             .collect();
         assert_eq!(shape, vec![vec![(0, 2), (3, 2)], vec![(6, 1)]]);
+        // Per-block entries split by block row, in the set's order.
+        let mut per_block = set;
+        let parts = rows.split(&mut per_block);
+        assert_eq!(parts.len(), 2);
+        assert_eq!((&*parts[0], &*parts[1]), (&[0, 1, 3, 4][..], &[6][..]));
+        assert_eq!(RunRows::new(&blocks, &[]).len(), 0);
     }
 }

@@ -22,79 +22,130 @@ pub(crate) struct Run {
     pub len: u32,
 }
 
-/// The runs of `set` (ascending block indices), grouped by block row.
-pub(crate) fn runs_by_row(blocks: &Blocks, set: &[u32]) -> Vec<Vec<Run>> {
-    let cx = blocks.count[0] as u32;
-    let mut rows: Vec<Vec<Run>> = Vec::new();
-    let mut last_row = u32::MAX;
-    for &b in set {
-        let row = b / cx;
-        if row != last_row {
-            rows.push(Vec::new());
-            last_row = row;
+/// The runs of a set of blocks (ascending block indices), grouped by
+/// block row, in two flat arrays built once per pass.
+pub(crate) struct RunRows {
+    runs: Vec<Run>,
+    /// Per block row `r`: its runs start at `runs[starts[r].0]` and its
+    /// blocks at `set[starts[r].1]`; one more entry closes the last row.
+    starts: Vec<(u32, u32)>,
+}
+
+impl RunRows {
+    /// The runs of `set` (ascending).
+    pub(crate) fn new(blocks: &Blocks, set: &[u32]) -> Self {
+        let cx = blocks.count[0] as u32;
+        let mut runs: Vec<Run> = Vec::new();
+        let mut starts = Vec::new();
+        let mut last_row = u32::MAX;
+        for (i, &b) in set.iter().enumerate() {
+            let row = b / cx;
+            if row != last_row {
+                starts.push((runs.len() as u32, i as u32));
+                last_row = row;
+                runs.push(Run { first: b, len: 1 });
+                continue;
+            }
+            match runs.last_mut() {
+                Some(r) if r.first + r.len == b => r.len += 1,
+                _ => runs.push(Run { first: b, len: 1 }),
+            }
         }
-        let runs = rows.last_mut().expect("pushed above");
-        match runs.last_mut() {
-            Some(r) if r.first + r.len == b => r.len += 1,
-            _ => runs.push(Run { first: b, len: 1 }),
-        }
+        starts.push((runs.len() as u32, set.len() as u32));
+        Self { runs, starts }
     }
-    rows
+
+    /// Block rows.
+    pub(crate) fn len(&self) -> usize {
+        self.starts.len() - 1
+    }
+
+    /// The runs of block row `r`.
+    pub(crate) fn runs(&self, r: usize) -> &[Run] {
+        &self.runs[self.starts[r].0 as usize..self.starts[r + 1].0 as usize]
+    }
+
+    /// `per_block` (one entry per block of the set, in its order) split
+    /// into the block rows' parts.
+    pub(crate) fn split<'a, T>(&self, mut per_block: &'a mut [T]) -> Vec<&'a mut [T]> {
+        (0..self.len())
+            .map(|r| {
+                let n = (self.starts[r + 1].1 - self.starts[r].1) as usize;
+                let (row, rest) = std::mem::take(&mut per_block).split_at_mut(n);
+                per_block = rest;
+                row
+            })
+            .collect()
+    }
+}
+
+/// Buffers [`sweep_runs`] keeps between sweeps: each block row's moves
+/// over both colours and its largest move.
+#[derive(Default)]
+pub struct SweepScratch {
+    rows: Vec<(BlockRowMoves, f32)>,
+    hx: usize,
+}
+
+impl SweepScratch {
+    /// `rows` cleared accumulators for rows of `hx` slots.
+    fn take(&mut self, rows: usize, hx: usize) -> &mut [(BlockRowMoves, f32)] {
+        if self.hx != hx {
+            self.rows.clear();
+            self.hx = hx;
+        }
+        for (acc, max) in &mut self.rows {
+            acc.clear();
+            *max = 0.0;
+        }
+        if self.rows.len() < rows {
+            self.rows
+                .resize_with(rows, || (BlockRowMoves::new(hx), 0.0));
+        }
+        &mut self.rows[..rows]
+    }
 }
 
 /// One red-black sweep over the blocks of `set` (ascending), in parallel
 /// and 8 slots at a time; moves smaller than `tol` (fraction of the element
-/// spacing) do not keep a block active.
+/// spacing) do not keep a block active. `scratch` carries buffers from one
+/// sweep to the next.
 pub fn sweep_runs(
     lat: &ElementLattice,
     state: &State,
     blocks: &Blocks,
     set: &[u32],
     tol: f64,
+    scratch: &mut SweepScratch,
 ) -> SweepReport {
     debug_assert!(set.windows(2).all(|w| w[0] < w[1]), "set must be ascending");
-    let rows = runs_by_row(blocks, set);
-    let mut results: Vec<BlockRowSweep> = rows
-        .iter()
-        .map(|runs| (run_blocks(runs), BlockRowMoves::new(lat.hx), 0.0))
-        .collect();
+    let rows = RunRows::new(blocks, set);
+    let mut out: Vec<(u32, FaceMask)> = set.iter().map(|&b| (b, 0)).collect();
+    let mut parts = rows.split(&mut out);
+    let accs = scratch.take(rows.len(), lat.hx);
     let tol = tol as f32;
     for colour in 0..2 {
-        rows.par_iter()
-            .zip(results.par_iter_mut())
-            .for_each(|(runs, (out, acc, max))| {
-                let mut moves = RowMoves::new(lat.hx);
-                walk_block_row(
-                    lat,
-                    blocks,
-                    runs,
-                    colour,
-                    &mut moves,
-                    acc,
-                    |jk, q, moves| relax_row(lat, state, colour, jk, q, tol, moves),
-                );
-                if colour == 1 {
-                    fold_runs(blocks, runs, acc, out);
-                }
-                *max = max.max(moves.take_max());
-            });
+        accs.par_iter_mut()
+            .zip(parts.par_iter_mut())
+            .enumerate()
+            .for_each_init(
+                || RowMoves::new(lat.hx),
+                |moves, (r, ((acc, max), part))| {
+                    let runs = rows.runs(r);
+                    walk_block_row(lat, blocks, runs, colour, moves, acc, |jk, q, moves| {
+                        relax_row(lat, state, colour, jk, q, tol, moves)
+                    });
+                    if colour == 1 {
+                        fold_runs(blocks, runs, acc, part);
+                    }
+                    *max = max.max(moves.take_max());
+                },
+            );
     }
     SweepReport {
-        max_move: results.iter().map(|r| r.2 as f64).fold(0.0, f64::max),
-        blocks: results.into_iter().flat_map(|r| r.0).collect(),
+        max_move: accs.iter().map(|r| r.1 as f64).fold(0.0, f64::max),
+        blocks: out,
     }
-}
-
-/// One block row's part of a sweep: its blocks' masks, its moves over both
-/// colours, and its largest move.
-type BlockRowSweep = (Vec<(u32, FaceMask)>, BlockRowMoves, f32);
-
-/// The blocks of a block row's runs, in order, each with an empty face
-/// mask.
-pub(crate) fn run_blocks(runs: &[Run]) -> Vec<(u32, FaceMask)> {
-    runs.iter()
-        .flat_map(|r| (r.first..r.first + r.len).map(|b| (b, 0)))
-        .collect()
 }
 
 /// Walks colour `colour`'s rows of one block row: for each row `(j, k)`
@@ -130,7 +181,7 @@ pub(crate) fn walk_block_row(
 }
 
 /// Folds a block row's moves `acc` into the face masks of its runs' blocks
-/// (`out`, in [`run_blocks`] order).
+/// (`out`, in the runs' order).
 pub(crate) fn fold_runs(
     blocks: &Blocks,
     runs: &[Run],
