@@ -407,6 +407,32 @@ fn info_describes_phantoms_and_refuses_hostile_headers() {
     );
 }
 
+/// A header that permutes and reverses its axes, in LPS, is read into the
+/// RAS grid: the axes follow the world, not the file's storage order.
+#[test]
+fn info_applies_header_orientation() {
+    let tmp = tempfile::tempdir().unwrap();
+    // i runs superior (2 mm), j left→right in RAS (LPS −x, 1 mm), k
+    // posterior in RAS (LPS +y, 3 mm): 2 × 3 × 4 voxels.
+    let values: Vec<String> = (0..24).map(|v| v.to_string()).collect();
+    let nrrd = format!(
+        "NRRD0004\ntype: uchar\ndimension: 3\nspace: left-posterior-superior\n\
+         sizes: 2 3 4\nspace directions: (0,0,2) (-1,0,0) (0,3,0)\n\
+         space origin: (10,20,30)\nencoding: ascii\n\n{}\n",
+        values.join(" ")
+    );
+    std::fs::write(tmp.path().join("turned.nrrd"), nrrd).unwrap();
+    let o = voxflex(&["--log", "info", "info", "turned.nrrd"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let out = text(&o);
+    assert!(out.contains("3 × 4 × 2 voxels"), "{out}");
+    assert!(out.contains("spacing   1 × 3 × 2 mm"), "{out}");
+    // LPS (10, 20, 30) is RAS (−10, −20, 30); k runs towards −y, so grid
+    // voxel 0 is the file's last k, 3 × 3 mm further back.
+    assert!(out.contains("origin    (-10, -29, 30) mm"), "{out}");
+    assert!(out.contains("i→+z, j→+x, k→−y"), "{out}");
+}
+
 #[test]
 fn a_cpu_only_plugin_runs_on_the_cpu_under_auto_and_is_refused_under_gpu() {
     plugin_dir(&["ripple"]);

@@ -3,9 +3,11 @@
 //! Conventions used everywhere in voxflex:
 //! - **Voxel index** `(i, j, k)` addresses voxel centres; `i` runs fastest in
 //!   memory (x-fastest, like NIfTI, MetaImage and NRRD).
-//! - **World** coordinates are millimetres. The centre of voxel `(i, j, k)`
-//!   sits at `origin + (i, j, k) * spacing` (axis-aligned; header rotations
-//!   are not applied — see the readers).
+//! - **World** coordinates are RAS millimetres (x grows towards the
+//!   patient's right, y anterior, z superior). The centre of voxel `(i, j, k)` sits at
+//!   `origin + (i, j, k) * spacing`: axis-aligned, spacing positive; the
+//!   readers reorder a file's voxels into this frame
+//!   ([`crate::io::orientation`]).
 
 use glam::DVec3;
 

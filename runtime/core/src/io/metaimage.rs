@@ -16,19 +16,23 @@
 //! - `HeaderSize`: bytes to skip at the start of the data file (`-1`: the
 //!   data is the last bytes of the file);
 //! - `ElementNumberOfChannels` must be 1; `BinaryData` must not be `False`.
-//! - `TransformMatrix` / `Rotation` / `Orientation`: **not applied** (the
-//!   volume is axis-aligned at `Offset`); a non-diagonal one logs a warning.
+//! - `TransformMatrix` / `Rotation` / `Orientation` (row `a`: voxel axis
+//!   `a`'s direction): applied, with the origin, in ITK's LPS world turned
+//!   into voxflex's RAS one, by reordering the voxels (see
+//!   [`super::orientation`]); an oblique volume is placed along its closest
+//!   axes with a warning.
 //!
 //! Other keys are ignored. File lists (`ElementDataFile = LIST` or a
 //! `%d` pattern) are refused with a message.
 
+use super::orientation::{HeaderFrame, HeaderGeometry, place};
 use super::{
-    DataSpec, RawType, ReadOptions, file_len, header_err, is_gzip, note_orientation, open,
-    read_voxels, skip_bytes, validate_dims, validate_origin, validate_spacing,
+    DataSpec, RawType, ReadOptions, file_len, header_err, is_gzip, open, read_voxels, skip_bytes,
+    validate_dims, validate_origin, validate_spacing,
 };
 use crate::error::IoError;
-use crate::grid::Grid;
 use crate::volume::Volume;
+use glam::DVec3;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
@@ -303,14 +307,33 @@ pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError
         }
         None => glam::DVec3::ZERO,
     };
-    if let Some((k, v)) = h.get(&["TransformMatrix", "Rotation", "Orientation"]) {
-        let m: Vec<f64> = parse_numbers(path, k, v)?;
-        if m.len() == 9 {
-            // Row a of the matrix is the direction of axis a (ITK's reading).
-            let cols = [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]];
-            note_orientation(path, "MetaImage TransformMatrix", cols);
+    // ITK's world is LPS; row `a` of the matrix is the direction of voxel
+    // axis `a` (ITK's reading).
+    let geometry = match h.get(&["TransformMatrix", "Rotation", "Orientation"]) {
+        Some((k, v)) => {
+            let m: Vec<f64> = parse_numbers(path, k, v)?;
+            // A 1-D or 2-D file's matrix is 1 × 1 or 2 × 2.
+            let m: [f64; 9] = match *m.as_slice() {
+                [x] if ndims == 1 => [x, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                [a, b, c, d] if ndims == 2 => [a, b, 0.0, c, d, 0.0, 0.0, 0.0, 1.0],
+                _ => m.as_slice().try_into().map_err(|_| {
+                    header_err(
+                        path,
+                        k,
+                        format!("`{v}` is not an NDims × NDims matrix (NDims is {ndims})"),
+                    )
+                })?,
+            };
+            HeaderGeometry {
+                directions: [0, 1, 2]
+                    .map(|a| DVec3::new(m[3 * a], m[3 * a + 1], m[3 * a + 2]) * spacing[a]),
+                origin,
+                frame: HeaderFrame::Lps,
+                field: "TransformMatrix",
+            }
         }
-    }
+        None => HeaderGeometry::aligned(spacing, origin, HeaderFrame::Lps, "ElementSpacing"),
+    };
 
     // --- data -----------------------------------------------------------
     let header_size: i64 = match h.get(&["HeaderSize"]) {
@@ -446,8 +469,7 @@ pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError
         ..needed_probe
     };
     let data = read_voxels(&mut reader, &spec)?;
-    Volume::new(Grid::new(dims, spacing, origin), data)
-        .map_err(|e| header_err(path, dims_key, e.to_string()))
+    place(path, dims, data, geometry)
 }
 
 #[cfg(test)]
@@ -479,6 +501,11 @@ mod tests {
         }
     }
 
+    /// A file's values as voxflex holds them: ITK's LPS x and y reversed.
+    fn lps<T: Clone>(values: &[T], dims: [usize; 3]) -> Vec<T> {
+        super::super::test_util::reversed(values, dims, [true, true, false])
+    }
+
     const HDR: &str = "ObjectType = Image\nNDims = 3\nBinaryData = True\n\
                        BinaryDataByteOrderMSB = False\nCompressedData = False\n\
                        TransformMatrix = 1 0 0 0 1 0 0 0 1\nOffset = -1.5 2 30\n\
@@ -501,8 +528,11 @@ mod tests {
         let v = super::super::read_volume(&p, &ReadOptions::default()).unwrap();
         assert_eq!(v.grid.dims, [3, 2, 2]);
         assert_eq!(v.grid.spacing, DVec3::new(0.5, 1.0, 2.5));
-        assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
-        assert_eq!(v.data, VoxelData::I16(vals()));
+        // ITK's LPS world in voxflex's RAS one: x and y reversed, voxel 0
+        // at LPS (−1.5, 2, 30) = RAS (1.5, −2, 30) is now the last along
+        // both, so the grid starts 2 × 0.5 and 1 × 1 mm lower.
+        assert_eq!(v.grid.origin, DVec3::new(0.5, -3.0, 30.0));
+        assert_eq!(v.data, VoxelData::I16(lps(&vals(), [3, 2, 2])));
         // Data file in a sub-folder, CRLF line ends, Position instead of Offset.
         std::fs::create_dir(d.0.path().join("sub")).unwrap();
         d.write("sub/x.raw", &i16_le(&vals()));
@@ -512,8 +542,8 @@ mod tests {
             .replace('\n', "\r\n");
         let p = d.write("crlf.mhd", h.as_bytes());
         let v = d.read(&p).unwrap();
-        assert_eq!(v.data, VoxelData::I16(vals()));
-        assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
+        assert_eq!(v.data, VoxelData::I16(lps(&vals(), [3, 2, 2])));
+        assert_eq!(v.grid.origin, DVec3::new(0.5, -3.0, 30.0));
     }
 
     #[test]
@@ -531,7 +561,7 @@ mod tests {
         let v = d.read(&p).unwrap();
         assert_eq!(v.grid.dims, [2, 2, 1]);
         assert_eq!(v.grid.spacing, DVec3::new(0.7, 0.8, 1.0));
-        assert_eq!(v.data, VoxelData::U16(v16));
+        assert_eq!(v.data, VoxelData::U16(lps(&v16, [2, 2, 1])));
 
         // .mha with LOCAL float data.
         let f: Vec<f32> = vec![0.5, -1.25, 3.0, 1e6];
@@ -540,7 +570,7 @@ mod tests {
             .to_vec();
         mha.extend(f.iter().flat_map(|v| v.to_le_bytes()));
         let p = d.write("f.mha", &mha);
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(f));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(lps(&f, [1, 2, 2])));
 
         // Compressed (zlib) uchar in a .mha, and MET_DOUBLE / MET_CHAR conversions.
         let u: Vec<u8> = (0..60).collect();
@@ -553,7 +583,7 @@ mod tests {
         .into_bytes();
         mha.extend_from_slice(&z);
         let p = d.write("z.mha", &mha);
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(u));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(lps(&u, [5, 4, 3])));
 
         let dd: Vec<u8> = [1.5f64, -2.0]
             .iter()
@@ -564,13 +594,13 @@ mod tests {
             "d.mhd",
             b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_DOUBLE\nElementDataFile = d.raw\n",
         );
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(vec![1.5, -2.0]));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(vec![-2.0, 1.5]));
         d.write("c.raw", &[0xff, 0x05]);
         let p = d.write(
             "c.mhd",
             b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_CHAR\nElementDataFile = c.raw\n",
         );
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::I16(vec![-1, 5]));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::I16(vec![5, -1]));
         // HeaderSize = -1: data at the end of the file.
         let mut tail = vec![9u8; 17];
         tail.extend_from_slice(&[7, 8]);
@@ -580,7 +610,7 @@ mod tests {
             b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_UCHAR\nHeaderSize = -1\n\
               ElementDataFile = t.raw\n",
         );
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(vec![7, 8]));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(vec![8, 7]));
     }
 
     #[test]

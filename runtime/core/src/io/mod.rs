@@ -32,6 +32,7 @@ pub mod metaimage;
 pub mod msh;
 pub mod nifti;
 pub mod nrrd;
+pub mod orientation;
 pub mod png;
 pub mod tetgen;
 pub mod vtu;
@@ -643,42 +644,6 @@ pub(crate) fn read_voxels(
     Ok(data)
 }
 
-/// Logs (once per file) that a header's rotation is ignored. `m` holds the
-/// axis direction vectors as columns (any scale); off-diagonal terms beyond a
-/// relative tolerance count as a rotation. Negative diagonal terms (axis
-/// flips) are logged at debug level.
-pub(crate) fn note_orientation(path: &Path, what: &str, m: [[f64; 3]; 3]) {
-    let mut rotated = false;
-    let mut flipped = false;
-    for (c, col) in m.iter().enumerate() {
-        let norm = col.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if !(norm.is_finite() && norm > 0.0) {
-            continue;
-        }
-        for (r, v) in col.iter().enumerate() {
-            if r != c && (v / norm).abs() > 1e-4 {
-                rotated = true;
-            }
-        }
-        if col[c] < 0.0 {
-            flipped = true;
-        }
-    }
-    if rotated {
-        tracing::warn!(
-            file = %path.display(),
-            "{what} has a non-diagonal rotation, which voxflex does not apply: the volume is \
-             treated as axis-aligned (voxel 0 at the header's origin, axis steps of the header's \
-             spacing); world positions away from voxel 0 differ from the header's"
-        );
-    } else if flipped {
-        tracing::debug!(
-            file = %path.display(),
-            "{what} flips an axis, which voxflex does not apply (axis-aligned, positive spacing)"
-        );
-    }
-}
-
 /// True when the stream starts with the gzip magic bytes.
 pub(crate) fn is_gzip(prefix: &[u8]) -> bool {
     prefix.len() >= 2 && prefix[0] == 0x1f && prefix[1] == 0x8b
@@ -713,6 +678,23 @@ pub(crate) mod test_util {
         }
         eprintln!("refused as expected: {msg}");
         msg
+    }
+
+    /// `values` (x fastest, `dims`) with the axes where `reverse` is set
+    /// reversed: how a reader reorders a file whose header runs those
+    /// axes backwards in voxflex's RAS world (an LPS file's x and y).
+    pub fn reversed<T: Clone>(values: &[T], dims: [usize; 3], reverse: [bool; 3]) -> Vec<T> {
+        let mut out = Vec::with_capacity(values.len());
+        let pick = |i: usize, a: usize| if reverse[a] { dims[a] - 1 - i } else { i };
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let (i, j, k) = (pick(i, 0), pick(j, 1), pick(k, 2));
+                    out.push(values[i + dims[0] * (j + dims[1] * k)].clone());
+                }
+            }
+        }
+        out
     }
 
     /// gzip-compresses bytes.

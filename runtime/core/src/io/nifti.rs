@@ -7,15 +7,15 @@
 //!
 //! - dims from `dim[1..=3]` (a 2-D image gets one slice); a 4-D file is
 //!   accepted only when `dim[4..]` are all 1.
-//! - spacing from `pixdim[1..=3]`, scaled to millimetres by `xyzt_units`
-//!   (metres and microns are converted; "unknown" is taken as mm).
-//! - origin (mm) from the sform offsets (`srow_x[3]`, `srow_y[3]`,
-//!   `srow_z[3]`) when `sform_code > 0`, else the qform offsets
-//!   (`qoffset_x/y/z`) when `qform_code > 0`, else zero.
-//! - **Rotations and axis flips of the sform/qform are not applied**: the
-//!   volume is treated as axis-aligned with voxel `(i, j, k)` at
-//!   `origin + (i, j, k) * spacing`. A header with a non-diagonal rotation
-//!   logs one `tracing` warning per file.
+//! - geometry, in millimetres (`xyzt_units` metres and microns are
+//!   converted; "unknown" is taken as mm): the sform (`srow_x/y/z`) when
+//!   `sform_code > 0`, else the qform (quaternion, `qfac`, `pixdim[1..=3]`,
+//!   `qoffset_x/y/z`) when `qform_code > 0`, else `pixdim[1..=3]` spacing
+//!   at the origin. Axis permutations and flips are applied by reordering
+//!   the voxels into voxflex's axis-aligned RAS grid (see
+//!   [`super::orientation`]): a coronal or radiologically stored file
+//!   reads anatomically. An oblique header is placed along its closest
+//!   axes with a warning giving the angle.
 //! - data types: `uint8`, `int16`, `uint16`, `float32` as they are; `int8` →
 //!   `i16`; `int32`, `uint32`, `int64`, `uint64`, `float64` → `f32`.
 //! - `scl_slope`/`scl_inter`: when the slope is finite, non-zero and the pair
@@ -29,13 +29,14 @@
 //! with the origin as offset). NIfTI stores spacing and origin as `f32`.
 //! A name ending in `.gz` is gzip-compressed.
 
+use super::orientation::{HeaderFrame, HeaderGeometry, place};
 use super::{
-    DataSpec, RawType, file_len, header_err, is_gzip, note_orientation, open, read_voxels,
-    skip_bytes, validate_dims, validate_origin, validate_spacing, write_atomically,
+    DataSpec, RawType, file_len, header_err, is_gzip, open, read_voxels, skip_bytes, validate_dims,
+    validate_origin, validate_spacing, write_atomically,
 };
 use crate::error::IoError;
-use crate::grid::Grid;
 use crate::volume::{Volume, VolumeView, VoxelData, VoxelSlice};
+use glam::DVec3;
 use rayon::prelude::*;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
@@ -276,27 +277,35 @@ pub fn read_nifti(path: &Path, opts: &super::ReadOptions) -> Result<Volume, IoEr
         }
     }
     let spacing = validate_spacing(path, "pixdim", spacing)?;
-    let (origin, origin_field) = if h.sform_code > 0 {
-        let m = [
-            [h.srow_x[0], h.srow_y[0], h.srow_z[0]].map(f64::from),
-            [h.srow_x[1], h.srow_y[1], h.srow_z[1]].map(f64::from),
-            [h.srow_x[2], h.srow_y[2], h.srow_z[2]].map(f64::from),
-        ];
-        note_orientation(path, "NIfTI sform", m);
-        (
-            [h.srow_x[3], h.srow_y[3], h.srow_z[3]].map(|v| f64::from(v) * unit_mm),
-            "srow_x/srow_y/srow_z",
-        )
+    // The sform when it is set (method 3), else the qform (method 2), else
+    // axis-aligned at zero (method 1).
+    let geometry = if h.sform_code > 0 {
+        let field = "srow_x/srow_y/srow_z";
+        let rows = [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(|v| f64::from(v) * unit_mm));
+        let origin = validate_origin(path, field, [rows[0][3], rows[1][3], rows[2][3]])?;
+        HeaderGeometry {
+            directions: [0, 1, 2].map(|a| DVec3::new(rows[0][a], rows[1][a], rows[2][a])),
+            origin,
+            frame: HeaderFrame::Ras,
+            field,
+        }
     } else if h.qform_code > 0 {
-        note_orientation(path, "NIfTI qform", quaternion_matrix(&h));
-        (
+        let field = "qoffset_x/qoffset_y/qoffset_z";
+        let origin = validate_origin(
+            path,
+            field,
             [h.quatern_x, h.quatern_y, h.quatern_z].map(|v| f64::from(v) * unit_mm),
-            "qoffset_x/qoffset_y/qoffset_z",
-        )
+        )?;
+        let r = quaternion_matrix(&h);
+        HeaderGeometry {
+            directions: [0, 1, 2].map(|a| DVec3::from_array(r[a]) * spacing[a]),
+            origin,
+            frame: HeaderFrame::Ras,
+            field: "quatern_b/quatern_c/quatern_d",
+        }
     } else {
-        ([0.0; 3], "qform_code")
+        HeaderGeometry::aligned(spacing, DVec3::ZERO, HeaderFrame::Ras, "qform_code")
     };
-    let origin = validate_origin(path, origin_field, origin)?;
 
     // --- data -----------------------------------------------------------
     let vox_offset = f64::from(h.vox_offset);
@@ -369,8 +378,7 @@ pub fn read_nifti(path: &Path, opts: &super::ReadOptions) -> Result<Volume, IoEr
         }
         data = scale_to_f32(&data, slope, inter);
     }
-    let grid = Grid::new(dims, spacing, origin);
-    Volume::new(grid, data).map_err(|e| header_err(path, "dim", e.to_string()))
+    place(path, dims, data, geometry)
 }
 
 /// Rotation matrix (columns = axis directions) of a NIfTI quaternion, with
@@ -561,6 +569,7 @@ mod tests {
     use super::super::ReadOptions;
     use super::super::test_util::{expect_err, gzip};
     use super::*;
+    use crate::grid::Grid;
     use glam::DVec3;
     use std::path::PathBuf;
 
@@ -874,14 +883,25 @@ mod tests {
         let (lo, hi) = colin.value_range();
         assert!(lo >= 0.0 && hi > 100.0, "{lo}..{hi}");
 
+        // A coronal acquisition stored radiologically: its sform runs i
+        // towards −x (2 mm), j towards +z (2 mm) and k towards +y (3 mm),
+        // so the grid holds 128 columns right to left reversed, 62 coronal
+        // slices along y and 128 rows along z.
         let small = read_nifti(&dir.join("mri_t1_small.nii.gz"), &opts).unwrap();
-        assert_eq!(small.grid.dims, [128, 128, 62]);
-        assert_eq!(small.grid.spacing, DVec3::new(2.0, 2.0, 3.0));
+        assert_eq!(small.grid.dims, [128, 62, 128]);
+        assert_eq!(small.grid.spacing, DVec3::new(2.0, 3.0, 2.0));
+        // The sform puts file voxel (127, 0, 0) — now grid voxel 0 — at
+        // (−254, −254, 0) mm.
+        assert_eq!(small.grid.origin, DVec3::new(-254.0, -254.0, 0.0));
         // Stored as int16 in the file (values 0..255).
         assert_eq!(small.scalar_type(), crate::volume::ScalarType::I16);
 
+        // x and y stored backwards (sform −3.94 mm): reversed, the grid
+        // starts at file voxel (63, 63, 0).
         let ct = read_nifti(&dir.join("ct_skull_64.nii.gz"), &opts).unwrap();
         assert_eq!(ct.grid.dims, [64, 64, 64]);
+        let corner = -3.94f32 as f64 * 63.0;
+        assert!((ct.grid.origin - DVec3::new(corner, corner, 0.0)).length() < 1e-9);
         assert!(
             (ct.grid.spacing - DVec3::new(3.94, 3.94, 3.65))
                 .abs()
@@ -896,6 +916,13 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         let p = tmp.path().join("ct.nii.gz");
         write_nifti(&p, ct.view()).unwrap();
-        assert_eq!(read_nifti(&p, &opts).unwrap(), ct);
+        let back = read_nifti(&p, &opts).unwrap();
+        assert_eq!(
+            (back.grid.dims, back.grid.spacing),
+            (ct.grid.dims, ct.grid.spacing)
+        );
+        assert_eq!(back.data, ct.data);
+        // NIfTI stores the origin as f32.
+        assert!((back.grid.origin - ct.grid.origin).length() < 1e-4);
     }
 }

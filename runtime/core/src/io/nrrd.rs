@@ -10,23 +10,27 @@
 //! - `encoding`: `raw`, `gzip`/`gz`, `ascii`/`text`/`txt` (`bzip2` and `hex`
 //!   are refused with a message);
 //! - `endian` (`little`/`big`; required for multi-byte binary data);
-//! - spacing (mm) from `space directions` (the length of each axis vector)
-//!   or else `spacings`, else 1 mm; origin (mm) from `space origin`, else 0.
-//!   **Rotations and axis flips in `space directions` are not applied**: a
-//!   non-diagonal one logs a warning; `space` and `measurement frame` are
-//!   ignored.
+//! - geometry: `space directions` (each axis's step vector, mm) or else
+//!   `spacings` (axis-aligned), else 1 mm; origin (mm) from `space origin`,
+//!   else 0; `space` `left-posterior-superior` (LPS) and
+//!   `left-anterior-superior` (LAS) are converted to voxflex's RAS world,
+//!   other spaces taken as they are. Axis permutations and flips are
+//!   applied by reordering the voxels (see [`super::orientation`]); an
+//!   oblique volume is placed along its closest axes with a warning.
+//!   `measurement frame` is ignored.
 //! - `byte skip` (raw: in the file, `-1` = data at the end; gzip: in the
 //!   decompressed stream) and `line skip` (lines skipped in the data file).
 //!
 //! Key/value pairs (`key:=value`) and comments (`#`) are ignored.
 
+use super::orientation::{HeaderFrame, HeaderGeometry, place};
 use super::{
-    DataSpec, RawType, ReadOptions, file_len, header_err, note_orientation, open, read_voxels,
-    skip_bytes, validate_dims, validate_origin, validate_spacing,
+    DataSpec, RawType, ReadOptions, file_len, header_err, open, read_voxels, skip_bytes,
+    validate_dims, validate_origin, validate_spacing,
 };
 use crate::error::IoError;
-use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
+use glam::DVec3;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
@@ -319,6 +323,14 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
     };
 
     // --- geometry -------------------------------------------------------
+    let frame = match h.get(&["space"]).map(|v| v.trim().to_ascii_lowercase()) {
+        Some(v) if v == "left-posterior-superior" || v == "lps" => HeaderFrame::Lps,
+        Some(v) if v == "left-anterior-superior" || v == "las" => HeaderFrame::Las,
+        // RAS, or a frame with no anatomical meaning (scanner-xyz,
+        // 3D-right-handed, …): taken as voxflex's world as it is.
+        _ => HeaderFrame::Ras,
+    };
+    let mut directions = None;
     let spacing = if let Some(v) = h.get(&["space directions"]) {
         let vecs = vectors(path, "space directions", v)?;
         if vecs.len() != dimension {
@@ -346,7 +358,7 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
             }
         }
         let spacing = validate_spacing(path, "space directions", spacing)?;
-        note_orientation(path, "NRRD space directions", cols);
+        directions = Some(cols.map(DVec3::from_array));
         spacing
     } else if let Some(v) = h.get(&["spacings"]) {
         let s: Vec<f64> = numbers(path, "spacings", v)?;
@@ -557,8 +569,16 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
             read_ascii(&mut data_reader, &spec)?
         }
     };
-    Volume::new(Grid::new(dims, spacing, origin), data)
-        .map_err(|e| header_err(path, "sizes", e.to_string()))
+    let geometry = match directions {
+        Some(directions) => HeaderGeometry {
+            directions,
+            origin,
+            frame,
+            field: "space directions",
+        },
+        None => HeaderGeometry::aligned(spacing, origin, frame, "spacings"),
+    };
+    place(path, dims, data, geometry)
 }
 
 /// Reads whitespace-separated ASCII values.
@@ -620,7 +640,7 @@ fn read_ascii(reader: &mut dyn BufRead, spec: &DataSpec<'_>) -> Result<VoxelData
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_util::{expect_err, gzip};
+    use super::super::test_util::{expect_err, gzip, reversed};
     use super::*;
     use glam::DVec3;
 
@@ -664,8 +684,14 @@ mod tests {
         let v = super::super::read_volume(&p, &ReadOptions::default()).unwrap();
         assert_eq!(v.grid.dims, [3, 2, 2]);
         assert_eq!(v.grid.spacing, DVec3::new(0.5, 1.0, 2.5));
-        assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
-        assert_eq!(v.data, VoxelData::I16(vals()));
+        // `space: left-posterior-superior` in voxflex's RAS world: x and y
+        // reversed, voxel 0 at LPS (−1.5, 2, 30) = RAS (1.5, −2, 30) now
+        // the last along both.
+        assert_eq!(v.grid.origin, DVec3::new(0.5, -3.0, 30.0));
+        assert_eq!(
+            v.data,
+            VoxelData::I16(reversed(&vals(), [3, 2, 2], [true, true, false]))
+        );
     }
 
     #[test]
@@ -681,8 +707,13 @@ mod tests {
         let v = d.read(&p).unwrap();
         assert_eq!(v.grid.dims, [2, 3, 2]);
         assert_eq!(v.grid.spacing, DVec3::new(0.7, 0.8, 3.0));
-        assert_eq!(v.grid.origin, DVec3::new(1.0, 2.0, 3.0));
-        assert_eq!(v.data, VoxelData::F32(f.clone()));
+        // z runs backwards (−3 mm per slice): the slices are reversed and
+        // the grid starts at the last one, 3 mm below voxel 0.
+        assert_eq!(v.grid.origin, DVec3::new(1.0, 2.0, 0.0));
+        assert_eq!(
+            v.data,
+            VoxelData::F32(reversed(&f, [2, 3, 2], [false, false, true]))
+        );
 
         // Detached gz (`gz` synonym) with MSB ushort and byte skip after decompression.
         let u: Vec<u16> = vec![1, 2, 0x1234, 65535];
