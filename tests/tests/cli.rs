@@ -565,6 +565,80 @@ fn roi_maps_grow_from_a_seed_and_stages_nobody_asked_for_are_not_built() {
 
 /// A ChainMail cut reaches the resampler: pulled apart, the two halves of
 /// a cube leave background in the gap, where the uncut cube stays solid.
+/// A carve through the mesh plugins' `.so` files: the proxy loses the
+/// tetrahedra in the ball, the resampled volume shows the hole, and the
+/// notes count the smaller proxy.
+#[test]
+fn mesh_models_carve_a_hole_through_the_plugin_boundary() {
+    plugin_dir(&["corotational-fem", "mass-spring"]);
+    let tmp = tempfile::tempdir().unwrap();
+    for plugin in ["corotational-fem", "mass-spring"] {
+        let run = |carve: bool| {
+            let carve_table = if carve {
+                "[[interaction]]\nframe = 0\nkind = \"carve\"\ncentre = [2.5, 2.5, 2.5]\nradius = 11\n"
+            } else {
+                ""
+            };
+            let scene_text = format!(
+                "[scene]\nname = \"carve\"\nbackend = \"cpu\"\nframes = 2\n\
+                 [volume]\nsource = \"phantom:cube\"\ndims = [20, 20, 20]\n\
+                 [model]\nplugin = \"{plugin}\"\n\
+                 [model.params]\nproxy = {{ kind = \"uniform\", step = 2 }}\n\
+                 materials = [{{ range = [50, 200], youngs_modulus = 3000 }}]\n\
+                 {carve_table}\
+                 [resample]\nbackground = 0\n\
+                 [output]\ndir = \"out\"\nnifti = \"deformed.nii.gz\"\n"
+            );
+            std::fs::write(tmp.path().join("s.toml"), &scene_text).unwrap();
+            let o = voxflex(&["run", "s.toml", "--out", "o", "--force"], tmp.path());
+            assert!(o.status.success(), "{plugin}: {}", text(&o));
+            let v = voxflex_core::io::read_volume(
+                &tmp.path().join("o/deformed.nii.gz"),
+                &Default::default(),
+            )
+            .unwrap();
+            let at = |p: [f64; 3]| {
+                let i = v
+                    .grid
+                    .world_to_index(voxflex_core::glam::DVec3::from_array(p))
+                    .round();
+                v.data
+                    .as_slice()
+                    .get_f32(v.grid.linear(i.x as usize, i.y as usize, i.z as usize))
+            };
+            let m = metrics(&tmp.path().join("o"));
+            let tets = m["stages"]["model"]["notes"]["proxy_tetrahedra"]
+                .as_f64()
+                .unwrap();
+            (at([2.5, 2.5, 2.5]), at([17.5, 2.5, 2.5]), tets)
+        };
+        let (centre, beside, whole) = run(false);
+        assert_eq!((centre, beside), (100.0, 100.0), "{plugin}: the cube");
+        let (centre, beside, carved) = run(true);
+        assert_eq!(centre, 0.0, "{plugin}: the carved ball is background");
+        assert_eq!(beside, 100.0, "{plugin}: tissue beside the ball stays");
+        assert!(carved < whole, "{plugin}: {carved} of {whole} tetrahedra");
+    }
+}
+
+/// Output piped into a reader that goes away ends the process without a
+/// panic (the default SIGPIPE action, as for other Unix tools).
+#[test]
+fn output_into_a_closed_pipe_ends_quietly() {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(voxflex_bin())
+        .args(["info", "phantom:head", "--dims", "48,48,48"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_ne!(o.status.code(), Some(101), "{err}");
+}
+
 #[test]
 fn a_chainmail_cut_opens_a_gap_in_the_resampled_volume() {
     plugin_dir(&["chainmail"]);

@@ -124,6 +124,7 @@ enum Command {
 }
 
 fn main() {
+    restore_sigpipe();
     let cli = Cli::parse();
     quiet_window_system_probes();
     // wgpu's GL backend reports a missing EGL display as an error while it
@@ -489,4 +490,18 @@ fn render(
     }
     println!("{} in {wall:.0} ms", resolved.reason);
     Ok(())
+}
+
+/// Output piped into a reader that stops early (`voxflex info … | head`)
+/// ends the process quietly, as it does for other Unix tools, instead of
+/// `println!` panicking on the broken pipe: Rust starts programs with
+/// SIGPIPE ignored, so the default action is put back.
+fn restore_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any other thread
+    // exists; setting a signal's disposition to its default is
+    // async-signal-safe and affects nothing else.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
 }

@@ -16,7 +16,7 @@ use voxflex_core::cut_polygon::CutPolygon;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferId, GpuService};
-use voxflex_core::interaction::GrabMotion;
+use voxflex_core::interaction::{CarveRegion, GrabMotion};
 use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
 use voxflex_core::volume::VolumeView;
 
@@ -341,28 +341,11 @@ impl ChainMail {
                 self.topology_changed |= cut > 0;
                 tracing::debug!(links = cut, "chainmail: links cut");
             }
-            InteractionSpec::Carve {
-                centre,
-                radius,
-                min,
-                max,
-            } => {
-                let inside = |p: DVec3| match (centre, radius, min, max) {
-                    (Some(c), Some(r), _, _) => (p - DVec3::from_array(c)).length() <= r,
-                    (_, _, Some(a), Some(b)) => {
-                        p.cmpge(DVec3::from_array(a)).all() && p.cmple(DVec3::from_array(b)).all()
-                    }
-                    _ => false,
-                };
+            InteractionSpec::Carve { .. } => {
+                let region = CarveRegion::of(spec).expect("a carve validated on parsing");
+                let inside = |p: DVec3| region.contains(p);
                 if !self.elements_are_voxels() {
-                    let region = match (centre, radius, min, max) {
-                        (Some(c), Some(r), _, _) => {
-                            let c = DVec3::from_array(c);
-                            (c - DVec3::splat(r), c + DVec3::splat(r))
-                        }
-                        (_, _, Some(a), Some(b)) => (DVec3::from_array(a), DVec3::from_array(b)),
-                        _ => (DVec3::ZERO, DVec3::ZERO),
-                    };
+                    let region = region.bounds();
                     let tets = carve_tets(&self.lat, &self.state, region, inside);
                     self.remove_source_tets(tets);
                 }

@@ -391,6 +391,84 @@ fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
 }
 
 #[test]
+fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh() {
+    use voxflex_core::deformation::{DisplacementTarget, RestPoints};
+    use voxflex_core::mesh_model::cantilever::tip_deflection;
+    let load = 1e-3;
+    let tip = |m: &Fem| tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u);
+    let mut whole = cantilever(2, load, static_params(1e-10));
+    whole.step(frame(0.0)).unwrap();
+    // The top half of the beam's middle carved away: thinner there, the
+    // tip sags more under the same load.
+    let mut m = cantilever(2, load, static_params(1e-10));
+    let grid = Grid::new([21, 3, 3], DVec3::splat(0.5), DVec3::ZERO);
+    let id = m.bind(RestPoints::Lattice(grid)).unwrap();
+    let outside = m.notes().unwrap()["bound_points_outside_proxy"];
+    let (nodes, tets) = {
+        let mesh = m.mesh().unwrap();
+        (mesh.nodes.len(), mesh.tets.len())
+    };
+    m.interact("kind = \"carve\"\nmin = [3, -1, 0.6]\nmax = [7, 2, 2]")
+        .unwrap();
+    let mesh = m.mesh().unwrap();
+    assert!(mesh.tets.len() < tets && mesh.nodes.len() < nodes);
+    for t in 0..mesh.tets.len() {
+        let c = mesh.corners(t).iter().sum::<DVec3>() * 0.25;
+        assert!(
+            !(c.x >= 3.0 && c.x <= 7.0 && c.z >= 0.6),
+            "tetrahedron {t} at {c} should be gone"
+        );
+    }
+    // The lattice points on the carved top face now lie outside the proxy.
+    assert!(m.notes().unwrap()["bound_points_outside_proxy"] > outside);
+    m.step(frame(0.0)).unwrap();
+    assert!(
+        tip(&m) < 1.5 * tip(&whole) && tip(&whole) < 0.0,
+        "carved {} vs whole {}",
+        tip(&m),
+        tip(&whole)
+    );
+    // The resampler's mask: every sampling cell at a lattice point in the
+    // box (x 3..7 mm = i 6..14, z 1 mm = k 2), none elsewhere.
+    let mut bits = vec![0u8; 20 * 2 * 2];
+    assert!(m.removed_tetrahedra(id, &mut bits).unwrap());
+    for (cell, b) in bits.iter().enumerate() {
+        let (i, k) = (cell % 20, cell / 40);
+        assert_eq!(
+            *b != 0,
+            (5..=14).contains(&i) && k == 1,
+            "cell {cell} (x {i}, z {k}): bits {b:#b}"
+        );
+    }
+    // Every point maps, those of removed tetrahedra with their neighbours.
+    let n = grid.len();
+    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+    m.map(
+        id,
+        DisplacementTarget::Cpu {
+            x: &mut x,
+            y: &mut y,
+            z: &mut z,
+        },
+    )
+    .unwrap();
+    assert!(x.iter().chain(&y).chain(&z).all(|v| v.is_finite()));
+    let top = grid.linear(10, 1, 2); // (5, 0.5, 1) mm: carved away
+    let below = grid.linear(10, 1, 1); // (5, 0.5, 0.5) mm: kept
+    assert!((z[top] - z[below]).abs() < 1e-3 * z[below].abs().max(1e-9) + 1e-9);
+    // A carve of the whole beam is refused; one that misses is a no-op.
+    let e = m
+        .interact("kind = \"carve\"\ncentre = [5, 0.5, 0.5]\nradius = 100")
+        .unwrap_err()
+        .0;
+    assert!(e.contains("whole proxy"), "{e}");
+    let before = m.mesh().unwrap().tets.len();
+    m.interact("kind = \"carve\"\ncentre = [50, 0, 0]\nradius = 1")
+        .unwrap();
+    assert_eq!(m.mesh().unwrap().tets.len(), before);
+}
+
+#[test]
 fn a_mesh_file_proxy_maps_its_tags_to_materials_and_hostile_files_are_refused() {
     use voxflex_core::deformation::ExecutionBackend;
     let dir = tempfile::tempdir().unwrap();

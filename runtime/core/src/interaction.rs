@@ -104,6 +104,69 @@ fn finite(v: &[f64; 3]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
+/// The region a `carve` removes, world mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CarveRegion {
+    /// A ball: centre and radius, mm.
+    Ball {
+        /// Centre, mm.
+        centre: DVec3,
+        /// Radius, mm.
+        radius: f64,
+    },
+    /// An axis-aligned box, corners in mm.
+    Box {
+        /// Lower corner, mm.
+        min: DVec3,
+        /// Upper corner, mm.
+        max: DVec3,
+    },
+}
+
+impl CarveRegion {
+    /// The region of a `carve` interaction; `None` for any other kind (or
+    /// a carve that [`InteractionSpec::from_toml`] would have refused).
+    pub fn of(spec: &InteractionSpec) -> Option<Self> {
+        match spec {
+            InteractionSpec::Carve {
+                centre: Some(c),
+                radius: Some(r),
+                ..
+            } => Some(Self::Ball {
+                centre: DVec3::from_array(*c),
+                radius: *r,
+            }),
+            InteractionSpec::Carve {
+                min: Some(a),
+                max: Some(b),
+                ..
+            } => Some(Self::Box {
+                min: DVec3::from_array(*a),
+                max: DVec3::from_array(*b),
+            }),
+            _ => None,
+        }
+    }
+
+    /// True when `p` (mm) lies in the region (its boundary included).
+    pub fn contains(&self, p: DVec3) -> bool {
+        match *self {
+            Self::Ball { centre, radius } => (p - centre).length() <= radius,
+            Self::Box { min, max } => p.cmpge(min).all() && p.cmple(max).all(),
+        }
+    }
+
+    /// The region's bounding box `(min, max)`, mm.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        match *self {
+            Self::Ball { centre, radius } => {
+                (centre - DVec3::splat(radius), centre + DVec3::splat(radius))
+            }
+            Self::Box { min, max } => (min, max),
+        }
+    }
+}
+
 impl InteractionSpec {
     /// Parses and validates one interaction table; errors name the kind and
     /// the key.

@@ -346,7 +346,9 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     // Versions: a stage runs when its input version moved past what it consumed.
     let mut model_version = 0u64;
     let mut map_version = 0u64;
-    let mut map_input = 0u64;
+    // The first frame always maps and resamples: a model that does not
+    // move still has an output (the volume as it is).
+    let mut map_input = u64::MAX;
     let mut resample_version = 0u64;
     let mut resample_input = 0u64;
     let mut output_input = u64::MAX; // outputs not written yet

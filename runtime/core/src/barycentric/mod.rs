@@ -109,6 +109,60 @@ impl BarycentricBinding {
         }
     }
 
+    /// Follows a removal of tetrahedra from the mesh the points were
+    /// bound to (a carve): `new_index[t]` is old tetrahedron `t`'s index in
+    /// `mesh` (the mesh after the removal) or `u32::MAX` where it is gone,
+    /// `old` the mesh before, and `rest(i)` point `i`'s rest position (mm).
+    /// Points of surviving tetrahedra keep their weights; the others bind
+    /// to the nearest remaining tetrahedron by clamped weights, and those
+    /// that were inside the removed one now count as outside. Returns how
+    /// many points were bound anew.
+    pub fn after_removal(
+        &mut self,
+        old: &TetMesh,
+        mesh: &TetMesh,
+        new_index: &[u32],
+        rest: impl Fn(usize) -> DVec3 + Sync,
+    ) -> usize {
+        let grid = TetGrid::new(mesh);
+        let rebound: Vec<(usize, u32, [u16; 3], bool)> = (0..self.len())
+            .into_par_iter()
+            .filter_map(|i| {
+                let old_t = self.tet[i] as usize;
+                if new_index[old_t] != u32::MAX {
+                    return None;
+                }
+                let p = rest(i);
+                let was_inside = weights(old.corners(old_t), p)
+                    .iter()
+                    .all(|&w| w >= -CONTAINED);
+                let c = TetGrid::cell_of(grid.lo, grid.cell, grid.dims, p);
+                let (t, w) = nearest(mesh, &grid, c, p);
+                // On a face the removed tetrahedron shared with a kept one:
+                // still inside the proxy.
+                let x = mesh.corners(t as usize);
+                let on = (0..4).map(|k| x[k] * w[k]).sum::<DVec3>();
+                let size = (x[1] - x[0]).length();
+                let now_outside = (on - p).length() > 1e-9 * size;
+                Some((i, t, quantised(w), was_inside && now_outside))
+            })
+            .collect();
+        // Renumber the kept ones first (the rebound still hold old
+        // indices of removed tetrahedra here), then write the rebound.
+        for t in &mut self.tet {
+            let new = new_index[*t as usize];
+            if new != u32::MAX {
+                *t = new;
+            }
+        }
+        for &(i, t, w, newly_outside) in &rebound {
+            self.tet[i] = t;
+            self.weights[i] = w;
+            self.outside += usize::from(newly_outside);
+        }
+        rebound.len()
+    }
+
     /// Number of bound points.
     pub fn len(&self) -> usize {
         self.tet.len()

@@ -179,12 +179,19 @@ fn nearest_in_tet(x: [DVec3; 4], p: DVec3) -> ([f64; 4], f64) {
 /// The tetrahedron nearest `p` and the weights of its nearest point,
 /// searching rings of grid cells outward from cell `c` (`p`'s cell, or the
 /// nearest one when `p` lies outside the grid). Cells of ring `r + 1` lie
-/// at least `r` cell widths from `p` (projecting `p` onto the grid's box
-/// never lengthens a distance to it), so the search stops once that bound
-/// passes the best distance found.
+/// at least `√(o² + (r · cell)²)` from `p`, `o` its distance to the grid's
+/// box, so the search stops once that bound passes the best distance
+/// found.
 pub(super) fn nearest(mesh: &TetMesh, grid: &TetGrid, c: [usize; 3], p: DVec3) -> (u32, [f64; 4]) {
     let mut best: Option<(f64, u32, [f64; 4])> = None;
     let max_ring = grid.dims.iter().copied().max().unwrap_or(1);
+    // Squared distance from `p` to the grid's box. With `q` the projection
+    // of `p` onto the box (in cell `c`), every point `y` of the box has
+    // |p − y|² ≥ |p − q|² + |q − y|², so a point far outside the grid
+    // stops after the rings that can still beat what it found, not after
+    // as many rings as it is far.
+    let hi = grid.lo + DVec3::from_array(grid.dims.map(|d| d as f64)) * grid.cell;
+    let off = ((grid.lo - p).max(DVec3::ZERO) + (p - hi).max(DVec3::ZERO)).length_squared();
     for r in 0..=max_ring {
         grid.ring(c, r, |t| {
             let (w, d) = nearest_in_tet(mesh.corners(t as usize), p);
@@ -193,7 +200,7 @@ pub(super) fn nearest(mesh: &TetMesh, grid: &TetGrid, c: [usize; 3], p: DVec3) -
             }
         });
         if let Some((d, ..)) = best
-            && r as f64 * grid.cell >= d.sqrt()
+            && off + (r as f64 * grid.cell).powi(2) >= d
         {
             break;
         }

@@ -16,6 +16,7 @@
 pub mod block_matrix;
 pub mod boundary;
 pub mod cantilever;
+pub mod carve;
 pub mod cut;
 pub mod material;
 mod model;

@@ -1,6 +1,7 @@
 //! [`MeshModel`]: a [`MeshSolver`] wrapped into a whole deformation model.
 
 use super::boundary::{Boundary, traction_forces};
+use super::carve::{GONE, carve_mesh, keep_nodes};
 use super::cut::cut_mesh;
 use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
@@ -15,10 +16,10 @@ use crate::deformation::{
 use crate::error::ModelError;
 use crate::gpu::{BufferId, GpuService};
 use crate::grid::Grid;
-use crate::interaction::{GrabMotion, InteractionSpec};
+use crate::interaction::{CarveRegion, GrabMotion, InteractionSpec};
 use crate::io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
 use crate::proxy::{HangingNode, octree_proxy, uniform_proxy};
-use crate::resample::tets_cut_by;
+use crate::resample::{tets_at_vertex, tets_cut_by};
 use crate::tet_mesh::TetMesh;
 use crate::volume::VolumeView;
 use glam::DVec3;
@@ -77,6 +78,8 @@ struct SolveTotals {
 struct DeviceMap {
     nodes: BufferId,
     node_count: usize,
+    /// The [`Built::version`] of the mesh the bindings were uploaded for.
+    version: u64,
     bindings: Vec<Option<GpuBinding>>,
 }
 
@@ -85,6 +88,9 @@ struct DeviceMap {
 struct Bound {
     binding: BarycentricBinding,
     lattice: Option<Grid>,
+    /// The rest points (mm) of a binding that is not a lattice, to bind
+    /// them again after a carve.
+    points: Vec<DVec3>,
     /// `(cell, tetrahedron bits)` removed by cuts.
     removed: Vec<(usize, u8)>,
     /// Removed tetrahedra not yet reported to the host.
@@ -105,6 +111,8 @@ struct Built<S: MeshSolver> {
     gravity: Vec<DVec3>,
     /// The displacements as f32 arrays, for `map`.
     u32: [Vec<f32>; 3],
+    /// Bumped by every change of topology (cut, carve).
+    version: u64,
 }
 
 impl<S: MeshSolver> MeshModel<S> {
@@ -203,6 +211,7 @@ impl<S: MeshSolver> MeshModel<S> {
             bc,
             gravity,
             u32: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            version: 0,
         });
         Ok(())
     }
@@ -336,6 +345,7 @@ impl<S: MeshSolver> MeshModel<S> {
         self.device = Some(DeviceMap {
             nodes: BufferId(u64::MAX),
             node_count: 0,
+            version: 0,
             bindings: Vec::new(),
         });
         Ok(())
@@ -364,10 +374,14 @@ impl<S: MeshSolver> MeshModel<S> {
             }
             device.nodes = gpu.create_buffer(16 * n as u64, "mesh model nodes")?;
             device.node_count = n;
-            // The tetrahedra changed too (a cut): upload the bindings again.
+        }
+        if device.version != b.version {
+            // The tetrahedra changed (a cut or carve): upload the bindings
+            // again.
             for old in device.bindings.drain(..).flatten() {
                 old.release(&*gpu);
             }
+            device.version = b.version;
         }
         let nodes: Vec<[f32; 4]> = (0..n)
             .map(|i| [b.u32[0][i], b.u32[1][i], b.u32[2][i], 0.0])
@@ -511,10 +525,8 @@ impl<S: MeshSolver> MeshModel<S> {
                 self.cut(&cut)?;
             }
             InteractionSpec::Carve { .. } => {
-                return Err(ModelError(format!(
-                    "{name} carve: removing tissue is not implemented for mesh models yet; \
-                     use the chainmail plugin to carve, or `cut` here"
-                )));
+                let region = CarveRegion::of(spec).expect("a carve validated on parsing");
+                self.carve(&region)?;
             }
         }
         Ok(())
@@ -531,41 +543,11 @@ impl<S: MeshSolver> MeshModel<S> {
             .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
         // The lattice bindings' removed tetrahedra, from the positions
         // before the cut (both sides still coincide there).
-        let max_u = b
-            .state
-            .u
-            .iter()
-            .map(|u| u.abs().max_element())
-            .fold(0.0, f64::max);
         for bound in &mut self.bindings {
-            let Some(g) = bound.lattice else { continue };
-            let grow = DVec3::splat(max_u) + g.spacing.abs() * 2.0;
-            let (a, c) = (
-                g.world_to_index(cut.lo - grow),
-                g.world_to_index(cut.hi + grow),
-            );
-            let (lo, hi) = (a.min(c), a.max(c));
-            let last = g.dims.map(|d| d as f64 - 1.0);
-            if (0..3).any(|k| hi[k] < 0.0 || lo[k] > last[k]) {
+            let Some((first, end, positions)) = lattice_near(bound, b, (cut.lo, cut.hi)) else {
                 continue;
-            }
-            let first = [0, 1, 2].map(|k| lo[k].floor().max(0.0) as usize);
-            let end = [0, 1, 2].map(|k| hi[k].ceil().min(last[k]) as usize);
-            let mut positions = Vec::new();
-            for k in first[2]..=end[2] {
-                for j in first[1]..=end[1] {
-                    for i in first[0]..=end[0] {
-                        let p = g.linear(i, j, k);
-                        let w = unpack(bound.binding.weights[p]);
-                        let tet = b.mesh.tets[bound.binding.tet[p] as usize];
-                        let u: DVec3 = (0..4)
-                            .map(|c| w[c] as f64 * b.state.u[tet[c] as usize])
-                            .sum();
-                        let rest = g.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
-                        positions.push(rest + u);
-                    }
-                }
-            }
+            };
+            let g = bound.lattice.expect("a lattice binding");
             let cells = g.dims.map(|d| d.saturating_sub(1));
             let removed = tets_cut_by(cells, (first, end), &positions, cut);
             bound.unreported |= !removed.is_empty();
@@ -592,6 +574,29 @@ impl<S: MeshSolver> MeshModel<S> {
                 b.u32[a].push(b.u32[a][n]);
             }
         }
+        // A load keeps acting on the nodes it was defined on; copies start
+        // without it.
+        let nodes = b.mesh.nodes.len();
+        for load in &mut self.loads {
+            load.forces.resize(nodes, DVec3::ZERO);
+        }
+        self.topology_changed()?;
+        tracing::info!(
+            faces = result.faces,
+            new_nodes = result.origin.len(),
+            "{name}: proxy cut"
+        );
+        Ok(())
+    }
+
+    /// After a cut or carve changed the mesh: gravity's nodal forces, the
+    /// solver (on the GPU if it was there), and the bindings on the device
+    /// follow the new mesh.
+    fn topology_changed(&mut self) -> Result<(), ModelError> {
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
         let nodes = b.mesh.nodes.len();
         b.bc.force.resize(nodes, DVec3::ZERO);
         let g = DVec3::from_array(self.params.gravity);
@@ -599,24 +604,130 @@ impl<S: MeshSolver> MeshModel<S> {
             .into_iter()
             .map(|m| m * g)
             .collect();
-        // A load keeps acting on the nodes it was defined on; copies start
-        // without it.
-        for load in &mut self.loads {
-            load.forces.resize(nodes, DVec3::ZERO);
-        }
         b.solver = S::new(&b.mesh, &b.materials, b.solver_params.clone())?;
         if self.device.is_some()
             && let Some(gpu) = self.gpu.clone()
         {
             b.solver.use_gpu(gpu)?;
         }
-        tracing::info!(
-            faces = result.faces,
-            new_nodes = result.origin.len(),
-            "{name}: proxy cut"
-        );
+        b.version += 1;
         self.unmapped = true;
         Ok(())
+    }
+
+    /// Removes the tetrahedra whose centroid (current positions) lies in
+    /// `region`, and the nodes only they used; the points bound inside them
+    /// follow the nearest remaining tetrahedron, and the sampling-mesh
+    /// tetrahedra at every lattice point now in `region` are removed, so
+    /// the hole shows in the resampled volume (the rule ChainMail's carve
+    /// uses).
+    fn carve(&mut self, region: &CarveRegion) -> Result<(), ModelError> {
+        let name = S::NAME;
+        let b = self
+            .built
+            .as_mut()
+            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        let x: Vec<DVec3> = b
+            .mesh
+            .nodes
+            .iter()
+            .zip(&b.state.u)
+            .map(|(r, u)| *r + *u)
+            .collect();
+        let carved = carve_mesh(&b.mesh, &x, region);
+        if carved.removed == 0 {
+            tracing::warn!(
+                "{name} carve: no tetrahedron of the proxy has its centre in {region:?}"
+            );
+            return Ok(());
+        }
+        if carved.mesh.tets.is_empty() {
+            return Err(ModelError(format!(
+                "{name} carve: {region:?} (mm) holds the whole proxy; carve a smaller region"
+            )));
+        }
+        // The sampling mesh first, from the positions before the carve.
+        for bound in &mut self.bindings {
+            let Some((first, end, positions)) = lattice_near(bound, b, region.bounds()) else {
+                continue;
+            };
+            let g = bound.lattice.expect("a lattice binding");
+            let cells = g.dims.map(|d| d.saturating_sub(1));
+            let span = [0, 1, 2].map(|a| end[a] - first[a] + 1);
+            let mut removed = Vec::new();
+            for (i, p) in positions.iter().enumerate() {
+                if region.contains(*p) {
+                    let v = [
+                        first[0] + i % span[0],
+                        first[1] + i / span[0] % span[1],
+                        first[2] + i / (span[0] * span[1]),
+                    ];
+                    removed.extend(tets_at_vertex(cells, v));
+                }
+            }
+            bound.unreported |= !removed.is_empty();
+            bound.removed.extend(removed);
+        }
+        let mut rebound = 0;
+        for bound in &mut self.bindings {
+            let (lattice, points) = (bound.lattice, &bound.points);
+            rebound += bound
+                .binding
+                .after_removal(
+                    &b.mesh,
+                    &carved.mesh,
+                    &carved.tet_index,
+                    |i| match lattice {
+                        Some(g) => {
+                            let [x, y, z] = g.unlinear(i);
+                            g.index_to_world(DVec3::new(x as f64, y as f64, z as f64))
+                        }
+                        None => points[i],
+                    },
+                );
+        }
+        let index = &carved.node_index;
+        b.state.u = keep_nodes(&b.state.u, index);
+        b.state.v = keep_nodes(&b.state.v, index);
+        b.bc.fixed = keep_nodes(&b.bc.fixed, index);
+        for a in 0..3 {
+            b.u32[a] = keep_nodes(&b.u32[a], index);
+        }
+        // A hanging node keeps its tie while all of it remains.
+        let ties = b.bc.hanging.len();
+        b.bc.hanging = std::mem::take(&mut b.bc.hanging)
+            .into_iter()
+            .filter_map(|h| {
+                let node = index[h.node as usize];
+                let masters: Option<Vec<(u32, f32)>> = h
+                    .masters
+                    .iter()
+                    .map(|&(m, w)| (index[m as usize] != GONE).then(|| (index[m as usize], w)))
+                    .collect();
+                Some(HangingNode {
+                    node: (node != GONE).then_some(node)?,
+                    masters: masters?,
+                })
+            })
+            .collect();
+        for load in &mut self.loads {
+            load.forces = keep_nodes(&load.forces, index);
+        }
+        let grabs = self.grabs.len();
+        self.grabs.retain_mut(|g| {
+            g.node = index[g.node as usize];
+            g.node != GONE
+        });
+        tracing::info!(
+            tetrahedra = carved.removed,
+            nodes = index.iter().filter(|&&n| n == GONE).count(),
+            rebound,
+            hanging_ties_dropped = ties - b.bc.hanging.len(),
+            grabs_dropped = grabs - self.grabs.len(),
+            "{name}: proxy carved"
+        );
+        b.mesh = carved.mesh;
+        self.topology_changed()
     }
 
     /// One frame: grabs and loads advance, the solver steps.
@@ -697,6 +808,50 @@ impl<S: MeshSolver> Drop for MeshModel<S> {
 
 /// Per voxel: the index of the first material whose range holds its value
 /// (`u16::MAX` for none).
+/// For a lattice binding, the lattice points whose current positions may
+/// lie in the world box `(lo, hi)` (mm): the index box `(first, end)`
+/// (inclusive) grown by the largest node displacement and two spacings,
+/// and the current position (mm) of every point in it, x fastest. `None`
+/// for other bindings, or when the box misses the lattice.
+fn lattice_near<S: MeshSolver>(
+    bound: &Bound,
+    b: &Built<S>,
+    (lo, hi): (DVec3, DVec3),
+) -> Option<([usize; 3], [usize; 3], Vec<DVec3>)> {
+    let g = bound.lattice?;
+    let max_u = b
+        .state
+        .u
+        .iter()
+        .map(|u| u.abs().max_element())
+        .fold(0.0, f64::max);
+    let grow = DVec3::splat(max_u) + g.spacing.abs() * 2.0;
+    let (a, c) = (g.world_to_index(lo - grow), g.world_to_index(hi + grow));
+    let (lo, hi) = (a.min(c), a.max(c));
+    let last = g.dims.map(|d| d as f64 - 1.0);
+    if (0..3).any(|k| hi[k] < 0.0 || lo[k] > last[k]) {
+        return None;
+    }
+    let first = [0, 1, 2].map(|k| lo[k].floor().max(0.0) as usize);
+    let end = [0, 1, 2].map(|k| hi[k].ceil().min(last[k]) as usize);
+    let mut positions = Vec::new();
+    for k in first[2]..=end[2] {
+        for j in first[1]..=end[1] {
+            for i in first[0]..=end[0] {
+                let p = g.linear(i, j, k);
+                let w = unpack(bound.binding.weights[p]);
+                let tet = b.mesh.tets[bound.binding.tet[p] as usize];
+                let u: DVec3 = (0..4)
+                    .map(|c| w[c] as f64 * b.state.u[tet[c] as usize])
+                    .sum();
+                let rest = g.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+                positions.push(rest + u);
+            }
+        }
+    }
+    Some((first, end, positions))
+}
+
 fn voxel_materials(volume: VolumeView<'_>, specs: &[super::MaterialSpec]) -> Vec<u16> {
     (0..volume.grid.len())
         .map(|l| {
@@ -735,12 +890,19 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
                 S::NAME
             );
         }
+        let (lattice, points) = match rest {
+            RestPoints::Lattice(g) => (Some(g), Vec::new()),
+            RestPoints::Points(p) => (
+                None,
+                p.iter()
+                    .map(|v| DVec3::from_array(v.map(f64::from)))
+                    .collect(),
+            ),
+        };
         self.bindings.push(Bound {
             binding,
-            lattice: match rest {
-                RestPoints::Lattice(g) => Some(g),
-                RestPoints::Points(_) => None,
-            },
+            lattice,
+            points,
             removed: Vec::new(),
             unreported: false,
         });
