@@ -27,7 +27,8 @@ pub use gpu::{GpuBinding, MAP_WGSL};
 use crate::tet_mesh::TetMesh;
 use glam::DVec3;
 use rayon::prelude::*;
-use search::{TetGrid, clamped, nearest};
+use search::{SurfaceGrid, TetGrid, clamped};
+use std::sync::OnceLock;
 use wide::f32x4;
 
 /// Weights below `−CONTAINED` still count as inside (points on shared
@@ -81,6 +82,8 @@ impl BarycentricBinding {
     /// Binds `n` rest points, `point(i)` in world mm.
     pub fn bind(mesh: &TetMesh, n: usize, point: impl Fn(usize) -> DVec3 + Sync) -> Self {
         let grid = TetGrid::new(mesh);
+        // Built by the first point outside the mesh, if any.
+        let surface = OnceLock::new();
         let found: Vec<(u32, [u16; 3], bool)> = (0..n)
             .into_par_iter()
             .map(|i| {
@@ -98,7 +101,8 @@ impl BarycentricBinding {
                 if let Some((t, w)) = inside {
                     return (t, quantised(w), false);
                 }
-                let (t, w) = nearest(mesh, &grid, c, p);
+                let surface = surface.get_or_init(|| SurfaceGrid::new(mesh, &grid));
+                let (t, w) = surface.nearest(mesh, p);
                 (t, quantised(w), true)
             })
             .collect();
@@ -125,6 +129,7 @@ impl BarycentricBinding {
         rest: impl Fn(usize) -> DVec3 + Sync,
     ) -> usize {
         let grid = TetGrid::new(mesh);
+        let surface = OnceLock::new();
         let rebound: Vec<(usize, u32, [u16; 3], bool)> = (0..self.len())
             .into_par_iter()
             .filter_map(|i| {
@@ -136,8 +141,8 @@ impl BarycentricBinding {
                 let was_inside = weights(old.corners(old_t), p)
                     .iter()
                     .all(|&w| w >= -CONTAINED);
-                let c = TetGrid::cell_of(grid.lo, grid.cell, grid.dims, p);
-                let (t, w) = nearest(mesh, &grid, c, p);
+                let surface = surface.get_or_init(|| SurfaceGrid::new(mesh, &grid));
+                let (t, w) = surface.nearest(mesh, p);
                 // On a face the removed tetrahedron shared with a kept one:
                 // still inside the proxy.
                 let x = mesh.corners(t as usize);

@@ -115,6 +115,18 @@ struct Built<S: MeshSolver> {
     version: u64,
 }
 
+impl<S: MeshSolver> Built<S> {
+    /// Current node positions, mm.
+    fn positions(&self) -> Vec<DVec3> {
+        self.mesh
+            .nodes
+            .iter()
+            .zip(&self.state.u)
+            .map(|(r, u)| *r + *u)
+            .collect()
+    }
+}
+
 impl<S: MeshSolver> MeshModel<S> {
     /// A model from the TOML text of its `[model.params.<plugin>]` table;
     /// the proxy is built in `init`.
@@ -553,13 +565,7 @@ impl<S: MeshSolver> MeshModel<S> {
             bound.unreported |= !removed.is_empty();
             bound.removed.extend(removed);
         }
-        let x: Vec<DVec3> = b
-            .mesh
-            .nodes
-            .iter()
-            .zip(&b.state.u)
-            .map(|(r, u)| *r + *u)
-            .collect();
+        let x: Vec<DVec3> = b.positions();
         let result = cut_mesh(&mut b.mesh, &x, cut);
         if result.faces == 0 {
             tracing::warn!("{name} cut: the polygon crosses no face of the proxy");
@@ -627,13 +633,7 @@ impl<S: MeshSolver> MeshModel<S> {
             .built
             .as_mut()
             .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
-        let x: Vec<DVec3> = b
-            .mesh
-            .nodes
-            .iter()
-            .zip(&b.state.u)
-            .map(|(r, u)| *r + *u)
-            .collect();
+        let x: Vec<DVec3> = b.positions();
         let carved = carve_mesh(&b.mesh, &x, region);
         if carved.removed == 0 {
             tracing::warn!(
