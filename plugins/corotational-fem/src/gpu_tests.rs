@@ -8,7 +8,7 @@ use crate::solver::{CorotationalFem, FemParams, SolverKind};
 use std::sync::Arc;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
-use voxflex_core::gpu::GpuService;
+use voxflex_core::gpu::{GpuService, GpuServiceExt};
 use voxflex_core::grid::Grid;
 use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, largest_and_difference};
 use voxflex_core::proxy::uniform_proxy;
@@ -128,5 +128,80 @@ fn gpu_solves_on_an_octree_proxy_with_hanging_nodes_match_rayon() {
             "node {}",
             h.node
         );
+    }
+}
+
+/// A carve on the GPU backend: the solver is rebuilt on the device, the
+/// binding (uploaded before the carve) is uploaded again for the smaller
+/// mesh, and the device map still equals the rayon map afterwards.
+#[test]
+fn a_carve_on_the_gpu_backend_rebuilds_the_device_map() {
+    use voxflex_core::deformation::{DisplacementTarget, RestPoints};
+    let Some(gpu) = test_gpu() else { return };
+    let mut cpu = bar(None, SolverKind::Dynamic);
+    let mut dev = bar(Some(gpu.clone()), SolverKind::Dynamic);
+    dev.use_gpu().unwrap();
+    let grid = Grid::new([25, 7, 7], DVec3::splat(0.5), DVec3::new(-20.0, 5.0, 40.0));
+    let (ic, id) = (
+        cpu.bind(RestPoints::Lattice(grid)).unwrap(),
+        dev.bind(RestPoints::Lattice(grid)).unwrap(),
+    );
+    let n = grid.len();
+    let bufs = [0, 1, 2].map(|_| gpu.create_buffer(4 * n as u64, "test out").unwrap());
+    let frame = FrameInfo {
+        frame: 0,
+        frames: 20,
+        dt_s: 1.0 / 30.0,
+    };
+    let run = |cpu: &mut Fem, dev: &mut Fem, frames: usize| {
+        let target = DisplacementTarget::Gpu {
+            x: bufs[0],
+            y: bufs[1],
+            z: bufs[2],
+        };
+        for _ in 0..frames {
+            cpu.step(frame).unwrap();
+            dev.step(frame).unwrap();
+        }
+        let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        let want = DisplacementTarget::Cpu {
+            x: &mut x,
+            y: &mut y,
+            z: &mut z,
+        };
+        cpu.map(ic, want).unwrap();
+        dev.map(id, target).unwrap();
+        let largest = x
+            .iter()
+            .chain(&y)
+            .chain(&z)
+            .fold(0f32, |m, v| m.max(v.abs()));
+        assert!(largest > 0.1, "the bar moves ({largest} mm)");
+        for (buf, want) in bufs.iter().zip([&x, &y, &z]) {
+            let mut got = vec![0f32; n];
+            gpu.download(*buf, &mut got).unwrap();
+            let worst = got
+                .iter()
+                .zip(want.iter())
+                .map(|(g, w)| (g - w).abs())
+                .fold(0f32, f32::max);
+            assert!(
+                worst <= 1e-4 * largest,
+                "map differs by {worst} of {largest}"
+            );
+        }
+    };
+    run(&mut cpu, &mut dev, 5);
+    let carve = "kind = \"carve\"\ncentre = [-12, 6.5, 41.5]\nradius = 1.6";
+    let tets = dev.mesh().unwrap().tets.len();
+    cpu.interact(carve).unwrap();
+    dev.interact(carve).unwrap();
+    assert!(
+        dev.mesh().unwrap().tets.len() < tets,
+        "the carve removes tissue"
+    );
+    run(&mut cpu, &mut dev, 10);
+    for buf in bufs {
+        gpu.destroy_buffer(buf);
     }
 }
