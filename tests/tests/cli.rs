@@ -407,13 +407,13 @@ fn info_describes_phantoms_and_refuses_hostile_headers() {
     );
 }
 
-/// A header that permutes and reverses its axes, in LPS, is read into the
-/// RAS grid: the axes follow the world, not the file's storage order.
+/// A header that permutes and reverses its axes is read into the LPS grid:
+/// the axes follow the world, not the file's storage order.
 #[test]
 fn info_applies_header_orientation() {
     let tmp = tempfile::tempdir().unwrap();
-    // i runs superior (2 mm), j left→right in RAS (LPS −x, 1 mm), k
-    // posterior in RAS (LPS +y, 3 mm): 2 × 3 × 4 voxels.
+    // i runs superior (2 mm), j towards the patient's right (LPS −x,
+    // 1 mm), k posterior (LPS +y, 3 mm): 2 × 3 × 4 voxels.
     let values: Vec<String> = (0..24).map(|v| v.to_string()).collect();
     let nrrd = format!(
         "NRRD0004\ntype: uchar\ndimension: 3\nspace: left-posterior-superior\n\
@@ -427,10 +427,10 @@ fn info_applies_header_orientation() {
     let out = text(&o);
     assert!(out.contains("3 × 4 × 2 voxels"), "{out}");
     assert!(out.contains("spacing   1 × 3 × 2 mm"), "{out}");
-    // LPS (10, 20, 30) is RAS (−10, −20, 30); k runs towards −y, so grid
-    // voxel 0 is the file's last k, 3 × 3 mm further back.
-    assert!(out.contains("origin    (-10, -29, 30) mm"), "{out}");
-    assert!(out.contains("i→+z, j→+x, k→−y"), "{out}");
+    // j runs towards −x, so grid voxel 0 is the file's last j, 2 × 1 mm
+    // further along −x than the header's origin.
+    assert!(out.contains("origin    (8, 20, 30) mm"), "{out}");
+    assert!(out.contains("i→+z, j→−x, k→+y"), "{out}");
 }
 
 #[test]

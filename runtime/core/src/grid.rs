@@ -3,8 +3,8 @@
 //! Conventions used everywhere in voxflex:
 //! - **Voxel index** `(i, j, k)` addresses voxel centres; `i` runs fastest in
 //!   memory (x-fastest, like NIfTI, MetaImage and NRRD).
-//! - **World** coordinates are RAS millimetres (x grows towards the
-//!   patient's right, y anterior, z superior). The centre of voxel `(i, j, k)` sits at
+//! - **World** coordinates are LPS millimetres (x grows towards the
+//!   patient's left, y posterior, z superior: DICOM's frame). The centre of voxel `(i, j, k)` sits at
 //!   `origin + (i, j, k) * spacing`: axis-aligned, spacing positive; the
 //!   readers reorder a file's voxels into this frame
 //!   ([`crate::io::orientation`]).

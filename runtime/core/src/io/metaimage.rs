@@ -17,8 +17,8 @@
 //!   data is the last bytes of the file);
 //! - `ElementNumberOfChannels` must be 1; `BinaryData` must not be `False`.
 //! - `TransformMatrix` / `Rotation` / `Orientation` (row `a`: voxel axis
-//!   `a`'s direction): applied, with the origin, in ITK's LPS world turned
-//!   into voxflex's RAS one, by reordering the voxels (see
+//!   `a`'s direction): applied, with the origin (ITK's LPS world is
+//!   voxflex's), by reordering the voxels (see
 //!   [`super::orientation`]); an oblique volume is placed along its closest
 //!   axes with a warning.
 //!
@@ -307,8 +307,8 @@ pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError
         }
         None => glam::DVec3::ZERO,
     };
-    // ITK's world is LPS; row `a` of the matrix is the direction of voxel
-    // axis `a` (ITK's reading).
+    // ITK's world is LPS, voxflex's too; row `a` of the matrix is the
+    // direction of voxel axis `a` (ITK's reading).
     let geometry = match h.get(&["TransformMatrix", "Rotation", "Orientation"]) {
         Some((k, v)) => {
             let m: Vec<f64> = parse_numbers(path, k, v)?;
@@ -501,11 +501,6 @@ mod tests {
         }
     }
 
-    /// A file's values as voxflex holds them: ITK's LPS x and y reversed.
-    fn lps<T: Clone>(values: &[T], dims: [usize; 3]) -> Vec<T> {
-        super::super::test_util::reversed(values, dims, [true, true, false])
-    }
-
     const HDR: &str = "ObjectType = Image\nNDims = 3\nBinaryData = True\n\
                        BinaryDataByteOrderMSB = False\nCompressedData = False\n\
                        TransformMatrix = 1 0 0 0 1 0 0 0 1\nOffset = -1.5 2 30\n\
@@ -528,11 +523,22 @@ mod tests {
         let v = super::super::read_volume(&p, &ReadOptions::default()).unwrap();
         assert_eq!(v.grid.dims, [3, 2, 2]);
         assert_eq!(v.grid.spacing, DVec3::new(0.5, 1.0, 2.5));
-        // ITK's LPS world in voxflex's RAS one: x and y reversed, voxel 0
-        // at LPS (−1.5, 2, 30) = RAS (1.5, −2, 30) is now the last along
-        // both, so the grid starts 2 × 0.5 and 1 × 1 mm lower.
-        assert_eq!(v.grid.origin, DVec3::new(0.5, -3.0, 30.0));
-        assert_eq!(v.data, VoxelData::I16(lps(&vals(), [3, 2, 2])));
+        assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
+        assert_eq!(v.data, VoxelData::I16(vals()));
+        // A matrix that reverses x: the columns come back in order, from
+        // the file's last one, 2 × 0.5 mm towards −x.
+        let flipped = HDR.replace("TransformMatrix = 1 0 0", "TransformMatrix = -1 0 0");
+        let p = d.write("flipped.mhd", flipped.as_bytes());
+        let v = d.read(&p).unwrap();
+        assert_eq!(v.grid.origin, DVec3::new(-2.5, 2.0, 30.0));
+        assert_eq!(
+            v.data,
+            VoxelData::I16(super::super::test_util::reversed(
+                &vals(),
+                [3, 2, 2],
+                [true, false, false]
+            ))
+        );
         // Data file in a sub-folder, CRLF line ends, Position instead of Offset.
         std::fs::create_dir(d.0.path().join("sub")).unwrap();
         d.write("sub/x.raw", &i16_le(&vals()));
@@ -542,8 +548,8 @@ mod tests {
             .replace('\n', "\r\n");
         let p = d.write("crlf.mhd", h.as_bytes());
         let v = d.read(&p).unwrap();
-        assert_eq!(v.data, VoxelData::I16(lps(&vals(), [3, 2, 2])));
-        assert_eq!(v.grid.origin, DVec3::new(0.5, -3.0, 30.0));
+        assert_eq!(v.data, VoxelData::I16(vals()));
+        assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
     }
 
     #[test]
@@ -561,7 +567,7 @@ mod tests {
         let v = d.read(&p).unwrap();
         assert_eq!(v.grid.dims, [2, 2, 1]);
         assert_eq!(v.grid.spacing, DVec3::new(0.7, 0.8, 1.0));
-        assert_eq!(v.data, VoxelData::U16(lps(&v16, [2, 2, 1])));
+        assert_eq!(v.data, VoxelData::U16(v16));
 
         // .mha with LOCAL float data.
         let f: Vec<f32> = vec![0.5, -1.25, 3.0, 1e6];
@@ -570,7 +576,7 @@ mod tests {
             .to_vec();
         mha.extend(f.iter().flat_map(|v| v.to_le_bytes()));
         let p = d.write("f.mha", &mha);
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(lps(&f, [1, 2, 2])));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(f));
 
         // Compressed (zlib) uchar in a .mha, and MET_DOUBLE / MET_CHAR conversions.
         let u: Vec<u8> = (0..60).collect();
@@ -583,7 +589,7 @@ mod tests {
         .into_bytes();
         mha.extend_from_slice(&z);
         let p = d.write("z.mha", &mha);
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(lps(&u, [5, 4, 3])));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(u));
 
         let dd: Vec<u8> = [1.5f64, -2.0]
             .iter()
@@ -594,13 +600,13 @@ mod tests {
             "d.mhd",
             b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_DOUBLE\nElementDataFile = d.raw\n",
         );
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(vec![-2.0, 1.5]));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::F32(vec![1.5, -2.0]));
         d.write("c.raw", &[0xff, 0x05]);
         let p = d.write(
             "c.mhd",
             b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_CHAR\nElementDataFile = c.raw\n",
         );
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::I16(vec![5, -1]));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::I16(vec![-1, 5]));
         // HeaderSize = -1: data at the end of the file.
         let mut tail = vec![9u8; 17];
         tail.extend_from_slice(&[7, 8]);
@@ -610,7 +616,7 @@ mod tests {
             b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_UCHAR\nHeaderSize = -1\n\
               ElementDataFile = t.raw\n",
         );
-        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(vec![8, 7]));
+        assert_eq!(d.read(&p).unwrap().data, VoxelData::U8(vec![7, 8]));
     }
 
     #[test]

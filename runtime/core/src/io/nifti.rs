@@ -11,8 +11,9 @@
 //!   converted; "unknown" is taken as mm): the sform (`srow_x/y/z`) when
 //!   `sform_code > 0`, else the qform (quaternion, `qfac`, `pixdim[1..=3]`,
 //!   `qoffset_x/y/z`) when `qform_code > 0`, else `pixdim[1..=3]` spacing
-//!   at the origin. Axis permutations and flips are applied by reordering
-//!   the voxels into voxflex's axis-aligned RAS grid (see
+//!   at the origin, all in NIfTI's RAS world, turned into voxflex's LPS
+//!   one. Axis permutations and flips are applied by reordering the
+//!   voxels into voxflex's axis-aligned grid (see
 //!   [`super::orientation`]): a coronal or radiologically stored file
 //!   reads anatomically. An oblique header is placed along its closest
 //!   axes with a warning giving the angle.
@@ -25,8 +26,9 @@
 //! **Writing** ([`write_nifti`]): the `nifti` crate writes only through
 //! `ndarray`, which voxflex does not depend on, so the header is written here
 //! byte by byte (little-endian NIfTI-1, `vox_offset` 352, no extensions,
-//! `xyzt_units` mm/s, qform and sform code 1 = scanner, identity rotation
-//! with the origin as offset). NIfTI stores spacing and origin as `f32`.
+//! `xyzt_units` mm/s, qform and sform code 1 = scanner: the grid's axes in
+//! NIfTI's RAS world, x and y negated, so other tools show it the right
+//! way round). NIfTI stores spacing and origin as `f32`.
 //! A name ending in `.gz` is gzip-compressed.
 
 use super::orientation::{HeaderFrame, HeaderGeometry, place};
@@ -484,14 +486,17 @@ fn build_header(path: &Path, volume: &VolumeView<'_>) -> Result<Vec<u8>, IoError
     put(&mut h, 148, b"voxflex");
     put(&mut h, 252, &1i16.to_le_bytes()); // qform_code: scanner
     put(&mut h, 254, &1i16.to_le_bytes()); // sform_code: scanner
-    // quatern_b/c/d = 0 (identity); qoffset = origin.
+    // voxflex's LPS grid in NIfTI's RAS world: x and y negated, a
+    // rotation of 180° about z (quatern_b = quatern_c = 0, quatern_d = 1).
+    let to_ras = [-1.0, -1.0, 1.0];
+    put(&mut h, 264, &1.0f32.to_le_bytes());
     for (i, o) in or.iter().enumerate() {
-        put(&mut h, 268 + 4 * i, &(*o as f32).to_le_bytes());
+        put(&mut h, 268 + 4 * i, &((o * to_ras[i]) as f32).to_le_bytes());
     }
     for row in 0..3 {
         let mut srow = [0.0f32; 4];
-        srow[row] = sp[row] as f32;
-        srow[3] = or[row] as f32;
+        srow[row] = (sp[row] * to_ras[row]) as f32;
+        srow[3] = (or[row] * to_ras[row]) as f32;
         for (i, v) in srow.iter().enumerate() {
             put(&mut h, 280 + 16 * row + 4 * i, &v.to_le_bytes());
         }
@@ -878,30 +883,32 @@ mod tests {
         );
         assert_eq!(colin.grid.dims, [181, 217, 181]);
         assert_eq!(colin.grid.spacing, DVec3::ONE);
-        assert_eq!(colin.grid.origin, DVec3::new(-90.0, -125.0, -71.0));
+        // RAS-stored (identity sform at (−90, −125, −71)): x and y reversed
+        // into LPS; grid voxel 0 is file voxel (180, 216, 0), at RAS
+        // (90, 91, −71) = LPS (−90, −91, −71) mm.
+        assert_eq!(colin.grid.origin, DVec3::new(-90.0, -91.0, -71.0));
         assert_eq!(colin.scalar_type(), crate::volume::ScalarType::U8);
         let (lo, hi) = colin.value_range();
         assert!(lo >= 0.0 && hi > 100.0, "{lo}..{hi}");
 
-        // A coronal acquisition stored radiologically: its sform runs i
-        // towards −x (2 mm), j towards +z (2 mm) and k towards +y (3 mm),
-        // so the grid holds 128 columns right to left reversed, 62 coronal
-        // slices along y and 128 rows along z.
+        // A coronal acquisition: its sform runs i towards RAS −x = LPS +x
+        // (2 mm), j towards +z (2 mm) and k towards RAS +y = LPS −y (3 mm),
+        // so the grid holds 128 columns along x, 62 coronal slices along y
+        // (reversed) and 128 rows along z.
         let small = read_nifti(&dir.join("mri_t1_small.nii.gz"), &opts).unwrap();
         assert_eq!(small.grid.dims, [128, 62, 128]);
         assert_eq!(small.grid.spacing, DVec3::new(2.0, 3.0, 2.0));
-        // The sform puts file voxel (127, 0, 0) — now grid voxel 0 — at
-        // (−254, −254, 0) mm.
-        assert_eq!(small.grid.origin, DVec3::new(-254.0, -254.0, 0.0));
+        // Grid voxel 0 is file voxel (0, 0, 61), at RAS (0, −254 + 183, 0)
+        // = LPS (0, 71, 0) mm.
+        assert_eq!(small.grid.origin, DVec3::new(0.0, 71.0, 0.0));
         // Stored as int16 in the file (values 0..255).
         assert_eq!(small.scalar_type(), crate::volume::ScalarType::I16);
 
-        // x and y stored backwards (sform −3.94 mm): reversed, the grid
-        // starts at file voxel (63, 63, 0).
+        // Stored along RAS −x and −y (sform −3.94 mm), i.e. LPS +x and +y:
+        // voxflex's own order, nothing reordered.
         let ct = read_nifti(&dir.join("ct_skull_64.nii.gz"), &opts).unwrap();
         assert_eq!(ct.grid.dims, [64, 64, 64]);
-        let corner = -3.94f32 as f64 * 63.0;
-        assert!((ct.grid.origin - DVec3::new(corner, corner, 0.0)).length() < 1e-9);
+        assert_eq!(ct.grid.origin, DVec3::ZERO);
         assert!(
             (ct.grid.spacing - DVec3::new(3.94, 3.94, 3.65))
                 .abs()

@@ -12,8 +12,8 @@
 //! - `endian` (`little`/`big`; required for multi-byte binary data);
 //! - geometry: `space directions` (each axis's step vector, mm) or else
 //!   `spacings` (axis-aligned), else 1 mm; origin (mm) from `space origin`,
-//!   else 0; `space` `left-posterior-superior` (LPS) and
-//!   `left-anterior-superior` (LAS) are converted to voxflex's RAS world,
+//!   else 0; `space` `right-anterior-superior` (RAS) and
+//!   `left-anterior-superior` (LAS) are converted to voxflex's LPS world,
 //!   other spaces taken as they are. Axis permutations and flips are
 //!   applied by reordering the voxels (see [`super::orientation`]); an
 //!   oblique volume is placed along its closest axes with a warning.
@@ -324,11 +324,11 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
 
     // --- geometry -------------------------------------------------------
     let frame = match h.get(&["space"]).map(|v| v.trim().to_ascii_lowercase()) {
-        Some(v) if v == "left-posterior-superior" || v == "lps" => HeaderFrame::Lps,
+        Some(v) if v == "right-anterior-superior" || v == "ras" => HeaderFrame::Ras,
         Some(v) if v == "left-anterior-superior" || v == "las" => HeaderFrame::Las,
-        // RAS, or a frame with no anatomical meaning (scanner-xyz,
+        // LPS, or a frame with no anatomical meaning (scanner-xyz,
         // 3D-right-handed, …): taken as voxflex's world as it is.
-        _ => HeaderFrame::Ras,
+        _ => HeaderFrame::Lps,
     };
     let mut directions = None;
     let spacing = if let Some(v) = h.get(&["space directions"]) {
@@ -684,9 +684,14 @@ mod tests {
         let v = super::super::read_volume(&p, &ReadOptions::default()).unwrap();
         assert_eq!(v.grid.dims, [3, 2, 2]);
         assert_eq!(v.grid.spacing, DVec3::new(0.5, 1.0, 2.5));
-        // `space: left-posterior-superior` in voxflex's RAS world: x and y
-        // reversed, voxel 0 at LPS (−1.5, 2, 30) = RAS (1.5, −2, 30) now
-        // the last along both.
+        // `space: left-posterior-superior` is voxflex's own world.
+        assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
+        assert_eq!(v.data, VoxelData::I16(vals()));
+        // The same header in RAS: x and y reversed, voxel 0 at RAS
+        // (−1.5, 2, 30) = LPS (1.5, −2, 30) now the last along both.
+        let ras = HDR.replace("left-posterior-superior", "right-anterior-superior");
+        let p = d.write("ras.nrrd", &attached(&ras, &le(&vals())));
+        let v = d.read(&p).unwrap();
         assert_eq!(v.grid.origin, DVec3::new(0.5, -3.0, 30.0));
         assert_eq!(
             v.data,

@@ -3,15 +3,15 @@
 //!
 //! voxflex grids are axis-aligned ([`Grid`]: voxel `(i, j, k)` at
 //! `origin + (i, j, k) * spacing`, spacing positive) in one world frame:
-//! **RAS millimetres** (x grows towards the patient's right, y anterior,
-//! z superior — NIfTI's and 3D Slicer's frame). A header may store the
-//! voxels along other axes: a coronal or sagittal acquisition permutes
-//! them, radiological storage reverses x, and LPS formats (ITK's
-//! MetaImage, NRRD with `space: left-posterior-superior`) count x and y the
-//! other way. [`place`] turns every such header into that grid exactly by
-//! permuting and reversing the voxel axes — like nibabel's
-//! `as_closest_canonical` — so slices, renders and scene coordinates are
-//! anatomical whatever the file's storage order.
+//! **LPS millimetres** (x grows towards the patient's left, y posterior,
+//! z superior — DICOM's and ITK's frame, and the built-in phantoms'). A
+//! header may store the voxels along other axes: a coronal or sagittal
+//! acquisition permutes them, storage order may reverse any of them, and
+//! RAS formats (NIfTI, NRRD with `space: right-anterior-superior`) count x
+//! and y the other way. [`place`] turns every such header into that grid
+//! exactly by permuting and reversing the voxel axes — like nibabel's
+//! `as_closest_canonical`, towards LPS — so slices, renders and scene
+//! coordinates are anatomical whatever the file's storage order.
 //!
 //! A header whose axes are rotated by other than multiples of 90°
 //! (oblique) cannot be represented exactly on an axis-aligned grid: it is
@@ -29,24 +29,24 @@ use std::path::Path;
 /// The world frame a header's directions and origin are written in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum HeaderFrame {
-    /// Right-anterior-superior (NIfTI; NRRD `right-anterior-superior`):
-    /// voxflex's own frame.
-    Ras,
     /// Left-posterior-superior (DICOM, ITK's MetaImage; NRRD
-    /// `left-posterior-superior`): x and y are negated into RAS.
+    /// `left-posterior-superior`): voxflex's own frame.
     Lps,
-    /// Left-anterior-superior (NRRD `left-anterior-superior`): x is
+    /// Right-anterior-superior (NIfTI; NRRD `right-anterior-superior`): x
+    /// and y are negated into LPS.
+    Ras,
+    /// Left-anterior-superior (NRRD `left-anterior-superior`): y is
     /// negated.
     Las,
 }
 
 impl HeaderFrame {
-    /// The signs that take this frame's coordinates to RAS.
-    fn to_ras(self) -> DVec3 {
+    /// The signs that take this frame's coordinates to LPS.
+    fn to_lps(self) -> DVec3 {
         match self {
-            Self::Ras => DVec3::ONE,
-            Self::Lps => DVec3::new(-1.0, -1.0, 1.0),
-            Self::Las => DVec3::new(-1.0, 1.0, 1.0),
+            Self::Lps => DVec3::ONE,
+            Self::Ras => DVec3::new(-1.0, -1.0, 1.0),
+            Self::Las => DVec3::new(1.0, -1.0, 1.0),
         }
     }
 }
@@ -148,7 +148,7 @@ impl AxisOrientation {
 const OBLIQUE_DEG: f64 = 1e-3;
 
 /// The volume of `data` (x fastest, `dims` voxels, in the file's order)
-/// that `geometry` places, as an axis-aligned grid in RAS millimetres:
+/// that `geometry` places, as an axis-aligned grid in LPS millimetres:
 /// voxel axes permuted and reversed onto the closest world axes, the
 /// spacing along each the length of its direction, and every voxel where
 /// the header puts it (an oblique header: the volume's centre). `path` names
@@ -159,9 +159,9 @@ pub(crate) fn place(
     data: VoxelData,
     geometry: HeaderGeometry,
 ) -> Result<Volume, IoError> {
-    let to_ras = geometry.frame.to_ras();
-    let mut directions = geometry.directions.map(|d| d * to_ras);
-    let origin = geometry.origin * to_ras;
+    let to_lps = geometry.frame.to_lps();
+    let mut directions = geometry.directions.map(|d| d * to_lps);
+    let origin = geometry.origin * to_lps;
     if AxisOrientation::closest(directions).is_none() {
         // A single-voxel axis (a 2-D image's third) may carry no direction:
         // it gets the normal of the other two.
@@ -261,7 +261,7 @@ pub(crate) fn place(
         };
         tracing::info!(
             file = %path.display(),
-            "voxels reordered into RAS: {}, {}, {} (grid dims {out_dims:?})",
+            "voxels reordered into LPS: {}, {}, {} (grid dims {out_dims:?})",
             axis(0),
             axis(1),
             axis(2)
@@ -334,7 +334,7 @@ mod tests {
 
     fn voxel_world(dims: [usize; 3], g: &HeaderGeometry, i: [usize; 3]) -> DVec3 {
         let _ = dims;
-        (g.origin + (0..3).map(|a| g.directions[a] * i[a] as f64).sum::<DVec3>()) * g.frame.to_ras()
+        (g.origin + (0..3).map(|a| g.directions[a] * i[a] as f64).sum::<DVec3>()) * g.frame.to_lps()
     }
 
     /// Every voxel's value is its file index; after placing, each grid
@@ -366,28 +366,29 @@ mod tests {
 
     #[test]
     fn a_coronal_radiological_header_is_placed_exactly() {
-        // Voxel i runs towards −x (2 mm), j towards +z (2 mm), k towards +y
-        // (3 mm): the header of `mri_t1_small.nii.gz`.
+        // Voxel i runs towards RAS −x (2 mm), j towards +z (2 mm), k
+        // towards RAS +y (3 mm): the header of `mri_t1_small.nii.gz`. In
+        // LPS, i runs along +x and k along −y.
         let g = HeaderGeometry {
             directions: [DVec3::X * -2.0, DVec3::Z * 2.0, DVec3::Y * 3.0],
             origin: DVec3::new(0.0, -254.0, 0.0),
             frame: HeaderFrame::Ras,
             field: "sform",
         };
-        let o = AxisOrientation::closest(g.directions).unwrap();
+        let o = AxisOrientation::closest(g.directions.map(|d| d * g.frame.to_lps())).unwrap();
         assert_eq!(o.world, [0, 2, 1]);
-        assert_eq!(o.reversed, [true, false, false]);
+        assert_eq!(o.reversed, [false, false, true]);
         assert_eq!(o.residual_deg, 0.0);
         check_exact([4, 3, 2], g);
     }
 
     #[test]
-    fn lps_headers_are_turned_into_ras() {
+    fn ras_headers_are_turned_into_lps() {
         let g = HeaderGeometry::aligned(
             DVec3::new(0.5, 1.0, 2.0),
             DVec3::new(10.0, 20.0, 30.0),
-            HeaderFrame::Lps,
-            "space directions",
+            HeaderFrame::Ras,
+            "srow_x/srow_y/srow_z",
         );
         let v = place(
             Path::new("t.nrrd"),

@@ -12,8 +12,9 @@
 //! | [`SliceAxis::Coronal`] | y = index | +x | −z (head at the top) |
 //! | [`SliceAxis::Sagittal`] | x = index | +y (anterior on the left) | −z (head at the top) |
 //!
-//! Header rotations are not applied by the readers (see [`crate::io`]), so a
-//! file stored in another voxel order shows mirrored or rotated.
+//! The readers reorder every file's voxels into that LPS grid
+//! ([`crate::io::orientation`]), so files stored in any axis order show
+//! this way too.
 
 use super::write_atomically;
 use crate::error::IoError;
