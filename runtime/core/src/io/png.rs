@@ -1,7 +1,8 @@
 //! 8-bit grayscale PNG snapshots of one slice of a volume, through a
 //! window/level.
 //!
-//! One pixel per voxel (no correction for anisotropic spacing). Orientation,
+//! One pixel per voxel in [`render_slice`]; [`write_slice_png`] stretches
+//! an anisotropic slice to square pixels. Orientation,
 //! chosen so that a volume whose voxel axes follow the DICOM/LPS convention
 //! (x toward the patient's left, y posterior, z superior — as ITK, DICOM and
 //! voxflex's phantoms) is shown upright in the radiological convention:
@@ -57,6 +58,17 @@ impl SliceAxis {
     /// Name of the fixed grid axis (`x`, `y` or `z`).
     pub fn letter(self) -> &'static str {
         ["x", "y", "z"][self.fixed_axis()]
+    }
+
+    /// A voxel's `(width, height)` in a slice of `grid` across this axis,
+    /// mm.
+    pub fn pixel_mm(self, grid: &Grid) -> (f64, f64) {
+        let s = grid.spacing;
+        match self {
+            SliceAxis::Axial => (s.x, s.y),
+            SliceAxis::Coronal => (s.x, s.z),
+            SliceAxis::Sagittal => (s.y, s.z),
+        }
     }
 
     /// Image `(width, height)` in pixels of a slice of `grid` across this axis.
@@ -251,7 +263,9 @@ pub fn render_slice(
 }
 
 /// Writes slice `index` of `volume` as an 8-bit grayscale PNG through
-/// `window` (see the module docs for orientation). Atomic: see
+/// `window` (see the module docs for orientation), in square pixels: on an
+/// anisotropic grid the coarser axis is stretched (bilinear) so the image
+/// has the slice's proportions in millimetres. Atomic: see
 /// [`write_atomically`].
 ///
 /// An index outside the volume or an invalid window is an
@@ -267,7 +281,42 @@ pub fn write_slice_png(
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    write_gray_png(path, &img)
+    write_gray_png(path, &square_pixels(img, axis.pixel_mm(&volume.grid)))
+}
+
+/// Largest side (pixels) [`square_pixels`] stretches an image to.
+const MAX_STRETCHED_SIDE: f64 = 8192.0;
+
+/// `img`, whose pixels are `pixel_mm` (width, height) millimetres, resized
+/// so its pixels are square (the finer size), within
+/// [`MAX_STRETCHED_SIDE`]; unchanged when they already are.
+fn square_pixels(img: GrayImage, (w_mm, h_mm): (f64, f64)) -> GrayImage {
+    let fine = w_mm.min(h_mm);
+    if !fine.is_finite() || fine <= 0.0 || (w_mm - h_mm).abs() <= 1e-9 * fine {
+        return img;
+    }
+    let (mut w, mut h) = (
+        img.width as f64 * w_mm / fine,
+        img.height as f64 * h_mm / fine,
+    );
+    let shrink = (MAX_STRETCHED_SIDE / w.max(h)).min(1.0);
+    (w, h) = ((w * shrink).round().max(1.0), (h * shrink).round().max(1.0));
+    let Some(buffer) =
+        image::GrayImage::from_raw(img.width as u32, img.height as u32, img.pixels.clone())
+    else {
+        return img;
+    };
+    let out = image::imageops::resize(
+        &buffer,
+        w as u32,
+        h as u32,
+        image::imageops::FilterType::Triangle,
+    );
+    GrayImage {
+        width: out.width() as usize,
+        height: out.height() as usize,
+        pixels: out.into_raw(),
+    }
 }
 
 /// Writes a [`GrayImage`] as an 8-bit grayscale PNG, atomically.
@@ -376,6 +425,17 @@ mod tests {
         assert!(msg.contains("width must be finite"), "{msg}");
         // The earlier good file is intact.
         assert_eq!(image::open(&p).unwrap().into_luma8().dimensions(), (4, 2));
+
+        // 3 mm slices under 1 mm pixels: the coronal image is stretched to
+        // its proportions in mm, z rows three pixels tall (head at the top:
+        // k = 1, value 101 at i = 1).
+        let mut thick = vol();
+        thick.grid.spacing = DVec3::new(1.0, 1.0, 3.0);
+        write_slice_png(&p, thick.view(), SliceAxis::Coronal, 0, ID).unwrap();
+        let img = image::open(&p).unwrap().into_luma8();
+        assert_eq!(img.dimensions(), (4, 6));
+        assert_eq!(img.get_pixel(1, 0).0[0], 101);
+        assert_eq!(img.get_pixel(1, 5).0[0], 100);
         assert_eq!("Z".parse::<SliceAxis>(), Ok(SliceAxis::Axial));
         assert!("oblique".parse::<SliceAxis>().is_err());
     }
