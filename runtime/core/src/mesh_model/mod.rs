@@ -19,6 +19,7 @@ pub mod cantilever;
 pub mod carve;
 pub mod cut;
 pub mod material;
+pub mod pieces;
 mod model;
 pub mod params;
 pub mod pcg;

@@ -3,6 +3,7 @@
 use super::boundary::{Boundary, traction_forces};
 use super::carve::{GONE, carve_mesh, keep_nodes};
 use super::cut::cut_mesh;
+use super::pieces::unanchored_pieces;
 use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
 use super::{MeshSolver, NodeState, SolveReport};
@@ -586,7 +587,7 @@ impl<S: MeshSolver> MeshModel<S> {
         for load in &mut self.loads {
             load.forces.resize(nodes, DVec3::ZERO);
         }
-        self.topology_changed()?;
+        self.topology_changed("cut")?;
         tracing::info!(
             faces = result.faces,
             new_nodes = result.origin.len(),
@@ -595,14 +596,30 @@ impl<S: MeshSolver> MeshModel<S> {
         Ok(())
     }
 
-    /// After a cut or carve changed the mesh: gravity's nodal forces, the
-    /// solver (on the GPU if it was there), and the bindings on the device
-    /// follow the new mesh.
-    fn topology_changed(&mut self) -> Result<(), ModelError> {
+    /// After a `what` (cut or carve) changed the mesh: gravity's nodal
+    /// forces, the solver (on the GPU if it was there), and the bindings on
+    /// the device follow the new mesh; a warning names pieces it severed
+    /// from every fixed or grabbed node.
+    fn topology_changed(&mut self, what: &str) -> Result<(), ModelError> {
         let b = self
             .built
             .as_mut()
             .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
+        let mut anchored = b.bc.fixed.clone();
+        for g in &self.grabs {
+            anchored[g.node as usize] = true;
+        }
+        if anchored.contains(&true) {
+            let (pieces, nodes) = unanchored_pieces(&b.mesh, &b.bc.hanging, |n| anchored[n]);
+            if pieces > 0 {
+                tracing::warn!(
+                    "{}: the {what} left {pieces} piece(s) ({nodes} nodes) attached to no \
+                     fixed or grabbed node: they move freely (fall under gravity), and a \
+                     static solve cannot place them; fix or grab them",
+                    S::NAME
+                );
+            }
+        }
         let nodes = b.mesh.nodes.len();
         b.bc.force.resize(nodes, DVec3::ZERO);
         let g = DVec3::from_array(self.params.gravity);
@@ -727,7 +744,7 @@ impl<S: MeshSolver> MeshModel<S> {
             "{name}: proxy carved"
         );
         b.mesh = carved.mesh;
-        self.topology_changed()
+        self.topology_changed("carve")
     }
 
     /// One frame: grabs and loads advance, the solver steps.
