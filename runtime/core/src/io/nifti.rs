@@ -752,6 +752,75 @@ mod tests {
         put_f32(&mut o, 280 + 12, f32::INFINITY); // srow_x[3]
         let p = c.write("origin.nii", &o);
         expect_err(c.read(&p), &p, &["srow_x", "not finite"]);
+        // A singular or NaN sform places no volume.
+        for (name, v) in [("flat", 0.0), ("nan", f32::NAN)] {
+            let mut s = b.clone();
+            put_f32(&mut s, 280 + 16 + 4, v); // srow_y[1]
+            let p = c.write(&format!("sform_{name}.nii"), &s);
+            expect_err(
+                c.read(&p),
+                &p,
+                &[
+                    "`srow_x/srow_y/srow_z`",
+                    "linearly dependent",
+                    "fix the header",
+                ],
+            );
+        }
+    }
+
+    /// The sform's axis order and directions are applied: a file whose
+    /// sform swaps i and j and reverses k reads back as the volume it was
+    /// written from, transposed and flipped, every voxel at its world
+    /// position.
+    #[test]
+    fn the_sform_places_every_voxel() {
+        let c = Case::new();
+        let v = &volumes()[1];
+        let [nx, ny, nz] = v.grid.dims;
+        let mut s = valid_bytes();
+        // Swap dims and spacing of i and j, and store the voxels j-fastest.
+        put_i16(&mut s, 42, ny as i16);
+        put_i16(&mut s, 44, nx as i16);
+        let sp = v.grid.spacing;
+        // RAS rows: i steps LPS +y (RAS −y), j steps LPS +x (RAS −x), k
+        // steps LPS −z (reversed) from RAS (−ox, −oy, oz + (nz − 1) sz).
+        let o = v.grid.origin;
+        let top = o.z + (nz - 1) as f64 * sp.z;
+        for (row, vals) in [
+            [0.0, -sp.x, 0.0, -o.x],
+            [-sp.y, 0.0, 0.0, -o.y],
+            [0.0, 0.0, -sp.z, top],
+        ]
+        .iter()
+        .enumerate()
+        {
+            for (i, x) in vals.iter().enumerate() {
+                put_f32(&mut s, 280 + 16 * row + 4 * i, *x as f32);
+            }
+        }
+        put_i16(&mut s, 252, 0); // no qform
+        let header = 352;
+        let values: Vec<i16> = match &v.data {
+            VoxelData::I16(d) => d.clone(),
+            other => panic!("the test volume is i16, not {other:?}"),
+        };
+        let mut data = Vec::new();
+        for k in (0..nz).rev() {
+            for x in 0..nx {
+                for y in 0..ny {
+                    data.extend_from_slice(&values[v.grid.linear(x, y, k)].to_le_bytes());
+                }
+            }
+        }
+        s.truncate(header);
+        s.extend_from_slice(&data);
+        let p = c.write("turned.nii", &s);
+        let back = c.read(&p).unwrap();
+        assert_eq!(back.grid.dims, v.grid.dims);
+        assert!((back.grid.spacing - sp).abs().max_element() < 1e-6);
+        assert!((back.grid.origin - o).abs().max_element() < 1e-4);
+        assert_eq!(back.data, v.data);
     }
 
     #[test]

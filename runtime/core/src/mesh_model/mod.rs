@@ -19,11 +19,11 @@ pub mod cantilever;
 pub mod carve;
 pub mod cut;
 pub mod material;
-pub mod pieces;
 mod model;
 pub mod params;
 pub mod pcg;
 pub mod pcg_gpu;
+pub mod pieces;
 
 pub use block_matrix::BlockMatrix;
 pub use boundary::Boundary;

@@ -3,9 +3,9 @@
 use super::boundary::{Boundary, traction_forces};
 use super::carve::{GONE, carve_mesh, keep_nodes};
 use super::cut::cut_mesh;
-use super::pieces::unanchored_pieces;
 use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
+use super::pieces::unanchored_pieces;
 use super::{MeshSolver, NodeState, SolveReport};
 use crate::barycentric::unpack;
 use crate::barycentric::{BarycentricBinding, GpuBinding};
