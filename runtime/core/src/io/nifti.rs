@@ -769,6 +769,22 @@ mod tests {
         }
     }
 
+    /// Without an sform, the qform our writer also writes (a 180° turn
+    /// about z: voxflex's LPS grid in NIfTI's RAS world) reads back the
+    /// same volume.
+    #[test]
+    fn the_qform_alone_places_the_volume() {
+        let c = Case::new();
+        let v = &volumes()[1];
+        let mut s = valid_bytes();
+        put_i16(&mut s, 254, 0); // sform_code: none
+        let p = c.write("qform.nii", &s);
+        let back = c.read(&p).unwrap();
+        assert_eq!((back.grid.dims, &back.data), (v.grid.dims, &v.data));
+        assert!((back.grid.spacing - v.grid.spacing).abs().max_element() < 1e-6);
+        assert!((back.grid.origin - v.grid.origin).abs().max_element() < 1e-4);
+    }
+
     /// The sform's axis order and directions are applied: a file whose
     /// sform swaps i and j and reverses k reads back as the volume it was
     /// written from, transposed and flipped, every voxel at its world
