@@ -51,7 +51,7 @@ fn pinned(cell: u8) -> bool {
 /// arithmetic, whether any neighbour's arrival beats an element's key. Far
 /// from a wavefront none does, and the window is carried to the write copy
 /// as whole vectors; otherwise, and in mixed windows, each element runs
-/// [`sponsor`].
+/// `sponsor`.
 pub fn jacobi_iteration(
     lat: &ElementLattice,
     state: &mut State,

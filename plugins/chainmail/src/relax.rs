@@ -20,7 +20,7 @@
 //! blocks into the other copy once, before propagation next runs
 //! ([`crate::model::ChainMail`]), instead of writing both on every sweep.
 //!
-//! Two kinds of sweep share [`relax_one`]:
+//! Two kinds of sweep share `relax_one`:
 //! - [`sweep_scalar`], element by element in block order on one thread:
 //!   the sequential baseline's relaxation.
 //! - [`crate::relax_passes::sweep_runs`], the parallel model's: 8 elements at a time

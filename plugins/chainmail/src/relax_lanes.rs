@@ -6,13 +6,13 @@
 //! 6 vectors per axis. A window takes one of three kernels:
 //! - **uniform**: the 8 elements and their 48 neighbours exist, share one
 //!   material and no link is cut. Every link has the same weight, so the
-//!   weighted mean of [`relax_one`] is the plain mean of the six.
+//!   weighted mean of `relax_one` is the plain mean of the six.
 //! - **masked**: the present elements and neighbours share one material,
 //!   but some links are missing (the lattice's faces, absent sites, cut
 //!   links). A lane mask per direction drops them from the mean and from the
 //!   constraint box; per-lane masks are built from the site bytes with word
 //!   arithmetic (no per-lane branches).
-//! - **scalar** ([`relax_one`] per element): materials differ inside the
+//! - **scalar** (`relax_one` per element): materials differ inside the
 //!   window, or a neighbour window would leave the arrays.
 //!
 //! Every kernel writes only the current Jacobi copy and records, per slot,

@@ -128,7 +128,7 @@ pub fn face_bits(c: usize, lo: usize, hi: usize, first: u8) -> FaceMask {
 const KINDS: usize = 5;
 
 /// The moves of the colour rows of one block row, OR-ed per row parity `p`
-/// (slot `q` holds element `2q + p`) and per kind of row (see [`KINDS`]).
+/// (slot `q` holds element `2q + p`) and per kind of row (see `KINDS`).
 #[derive(Clone, Debug)]
 pub struct BlockRowMoves {
     words: usize,

@@ -4,7 +4,7 @@
 //! ([`scene`]), backend selection ([`backend`]) and the wgpu GPU context
 //! ([`gpu_context`], the only place voxflex links wgpu), the scene pipeline
 //! with versioned, dirty-region stages ([`pipeline`]), run reports
-//! ([`metrics`]) and the `voxflex bench` measurements ([`bench`]).
+//! ([`metrics`]) and the `voxflex bench` measurements ([`mod@bench`]).
 
 pub mod backend;
 pub mod bench;

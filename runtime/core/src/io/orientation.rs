@@ -8,7 +8,7 @@
 //! header may store the voxels along other axes: a coronal or sagittal
 //! acquisition permutes them, storage order may reverse any of them, and
 //! RAS formats (NIfTI, NRRD with `space: right-anterior-superior`) count x
-//! and y the other way. [`place`] turns every such header into that grid
+//! and y the other way. `place` turns every such header into that grid
 //! exactly by permuting and reversing the voxel axes — like nibabel's
 //! `as_closest_canonical`, towards LPS — so slices, renders and scene
 //! coordinates are anatomical whatever the file's storage order.

@@ -1,6 +1,6 @@
 //! The WGSL path of the opacity growth, written against [`GpuService`]
 //! (`shaders/opacity/*.wgsl`; the CPU twin is [`super::cpu`] with
-//! [`super::frontier`]).
+//! `super::frontier`).
 //!
 //! One Jacobi step is four kernels, each one invocation per list entry
 //! (3-D-folded dispatch, workgroups of 64):

@@ -97,7 +97,7 @@
 
 //! # Transfer function
 //!
-//! [`GaussianTf`] / [`gaussian_tf`] is the paper's automatic transfer
+//! [`GaussianTf`] / [`gaussian_tf()`] is the paper's automatic transfer
 //! function `f(x) = t(x) · (a + b · g(x))`, `g` a Gaussian at `d_s` with
 //! standard deviation σ_s, `a = 0.01`, `b = 0.99`.
 

@@ -5,13 +5,13 @@
 //!   (four vertices of a row per SIMD operation);
 //! - clear: the region's output words set to `u32::MAX` ("no owner");
 //! - pass 1: one task per cell block; its cells go eight at a time, by
-//!   parity, through [`super::lanes`] (per cell the eight deformed corners,
+//!   parity, through `super::lanes` (per cell the eight deformed corners,
 //!   the face planes and, per candidate voxel centre of the cell's clipped
 //!   box, the smallest containing tetrahedron), then `fetch_min(tet id)`
 //!   after a relaxed load, so voxels that already hold a smaller id cost no
 //!   atomic read-modify-write;
 //! - pass 2: one task per output row; owner → barycentric weights → value,
-//!   eight voxels per SIMD operation through [`super::fill_lanes`].
+//!   eight voxels per SIMD operation through `super::fill_lanes`.
 //!
 //! The output `Vec<f32>` is viewed as `[AtomicU32]` during a call; no other
 //! per-voxel memory is used.
@@ -270,7 +270,7 @@ fn flush(
 }
 
 /// Pass 2 over the region: owner id → interpolated value (f32 bits), eight
-/// voxels of a row at a time ([`super::fill_lanes`]).
+/// voxels of a row at a time (`super::fill_lanes`).
 fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
     let r = ctx.clip;
     let d = r.dims();

@@ -1,7 +1,7 @@
 //! The scalar statement of the tetrahedron geometry of both passes: face
 //! planes, the inclusion test of pass 1 and the barycentric weights of
-//! pass 2. The CPU kernels run it eight lanes at a time ([`super::lanes`],
-//! [`super::fill_lanes`]) and the GPU in WGSL; this file is the reference
+//! pass 2. The CPU kernels run it eight lanes at a time (`super::lanes`,
+//! `super::fill_lanes`) and the GPU in WGSL; this file is the reference
 //! they are tested against, bit for bit, so it is compiled for tests only.
 //!
 //! All coordinates here are **source voxel index** units (see
@@ -30,7 +30,7 @@
 //!   tetrahedra's boxes separately (x-runs per tetrahedron pay off only for
 //!   cells many voxels long). `CellRaster` (test builds) is the scalar
 //!   statement of this predicate; the CPU kernel evaluates it eight cells at a
-//!   time in [`super::lanes`] and the GPU in `raster.wgsl`, all three with
+//!   time in `super::lanes` and the GPU in `raster.wgsl`, all three with
 //!   the same expressions.
 
 // Per-lane and per-face loops index several arrays by the same number.
