@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use voxflex_core::glam::DVec3;
+use voxflex_core::proxy::HangingNode;
 use wide::{f32x4, f32x8};
 
 /// Springs per parallel task of [`SpringKernel::spring_pass`] (a multiple of 8).
@@ -69,6 +70,8 @@ pub struct SpringKernel {
     /// Per spring (kernel order, padded): `[fx, fy, fz, 0]`, the force on
     /// end `a`, µN.
     f: Vec<f32x4>,
+    /// Per node, with hanging nodes: the total force (µN) of a sub-step.
+    totals: Vec<f32x4>,
 }
 
 /// What one explicit sub-step applies to the free nodes (symplectic
@@ -84,6 +87,11 @@ pub struct Substep<'a> {
     pub free: &'a [bool],
     /// Mass damping α, 1/s.
     pub alpha: f32,
+    /// The hanging nodes of an octree proxy, tied to their masters (empty
+    /// for a conforming proxy): each sub-step moves their forces onto
+    /// their masters before the update, and the fix-up must set their
+    /// state from the masters'.
+    pub hanging: &'a [HangingNode],
 }
 
 /// Sets the imposed nodes' rows after sub-step `s` (numbered from 1), on
@@ -269,6 +277,34 @@ impl SpringArrays {
         }
     }
 
+    /// The total force (springs, external, mass damping; µN) on the nodes
+    /// `first .. first + out.len()`, into `out`, from the per-spring forces
+    /// `f` and the node state `rows` (all nodes).
+    fn totals(&self, f: &[f32x4], rows: &[f32x8], first: usize, out: &mut [f32x4], step: &Substep) {
+        let alpha = f32x4::splat(step.alpha);
+        for (i, o) in out.iter_mut().enumerate() {
+            let n = first + i;
+            let [_, v]: [f32x4; 2] = bytemuck::cast(rows[n]);
+            *o = self.node_force(f, n) + f32x4::from(step.ext[n])
+                - alpha * v / f32x4::splat(step.inv_mass[n]);
+        }
+    }
+
+    /// Symplectic Euler for the free nodes `first .. first + rows.len()`
+    /// from their total forces `total` (all nodes).
+    fn apply_totals(&self, total: &[f32x4], first: usize, rows: &mut [f32x8], step: &Substep) {
+        let h = f32x4::splat(step.h);
+        for (i, row) in rows.iter_mut().enumerate() {
+            let n = first + i;
+            if !step.free[n] {
+                continue;
+            }
+            let [u, v]: [f32x4; 2] = bytemuck::cast(*row);
+            let v = v + h * total[n] * f32x4::splat(step.inv_mass[n]);
+            *row = bytemuck::cast([u + h * v, v]);
+        }
+    }
+
     /// `parts` node ranges and the spring ranges that go with them (the
     /// springs whose end `a` is in the node range, boundaries rounded to
     /// 8; the last takes the padding), balanced by spring count.
@@ -388,6 +424,7 @@ impl SpringKernel {
             state: vec![f32x8::ZERO; n.max(1)],
             nodes: n,
             f,
+            totals: Vec::new(),
         }
     }
 
@@ -423,23 +460,6 @@ impl SpringKernel {
     #[inline]
     pub fn set_node(&mut self, n: usize, u: [f32; 3], v: [f32; 3]) {
         self.rows().set_node(n, u, v);
-    }
-
-    /// Applies the forces `f` (µN) to the `free` nodes for `h` seconds
-    /// (symplectic Euler): the general path, when forces were summed and
-    /// moved off hanging nodes on the CPU.
-    pub fn apply(&mut self, f: &[DVec3], h: f64, masses: &[f64], free: &[bool]) {
-        for (n, fn_) in f.iter().enumerate() {
-            if free[n] {
-                let a = (*fn_ * (h / masses[n])).as_vec3().to_array();
-                let (mut u, mut v) = self.node(n);
-                for k in 0..3 {
-                    v[k] += a[k];
-                    u[k] += h as f32 * v[k];
-                }
-                self.set_node(n, u, v);
-            }
-        }
     }
 
     /// Springs (unpadded count).
@@ -521,16 +541,23 @@ impl SpringKernel {
         let barrier = SpinBarrier::new(threads);
         let springs = &self.springs;
         let nodes = self.nodes;
+        let tied = !step.hanging.is_empty();
+        if tied {
+            self.totals.resize(nodes, f32x4::ZERO);
+        }
         let (state, f) = (Shared::new(&mut self.state), Shared::new(&mut self.f));
+        let totals = Shared::new(&mut self.totals);
         rayon::broadcast(|ctx| {
             let (node_range, spring_range) = parts[ctx.index()].clone();
             for s in 1..=count {
-                // SAFETY (both phases and the fix-up): the barriers separate
+                // SAFETY (every phase and the fix-up): the barriers separate
                 // them; in the spring phase `state` is only read and each
-                // thread writes its own range of `f`; in the node phase `f`
-                // is only read and each thread writes its own range of
-                // `state` (the ranges are disjoint: `partition`); the
-                // fix-up runs on one thread while the others wait.
+                // thread writes its own range of `f`; in the node phases `f`
+                // (and `totals` once written) is only read and each thread
+                // writes its own range of `state` or `totals` (the ranges
+                // are disjoint: `partition`); moving the hanging nodes'
+                // forces and the fix-up run on one thread while the others
+                // wait.
                 unsafe {
                     springs.forces(
                         state.all(),
@@ -539,14 +566,48 @@ impl SpringKernel {
                     )
                 };
                 barrier.wait();
-                unsafe {
-                    springs.integrate(
-                        f.all(),
-                        node_range.start,
-                        state.part(node_range.clone()),
-                        step,
-                    )
-                };
+                if tied {
+                    // Total forces, the hanging nodes' moved onto their
+                    // masters (deepest ties first, as `Boundary::untie`),
+                    // then the update from them.
+                    unsafe {
+                        springs.totals(
+                            f.all(),
+                            state.all(),
+                            node_range.start,
+                            totals.part(node_range.clone()),
+                            step,
+                        )
+                    };
+                    barrier.wait();
+                    if ctx.index() == 0 {
+                        let t = unsafe { totals.part(0..nodes) };
+                        for h in step.hanging.iter().rev() {
+                            let fh = std::mem::replace(&mut t[h.node as usize], f32x4::ZERO);
+                            for &(m, w) in &h.masters {
+                                t[m as usize] += f32x4::splat(w) * fh;
+                            }
+                        }
+                    }
+                    barrier.wait();
+                    unsafe {
+                        springs.apply_totals(
+                            totals.all(),
+                            node_range.start,
+                            state.part(node_range.clone()),
+                            step,
+                        )
+                    };
+                } else {
+                    unsafe {
+                        springs.integrate(
+                            f.all(),
+                            node_range.start,
+                            state.part(node_range.clone()),
+                            step,
+                        )
+                    };
+                }
                 barrier.wait();
                 if let Some(fixup) = fixup {
                     if ctx.index() == 0 {
@@ -742,6 +803,7 @@ mod tests {
             inv_mass: &inv_mass,
             free: &free,
             alpha: alpha as f32,
+            hanging: &[],
         };
         kernel.spring_pass();
         kernel.integrate(&step);
@@ -799,6 +861,7 @@ mod tests {
             inv_mass: &c.inv_mass,
             free: &c.free,
             alpha: 0.5,
+            hanging: &[],
         };
         let pull =
             |s: u32, rows: &mut NodeRows| rows.set_node(0, [0.01 * s as f32, 0.0, 0.0], [0.0; 3]);
@@ -825,5 +888,101 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// With hanging nodes, the one-region sub-step (total forces, the
+    /// hanging nodes' moved onto their masters, update, ties) matches the
+    /// same sequence done in f64, one node at a time.
+    #[test]
+    fn hanging_nodes_pass_their_forces_to_their_masters() {
+        let c = case(300, 1_201);
+        // Nodes 0..30 hang on three later nodes each (weights summing to
+        // one); nodes 30..40 are fixed; the rest are free.
+        let hanging: Vec<HangingNode> = (0..30)
+            .map(|n| HangingNode {
+                node: n,
+                masters: vec![(40 + 3 * n, 0.5), (41 + 3 * n, 0.3), (42 + 3 * n, 0.2)],
+            })
+            .collect();
+        let free: Vec<bool> = (0..300).map(|n| n >= 40).collect();
+        let step = Substep {
+            h: 1e-3,
+            ext: &c.ext,
+            inv_mass: &c.inv_mass,
+            free: &free,
+            alpha: 0.5,
+            hanging: &hanging,
+        };
+        let tie = |s: u32, rows: &mut NodeRows| {
+            let _ = s;
+            for h in &hanging {
+                let (mut u, mut v) = ([0f32; 3], [0f32; 3]);
+                for &(m, w) in &h.masters {
+                    let (um, vm) = rows.node(m as usize);
+                    for i in 0..3 {
+                        u[i] += w * um[i];
+                        v[i] += w * vm[i];
+                    }
+                }
+                rows.set_node(h.node as usize, u, v);
+            }
+        };
+        let mut kernel = SpringKernel::new(&c.springs, &c.rest);
+        kernel.load(&c.u, &c.v);
+        let mut reference = SpringKernel::new(&c.springs, &c.rest);
+        reference.load(&c.u, &c.v);
+        for s in 1..=5 {
+            reference.spring_pass();
+            let mut f: Vec<DVec3> = (0..300)
+                .map(|n| {
+                    let spring = DVec3::from_array(reference.node_force(n).map(f64::from));
+                    let ext =
+                        DVec3::new(c.ext[n][0] as f64, c.ext[n][1] as f64, c.ext[n][2] as f64);
+                    let v = DVec3::from_array(reference.node(n).1.map(f64::from));
+                    spring + ext - 0.5 * v / c.inv_mass[n] as f64
+                })
+                .collect();
+            for h in hanging.iter().rev() {
+                let fh = std::mem::take(&mut f[h.node as usize]);
+                for &(m, w) in &h.masters {
+                    f[m as usize] += w as f64 * fh;
+                }
+            }
+            for n in (0..300).filter(|&n| free[n]) {
+                let (u, v) = reference.node(n);
+                let v = DVec3::from_array(v.map(f64::from)) + 1e-3 * f[n] * c.inv_mass[n] as f64;
+                let u = DVec3::from_array(u.map(f64::from)) + 1e-3 * v;
+                reference.set_node(n, u.as_vec3().to_array(), v.as_vec3().to_array());
+            }
+            tie(s, &mut reference.rows());
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        pool.install(|| kernel.substeps(5, &step, Some(&tie)));
+        for n in 0..300 {
+            let (a, b) = (kernel.node(n), reference.node(n));
+            for k in 0..3 {
+                assert!(
+                    (a.0[k] - b.0[k]).abs() <= 1e-5 * (1.0 + b.0[k].abs()),
+                    "node {n}: u {a:?} vs {b:?}"
+                );
+                assert!(
+                    (a.1[k] - b.1[k]).abs() <= 1e-4 * (1.0 + b.1[k].abs()),
+                    "node {n}: v {a:?} vs {b:?}"
+                );
+            }
+        }
+        // The hanging nodes moved with their masters, and forces reached
+        // the masters (they moved differently from an untied run).
+        let mut untied = SpringKernel::new(&c.springs, &c.rest);
+        untied.load(&c.u, &c.v);
+        let plain = Substep {
+            hanging: &[],
+            ..step
+        };
+        untied.substeps(5, &plain, None);
+        assert!((40..130).any(|n| untied.node(n).0 != kernel.node(n).0));
     }
 }

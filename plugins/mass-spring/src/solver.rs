@@ -230,6 +230,7 @@ impl MassSpring {
             inv_mass: &inv_mass,
             free: &free,
             alpha: self.params.mass_damping as f32,
+            hanging: &bc.hanging,
         };
         // Imposed nodes: fixed ones stay (the integrator leaves them), driven
         // ones move linearly to their targets over the frame, hanging ones
@@ -261,19 +262,9 @@ impl MassSpring {
                 rows.set_node(hn.node as usize, u, v);
             }
         };
-        if bc.hanging.is_empty() {
-            let fixup: Option<Fixup> = (!bc.driven.is_empty()).then_some(&drive);
-            self.kernel.substeps(substeps, &step, fixup);
-        } else {
-            // Hanging nodes pass their forces to their masters first.
-            let mut f = vec![DVec3::ZERO; free.len()];
-            for s in 1..=substeps {
-                self.node_forces(bc, &mut f);
-                bc.untie(&mut f);
-                self.kernel.apply(&f, h, &self.masses, &free);
-                drive(s, &mut self.kernel.rows());
-            }
-        }
+        let fixup: Option<Fixup> =
+            (!bc.driven.is_empty() || !bc.hanging.is_empty()).then_some(&drive);
+        self.kernel.substeps(substeps, &step, fixup);
         self.kernel.store(&mut state.u, &mut state.v);
         bc.impose(&mut state.u);
         Ok(SolveReport {
