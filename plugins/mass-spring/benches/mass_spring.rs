@@ -4,12 +4,12 @@
 //! - the explicit sub-step on ~100 k springs (a box of 32 × 32 × 16 cells
 //!   of the five-tetrahedra split): time per sub-step, from one frame of
 //!   many sub-steps;
+//! - the same on an octree proxy, whose hanging nodes pass their forces to
+//!   their masters every sub-step;
 //! - the cantilever of `tests/reference/cantilever.json` run to rest with
 //!   the implicit integrator: time and tip deflection against the same-mesh
 //!   linear FEM reference — the error a mass-spring model makes, which
 //!   users trade against its speed.
-//!
-//! - explicit sub-steps on an octree proxy (hanging nodes tied);
 //!
 //! `-- substep`, `-- octree` or `-- cantilever` runs one part.
 
