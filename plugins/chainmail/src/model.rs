@@ -60,11 +60,12 @@ pub struct ChainMail {
     lat: ElementLattice,
     state: State,
     blocks: Blocks,
-    /// Blocks the next propagation iteration visits (block schedule).
+    /// Blocks the next propagation iteration visits (block schedule),
+    /// ascending, no repeats (the passes' one-writer-per-row rule needs it).
     active: Vec<u32>,
     /// Elements the next propagation iteration visits (frontier schedule).
     frontier: Vec<u32>,
-    /// Blocks the next relaxation sweep visits.
+    /// Blocks the next relaxation sweep visits, ascending, no repeats.
     relax: Vec<u32>,
     /// Scratch flags for building block lists.
     seen: Vec<bool>,
@@ -372,7 +373,7 @@ impl ChainMail {
                 for g in self.grabs.drain(..) {
                     self.lat.cells[g.element] &= !HELD;
                     let b = self.blocks.of(self.lat.coords(g.element));
-                    push_unique(&mut self.relax, b as u32);
+                    insert_sorted(&mut self.relax, b as u32);
                 }
             }
         }
@@ -451,7 +452,7 @@ impl ChainMail {
     fn touch(&mut self, n: usize) {
         let b = self.blocks.of(self.lat.coords(n));
         self.dirty[b] = true;
-        self.relax.push(b as u32);
+        insert_sorted(&mut self.relax, b as u32);
     }
 
     /// Cuts the links crossing `polygon` (fanned from its first corner);
@@ -528,9 +529,9 @@ impl ChainMail {
             self.on_device(|g, _| g.write_element(e, u, k));
             let b = self.blocks.of(self.lat.coords(e));
             if parallel && self.params.schedule == Schedule::Blocks {
-                push_unique(&mut self.active, b as u32);
+                insert_sorted(&mut self.active, b as u32);
             }
-            push_unique(&mut self.relax, b as u32);
+            insert_sorted(&mut self.relax, b as u32);
             self.dirty[b] = true;
             moved.push(e);
         }
@@ -657,8 +658,6 @@ impl ChainMail {
         self.counts.updates += rep.updates;
         self.note_changes(&rep.blocks);
         self.active = self.blocks.next_active(&rep.blocks, &mut self.seen);
-        self.relax.sort_unstable();
-        self.relax.dedup();
         merge_sorted(&mut self.relax, &self.active, &mut self.merge_scratch);
         rep.updates > 0
     }
@@ -675,13 +674,12 @@ impl ChainMail {
             .iter()
             .map(|&n| self.blocks.of(self.lat.coords(n as usize)) as u32)
             .collect();
+        touched.sort_unstable();
         touched.dedup();
         for &b in &touched {
             self.dirty[b as usize] = true;
         }
-        self.relax.extend_from_slice(&touched);
-        self.relax.sort_unstable();
-        self.relax.dedup();
+        merge_sorted(&mut self.relax, &touched, &mut self.merge_scratch);
         self.frontier = next_frontier(&self.lat, &rep.updated);
         !rep.updated.is_empty()
     }
@@ -692,10 +690,6 @@ impl ChainMail {
         // blocks, in parallel and 8 at a time.
         let sequential = self.params.algorithm == Algorithm::Sequential;
         let tol = self.params.rest_tolerance;
-        if !sequential {
-            self.relax.sort_unstable();
-            self.relax.dedup();
-        }
         let rep = if sequential {
             let all: Vec<u32> = (0..self.blocks.len() as u32).collect();
             sweep_scalar(&self.lat, &self.state, &self.blocks, &all, tol)
@@ -817,15 +811,16 @@ fn merge_sorted(list: &mut Vec<u32>, more: &[u32], scratch: &mut Vec<u32>) {
     std::mem::swap(list, scratch);
 }
 
-fn push_unique(v: &mut Vec<u32>, b: u32) {
-    if !v.contains(&b) {
-        v.push(b);
+/// Inserts block `b` into `list` (ascending, no repeats), keeping it so.
+fn insert_sorted(list: &mut Vec<u32>, b: u32) {
+    if let Err(at) = list.binary_search(&b) {
+        list.insert(at, b);
     }
 }
 
 #[cfg(test)]
 mod merge_tests {
-    use super::merge_sorted;
+    use super::{insert_sorted, merge_sorted};
 
     #[test]
     fn merging_sorted_block_lists_keeps_them_sorted_and_unique() {
@@ -840,5 +835,10 @@ mod merge_tests {
             merge_sorted(&mut list, &b, &mut scratch);
             assert_eq!(list, want);
         }
+        let mut list = vec![];
+        for b in [7, 2, 9, 2, 0, 7] {
+            insert_sorted(&mut list, b);
+        }
+        assert_eq!(list, vec![0, 2, 7, 9]);
     }
 }

@@ -32,8 +32,10 @@ pub(crate) struct RunRows {
 }
 
 impl RunRows {
-    /// The runs of `set` (ascending).
+    /// The runs of `set` (ascending, no repeats: a block row met twice
+    /// would get two writers).
     pub(crate) fn new(blocks: &Blocks, set: &[u32]) -> Self {
+        debug_assert!(set.windows(2).all(|w| w[0] < w[1]), "set must be ascending");
         let cx = blocks.count[0] as u32;
         let mut runs: Vec<Run> = Vec::new();
         let mut starts = Vec::new();
@@ -118,7 +120,6 @@ pub fn sweep_runs(
     tol: f64,
     scratch: &mut SweepScratch,
 ) -> SweepReport {
-    debug_assert!(set.windows(2).all(|w| w[0] < w[1]), "set must be ascending");
     let rows = RunRows::new(blocks, set);
     let mut out: Vec<(u32, FaceMask)> = set.iter().map(|&b| (b, 0)).collect();
     let mut parts = rows.split(&mut out);
