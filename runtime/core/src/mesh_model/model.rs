@@ -230,9 +230,7 @@ impl<S: MeshSolver> MeshModel<S> {
     }
 
     fn built(&self) -> Result<&Built<S>, ModelError> {
-        self.built
-            .as_ref()
-            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))
+        built_ref(&self.built)
     }
 
     /// The proxy (after `init`).
@@ -248,10 +246,7 @@ impl<S: MeshSolver> MeshModel<S> {
     /// Puts the nodes at displacements `u` (mm), at rest (zero velocity):
     /// for programs and tests that start from a deformed state.
     pub fn set_displacements(&mut self, u: &[DVec3]) -> Result<(), ModelError> {
-        let b = self
-            .built
-            .as_mut()
-            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
+        let b = built_mut(&mut self.built)?;
         if u.len() != b.state.u.len() || u.iter().any(|v| !v.is_finite()) {
             return Err(ModelError(format!(
                 "{}: {} displacements given for {} nodes (all must be finite)",
@@ -350,10 +345,7 @@ impl<S: MeshSolver> MeshModel<S> {
                 S::NAME
             ))
         })?;
-        let b = self
-            .built
-            .as_mut()
-            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
+        let b = built_mut(&mut self.built)?;
         b.solver.use_gpu(gpu)?;
         self.device = Some(DeviceMap {
             nodes: BufferId(u64::MAX),
@@ -372,10 +364,7 @@ impl<S: MeshSolver> MeshModel<S> {
             .gpu
             .clone()
             .ok_or_else(|| ModelError(format!("{name}: a GPU target needs the GPU backend")))?;
-        let b = self
-            .built
-            .as_ref()
-            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        let b = built_ref(&self.built)?;
         let device = self
             .device
             .as_mut()
@@ -423,10 +412,7 @@ impl<S: MeshSolver> MeshModel<S> {
 
     fn apply(&mut self, spec: &InteractionSpec) -> Result<(), ModelError> {
         let name = S::NAME;
-        let b = self
-            .built
-            .as_mut()
-            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        let b = built_mut(&mut self.built)?;
         match spec {
             InteractionSpec::Grab { point, .. } => {
                 // The node nearest the point where it is now.
@@ -550,19 +536,14 @@ impl<S: MeshSolver> MeshModel<S> {
     /// tetrahedra of every lattice binding that the cut crosses.
     fn cut(&mut self, cut: &CutPolygon) -> Result<(), ModelError> {
         let name = S::NAME;
-        let b = self
-            .built
-            .as_mut()
-            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        let b = built_mut(&mut self.built)?;
         // The lattice bindings' removed tetrahedra, from the positions
         // before the cut (both sides still coincide there).
         for bound in &mut self.bindings {
-            let Some((first, end, positions)) = lattice_near(bound, b, (cut.lo, cut.hi)) else {
+            let Some(near) = lattice_near(bound, b, (cut.lo, cut.hi)) else {
                 continue;
             };
-            let g = bound.lattice.expect("a lattice binding");
-            let cells = g.dims.map(|d| d.saturating_sub(1));
-            let removed = tets_cut_by(cells, (first, end), &positions, cut);
+            let removed = tets_cut_by(near.cells, (near.first, near.end), &near.positions, cut);
             bound.unreported |= !removed.is_empty();
             bound.removed.extend(removed);
         }
@@ -601,10 +582,7 @@ impl<S: MeshSolver> MeshModel<S> {
     /// the device follow the new mesh; a warning names pieces it severed
     /// from every fixed or grabbed node.
     fn topology_changed(&mut self, what: &str) -> Result<(), ModelError> {
-        let b = self
-            .built
-            .as_mut()
-            .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))?;
+        let b = built_mut(&mut self.built)?;
         let mut anchored = b.bc.fixed.clone();
         for g in &self.grabs {
             anchored[g.node as usize] = true;
@@ -646,10 +624,7 @@ impl<S: MeshSolver> MeshModel<S> {
     /// uses).
     fn carve(&mut self, region: &CarveRegion) -> Result<(), ModelError> {
         let name = S::NAME;
-        let b = self
-            .built
-            .as_mut()
-            .ok_or_else(|| ModelError(format!("{name}: used before init")))?;
+        let b = built_mut(&mut self.built)?;
         let x: Vec<DVec3> = b.positions();
         let carved = carve_mesh(&b.mesh, &x, region);
         if carved.removed == 0 {
@@ -665,21 +640,13 @@ impl<S: MeshSolver> MeshModel<S> {
         }
         // The sampling mesh first, from the positions before the carve.
         for bound in &mut self.bindings {
-            let Some((first, end, positions)) = lattice_near(bound, b, region.bounds()) else {
+            let Some(near) = lattice_near(bound, b, region.bounds()) else {
                 continue;
             };
-            let g = bound.lattice.expect("a lattice binding");
-            let cells = g.dims.map(|d| d.saturating_sub(1));
-            let span = [0, 1, 2].map(|a| end[a] - first[a] + 1);
             let mut removed = Vec::new();
-            for (i, p) in positions.iter().enumerate() {
+            for (i, p) in near.positions.iter().enumerate() {
                 if region.contains(*p) {
-                    let v = [
-                        first[0] + i % span[0],
-                        first[1] + i / span[0] % span[1],
-                        first[2] + i / (span[0] * span[1]),
-                    ];
-                    removed.extend(tets_at_vertex(cells, v));
+                    removed.extend(tets_at_vertex(near.cells, near.point(i)));
                 }
             }
             bound.unreported |= !removed.is_empty();
@@ -823,18 +790,53 @@ impl<S: MeshSolver> Drop for MeshModel<S> {
     }
 }
 
-/// Per voxel: the index of the first material whose range holds its value
-/// (`u16::MAX` for none).
+/// What `init` built, or the error of a model used before it.
+fn built_ref<S: MeshSolver>(built: &Option<Built<S>>) -> Result<&Built<S>, ModelError> {
+    built
+        .as_ref()
+        .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))
+}
+
+/// What `init` built, mutably, or the error of a model used before it.
+fn built_mut<S: MeshSolver>(built: &mut Option<Built<S>>) -> Result<&mut Built<S>, ModelError> {
+    built
+        .as_mut()
+        .ok_or_else(|| ModelError(format!("{}: used before init", S::NAME)))
+}
+
+/// Lattice points near a world box, at their current positions
+/// ([`lattice_near`]).
+struct LatticeBox {
+    /// Cells of the lattice's sampling mesh per axis.
+    cells: [usize; 3],
+    /// First and last point index per axis (inclusive).
+    first: [usize; 3],
+    end: [usize; 3],
+    /// Current position (mm) of every point in the box, x fastest.
+    positions: Vec<DVec3>,
+}
+
+impl LatticeBox {
+    /// Lattice index of the box's `i`-th point.
+    fn point(&self, i: usize) -> [usize; 3] {
+        let span = [0, 1, 2].map(|a| self.end[a] - self.first[a] + 1);
+        [
+            self.first[0] + i % span[0],
+            self.first[1] + i / span[0] % span[1],
+            self.first[2] + i / (span[0] * span[1]),
+        ]
+    }
+}
+
 /// For a lattice binding, the lattice points whose current positions may
-/// lie in the world box `(lo, hi)` (mm): the index box `(first, end)`
-/// (inclusive) grown by the largest node displacement and two spacings,
-/// and the current position (mm) of every point in it, x fastest. `None`
-/// for other bindings, or when the box misses the lattice.
+/// lie in the world box `(lo, hi)` (mm): the index box grown by the largest
+/// node displacement and two spacings, with every point's current position.
+/// `None` for other bindings, or when the box misses the lattice.
 fn lattice_near<S: MeshSolver>(
     bound: &Bound,
     b: &Built<S>,
     (lo, hi): (DVec3, DVec3),
-) -> Option<([usize; 3], [usize; 3], Vec<DVec3>)> {
+) -> Option<LatticeBox> {
     let g = bound.lattice?;
     let max_u = b
         .state
@@ -866,9 +868,16 @@ fn lattice_near<S: MeshSolver>(
             }
         }
     }
-    Some((first, end, positions))
+    Some(LatticeBox {
+        cells: g.dims.map(|d| d.saturating_sub(1)),
+        first,
+        end,
+        positions,
+    })
 }
 
+/// Per voxel: the index of the first material whose range holds its value
+/// (`u16::MAX` for none).
 fn voxel_materials(volume: VolumeView<'_>, specs: &[super::MaterialSpec]) -> Vec<u16> {
     (0..volume.grid.len())
         .map(|l| {
