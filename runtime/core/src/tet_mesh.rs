@@ -102,32 +102,54 @@ impl TetMesh {
         signed_volume(self.corners(t))
     }
 
+    /// Node indices of tetrahedron `t`'s face opposite its corner `opp`,
+    /// in corner order.
+    pub fn face(&self, t: usize, opp: usize) -> [u32; 3] {
+        let tet = self.tets[t];
+        let mut f = [0u32; 3];
+        for (m, c) in (0..4).filter(|&c| c != opp).enumerate() {
+            f[m] = tet[c];
+        }
+        f
+    }
+
     /// The faces used by exactly one tetrahedron (the mesh's surface), each
-    /// as sorted node indices; `Err` with a face used more than twice (the
-    /// mesh is not a manifold).
-    pub fn boundary_faces(&self) -> Result<Vec<[u32; 3]>, [u32; 3]> {
-        let mut count: HashMap<[u32; 3], u32> = HashMap::new();
-        for tet in &self.tets {
-            for a in 0..4 {
-                let mut f = [0u32; 3];
-                let mut m = 0;
-                for (b, &v) in tet.iter().enumerate() {
-                    if b != a {
-                        f[m] = v;
-                        m += 1;
-                    }
-                }
+    /// as `(tetrahedron, its corner opposite the face)`, ascending; `Err`
+    /// with a face (sorted node indices) used more than twice (the mesh is
+    /// not a manifold).
+    pub fn surface(&self) -> Result<Vec<(u32, u8)>, [u32; 3]> {
+        let mut uses: HashMap<[u32; 3], (u32, u32, u8)> = HashMap::new();
+        for t in 0..self.tets.len() {
+            for opp in 0..4 {
+                let mut f = self.face(t, opp);
                 f.sort_unstable();
-                *count.entry(f).or_insert(0) += 1;
+                uses.entry(f).or_insert((0, t as u32, opp as u8)).0 += 1;
             }
         }
-        if let Some((f, _)) = count.iter().find(|&(_, &c)| c > 2) {
+        if let Some((f, _)) = uses.iter().find(|&(_, u)| u.0 > 2) {
             return Err(*f);
         }
-        let mut faces: Vec<[u32; 3]> = count
+        let mut faces: Vec<(u32, u8)> = uses
+            .into_values()
+            .filter(|u| u.0 == 1)
+            .map(|(_, t, opp)| (t, opp))
+            .collect();
+        faces.sort_unstable();
+        Ok(faces)
+    }
+
+    /// The faces used by exactly one tetrahedron (the mesh's surface), each
+    /// as sorted node indices, ascending; `Err` with a face used more than
+    /// twice (the mesh is not a manifold).
+    pub fn boundary_faces(&self) -> Result<Vec<[u32; 3]>, [u32; 3]> {
+        let mut faces: Vec<[u32; 3]> = self
+            .surface()?
             .into_iter()
-            .filter(|&(_, c)| c == 1)
-            .map(|(f, _)| f)
+            .map(|(t, opp)| {
+                let mut f = self.face(t as usize, opp as usize);
+                f.sort_unstable();
+                f
+            })
             .collect();
         faces.sort_unstable();
         Ok(faces)

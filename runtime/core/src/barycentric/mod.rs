@@ -101,7 +101,7 @@ impl BarycentricBinding {
                 if let Some((t, w)) = inside {
                     return (t, quantised(w), false);
                 }
-                let surface = surface.get_or_init(|| SurfaceGrid::new(mesh, &grid));
+                let surface = surface.get_or_init(|| SurfaceGrid::new(mesh));
                 let (t, w) = surface.nearest(mesh, p);
                 (t, quantised(w), true)
             })
@@ -128,7 +128,6 @@ impl BarycentricBinding {
         new_index: &[u32],
         rest: impl Fn(usize) -> DVec3 + Sync,
     ) -> usize {
-        let grid = TetGrid::new(mesh);
         let surface = OnceLock::new();
         let rebound: Vec<(usize, u32, [u16; 3], bool)> = (0..self.len())
             .into_par_iter()
@@ -141,7 +140,7 @@ impl BarycentricBinding {
                 let was_inside = weights(old.corners(old_t), p)
                     .iter()
                     .all(|&w| w >= -CONTAINED);
-                let surface = surface.get_or_init(|| SurfaceGrid::new(mesh, &grid));
+                let surface = surface.get_or_init(|| SurfaceGrid::new(mesh));
                 let (t, w) = surface.nearest(mesh, p);
                 // On a face the removed tetrahedron shared with a kept one:
                 // still inside the proxy.

@@ -7,7 +7,6 @@
 use super::{CONTAINED, weights};
 use crate::tet_mesh::TetMesh;
 use glam::DVec3;
-use std::collections::HashMap;
 
 /// A uniform grid over the mesh bounds; each cell lists the tetrahedra
 /// whose bounding boxes overlap it (compressed rows).
@@ -21,8 +20,17 @@ pub(super) struct TetGrid {
 
 impl TetGrid {
     pub(super) fn new(mesh: &TetMesh) -> Self {
+        let (lo, cell, dims) = Self::layout(mesh);
+        Self::from_boxes(lo, cell, dims, mesh.tets.len(), |t| {
+            corner_box(&mesh.corners(t))
+        })
+    }
+
+    /// The cells over `mesh`'s bounds: lower corner (mm), cell size (mm)
+    /// and cells per axis, about one tetrahedron per cell (at most 1024
+    /// cells per axis).
+    fn layout(mesh: &TetMesh) -> (DVec3, f64, [usize; 3]) {
         let (lo, hi) = mesh.bounds();
-        // About one tetrahedron per cell (at most 1024 cells per axis).
         let extent = hi - lo;
         let volume = extent.x.max(1e-9) * extent.y.max(1e-9) * extent.z.max(1e-9);
         let cell = (volume / mesh.tets.len() as f64)
@@ -30,9 +38,7 @@ impl TetGrid {
             .max(extent.max_element() / 1024.0)
             .max(1e-9);
         let dims = [0, 1, 2].map(|a| ((extent[a] / cell).floor() as usize + 1).min(1024));
-        Self::from_boxes(lo, cell, dims, mesh.tets.len(), |t| {
-            corner_box(&mesh.corners(t))
-        })
+        (lo, cell, dims)
     }
 
     /// A grid of `dims` cells of size `cell` from `lo` listing items
@@ -196,13 +202,14 @@ fn corner_box(x: &[DVec3]) -> (DVec3, DVec3) {
         .fold((x[0], x[0]), |(a, b), p| (a.min(*p), b.max(*p)))
 }
 
-/// The mesh's surface: the faces of one tetrahedron only, in a grid of the
-/// same cells as its [`TetGrid`]. The point of the mesh nearest a point
+/// The mesh's surface ([`TetMesh::surface`]), in a grid of the same cells
+/// as its [`TetGrid`]. The point of the mesh nearest a point
 /// outside it lies on one of them, so that search tests a few triangles
 /// per cell instead of every tetrahedron near the surface (four triangles
 /// each). At 2:1 level changes of an octree proxy the fine and coarse
-/// faces do not match and count as surface too: real faces of real
-/// tetrahedra, so the nearest one found is still the nearest point.
+/// faces do not match and count as surface too (and a mesh that is not a
+/// manifold lists every face): real faces of real tetrahedra, so the
+/// nearest one found is still the nearest point.
 pub(super) struct SurfaceGrid {
     grid: TetGrid,
     /// Per face: its tetrahedron and that tetrahedron's corner opposite it.
@@ -210,27 +217,14 @@ pub(super) struct SurfaceGrid {
 }
 
 impl SurfaceGrid {
-    pub(super) fn new(mesh: &TetMesh, tets: &TetGrid) -> Self {
-        let mut seen: HashMap<[u32; 3], Option<(u32, u8)>> = HashMap::new();
-        for (t, tet) in mesh.tets.iter().enumerate() {
-            for opp in 0..4u8 {
-                let mut key = [0u32; 3];
-                let mut m = 0;
-                for (c, &v) in tet.iter().enumerate() {
-                    if c != opp as usize {
-                        key[m] = v;
-                        m += 1;
-                    }
-                }
-                key.sort_unstable();
-                seen.entry(key)
-                    .and_modify(|f| *f = None)
-                    .or_insert(Some((t as u32, opp)));
-            }
-        }
-        let mut faces: Vec<(u32, u8)> = seen.into_values().flatten().collect();
-        faces.sort_unstable();
-        let grid = TetGrid::from_boxes(tets.lo, tets.cell, tets.dims, faces.len(), |f| {
+    pub(super) fn new(mesh: &TetMesh) -> Self {
+        let faces = mesh.surface().unwrap_or_else(|_| {
+            (0..mesh.tets.len() as u32)
+                .flat_map(|t| (0..4).map(move |opp| (t, opp)))
+                .collect()
+        });
+        let (lo, cell, dims) = TetGrid::layout(mesh);
+        let grid = TetGrid::from_boxes(lo, cell, dims, faces.len(), |f| {
             let (t, opp) = faces[f];
             corner_box(&face(mesh, t, opp))
         });
@@ -262,18 +256,10 @@ impl SurfaceGrid {
     }
 }
 
-/// The corners of tetrahedron `t` but `opp`, in order.
+/// The corners of tetrahedron `t` but `opp`, in order (mm).
 fn face(mesh: &TetMesh, t: u32, opp: u8) -> [DVec3; 3] {
-    let x = mesh.corners(t as usize);
-    let mut f = [DVec3::ZERO; 3];
-    let mut m = 0;
-    for (k, &v) in x.iter().enumerate() {
-        if k != opp as usize {
-            f[m] = v;
-            m += 1;
-        }
-    }
-    f
+    mesh.face(t as usize, opp as usize)
+        .map(|n| mesh.nodes[n as usize])
 }
 
 /// The item of `grid` nearest `p` by `distance(item) -> (weights, squared
@@ -345,7 +331,7 @@ mod tests {
         };
         for mesh in [&uniform, &octree] {
             let tets = TetGrid::new(mesh);
-            let surface = SurfaceGrid::new(mesh, &tets);
+            let surface = SurfaceGrid::new(mesh);
             let mut outside = 0;
             for _ in 0..400 {
                 let p = DVec3::new(rnd(), rnd(), rnd()) * DVec3::new(40.0, 36.0, 32.0)
