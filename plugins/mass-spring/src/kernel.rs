@@ -102,12 +102,35 @@ pub type Fixup<'a> = &'a (dyn Fn(u32, &mut NodeRows) + Sync);
 /// per-sub-step fix-up of imposed nodes.
 pub struct NodeRows<'a>(&'a mut [f32x8]);
 
+/// A node's state row as displacement (mm) and velocity (mm/s).
+#[inline]
+fn split_row(row: f32x8) -> ([f32; 3], [f32; 3]) {
+    let r = row.to_array();
+    ([r[0], r[1], r[2]], [r[4], r[5], r[6]])
+}
+
 impl NodeRows<'_> {
     /// Node `n`'s displacement (mm) and velocity (mm/s).
     #[inline]
     pub fn node(&self, n: usize) -> ([f32; 3], [f32; 3]) {
-        let r = self.0[n].to_array();
-        ([r[0], r[1], r[2]], [r[4], r[5], r[6]])
+        split_row(self.0[n])
+    }
+
+    /// Sets every hanging node's displacement and velocity from its
+    /// masters' (`u = P u`, `v = P v`; the rows' twin of
+    /// `Boundary::tie`).
+    pub fn tie(&mut self, hanging: &[HangingNode]) {
+        for h in hanging {
+            let (mut u, mut v) = ([0f32; 3], [0f32; 3]);
+            for &(m, w) in &h.masters {
+                let (um, vm) = self.node(m as usize);
+                for i in 0..3 {
+                    u[i] += w * um[i];
+                    v[i] += w * vm[i];
+                }
+            }
+            self.set_node(h.node as usize, u, v);
+        }
     }
 
     /// Sets node `n`'s displacement (mm) and velocity (mm/s).
@@ -329,6 +352,18 @@ impl SpringArrays {
     }
 }
 
+/// Moves the hanging nodes' forces `total` (µN per node) onto their
+/// masters and clears them, deepest ties first (`f ← Pᵀ f`; the f32 twin of
+/// `Boundary::untie`).
+fn untie_rows(hanging: &[HangingNode], total: &mut [f32x4]) {
+    for h in hanging.iter().rev() {
+        let f = std::mem::replace(&mut total[h.node as usize], f32x4::ZERO);
+        for &(m, w) in &h.masters {
+            total[m as usize] += f32x4::splat(w) * f;
+        }
+    }
+}
+
 /// An array that the threads of [`SpringKernel::substeps`] share between
 /// barriers: within one phase it is either only read, or written in
 /// disjoint ranges.
@@ -452,8 +487,7 @@ impl SpringKernel {
     /// Node `n`'s displacement (mm) and velocity (mm/s).
     #[inline]
     pub fn node(&self, n: usize) -> ([f32; 3], [f32; 3]) {
-        let r = self.state[n].to_array();
-        ([r[0], r[1], r[2]], [r[4], r[5], r[6]])
+        split_row(self.state[n])
     }
 
     /// Sets node `n`'s displacement (mm) and velocity (mm/s).
@@ -568,8 +602,7 @@ impl SpringKernel {
                 barrier.wait();
                 if tied {
                     // Total forces, the hanging nodes' moved onto their
-                    // masters (deepest ties first, as `Boundary::untie`),
-                    // then the update from them.
+                    // masters, then the update from them.
                     unsafe {
                         springs.totals(
                             f.all(),
@@ -582,12 +615,7 @@ impl SpringKernel {
                     barrier.wait();
                     if ctx.index() == 0 {
                         let t = unsafe { totals.part(0..nodes) };
-                        for h in step.hanging.iter().rev() {
-                            let fh = std::mem::replace(&mut t[h.node as usize], f32x4::ZERO);
-                            for &(m, w) in &h.masters {
-                                t[m as usize] += f32x4::splat(w) * fh;
-                            }
-                        }
+                        untie_rows(step.hanging, t);
                     }
                     barrier.wait();
                     unsafe {
@@ -727,6 +755,7 @@ fn store_rows(out: &mut [f32x4], [fx, fy, fz]: [f32x8; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use voxflex_core::mesh_model::Boundary;
 
     /// Random springs between random nodes, and a random node state.
     struct Case {
@@ -913,20 +942,9 @@ mod tests {
             alpha: 0.5,
             hanging: &hanging,
         };
-        let tie = |s: u32, rows: &mut NodeRows| {
-            let _ = s;
-            for h in &hanging {
-                let (mut u, mut v) = ([0f32; 3], [0f32; 3]);
-                for &(m, w) in &h.masters {
-                    let (um, vm) = rows.node(m as usize);
-                    for i in 0..3 {
-                        u[i] += w * um[i];
-                        v[i] += w * vm[i];
-                    }
-                }
-                rows.set_node(h.node as usize, u, v);
-            }
-        };
+        let tie = |_: u32, rows: &mut NodeRows| rows.tie(&hanging);
+        let mut untie = Boundary::new(300);
+        untie.hanging = hanging.clone();
         let mut kernel = SpringKernel::new(&c.springs, &c.rest);
         kernel.load(&c.u, &c.v);
         let mut reference = SpringKernel::new(&c.springs, &c.rest);
@@ -942,12 +960,7 @@ mod tests {
                     spring + ext - 0.5 * v / c.inv_mass[n] as f64
                 })
                 .collect();
-            for h in hanging.iter().rev() {
-                let fh = std::mem::take(&mut f[h.node as usize]);
-                for &(m, w) in &h.masters {
-                    f[m as usize] += w as f64 * fh;
-                }
-            }
+            untie.untie(&mut f);
             for n in (0..300).filter(|&n| free[n]) {
                 let (u, v) = reference.node(n);
                 let v = DVec3::from_array(v.map(f64::from)) + 1e-3 * f[n] * c.inv_mass[n] as f64;

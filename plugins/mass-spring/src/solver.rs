@@ -250,17 +250,7 @@ impl MassSpring {
                     ((u - now) / h).as_vec3().to_array(),
                 );
             }
-            for hn in &bc.hanging {
-                let (mut u, mut v) = ([0f32; 3], [0f32; 3]);
-                for &(m, w) in &hn.masters {
-                    let (um, vm) = rows.node(m as usize);
-                    for i in 0..3 {
-                        u[i] += w * um[i];
-                        v[i] += w * vm[i];
-                    }
-                }
-                rows.set_node(hn.node as usize, u, v);
-            }
+            rows.tie(&bc.hanging);
         };
         let fixup: Option<Fixup> =
             (!bc.driven.is_empty() || !bc.hanging.is_empty()).then_some(&drive);
