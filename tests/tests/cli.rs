@@ -592,25 +592,12 @@ fn mesh_models_carve_a_hole_through_the_plugin_boundary() {
             std::fs::write(tmp.path().join("s.toml"), &scene_text).unwrap();
             let o = voxflex(&["run", "s.toml", "--out", "o", "--force"], tmp.path());
             assert!(o.status.success(), "{plugin}: {}", text(&o));
-            let v = voxflex_core::io::read_volume(
-                &tmp.path().join("o/deformed.nii.gz"),
-                &Default::default(),
-            )
-            .unwrap();
-            let at = |p: [f64; 3]| {
-                let i = v
-                    .grid
-                    .world_to_index(voxflex_core::glam::DVec3::from_array(p))
-                    .round();
-                v.data
-                    .as_slice()
-                    .get_f32(v.grid.linear(i.x as usize, i.y as usize, i.z as usize))
-            };
+            let at = output_values(tmp.path(), &[[2.5, 2.5, 2.5], [17.5, 2.5, 2.5]]);
             let m = metrics(&tmp.path().join("o"));
             let tets = m["stages"]["model"]["notes"]["proxy_tetrahedra"]
                 .as_f64()
                 .unwrap();
-            (at([2.5, 2.5, 2.5]), at([17.5, 2.5, 2.5]), tets)
+            (at[0], at[1], tets)
         };
         let (centre, beside, whole) = run(false);
         assert_eq!((centre, beside), (100.0, 100.0), "{plugin}: the cube");
@@ -664,20 +651,7 @@ fn a_chainmail_cut_opens_a_gap_in_the_resampled_volume() {
         std::fs::write(tmp.path().join("s.toml"), &scene_text).unwrap();
         let o = voxflex(&["run", "s.toml", "--out", "o", "--force"], tmp.path());
         assert!(o.status.success(), "{}", text(&o));
-        let v = voxflex_core::io::read_volume(
-            &tmp.path().join("o/deformed.nii.gz"),
-            &Default::default(),
-        )
-        .unwrap();
-        let i = v
-            .grid
-            .world_to_index(voxflex_core::glam::DVec3::new(7.5, 2.5, 2.5))
-            .round();
-        let l = v.grid.linear(i.x as usize, i.y as usize, i.z as usize);
-        match v.data.as_slice() {
-            voxflex_core::volume::VoxelSlice::F32(s) => s[l],
-            other => panic!("unexpected output type {other:?}"),
-        }
+        output_values(tmp.path(), &[[7.5, 2.5, 2.5]])[0]
     };
     assert_eq!(value_in_gap(false), 100.0, "the uncut cube moves as one");
     assert_eq!(value_in_gap(true), 0.0, "the cut opens a gap of background");

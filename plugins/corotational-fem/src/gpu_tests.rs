@@ -8,9 +8,11 @@ use crate::solver::{CorotationalFem, FemParams, SolverKind};
 use std::sync::Arc;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
-use voxflex_core::gpu::{GpuService, GpuServiceExt};
+use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, largest_and_difference};
+use voxflex_core::mesh_model::{
+    ElasticMaterial, MeshModel, device_difference, largest_and_difference,
+};
 use voxflex_core::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
@@ -163,13 +165,7 @@ fn a_carve_on_the_gpu_backend_rebuilds_the_device_map() {
             cpu.step(frame).unwrap();
             dev.step(frame).unwrap();
         }
-        let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-        let want = DisplacementTarget::Cpu {
-            x: &mut x,
-            y: &mut y,
-            z: &mut z,
-        };
-        cpu.map(ic, want).unwrap();
+        let [x, y, z] = crate::tests::map_on_cpu(cpu, ic, n);
         dev.map(id, target).unwrap();
         let largest = x
             .iter()
@@ -177,19 +173,11 @@ fn a_carve_on_the_gpu_backend_rebuilds_the_device_map() {
             .chain(&z)
             .fold(0f32, |m, v| m.max(v.abs()));
         assert!(largest > 0.1, "the bar moves ({largest} mm)");
-        for (buf, want) in bufs.iter().zip([&x, &y, &z]) {
-            let mut got = vec![0f32; n];
-            gpu.download(*buf, &mut got).unwrap();
-            let worst = got
-                .iter()
-                .zip(want.iter())
-                .map(|(g, w)| (g - w).abs())
-                .fold(0f32, f32::max);
-            assert!(
-                worst <= 1e-4 * largest,
-                "map differs by {worst} of {largest}"
-            );
-        }
+        let worst = device_difference(&*gpu, bufs, [&x, &y, &z]).unwrap();
+        assert!(
+            worst <= 1e-4 * largest,
+            "map differs by {worst} of {largest}"
+        );
     };
     run(&mut cpu, &mut dev, 5);
     let carve = "kind = \"carve\"\ncentre = [-12, 6.5, 41.5]\nradius = 1.6";

@@ -16,6 +16,22 @@ pub(crate) fn cantilever(r: usize, load: f64, params: FemParams) -> Fem {
     voxflex_core::mesh_model::cantilever::model::<CorotationalFem>(r, load, params)
 }
 
+/// Binding `id`'s displacements (mm) of its `n` points, mapped on the CPU.
+pub(crate) fn map_on_cpu(
+    m: &mut Fem,
+    id: voxflex_core::deformation::BindingId,
+    n: usize,
+) -> [Vec<f32>; 3] {
+    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+    let target = voxflex_core::deformation::DisplacementTarget::Cpu {
+        x: &mut x,
+        y: &mut y,
+        z: &mut z,
+    };
+    m.map(id, target).unwrap();
+    [x, y, z]
+}
+
 pub(crate) fn static_params(tolerance: f64) -> FemParams {
     FemParams {
         solver: SolverKind::Static,
@@ -331,7 +347,7 @@ fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() 
 
 #[test]
 fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
-    use voxflex_core::deformation::{DisplacementTarget, RestPoints};
+    use voxflex_core::deformation::RestPoints;
     // The cantilever, cut through at x = 5; a pull on the free half moves
     // it away while the clamped half stays.
     let mut m = cantilever(2, 0.0, static_params(1e-10));
@@ -376,23 +392,14 @@ fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
         "reported once"
     );
     let n = grid.len();
-    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-    m.map(
-        id,
-        DisplacementTarget::Cpu {
-            x: &mut x,
-            y: &mut y,
-            z: &mut z,
-        },
-    )
-    .unwrap();
+    let [x, _, _] = map_on_cpu(&mut m, id, n);
     assert!((x[grid.linear(20, 1, 1)] - 2.0).abs() < 0.1);
     assert!(x[grid.linear(0, 1, 1)].abs() < 1e-6);
 }
 
 #[test]
 fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh() {
-    use voxflex_core::deformation::{DisplacementTarget, RestPoints};
+    use voxflex_core::deformation::RestPoints;
     use voxflex_core::mesh_model::cantilever::tip_deflection;
     let load = 1e-3;
     let tip = |m: &Fem| tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u);
@@ -442,16 +449,7 @@ fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh() {
     }
     // Every point maps, those of removed tetrahedra with their neighbours.
     let n = grid.len();
-    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-    m.map(
-        id,
-        DisplacementTarget::Cpu {
-            x: &mut x,
-            y: &mut y,
-            z: &mut z,
-        },
-    )
-    .unwrap();
+    let [x, y, z] = map_on_cpu(&mut m, id, n);
     assert!(x.iter().chain(&y).chain(&z).all(|v| v.is_finite()));
     let top = grid.linear(10, 1, 2); // (5, 0.5, 1) mm: carved away
     let below = grid.linear(10, 1, 1); // (5, 0.5, 0.5) mm: kept

@@ -8,9 +8,11 @@ use crate::solver::{MassSpring, SpringParams};
 use std::sync::Arc;
 use voxflex_core::deformation::{DeformationModel, DisplacementTarget, FrameInfo, RestPoints};
 use voxflex_core::glam::DVec3;
-use voxflex_core::gpu::{GpuService, GpuServiceExt};
+use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, largest_and_difference};
+use voxflex_core::mesh_model::{
+    ElasticMaterial, MeshModel, device_difference, largest_and_difference,
+};
 use voxflex_core::proxy::uniform_proxy;
 
 type Springs = MeshModel<MassSpring>;
@@ -109,16 +111,10 @@ fn gpu_sub_steps_match_rayon_after_100_frames() {
         },
     )
     .unwrap();
-    for (buf, want) in bufs.iter().zip([&x, &y, &z]) {
-        let mut got = vec![0f32; n];
-        gpu.download(*buf, &mut got).unwrap();
-        let worst = got
-            .iter()
-            .zip(want.iter())
-            .map(|(g, w)| (g - w).abs())
-            .fold(0f32, f32::max);
-        assert!(worst <= 1e-4 * largest as f32, "map differs by {worst}");
-        gpu.destroy_buffer(*buf);
+    let worst = device_difference(&*gpu, bufs, [&x, &y, &z]).unwrap();
+    assert!(worst <= 1e-4 * largest as f32, "map differs by {worst}");
+    for buf in bufs {
+        gpu.destroy_buffer(buf);
     }
 }
 

@@ -32,8 +32,9 @@ pub use model::MeshModel;
 pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
 pub use pcg::{CgOutcome, CgSettings};
 
+use crate::error::GpuError;
 use crate::error::ModelError;
-use crate::gpu::GpuService;
+use crate::gpu::{BufferId, GpuService, GpuServiceExt};
 use crate::tet_mesh::TetMesh;
 use glam::DVec3;
 use std::sync::Arc;
@@ -67,6 +68,26 @@ pub fn largest_and_difference(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
         .map(|(p, q)| (*p - *q).length())
         .fold(0.0, f64::max);
     (largest, worst)
+}
+
+/// The largest difference between the device arrays `bufs` (x, y, z; f32)
+/// and `want` (mm): how GPU parity tests compare a map into device buffers.
+pub fn device_difference(
+    gpu: &dyn GpuService,
+    bufs: [BufferId; 3],
+    want: [&[f32]; 3],
+) -> Result<f32, GpuError> {
+    let mut worst = 0f32;
+    for (buf, want) in bufs.into_iter().zip(want) {
+        let mut got = vec![0f32; want.len()];
+        gpu.download(buf, &mut got)?;
+        worst = got
+            .iter()
+            .zip(want)
+            .map(|(g, w)| (g - w).abs())
+            .fold(worst, f32::max);
+    }
+    Ok(worst)
 }
 
 /// What a solver's step did, for metrics and tests.
