@@ -191,54 +191,47 @@ pub(crate) fn place(
             ),
         ));
     };
-    let spacing_file = directions.map(|d| d.length());
-    // The header's world position of the volume's centre.
-    let centre = origin
-        + (0..3)
-            .map(|a| directions[a] * (dims[a].max(1) - 1) as f64 * 0.5)
-            .sum::<DVec3>();
+    // The header's world position of a file voxel index, and the grid
+    // index it gets.
+    let last = dims.map(|n| (n.max(1) - 1) as f64);
+    let header_at = |idx: [f64; 3]| origin + (0..3).map(|a| directions[a] * idx[a]).sum::<DVec3>();
+    let grid_index = |idx: [f64; 3]| {
+        let mut out = DVec3::ZERO;
+        for a in 0..3 {
+            out[o.world[a]] = if o.reversed[a] {
+                last[a] - idx[a]
+            } else {
+                idx[a]
+            };
+        }
+        out
+    };
     let mut out_dims = [0usize; 3];
     let mut spacing = DVec3::ZERO;
     for a in 0..3 {
         out_dims[o.world[a]] = dims[a];
-        spacing[o.world[a]] = spacing_file[a];
+        spacing[o.world[a]] = directions[a].length();
     }
-    let grid = if o.residual_deg > OBLIQUE_DEG {
-        let extent = DVec3::from_array(out_dims.map(|n| (n.max(1) - 1) as f64)) * spacing;
-        Grid::new(out_dims, spacing, centre - 0.5 * extent)
-    } else {
+    let grid = if o.residual_deg <= OBLIQUE_DEG {
         // Exact: grid voxel 0 is the file voxel at the low end of every
         // axis, where the header puts it.
-        let corner = origin
-            + (0..3)
-                .filter(|&a| o.reversed[a])
-                .map(|a| directions[a] * (dims[a].max(1) - 1) as f64)
-                .sum::<DVec3>();
-        Grid::new(out_dims, spacing, corner)
-    };
-    if o.residual_deg > OBLIQUE_DEG {
+        let first = [0, 1, 2].map(|a| if o.reversed[a] { last[a] } else { 0.0 });
+        Grid::new(out_dims, spacing, header_at(first))
+    } else {
+        let extent = DVec3::from_array(out_dims.map(|n| (n.max(1) - 1) as f64)) * spacing;
+        let grid = Grid::new(
+            out_dims,
+            spacing,
+            header_at(last.map(|l| 0.5 * l)) - 0.5 * extent,
+        );
         // Largest distance between where the header puts a corner voxel
         // and where the grid does.
-        let mut worst = 0.0f64;
-        for corner in 0..8 {
-            let idx = [0, 1, 2].map(|a| {
-                if corner >> a & 1 == 1 {
-                    dims[a].max(1) - 1
-                } else {
-                    0
-                }
-            });
-            let header = origin + (0..3).map(|a| directions[a] * idx[a] as f64).sum::<DVec3>();
-            let mut out = [0.0; 3];
-            for a in 0..3 {
-                out[o.world[a]] = if o.reversed[a] {
-                    (dims[a].max(1) - 1 - idx[a]) as f64
-                } else {
-                    idx[a] as f64
-                };
-            }
-            worst = worst.max((grid.index_to_world(DVec3::from_array(out)) - header).length());
-        }
+        let worst = (0..8)
+            .map(|corner| {
+                let idx = [0, 1, 2].map(|a| if corner >> a & 1 == 1 { last[a] } else { 0.0 });
+                (grid.index_to_world(grid_index(idx)) - header_at(idx)).length()
+            })
+            .fold(0.0, f64::max);
         tracing::warn!(
             file = %path.display(),
             "header field `{}` is oblique by {:.2}°; voxflex grids are axis-aligned, so the \
@@ -247,7 +240,8 @@ pub(crate) fn place(
             geometry.field,
             o.residual_deg
         );
-    }
+        grid
+    };
     let data = if o.is_identity() {
         data
     } else {
