@@ -301,11 +301,8 @@ fn square_pixels(img: GrayImage, (w_mm, h_mm): (f64, f64)) -> GrayImage {
     );
     let shrink = (MAX_STRETCHED_SIDE / w.max(h)).min(1.0);
     (w, h) = ((w * shrink).round().max(1.0), (h * shrink).round().max(1.0));
-    let Some(buffer) =
-        image::GrayImage::from_raw(img.width as u32, img.height as u32, img.pixels.clone())
-    else {
-        return img;
-    };
+    let buffer = image::GrayImage::from_raw(img.width as u32, img.height as u32, img.pixels)
+        .expect("a rendered slice holds width × height pixels");
     let out = image::imageops::resize(
         &buffer,
         w as u32,
