@@ -1,5 +1,5 @@
 // voxflex resampler, pass 2: one invocation per output voxel of the clip box.
-// Replaces the owner id by the value interpolated in the owner tetrahedron
+// Replaces the owner key by the value interpolated in the owner tetrahedron
 // (raster.rs: barycentric, interpolate), or the background.
 
 @group(0) @binding(6) var<storage, read_write> OUT: array<u32>;
@@ -21,8 +21,9 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         OUT[o] = bitcast<u32>(P.misc.x);
         return;
     }
-    let cell = owner / 5u;
-    let t = owner % 5u;
+    let id = owner & 0x7fffffffu;  // the owner key without WEAK_OWNER
+    let cell = id / 5u;
+    let t = id % 5u;
     let ci = cell % P.cdim.x;
     let cj = (cell / P.cdim.x) % P.cdim.y;
     let ck = cell / (P.cdim.x * P.cdim.y);

@@ -1,7 +1,10 @@
 // voxflex resampler, pass 1: one invocation per cell of the listed blocks.
 // Every output voxel centre in the cell's clipped bounding box goes to the
-// smallest tetrahedron of the cell that passes the inclusion test of
-// raster.rs (CellRaster): atomicMin(tet id) into the output slab.
+// tetrahedron of the cell that passes the inclusion test of raster.rs
+// (CellRaster) with the smallest owner key — its id, with WEAK_OWNER set
+// when none of its corners moved, it is inverted, or the voxel centre is
+// the rest position of one of its still corners (sampling_mesh.rs) —
+// atomicMin(key) into the output slab.
 
 @group(0) @binding(4) var<storage, read> BLOCKS: array<u32>;
 @group(0) @binding(6) var<storage, read_write> OUT: array<atomic<u32>>;
@@ -20,6 +23,14 @@ var<private> TET_FACES: array<u32, 40> = array<u32, 40>(
     0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u, 14u, 10u, 6u, 0u,
     0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u, 15u, 9u, 5u, 1u,
 );
+
+// ORIENTATION (sampling_mesh.rs): [parity][tet] = slot | (rest D > 0) << 2:
+// the face test whose D decides the tetrahedron's orientation.
+var<private> ORIENT: array<u32, 10> = array<u32, 10>(
+    0u, 6u, 2u, 6u, 7u, 5u, 1u, 5u, 3u, 3u,
+);
+
+const WEAK_OWNER: u32 = 0x80000000u;
 
 var<private> PX: array<f32, 8>;
 var<private> PY: array<f32, 8>;
@@ -50,8 +61,13 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     }
     var cmin = vec3<f32>(3.0e38);
     var cmax = vec3<f32>(-3.0e38);
+    var moved = 0u;
     for (var c = 0u; c < 8u; c++) {
-        let p = vertex_position(ci + (c & 1u), cj + ((c >> 1u) & 1u), ck + (c >> 2u));
+        let v = vec3<u32>(ci + (c & 1u), cj + ((c >> 1u) & 1u), ck + (c >> 2u));
+        let p = vertex_position(v.x, v.y, v.z);
+        if any(p != vec3<f32>(v)) {
+            moved |= 1u << c;
+        }
         PX[c] = p.x;
         PY[c] = p.y;
         PZ[c] = p.z;
@@ -88,6 +104,19 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     if live == 0u {
         return;
     }
+    // Weak owners (bit t): no corner moved, or inverted.
+    var weak = 0u;
+    for (var t = 0u; t < 5u; t++) {
+        var any_moved = 0u;
+        for (var a = 0u; a < 4u; a++) {
+            any_moved |= moved & (1u << TETS[parity * 20u + t * 4u + a]);
+        }
+        let o = ORIENT[parity * 5u + t];
+        let positive = SG[t * 4u + (o & 3u)] > 0.0;
+        if any_moved == 0u || positive != ((o >> 2u) == 1u) {
+            weak |= 1u << t;
+        }
+    }
     let base = cell * 5u;
     for (var z = lo.z; z <= hi.z; z++) {
         for (var y = lo.y; y <= hi.y; y++) {
@@ -97,22 +126,35 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
                 for (var f = 0u; f < 16u; f++) {
                     tv[f] = plane_eval(Plane(PN[f], PB[f]), q);
                 }
+                // Still corners whose rest position is this voxel centre: a
+                // tetrahedron touching it only there claims it weakly.
+                var still_here = 0u;
+                let r = vec3<i32>(x, y, z) - vec3<i32>(vec3<u32>(ci, cj, ck));
+                if all(r >= vec3<i32>(0)) && all(r <= vec3<i32>(1)) {
+                    still_here = (1u << u32(r.x + 2 * r.y + 4 * r.z)) & ~moved;
+                }
+                var key = NO_OWNER;
                 for (var t = 0u; t < 5u; t++) {
                     if (live & (1u << t)) == 0u {
                         continue;
                     }
                     var ok = true;
+                    var touch = false;
                     for (var a = 0u; a < 4u; a++) {
                         let s = t * 4u + a;
                         ok = ok && SG[s] * tv[TET_FACES[parity * 20u + s]] >= TH[s];
+                        let c = TETS[parity * 20u + s];
+                        touch = touch || ((still_here & (1u << c)) != 0u);
                     }
                     if ok {
-                        let o = out_index(x, y, z);
-                        let id = base + t;
-                        if atomicLoad(&OUT[o]) > id {
-                            atomicMin(&OUT[o], id);
-                        }
-                        break;
+                        let w = (weak & (1u << t)) != 0u || touch;
+                        key = min(key, (base + t) | select(0u, WEAK_OWNER, w));
+                    }
+                }
+                if key != NO_OWNER {
+                    let o = out_index(x, y, z);
+                    if atomicLoad(&OUT[o]) > key {
+                        atomicMin(&OUT[o], key);
                     }
                 }
             }

@@ -656,3 +656,40 @@ fn a_chainmail_cut_opens_a_gap_in_the_resampled_volume() {
     assert_eq!(value_in_gap(false), 100.0, "the uncut cube moves as one");
     assert_eq!(value_in_gap(true), 0.0, "the cut opens a gap of background");
 }
+
+#[test]
+fn warnings_of_plugins_land_in_metrics_whatever_the_log_filter() {
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // The affine field ignores a grab, loudly.
+    let s = format!(
+        "{}\n[[interaction]]\nframe = 1\nkind = \"grab\"\npoint = [0, 0, 0]\nby = [1, 0, 0]\n",
+        scene("cpu", "cube", 16, 3, "affine", &twist(2), &out)
+    );
+    std::fs::write(tmp.path().join("s.toml"), s).unwrap();
+    let o = voxflex(&["--log", "error", "run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        !String::from_utf8_lossy(&o.stderr).contains("takes no interactions"),
+        "--log error hides it on the terminal\n{}",
+        text(&o)
+    );
+    let m = metrics(&out);
+    let warnings = m["warnings"].as_array().expect("a warnings list");
+    assert_eq!(warnings.len(), 1, "{m}");
+    let w = warnings[0].as_str().unwrap();
+    assert!(
+        w.contains("affine") && w.contains("takes no interactions"),
+        "{w}"
+    );
+    // A clean run has an empty list.
+    std::fs::write(
+        tmp.path().join("s.toml"),
+        scene("cpu", "cube", 16, 3, "affine", &twist(2), &out),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(metrics(&out)["warnings"], serde_json::json!([]));
+}

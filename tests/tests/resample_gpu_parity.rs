@@ -1,6 +1,7 @@
 //! The resampler's WGSL path against its rayon twin on a real device
 //! (lavapipe in CI): identity bit for bit, deformed fields within 1e-5 of the
-//! data range, output split into z-slabs under a tiny storage-binding limit,
+//! data range, folds (moved tissue over still and inverted cells) bit for
+//! bit, output split into z-slabs under a tiny storage-binding limit,
 //! removed tetrahedra, and dirty-region resampling equal to a full resample.
 //! The checks live in `voxflex_core::resample::parity`; on a machine without
 //! an adapter these tests print SKIPPED, except under `CI=true`.
@@ -16,6 +17,11 @@ fn identity_is_bitwise() {
 #[test]
 fn deformed_matches_cpu() {
     run(parity::check_deformed_matches_cpu);
+}
+
+#[test]
+fn folds_match_cpu_bit_for_bit() {
+    run(parity::check_folds_match_cpu);
 }
 
 #[test]

@@ -8,6 +8,11 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
+use tracing::Level;
+use tracing_subscriber::Layer as _;
+use tracing_subscriber::filter::Targets;
+use tracing_subscriber::layer::SubscriberExt as _;
+use tracing_subscriber::util::SubscriberInitExt as _;
 use voxflex_runtime::pipeline::{RunOptions, run_scene};
 use voxflex_runtime::scene::Scene;
 use voxflex_runtime::{bench, plugin_loader};
@@ -130,9 +135,20 @@ fn main() {
     // wgpu's GL backend reports a missing EGL display as an error while it
     // probes adapters; that is not the user's problem unless they ask.
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| format!("{},wgpu_hal=off", cli.log));
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::new(filter))
-        .with_writer(std::io::stderr)
+    // The terminal shows what RUST_LOG / --log asks for; every warning of a
+    // run also goes into its metrics.json, whatever the filter.
+    tracing_subscriber::registry()
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                .with_filter(tracing_subscriber::EnvFilter::new(filter)),
+        )
+        .with(
+            // voxflex's own crates and plugins (a prefix match), not the
+            // GPU stack's adapter probing.
+            voxflex_runtime::warnings::WarningLayer
+                .with_filter(Targets::new().with_target("voxflex", Level::WARN)),
+        )
         .init();
     if let Err(e) = dispatch(cli.command) {
         // One line: the chain of causes, joined, skipping a cause whose text

@@ -14,3 +14,4 @@ pub mod pipeline;
 pub mod plugin_loader;
 pub mod scene;
 pub mod visualise;
+pub mod warnings;

@@ -62,6 +62,10 @@ pub struct RunMetrics {
     pub resample_extra_bytes_per_voxel: f64,
     /// Files written, relative to the output directory.
     pub outputs: Vec<String>,
+    /// Every warning (and error) the host and the plugins raised during the
+    /// run, in order (see [`crate::warnings`]); empty when the front end did
+    /// not install [`crate::warnings::WarningLayer`] or nothing was wrong.
+    pub warnings: Vec<String>,
     /// Total wall time, milliseconds.
     pub total_wall_ms: f64,
 }

@@ -223,6 +223,8 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     }
     // A partial run must never look up to date.
     let _ = std::fs::remove_file(out_dir.join(STAMP_FILE));
+    // Every warning from here on also goes into metrics.json.
+    let warnings = crate::warnings::capture();
 
     configure_threads(scene.settings.threads);
     // A deformation plugin without a GPU path runs the scene on the CPU
@@ -508,6 +510,7 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         source.release(gpu.as_ref());
         d.resampler.release_gpu(gpu.as_ref());
     }
+    metrics.warnings = warnings.finish();
     metrics.total_wall_ms = started.elapsed().as_secs_f64() * 1e3;
     write_text(&out_dir.join(METRICS_FILE), &metrics.to_json())?;
     write_text(&out_dir.join(STAMP_FILE), &fingerprint)?;

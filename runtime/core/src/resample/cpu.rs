@@ -7,9 +7,10 @@
 //! - pass 1: one task per cell block; its cells go eight at a time, by
 //!   parity, through `super::lanes` (per cell the eight deformed corners,
 //!   the face planes and, per candidate voxel centre of the cell's clipped
-//!   box, the smallest containing tetrahedron), then `fetch_min(tet id)`
-//!   after a relaxed load, so voxels that already hold a smaller id cost no
-//!   atomic read-modify-write;
+//!   box, the containing tetrahedron of smallest owner key — see
+//!   `sampling_mesh::WEAK_OWNER`), then `fetch_min(key)` after a relaxed
+//!   load, so voxels that already hold a smaller key cost no atomic
+//!   read-modify-write;
 //! - pass 2: one task per output row; owner → barycentric weights → value,
 //!   eight voxels per SIMD operation through `super::fill_lanes`.
 //!
@@ -20,7 +21,7 @@ use super::blocks::BlockBounds;
 use super::fill_lanes::{FILL_LANES, FillGroup, interpolate_group};
 use super::lanes::{LANES, LaneCtx, raster_group};
 use super::sampling_mesh::{
-    CELL_TETS, TetDecoder, cell_parity, corner_offset, deformed_coordinate,
+    CELL_TETS, OWNER_ID, TetDecoder, cell_parity, corner_offset, deformed_coordinate,
 };
 use super::{
     DisplacementsRef, Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, VoxelBox,
@@ -269,7 +270,7 @@ fn flush(
     g.2 = 0;
 }
 
-/// Pass 2 over the region: owner id → interpolated value (f32 bits), eight
+/// Pass 2 over the region: owner key → interpolated value (f32 bits), eight
 /// voxels of a row at a time (`super::fill_lanes`).
 fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
     let r = ctx.clip;
@@ -329,11 +330,11 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
 }
 
 /// Lane `l` of `g`: the corners (source index units) and source values of
-/// tetrahedron `owner`.
+/// the tetrahedron of owner key `owner` (its id, maybe with `WEAK_OWNER`).
 #[inline(always)]
 fn gather<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, l: usize, g: &mut FillGroup) {
     let mesh = &ctx.c.mesh;
-    let (cell, t) = ctx.decoder.decode(owner);
+    let (cell, t) = ctx.decoder.decode(owner & OWNER_ID);
     let [nx, ny, _] = mesh.vertex_dims();
     let corners = CELL_TETS[cell_parity(cell)][t];
     let base = cell[0] + nx * (cell[1] + ny * cell[2]);

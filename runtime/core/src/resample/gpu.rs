@@ -644,6 +644,20 @@ mod tests {
             .map(|&v| v as u32)
             .collect();
         assert_eq!(wgsl_table(RASTER, "TET_FACES"), tf);
+        let orient: Vec<u32> = super::super::sampling_mesh::ORIENTATION
+            .iter()
+            .flatten()
+            .map(|&(slot, positive)| slot as u32 | (positive as u32) << 2)
+            .collect();
+        assert_eq!(wgsl_table(RASTER, "ORIENT"), orient);
+        assert!(RASTER.contains(&format!(
+            "const WEAK_OWNER: u32 = 0x{:08x}u;",
+            super::super::sampling_mesh::WEAK_OWNER
+        )));
+        assert!(FILL.contains(&format!(
+            "owner & 0x{:08x}u",
+            super::super::sampling_mesh::OWNER_ID
+        )));
         assert_eq!(
             wgsl_table(COMMON, "OTHERS"),
             vec![1, 2, 3, 0, 2, 3, 0, 1, 3, 0, 1, 2]

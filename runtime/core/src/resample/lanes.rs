@@ -12,7 +12,9 @@
 //! multiply-add), so the owners are those of `raster::CellRaster` and of the
 //! WGSL kernel, bit for bit.
 
-use super::sampling_mesh::{CORNER_TABLES, FACE_TABLES, corner_offset};
+use super::sampling_mesh::{
+    CELL_TETS, CORNER_TABLES, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset,
+};
 use super::{DisplacementsRef, OutputGrid, VoxelBox};
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 use wide::{f32x8, i32x8};
@@ -60,17 +62,37 @@ struct Test {
     thr: F,
     /// Lanes with a usable `D` (bit per lane).
     ok: u32,
+    /// Lanes with `D > 0` (bit per lane).
+    positive: u32,
 }
 
 #[inline(always)]
 fn test(d: F, eps: f32) -> Test {
     let abs = d.abs();
     let usable = d.simd_ne(F::ZERO) & abs.simd_lt(F::splat(f32::INFINITY));
+    let positive = d.simd_gt(F::ZERO);
     Test {
-        sign: d.simd_gt(F::ZERO).select(F::ONE, F::splat(-1.0)),
+        sign: positive.select(F::ONE, F::splat(-1.0)),
         thr: F::splat(-eps) * abs,
         ok: usable.to_bitmask(),
+        positive: positive.to_bitmask(),
     }
+}
+
+/// Lanes where tetrahedron `t` is a weak owner (`WEAK_OWNER`) wherever it
+/// is: none of its corners moved (`moved[c]`: lanes where corner `c` moved), or its
+/// orientation `D` (`d_positive`: lanes with `D > 0`) has the other sign
+/// than at rest.
+#[inline(always)]
+fn weak_lanes<const P: usize>(t: usize, moved: &[u32; 8], d_positive: u32) -> u32 {
+    let [a, b, c, d] = CELL_TETS[P][t];
+    let any_moved = moved[a as usize] | moved[b as usize] | moved[c as usize] | moved[d as usize];
+    let inverted = if ORIENTATION[P][t].1 {
+        !d_positive
+    } else {
+        d_positive
+    };
+    (!any_moved | inverted) & ((1 << LANES) - 1)
 }
 
 /// Lanes passing test `t` with plane value `v` (bit per lane).
@@ -156,6 +178,7 @@ pub(crate) fn raster_group<const P: usize>(
     let last = 1 + nx * (1 + ny);
     let n_vertices = disp[0].len().min(disp[1].len()).min(disp[2].len());
     assert!(base.iter().all(|&b| b + last < n_vertices));
+    let cell_i = [0, 1, 2].map(|a| I::new(cell_f[a].map(|v| v as i32)));
     let cell_f = [F::new(cell_f[0]), F::new(cell_f[1]), F::new(cell_f[2])];
     let inv = [
         F::splat(ctx.inv_spacing[0]),
@@ -163,21 +186,25 @@ pub(crate) fn raster_group<const P: usize>(
         F::splat(ctx.inv_spacing[2]),
     ];
     let mut p = [[F::ZERO; 3]; 8];
+    // Lanes where corner c moved (its position is not its rest index).
+    let mut moved = [0u32; 8];
     for c in 0..8u8 {
         let o = corner_offset(c);
         let off = o[0] + nx * (o[1] + ny * o[2]);
+        let mut m = F::ZERO.simd_ne(F::ZERO);
         for a in 0..3 {
             let d = &disp[a];
-            // SAFETY: `off <= last` and every `base[l] + last` is in bounds
-            // (asserted above).
             let mut v = [0f32; LANES];
             for l in 0..LANES {
                 // SAFETY: `off <= last` and every `base[l] + last` is in
                 // bounds (asserted above).
                 v[l] = unsafe { *d.get_unchecked(base[l] + off) };
             }
-            p[c as usize][a] = (cell_f[a] + F::splat(o[a] as f32)) + F::new(v) * inv[a];
+            let rest = cell_f[a] + F::splat(o[a] as f32);
+            p[c as usize][a] = rest + F::new(v) * inv[a];
+            m |= p[c as usize][a].simd_ne(rest);
         }
+        moved[c as usize] = m.to_bitmask();
     }
     // Candidate boxes: ⌈min⌉ ..= ⌊max⌋ of the corners per axis, clipped
     // (`ceil_i32` / `floor_i32` per lane: saturating truncation, then ±1).
@@ -225,6 +252,14 @@ pub(crate) fn raster_group<const P: usize>(
             }
         }
     }
+    // Owner keys' weak bit per tetrahedron and lane (see `WEAK_OWNER`).
+    let weak = [
+        weak_lanes::<P>(0, &moved, cs[0].t_corner.positive),
+        weak_lanes::<P>(1, &moved, cs[1].t_corner.positive),
+        weak_lanes::<P>(2, &moved, cs[2].t_corner.positive),
+        weak_lanes::<P>(3, &moved, cs[3].t_corner.positive),
+        weak_lanes::<P>(4, &moved, cs[0].t_central.positive),
+    ];
     // Walk every lane's box in step; lanes that run out drop out. Cursors
     // stay inside their box (they wrap), so "at the end" is equality.
     let mut q = lo;
@@ -245,42 +280,55 @@ pub(crate) fn raster_group<const P: usize>(
             eval(&cs[2].interior, &qf),
             eval(&cs[3].interior, &qf),
         ];
-        // Corner tetrahedron k takes the lanes that pass its four faces and
-        // no smaller one; the owner's bits are (k & 1, k >> 1, central).
-        let (mut found, mut bit0, mut bit1) = (0u32, 0u32, 0u32);
+        // Lanes passing each tetrahedron's four faces: corner tetrahedra
+        // 0..4, then the central one.
+        let mut passing = [0u32; 5];
         for k in 0..4 {
             let c = &cs[k];
-            let mut m = pass(&c.t_corner, ti[k]) & live[k] & !found;
+            let mut m = pass(&c.t_corner, ti[k]) & live[k] & active;
             if m != 0 {
                 for mm in 0..3 {
                     m &= pass(&c.t_boundary[mm], eval(&c.boundary[mm], &qf));
                 }
-                found |= m;
-                if k & 1 != 0 {
-                    bit0 |= m;
-                }
-                if k & 2 != 0 {
-                    bit1 |= m;
-                }
             }
+            passing[k] = m;
         }
-        let central = live[4]
+        passing[4] = live[4]
             & pass(&cs[0].t_central, ti[0])
             & pass(&cs[1].t_central, ti[1])
             & pass(&cs[2].t_central, ti[2])
             & pass(&cs[3].t_central, ti[3])
-            & !found;
-        found = (found | central) & active;
+            & active;
+        let mut found = passing.iter().fold(0, |a, &m| a | m);
         if found != 0 {
+            // Lanes whose centre is the rest position of a still corner c:
+            // a tetrahedron touching it only there claims it weakly.
+            let at = [0, 1, 2].map(|a| [q[a].simd_eq(cell_i[a]), q[a].simd_eq(cell_i[a] + I::ONE)]);
+            let mut at_still = [0u32; 8];
+            for (c, s) in at_still.iter_mut().enumerate() {
+                let m = at[0][c & 1] & at[1][(c >> 1) & 1] & at[2][c >> 2];
+                *s = m.to_bitmask() & !moved[c];
+            }
             let (qx, qy, qz) = (q[0].to_array(), q[1].to_array(), q[2].to_array());
             while found != 0 {
                 let l = found.trailing_zeros() as usize;
                 found &= found - 1;
-                let owner = ((bit0 >> l) & 1) | ((bit1 >> l) & 1) << 1 | ((central >> l) & 1) << 2;
-                let id = base_id(l) + owner;
+                // The lane's smallest key among its passing tetrahedra.
+                let mut key = u32::MAX;
+                for t in 0..5 {
+                    if (passing[t] >> l) & 1 != 0 {
+                        let [a, b, c, d] = CELL_TETS[P][t];
+                        let touch = at_still[a as usize]
+                            | at_still[b as usize]
+                            | at_still[c as usize]
+                            | at_still[d as usize];
+                        let w = (((weak[t] | touch) >> l) & 1) * WEAK_OWNER;
+                        key = key.min(w | (base_id(l) + t as u32));
+                    }
+                }
                 let o = &out[ctx.output.linear([qx[l], qy[l], qz[l]])];
-                if o.load(Relaxed) > id {
-                    o.fetch_min(id, Relaxed);
+                if o.load(Relaxed) > key {
+                    o.fetch_min(key, Relaxed);
                 }
             }
         }
@@ -309,7 +357,7 @@ mod tests {
         /// the owners of the scalar reference, cell by cell.
         #[test]
         fn lanes_equal_scalar_reference(
-            d in proptest::collection::vec(-0.6f32..0.6, 3 * 7 * 5 * 4),
+            d in proptest::collection::vec(prop_oneof![Just(0.0f32), -1.2f32..1.2], 3 * 7 * 5 * 4),
             picks in proptest::collection::vec((0usize..72, 0u8..32), 1..2 * LANES + 1),
             eps in prop::sample::select(vec![0.0f32, 1e-6, 1e-2]),
         ) {
@@ -356,27 +404,33 @@ mod tests {
                         c.x[q as usize] = deformed_coordinate(v[0], x[g], inv[0]);
                         c.y[q as usize] = deformed_coordinate(v[1], y[g], inv[1]);
                         c.z[q as usize] = deformed_coordinate(v[2], z[g], inv[2]);
+                        let still = c.x[q as usize] == v[0] as f32
+                            && c.y[q as usize] == v[1] as f32
+                            && c.z[q as usize] == v[2] as f32;
+                        c.moved |= (!still as u8) << q;
                     }
-                    let owner = |r: &mut dyn FnMut([f32; 3]) -> Option<usize>, lo: [i32; 3], hi: [i32; 3], want: &mut Vec<u32>| {
+                    c.rest = cell.map(|v| v as i32);
+                    let owner = |r: &mut dyn FnMut([f32; 3]) -> Option<u32>, lo: [i32; 3], hi: [i32; 3], want: &mut Vec<u32>| {
                         for zz in lo[2]..=hi[2] {
                             for yy in lo[1]..=hi[1] {
                                 for xx in lo[0]..=hi[0] {
-                                    if let Some(t) = r([xx as f32, yy as f32, zz as f32]) {
+                                    if let Some(key) = r([xx as f32, yy as f32, zz as f32]) {
                                         let o = output.linear([xx, yy, zz]);
-                                        want[o] = want[o].min(mesh.tet_id(cell, t));
+                                        want[o] = want[o].min(key);
                                     }
                                 }
                             }
                         }
                     };
+                    let key = |t: usize, weak: bool| mesh.tet_id(cell, t) | ((weak as u32) * WEAK_OWNER);
                     if parity == 0 {
                         if let Some(mut r) = CellRaster::<0>::new(&c, removed[l], eps, &clip) {
                             let (lo, hi) = (r.lo, r.hi);
-                            owner(&mut |q| r.owner(q), lo, hi, &mut want);
+                            owner(&mut |q| r.owner(q).map(|(t, w)| key(t, w)), lo, hi, &mut want);
                         }
                     } else if let Some(mut r) = CellRaster::<1>::new(&c, removed[l], eps, &clip) {
                         let (lo, hi) = (r.lo, r.hi);
-                        owner(&mut |q| r.owner(q), lo, hi, &mut want);
+                        owner(&mut |q| r.owner(q).map(|(t, w)| key(t, w)), lo, hi, &mut want);
                     }
                 }
                 let got: Vec<u32> = out.iter().map(|a| a.load(Relaxed)).collect();

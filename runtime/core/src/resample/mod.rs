@@ -17,15 +17,18 @@
 //!    [`ResampleParams::background`].
 //! 4. **Two-pass deterministic rasterisation** ([`raster`]): pass 1 runs per
 //!    cell, gives every output voxel centre in the cell's deformed bounding
-//!    box to the smallest tetrahedron of the cell that contains it and
-//!    `atomic-min`s that tetrahedron's id into the output, viewed as `u32`
-//!    (the CPU evaluates eight cells per SIMD lane group); pass 2 runs per
-//!    output voxel and replaces
-//!    the owner id by the value interpolated with the owner's barycentric
-//!    weights (f32 bits, in place). The smallest id wins shared faces and
-//!    folds, so the result does not depend on thread timing and is the same
-//!    on CPU and GPU. An unmoved voxel reproduces its source value bit for
-//!    bit.
+//!    box to the containing tetrahedron of the cell with the smallest *owner
+//!    key* and `atomic-min`s that key into the output, viewed as `u32` (the
+//!    CPU evaluates eight cells per SIMD lane group); pass 2 runs per output
+//!    voxel and replaces the key by the value interpolated with the owner's
+//!    barycentric weights (f32 bits, in place). The key is the tetrahedron
+//!    id with [`sampling_mesh::WEAK_OWNER`] set on weak claims (a tetrahedron
+//!    that did not move, is inverted, or touches the centre only at a still
+//!    vertex), so where the deformed mesh overlaps itself moved tissue wins
+//!    over the still air and inverted cells beneath it, in every direction;
+//!    the smallest id decides among equal claims (shared faces). The result
+//!    does not depend on thread timing and is the same on CPU and GPU. An
+//!    unmoved voxel reproduces its source value bit for bit.
 //! 5. **Removed tetrahedra** ([`TetMask`]) are skipped (cuts).
 //! 6. **Dirty-region resampling** ([`plan`]): after a localised change only
 //!    the output box `R` that the moved cells covered before or cover now is

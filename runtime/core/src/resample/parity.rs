@@ -357,6 +357,45 @@ pub fn check_deformed_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
     Ok(())
 }
 
+/// Folds: a block of vertices pulled several cells through still
+/// neighbours, towards lower and towards higher indices along each axis
+/// (moved over still cells, inverted cells, still vertices covered by moved
+/// tissue — every case of the owner-key rule, `sampling_mesh::WEAK_OWNER`):
+/// the GPU's owners are the CPU's, so the outputs are bit-identical.
+pub fn check_folds_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    let grid = test_grid();
+    let params = ResampleParams {
+        background: -3000.0,
+        ..Default::default()
+    };
+    let vol = head_i16(&grid);
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let mut f = Field::zero(&grid);
+            let d = grid.dims;
+            for k in d[2] / 3..d[2] / 2 {
+                for j in d[1] / 3..d[1] / 2 {
+                    for i in d[0] / 3..d[0] / 2 {
+                        let l = grid.linear(i, j, k);
+                        let by = sign * 4.5 * grid.spacing[axis] as f32;
+                        [&mut f.x, &mut f.y, &mut f.z][axis][l] = by;
+                    }
+                }
+            }
+            let want = cpu_run(&vol, &f, None, params)?;
+            let got = gpu_run(gpu, &vol, &f, None, params)?;
+            compare(
+                &format!("fold along axis {axis}, sign {sign}"),
+                &want,
+                &got,
+                params.background,
+                None,
+            )?;
+        }
+    }
+    Ok(())
+}
+
 /// As [`check_deformed_matches_cpu`] but with a storage binding limit so
 /// small that the output is processed in many z-slabs; an exact integer
 /// translation (output grown, slabbed) must still match bit for bit; and a
@@ -525,6 +564,7 @@ pub fn check_dirty_matches_full(gpu: &dyn GpuService) -> Result<(), String> {
 pub fn check_all(gpu: &dyn GpuService) -> Result<(), String> {
     check_identity_bitwise(gpu)?;
     check_deformed_matches_cpu(gpu)?;
+    check_folds_match_cpu(gpu)?;
     check_output_slabs(gpu)?;
     check_mask_matches_cpu(gpu)?;
     check_dirty_matches_full(gpu)

@@ -16,8 +16,11 @@
 //! compute the face's plane from the same vertices in the same order, bit
 //! for bit (see [`super::raster`]).
 //!
-//! Tetrahedron id = `cell_linear * 5 + t` as `u32` (`u32::MAX` is reserved
-//! as "no owner"), with `cell_linear = i + (nx−1)·(j + (ny−1)·k)`.
+//! Tetrahedron id = `cell_linear * 5 + t` as `u32`, below `2³¹ − 1`, with
+//! `cell_linear = i + (nx−1)·(j + (ny−1)·k)`. Pass 1 of the resampler
+//! stores an *owner key* per output voxel: the id, with [`WEAK_OWNER`] set
+//! for a tetrahedron that did not move or is inverted (`u32::MAX` = no
+//! owner).
 
 use super::ResampleError;
 use crate::fast_div::FastDiv;
@@ -25,6 +28,30 @@ use crate::grid::Grid;
 
 /// Tetrahedra per hexahedral cell.
 pub const TETS_PER_CELL: usize = 5;
+
+/// Bit of an owner key marking a *weak* claim of a tetrahedron on a voxel
+/// centre: none of the tetrahedron's vertices moved, it is inverted (its
+/// orientation opposite to its rest orientation), or the centre is the rest
+/// position of one of its vertices that did not move (it touches the centre
+/// only there). Where tetrahedra overlap, the smallest key wins, so a
+/// moved, positively oriented tetrahedron always beats a weak claim, and
+/// the smallest id only decides among equals. Without overlaps nothing
+/// changes: a centre on a still vertex is weak for every tetrahedron there,
+/// and every one of them gives the vertex's own value (the identity stays
+/// bit-exact).
+///
+/// *Why:* a model that moves tissue into the air around it (ChainMail's air
+/// voxels are not elements and never move) leaves the air's cells where
+/// they were, under the stretched tissue, with the air vertices' own
+/// tetrahedra touching each still vertex, and the cells between the moved
+/// surface and the still air inverted. With the smallest id alone, these
+/// won wherever their ids were smaller — only when tissue was pulled
+/// towards lower voxel indices — and the stretched tissue vanished from the
+/// output (issue 12, item 1). The rule is the same in every direction.
+pub const WEAK_OWNER: u32 = 1 << 31;
+
+/// The tetrahedron id of an owner key (see [`WEAK_OWNER`]).
+pub const OWNER_ID: u32 = WEAK_OWNER - 1;
 
 /// Corners (`c = cx + 2 cy + 4 cz`, ascending) of the five tetrahedra of a
 /// cell, for even (`[0]`) and odd (`[1]`) `i + j + k`. Tetrahedron 4 is the
@@ -178,6 +205,81 @@ pub(crate) const CORNER_TABLES: CornerTables = CornerTables {
     boundary: [CORNER_EVEN.1, CORNER_ODD.1],
 };
 
+/// The face test whose `D` decides each tetrahedron's orientation, and that
+/// `D`'s sign at rest, per parity and tetrahedron: `(slot, positive)`, `D`
+/// being the plane of the face opposite corner slot `slot` (ascending
+/// corners) evaluated at that corner. For corner tetrahedron `k` it is the
+/// interior face at its corner vertex, for the central one the interior face
+/// of corner tetrahedron 0 at the central vertex opposite it — the `D`s the
+/// CPU kernel already has (`lanes.rs`); `raster.wgsl` mirrors the table as
+/// `ORIENT`. A tetrahedron is inverted when its `D` has the other sign.
+pub(crate) const ORIENTATION: [[(u8, bool); TETS_PER_CELL]; 2] =
+    [build_orientation(0), build_orientation(1)];
+
+const fn slot_of(tet: &[u8; 4], corner: u8) -> u8 {
+    let mut a = 0;
+    while a < 4 {
+        if tet[a] == corner {
+            return a as u8;
+        }
+        a += 1;
+    }
+    panic!("corner not in tetrahedron")
+}
+
+/// `D` at rest (integer corners) of the face opposite slot `a` of `tet`.
+const fn rest_d(p: usize, tet: &[u8; 4], a: usize) -> i32 {
+    let f = FACE_TABLES.tet_faces[p][slot_tet(p, tet)][a];
+    let [u, v, w] = FACE_TABLES.faces[p][f as usize];
+    let (pu, pv, pw, pa) = (rest_pos(u), rest_pos(v), rest_pos(w), rest_pos(tet[a]));
+    let x = [pv[0] - pu[0], pv[1] - pu[1], pv[2] - pu[2]];
+    let y = [pw[0] - pu[0], pw[1] - pu[1], pw[2] - pu[2]];
+    let n = [
+        x[1] * y[2] - x[2] * y[1],
+        x[2] * y[0] - x[0] * y[2],
+        x[0] * y[1] - x[1] * y[0],
+    ];
+    n[0] * (pa[0] - pu[0]) + n[1] * (pa[1] - pu[1]) + n[2] * (pa[2] - pu[2])
+}
+
+/// Rest position of corner `c` (cell-local voxel index units).
+const fn rest_pos(c: u8) -> [i32; 3] {
+    let o = corner_offset(c);
+    [o[0] as i32, o[1] as i32, o[2] as i32]
+}
+
+/// Which of the parity's five tetrahedra `tet` is.
+const fn slot_tet(p: usize, tet: &[u8; 4]) -> usize {
+    let mut t = 0;
+    while t < TETS_PER_CELL {
+        let c = &CELL_TETS[p][t];
+        if c[0] == tet[0] && c[1] == tet[1] && c[2] == tet[2] && c[3] == tet[3] {
+            return t;
+        }
+        t += 1;
+    }
+    panic!("not a tetrahedron of the cell")
+}
+
+const fn build_orientation(p: usize) -> [(u8, bool); TETS_PER_CELL] {
+    let mut out = [(0u8, false); TETS_PER_CELL];
+    let mut k = 0;
+    while k < 4 {
+        let tet = &CELL_TETS[p][k];
+        let a = slot_of(tet, CORNER_TABLES.interior[p][k][1]);
+        let d = rest_d(p, tet, a as usize);
+        assert!(d != 0, "a rest tetrahedron is not degenerate");
+        out[k] = (a, d > 0);
+        k += 1;
+    }
+    let central = &CELL_TETS[p][4];
+    let a = slot_of(central, CORNER_TABLES.interior[p][0][2]);
+    let d = rest_d(p, central, a as usize);
+    assert!(d != 0, "a rest tetrahedron is not degenerate");
+    out[4] = (a, d > 0);
+    out
+}
+
 /// Offset `[cx, cy, cz]` of cell corner `c` (`c = cx + 2 cy + 4 cz`).
 #[inline]
 pub const fn corner_offset(c: u8) -> [usize; 3] {
@@ -215,7 +317,8 @@ pub struct SamplingMesh {
 
 impl SamplingMesh {
     /// The mesh of `grid`: at least 2 voxels per axis, and every tetrahedron
-    /// id must fit a `u32` below `u32::MAX`.
+    /// id must fit [`OWNER_ID`] (below `2³¹ − 1`: 429 million cells, e.g.
+    /// 512 × 512 × 1,600 voxels).
     pub fn new(grid: &Grid) -> Result<Self, ResampleError> {
         let d = grid.dims;
         if d.iter().any(|&n| n < 2) {
@@ -223,7 +326,7 @@ impl SamplingMesh {
         }
         let cells = (d[0] as u128 - 1) * (d[1] as u128 - 1) * (d[2] as u128 - 1);
         let tets = cells * TETS_PER_CELL as u128;
-        if tets >= u32::MAX as u128 {
+        if tets >= OWNER_ID as u128 {
             return Err(ResampleError::TooManyCells {
                 dims: d,
                 tetrahedra: tets as u64,
