@@ -306,4 +306,5 @@ fn rest(n: usize) {
         mean(40..80),
         mean(80..150)
     );
+    println!("notes: {:?}", m.notes());
 }
