@@ -20,6 +20,8 @@ use voxflex_chainmail::model::ChainMail;
 use voxflex_chainmail::params::{ChainMailParams, InteractionSpec};
 use voxflex_core::phantom::phantom;
 
+/// The papers' test parameters; plain relaxation (`over_relaxation = 1`),
+/// as the papers relax, so the figures compare like for like.
 fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
     // "frontier" selects the parallel algorithm with the element work-list.
     let (algorithm, schedule) = match algorithm {
@@ -28,6 +30,7 @@ fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
     };
     ChainMailParams::from_toml(&format!(
         "algorithm = \"{algorithm}\"\nschedule = \"{schedule}\"\nblock = {block:?}\n\
+         over_relaxation = 1.0\n\
          materials = [{{ range = [-1e9, 1e9], constraint = 0.1, elastic = 1.0 }}]"
     ))
     .expect("bench parameters")
@@ -80,6 +83,10 @@ fn main() {
     };
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
 
+    if std::env::args().any(|a| a == "rest") {
+        rest(n);
+        return;
+    }
     if std::env::args().any(|a| a == "kernels") {
         // Only the relaxation kernels (for profiling).
         let (.., pm) = run("parallel", [8, 4, 4], 20);
@@ -246,4 +253,58 @@ fn relaxation_kernels(pm: &ChainMail, ms: impl Fn(std::time::Duration) -> f64) {
         "relaxation over every block: {:.2} ms per sweep",
         ms(t.elapsed()) / 40.0
     );
+}
+
+/// The head pull to rest: an `n³` crop of the head phantom (the head
+/// scene's materials, skull fixed), the scalp pulled out by 20 mm over 6
+/// frames, 150 frames of 10 + 10 iterations; every frame's wall time,
+/// blocks visited and largest relaxation move, the rest frame, and the
+/// mean cost per frame early and late. `mirror` pulls the other side.
+fn rest(n: usize) {
+    let mirrored = std::env::args().any(|a| a == "mirror");
+    let verbose = std::env::args().any(|a| a == "verbose");
+    let extra: String = std::env::args()
+        .filter_map(|a| a.strip_prefix("param:").map(str::to_owned))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let fix = std::env::args().any(|a| a == "fix");
+    let mut m = voxflex_chainmail::scenes::head_pull(n, 20.0, 6, mirrored, fix, &extra);
+    println!(
+        "head pull: {n}³ crop, {} elements, 20 mm over 6 frames{}{}, {extra}",
+        m.lattice().element_count(),
+        if mirrored { " (mirrored)" } else { "" },
+        if fix {
+            ", skull fixed"
+        } else {
+            ", skull free (rigid)"
+        }
+    );
+    let mut rest_frame = None;
+    let mut ms = Vec::new();
+    for f in 1..=150u64 {
+        let s = m.step_stats();
+        ms.push(s.ms);
+        if verbose || f % 10 == 0 || f <= 10 {
+            println!(
+                "frame {f:3}: {:7.2} ms, blocks propagated {:6}, relaxed {:7}, sweeps {:2}, max move {:.2e}, changed {}",
+                s.ms, s.propagation_blocks, s.relaxation_blocks, s.sweeps, s.max_move, s.changed
+            );
+        }
+        if !s.changed && rest_frame.is_none() {
+            rest_frame = Some(f);
+        }
+    }
+    let mean = |r: std::ops::Range<usize>| {
+        let r = r.start.min(ms.len())..r.end.min(ms.len());
+        ms[r.clone()].iter().sum::<f64>() / r.len().max(1) as f64
+    };
+    println!(
+        "rest frame: {}; ms per frame: frames 1–10 {:.2}, 11–40 {:.2}, 41–80 {:.2}, 81–150 {:.2}",
+        rest_frame.map_or("none within 150".into(), |f| f.to_string()),
+        mean(0..10),
+        mean(10..40),
+        mean(40..80),
+        mean(80..150)
+    );
+    println!("notes: {:?}", m.notes());
 }

@@ -57,12 +57,15 @@ pub struct MaterialEntry {
     /// Mean constraint fraction (dimensionless), for propagation times and
     /// relaxation weights.
     pub frac: f32,
-    /// Relaxation step fraction (1 elastic … 0 plastic).
+    /// Relaxation step fraction: the material's `elastic` (1 elastic … 0
+    /// plastic) times the over-relaxation factor ω (< 2).
     pub elastic: f32,
 }
 
 impl MaterialEntry {
-    fn new(m: &Material, spacing: [f64; 3]) -> Self {
+    /// The kernels' entry for material `m` at `spacing` (mm), with the
+    /// over-relaxation factor `omega` folded into its elastic fraction.
+    fn new(m: &Material, spacing: [f64; 3], omega: f64) -> Self {
         let c = if m.rigid {
             [0.0; 3]
         } else {
@@ -71,7 +74,7 @@ impl MaterialEntry {
         Self {
             d: [0, 1, 2].map(|a| (c[a] * spacing[a]) as f32),
             frac: ((c[0] + c[1] + c[2]) / 3.0) as f32,
-            elastic: m.elastic as f32,
+            elastic: (m.elastic * omega) as f32,
         }
     }
 }
@@ -198,10 +201,11 @@ impl ElementLattice {
         }
         let sp = g.spacing.to_array();
         let spacing = sp.map(|s| s * k as f64);
+        let omega = params.omega(dims.into_iter().max().unwrap_or(1));
         let materials: Vec<MaterialEntry> = params
             .materials
             .iter()
-            .map(|m| MaterialEntry::new(m, spacing))
+            .map(|m| MaterialEntry::new(m, spacing, omega))
             .collect();
         let ranges: Vec<[f64; 2]> = params.materials.iter().map(|m| m.range).collect();
         let classify = |v: f64| -> Cell {

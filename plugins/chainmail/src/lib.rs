@@ -34,6 +34,7 @@
 //! same layout, chosen by the scene's `backend`.
 
 pub mod blocks;
+pub mod conflicts;
 pub mod gpu;
 pub mod lattice;
 pub mod mapping;
@@ -45,10 +46,16 @@ pub mod relax_lanes;
 pub mod relax_passes;
 pub mod removal;
 pub mod row_moves;
+pub mod run_log;
+pub mod scenes;
 pub mod state;
 
 #[cfg(test)]
+mod conflict_tests;
+#[cfg(test)]
 mod gpu_tests;
+#[cfg(test)]
+mod rest_tests;
 #[cfg(test)]
 mod tests;
 
@@ -59,7 +66,7 @@ use voxflex_abi::ffi::{CAPABILITY_CPU, CAPABILITY_GPU};
 use voxflex_abi::{DeformationPlugin, HostContext};
 use voxflex_core::deformation::{
     BindingId, DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo,
-    RestPoints, StepOutcome,
+    ModelNotes, RestPoints, StepOutcome,
 };
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
@@ -146,9 +153,12 @@ impl DeformationModel for ChainMailPlugin {
         self.model_mut()?.interact(&spec)
     }
 
-    fn step(&mut self, _frame: FrameInfo) -> Result<StepOutcome, ModelError> {
+    fn step(&mut self, frame: FrameInfo) -> Result<StepOutcome, ModelError> {
         let model = self.model_mut()?;
         let changed = model.step();
+        if frame.frame + 1 == frame.frames {
+            model.warn_if_not_at_rest();
+        }
         if let Some(e) = model.take_gpu_error() {
             return Err(e);
         }
@@ -230,6 +240,14 @@ impl DeformationModel for ChainMailPlugin {
         cell_bits: &mut [u8],
     ) -> Result<bool, ModelError> {
         self.removed(binding, cell_bits)
+    }
+
+    fn notes(&mut self) -> Result<ModelNotes, ModelError> {
+        Ok(self
+            .model
+            .as_ref()
+            .map(ChainMail::notes)
+            .unwrap_or_default())
     }
 }
 

@@ -2,6 +2,7 @@
 //! schedule (interleaved propagation and relaxation).
 
 use crate::blocks::{Blocks, FaceMask};
+use crate::conflicts::{self, Conflicts, Violation};
 use crate::gpu::GpuChainMail;
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::params::{Algorithm, ChainMailParams, InteractionSpec, Schedule};
@@ -9,6 +10,7 @@ use crate::propagate::{frontier_iteration, gibson, jacobi_iteration, next_fronti
 use crate::relax::sweep_scalar;
 use crate::relax_passes::{SweepScratch, sweep_runs};
 use crate::removal::{carve_tets, cut_tets};
+use crate::run_log::RunLog;
 use crate::state::{MAX_WAVE, State, key};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -54,6 +56,24 @@ pub struct SettleReport {
     pub at_rest: bool,
 }
 
+/// What one frame ([`ChainMail::step`]) did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// Wall time of the frame's model work, ms.
+    pub ms: f64,
+    /// Blocks visited by propagation, summed over the frame's iterations.
+    pub propagation_blocks: u64,
+    /// Blocks visited by relaxation, summed over the frame's sweeps.
+    pub relaxation_blocks: u64,
+    /// Relaxation sweeps run.
+    pub sweeps: u64,
+    /// Largest element move of the frame's last sweep, fraction of the
+    /// element spacing.
+    pub max_move: f64,
+    /// The step reported a change (downstream re-maps).
+    pub changed: bool,
+}
+
 /// A heterogeneous ChainMail model over a volume.
 pub struct ChainMail {
     params: ChainMailParams,
@@ -80,6 +100,14 @@ pub struct ChainMail {
     unsynced: Vec<u32>,
     unsynced_flag: Vec<bool>,
     wave: u32,
+    /// Largest move of the last relaxation sweep, fraction of the spacing.
+    last_max_move: f64,
+    /// Link violations per block, for the conflict check.
+    conflicts: Conflicts,
+    /// Propagation ran (or a grab moved) since the last conflict check.
+    propagated_since_check: bool,
+    /// Frames so far, for the notes.
+    log: RunLog,
     grabs: Vec<Grab>,
     counts: Counts,
     /// Sampling-mesh tetrahedra the cuts and carving removed (one byte per
@@ -125,6 +153,10 @@ impl ChainMail {
             frontier: Vec::new(),
             relax: Vec::new(),
             wave: 0,
+            last_max_move: 0.0,
+            conflicts: Conflicts::new(&blocks),
+            propagated_since_check: false,
+            log: RunLog::default(),
             grabs: Vec::new(),
             counts: Counts::default(),
             removed_tets: Vec::new(),
@@ -451,8 +483,16 @@ impl ChainMail {
     /// Marks element `n`'s block dirty and due for relaxation.
     fn touch(&mut self, n: usize) {
         let b = self.blocks.of(self.lat.coords(n));
-        self.dirty[b] = true;
+        self.mark_changed(b);
         insert_sorted(&mut self.relax, b as u32);
+    }
+
+    /// Block `b` changed: the map must re-read it and its links must be
+    /// measured again.
+    #[inline]
+    fn mark_changed(&mut self, b: usize) {
+        self.dirty[b] = true;
+        self.conflicts.mark(b);
     }
 
     /// Cuts the links crossing `polygon` (fanned from its first corner);
@@ -524,6 +564,7 @@ impl ChainMail {
         }
         self.wave += 1;
         let k = key(self.wave, 0);
+        self.propagated_since_check = true;
         for (e, u) in targets {
             self.state.set_both(e, u, k);
             self.on_device(|g, _| g.write_element(e, u, k));
@@ -532,7 +573,7 @@ impl ChainMail {
                 insert_sorted(&mut self.active, b as u32);
             }
             insert_sorted(&mut self.relax, b as u32);
-            self.dirty[b] = true;
+            self.mark_changed(b);
             moved.push(e);
         }
         moved
@@ -543,6 +584,13 @@ impl ChainMail {
     /// `relaxation_iterations` relaxation sweeps, or (sequential) one full
     /// Gibson pass and the sweeps. Returns true when anything moved.
     pub fn step(&mut self) -> bool {
+        self.step_stats().changed
+    }
+
+    /// [`Self::step`], with what the frame did.
+    pub fn step_stats(&mut self) -> FrameStats {
+        let t = std::time::Instant::now();
+        let mut stats = FrameStats::default();
         let moved = self.advance_grabs();
         let mut changed = !moved.is_empty() || std::mem::take(&mut self.topology_changed);
         match self.params.algorithm {
@@ -551,6 +599,7 @@ impl ChainMail {
                     if !self.propagating() {
                         break;
                     }
+                    stats.propagation_blocks += self.active.len() as u64;
                     changed |= self.propagate_once();
                 }
             }
@@ -564,9 +613,125 @@ impl ChainMail {
             if self.relax.is_empty() {
                 break;
             }
+            stats.relaxation_blocks += self.relax.len() as u64;
+            stats.sweeps += 1;
             changed |= self.relax_once();
+            stats.max_move = self.last_max_move;
         }
-        changed
+        stats.changed = changed;
+        if self.propagated_since_check && !self.propagating() {
+            self.check_conflicts();
+        }
+        stats.ms = t.elapsed().as_secs_f64() * 1e3;
+        self.log.frame(&stats, self.at_rest());
+        stats
+    }
+
+    /// Measures the link violations left now that propagation has settled
+    /// (see [`crate::conflicts`]), logs them, and warns when the largest
+    /// exceeds the tolerance and a quarter more than the last warning.
+    fn check_conflicts(&mut self) {
+        if let Err(e) = self.pull() {
+            self.gpu_error.get_or_insert(e);
+            return;
+        }
+        self.propagated_since_check = false;
+        let spacing = self
+            .lat
+            .spacing
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let tol_mm = (conflicts::TOLERANCE * spacing) as f32;
+        let mut v = self
+            .conflicts
+            .check(&self.lat, &self.state, &self.blocks, tol_mm);
+        if v.count > 0 && !self.grabs.is_empty() {
+            // The grabs are what pulled the links apart.
+            v.kinds |= conflicts::HELD_END;
+        }
+        self.log.conflict(v);
+        if v.count > 0 && v.mm > 1.25 * self.log.last_warned_mm {
+            self.log.last_warned_mm = v.mm;
+            self.warn_conflict(v, spacing);
+        }
+    }
+
+    fn warn_conflict(&self, v: Violation, spacing: f64) {
+        tracing::warn!("{}", self.conflict_message(v, spacing));
+    }
+
+    /// The warning about the worst conflict measured so far, if any.
+    pub fn conflict_warning(&self) -> Option<String> {
+        let spacing = self
+            .lat
+            .spacing
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let (v, _) = self.log.worst?;
+        Some(self.conflict_message(v, spacing))
+    }
+
+    fn conflict_message(&self, v: Violation, spacing: f64) -> String {
+        let at = |n: u32| {
+            let p = self.lat.world(self.lat.coords(n as usize));
+            format!("[{:.1}, {:.1}, {:.1}]", p.x, p.y, p.z)
+        };
+        format!(
+            "chainmail: {} link constraints cannot hold ({}): the largest violation is \
+             {:.3} mm ({:.2} element spacings) on the link between the elements at {} and {} mm \
+             (rest positions, world LPS); propagation never moves fixed or held elements, so \
+             the tissue between them tears. Move the `fix` box or the grab's `point` apart, \
+             shorten its `by`/`to`, or raise the materials' `constraint` (violations up to {} \
+             of the spacing are ignored)",
+            v.count,
+            conflicts::describe(v.kinds),
+            v.mm,
+            v.mm as f64 / spacing,
+            at(v.link.0),
+            at(v.link.1),
+            conflicts::TOLERANCE
+        )
+    }
+
+    /// What the model reports about its run (see [`RunLog::notes`]), plus
+    /// the iteration counts.
+    pub fn notes(&self) -> voxflex_core::deformation::ModelNotes {
+        let mut notes = voxflex_core::deformation::ModelNotes::new();
+        self.log.notes(&mut notes);
+        let c = self.counts;
+        notes.insert(
+            "propagation_iterations".into(),
+            c.propagation_iterations as f64,
+        );
+        notes.insert("relaxation_sweeps".into(), c.relaxation_iterations as f64);
+        notes
+    }
+
+    /// Warns when work is still pending (call after a run's last frame):
+    /// the model has not come to rest and the last frames were not final.
+    pub fn warn_if_not_at_rest(&self) {
+        if self.at_rest() {
+            return;
+        }
+        tracing::warn!(
+            "chainmail: not at rest after {} frames: {} blocks still propagating, {} relaxing \
+             (last sweep moved an element by {:.1e} of the spacing; rest below \
+             `rest_tolerance` = {:.1e}); add frames or raise `relaxation_iterations` \
+             (now {}) or `rest_tolerance`",
+            self.log.frames,
+            self.active.len() + self.frontier.len(),
+            self.relax.len(),
+            self.last_max_move,
+            self.params.rest_tolerance,
+            self.params.relaxation_iterations
+        );
+    }
+
+    /// The run so far (frames, rest, conflicts).
+    pub fn run_log(&self) -> &RunLog {
+        &self.log
     }
 
     /// Runs propagation, then relaxation, until nothing moves (or the caps
@@ -591,12 +756,15 @@ impl ChainMail {
     fn sequential_pass(&mut self, moved: &[usize]) {
         self.sync_copies();
         let updates = gibson(&self.lat, &self.state, moved, self.wave);
+        self.propagated_since_check = true;
         self.counts.propagation_iterations += 1;
         self.counts.updates += updates;
         self.counts.visits += updates;
         // Relax wherever the pass reached: every block is a candidate.
         self.relax = (0..self.blocks.len() as u32).collect();
-        self.dirty.iter_mut().for_each(|d| *d = true);
+        for b in 0..self.blocks.len() {
+            self.mark_changed(b);
+        }
     }
 
     /// Relaxation only, until at rest (or `max` sweeps); returns the sweeps.
@@ -656,6 +824,7 @@ impl ChainMail {
         self.counts.propagation_iterations += 1;
         self.counts.visits += rep.visits;
         self.counts.updates += rep.updates;
+        self.propagated_since_check = true;
         self.note_changes(&rep.blocks);
         self.active = self.blocks.next_active(&rep.blocks, &mut self.seen);
         merge_sorted(&mut self.relax, &self.active, &mut self.merge_scratch);
@@ -666,6 +835,7 @@ impl ChainMail {
         self.frontier.sort_unstable();
         self.frontier.dedup();
         let rep = frontier_iteration(&self.lat, &mut self.state, &self.frontier);
+        self.propagated_since_check = true;
         self.counts.propagation_iterations += 1;
         self.counts.visits += rep.visits;
         self.counts.updates += rep.updated.len() as u64;
@@ -677,7 +847,7 @@ impl ChainMail {
         touched.sort_unstable();
         touched.dedup();
         for &b in &touched {
-            self.dirty[b as usize] = true;
+            self.mark_changed(b as usize);
         }
         merge_sorted(&mut self.relax, &touched, &mut self.merge_scratch);
         self.frontier = next_frontier(&self.lat, &rep.updated);
@@ -708,6 +878,7 @@ impl ChainMail {
             )
         };
         self.counts.relaxation_iterations += 1;
+        self.last_max_move = rep.max_move;
         for &(b, _) in &rep.blocks {
             if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {
                 self.unsynced.push(b);
@@ -760,7 +931,7 @@ impl ChainMail {
     fn note_changes(&mut self, results: &[(u32, FaceMask)]) {
         for &(b, m) in results {
             if m != 0 {
-                self.dirty[b as usize] = true;
+                self.mark_changed(b as usize);
             }
         }
     }

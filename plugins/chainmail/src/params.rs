@@ -124,6 +124,16 @@ pub struct ChainMailParams {
     /// the element spacing in an iteration (default 1e-4).
     #[serde(default = "default_rest_tolerance")]
     pub rest_tolerance: f64,
+    /// Over-relaxation factor ω of the relaxation sweeps, in (0, 2): each
+    /// element moves `ω · elastic` of the way to its neighbours' weighted
+    /// mean. 1 is plain (Gauss-Seidel) relaxation, which needs on the order
+    /// of `L²` sweeps to settle a region `L` elements across; absent (the
+    /// default) picks `2 / (1 + sin(π / L))` for the lattice's largest side
+    /// `L` (successive over-relaxation: on the order of `L` sweeps),
+    /// divided by the largest `elastic` (see [`ChainMailParams::omega`]).
+    /// Explicit values must keep `ω · elastic < 2` for every material.
+    #[serde(default)]
+    pub over_relaxation: Option<f64>,
 }
 
 fn default_downsample() -> usize {
@@ -137,6 +147,29 @@ fn default_block() -> [usize; 3] {
 }
 fn default_rest_tolerance() -> f64 {
     1e-4
+}
+
+impl ChainMailParams {
+    /// The over-relaxation factor for a lattice whose largest side is `l`
+    /// elements (see [`ChainMailParams::over_relaxation`]). The automatic
+    /// choice is divided by the largest `elastic` fraction of a non-rigid
+    /// material, so the most elastic steps by exactly `2 / (1 + sin(π / l))`
+    /// and every product `ω · elastic` of those stays below 2 (a rigid
+    /// element cannot move in relaxation: its links allow one position).
+    pub fn omega(&self, l: usize) -> f64 {
+        self.over_relaxation.unwrap_or_else(|| {
+            let best = 2.0 / (1.0 + (std::f64::consts::PI / l.max(2) as f64).sin());
+            // Rigid materials are held by their own links (a box of size
+            // 0), whatever their elastic fraction.
+            let most = self
+                .materials
+                .iter()
+                .filter(|m| !m.rigid)
+                .map(|m| m.elastic)
+                .fold(0.0, f64::max);
+            if most > 0.0 { best / most } else { 1.0 }
+        })
+    }
 }
 
 /// Largest constraint fraction: keeps arrival times inside their 20 bits
@@ -208,6 +241,18 @@ impl ChainMailParams {
             return bad(
                 "rest_tolerance",
                 format!("{} must be in (0, 1)", self.rest_tolerance),
+            );
+        }
+        let most = self.materials.iter().map(|m| m.elastic).fold(0.0, f64::max);
+        if let Some(w) = self.over_relaxation
+            && !(w > 0.0 && w * most < 2.0)
+        {
+            return bad(
+                "over_relaxation",
+                format!(
+                    "{w} must be positive with {w} × the largest elastic ({most}) below 2 \
+                     (1 = plain relaxation; leave it out for the automatic choice)"
+                ),
             );
         }
         if let Some(c) = self.crop

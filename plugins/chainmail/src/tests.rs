@@ -45,7 +45,7 @@ pub(crate) fn grab(m: &mut ChainMail, at: [usize; 3], by: [f64; 3]) {
 }
 
 /// Largest violation of any link constraint (mm; ≤ 0 when all hold).
-fn worst_violation(m: &ChainMail) -> f32 {
+pub(crate) fn worst_violation(m: &ChainMail) -> f32 {
     let lat = m.lattice();
     let mut worst = f32::NEG_INFINITY;
     for n in 0..lat.len() {

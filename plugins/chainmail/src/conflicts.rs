@@ -1,0 +1,208 @@
+//! Conflicting constraints: the link violations propagation cannot undo.
+//!
+//! Propagation restores every link constraint `|u_n − u_e|_a ≤ D_a` it can
+//! (tested), but it never moves a fixed or held element. When a grab pulls
+//! a rigid piece (or any tissue) further than the slack between it and a
+//! fixed region, or two grabs pull apart, the links between them cannot all
+//! hold: the model tears there. Relaxation never raises a link's violation
+//! (it moves an element only into the intersection of its neighbours'
+//! boxes), so violations can only grow while propagation runs; the model
+//! measures them when propagation has settled after running ([`Conflicts`]),
+//! reports the largest (`max_constraint_violation_mm` in `metrics.json`)
+//! and warns when it exceeds [`TOLERANCE`].
+//!
+//! The measure is incremental: each block owns the +x, +y and +z links of
+//! its elements and keeps its largest violation; a check recomputes only
+//! the blocks changed since the last one (and their −x, −y, −z neighbours,
+//! which own the links into them).
+
+use crate::blocks::Blocks;
+use crate::lattice::{ElementLattice, FIXED, HELD};
+use crate::state::State;
+use rayon::prelude::*;
+
+/// Violations up to this fraction of the element spacing are f32 rounding
+/// (a clamped displacement of 100 mm is exact to ~1e-5 mm), not conflicts:
+/// 1e-3 of the spacing (1 µm at 1 mm elements).
+pub const TOLERANCE: f64 = 1e-3;
+
+/// What kinds of constraint meet at violated links (bits).
+pub type Kinds = u8;
+/// A violated link has a fixed end (`fix`).
+pub const FIXED_END: Kinds = 1;
+/// A grab is involved: a violated link has a held end, or (set by the
+/// model) grabs were held when the violation was measured — only a grab
+/// moves elements, so it is what pulled the links apart.
+pub const HELD_END: Kinds = 2;
+/// A violated link has an end of rigid material (constraint 0).
+pub const RIGID_END: Kinds = 4;
+
+/// The words for a set of [`Kinds`], e.g. "fixed vs grab vs rigid".
+pub fn describe(kinds: Kinds) -> String {
+    let mut parts = Vec::new();
+    for (bit, name) in [
+        (FIXED_END, "fixed"),
+        (HELD_END, "grab"),
+        (RIGID_END, "rigid"),
+    ] {
+        if kinds & bit != 0 {
+            parts.push(name);
+        }
+    }
+    if parts.is_empty() {
+        "elastic vs elastic (two pulls apart)".into()
+    } else {
+        parts.join(" vs ")
+    }
+}
+
+/// The violated links of a block, or of the whole model.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Violation {
+    /// Largest violation, mm (0 when every link holds).
+    pub mm: f32,
+    /// The link's two elements (storage indices) for the largest.
+    pub link: (u32, u32),
+    /// Links violated by more than [`TOLERANCE`].
+    pub count: u32,
+    /// What meets at those links.
+    pub kinds: Kinds,
+}
+
+impl Violation {
+    fn merge(mut self, o: Violation) -> Violation {
+        if o.mm > self.mm {
+            self.mm = o.mm;
+            self.link = o.link;
+        }
+        self.count += o.count;
+        self.kinds |= o.kinds;
+        self
+    }
+}
+
+/// Per-block violations, kept up to date by [`Conflicts::check`].
+pub struct Conflicts {
+    per_block: Vec<Violation>,
+    stale: Vec<bool>,
+    stale_list: Vec<u32>,
+}
+
+impl Conflicts {
+    /// Every block stale (nothing measured yet).
+    pub fn new(blocks: &Blocks) -> Self {
+        Self {
+            per_block: vec![Violation::default(); blocks.len()],
+            stale: vec![true; blocks.len()],
+            stale_list: (0..blocks.len() as u32).collect(),
+        }
+    }
+
+    /// Marks block `b` changed since the last check.
+    #[inline]
+    pub fn mark(&mut self, b: usize) {
+        if !std::mem::replace(&mut self.stale[b], true) {
+            self.stale_list.push(b as u32);
+        }
+    }
+
+    /// Re-measures the stale blocks (and the −x, −y, −z neighbours that own
+    /// links into them) on the current copy and returns the whole model's
+    /// violation. `tol_mm` is [`TOLERANCE`] in mm.
+    pub fn check(
+        &mut self,
+        lat: &ElementLattice,
+        state: &State,
+        blocks: &Blocks,
+        tol_mm: f32,
+    ) -> Violation {
+        let [cx, cy, _] = blocks.count;
+        let mut list = std::mem::take(&mut self.stale_list);
+        let direct = list.len();
+        for i in 0..direct {
+            let b = list[i] as usize;
+            let c = [b % cx, (b / cx) % cy, b / (cx * cy)];
+            for (a, stride) in [1, cx, cx * cy].into_iter().enumerate() {
+                if c[a] > 0 && !std::mem::replace(&mut self.stale[b - stride], true) {
+                    list.push((b - stride) as u32);
+                }
+            }
+        }
+        let measured: Vec<Violation> = list
+            .par_iter()
+            .map(|&b| block_violation(lat, state, blocks, b as usize, tol_mm))
+            .collect();
+        for (&b, v) in list.iter().zip(measured) {
+            self.per_block[b as usize] = v;
+            self.stale[b as usize] = false;
+        }
+        list.clear();
+        self.stale_list = list;
+        self.per_block
+            .iter()
+            .copied()
+            .fold(Violation::default(), Violation::merge)
+    }
+}
+
+/// The violation of the links block `b` owns (its elements' +x, +y, +z
+/// links), on the current copy.
+fn block_violation(
+    lat: &ElementLattice,
+    state: &State,
+    blocks: &Blocks,
+    b: usize,
+    tol_mm: f32,
+) -> Violation {
+    let cur = state.cur;
+    let (lo, hi) = blocks.range(b);
+    let mut v = Violation::default();
+    for k in lo[2]..hi[2] {
+        for j in lo[1]..hi[1] {
+            for i in lo[0]..hi[0] {
+                let c = [i, j, k];
+                let n = lat.linear(c);
+                if !lat.present(n) {
+                    continue;
+                }
+                let un = state.get(cur, n);
+                for l in [0, 2, 4] {
+                    let Some(e) = lat.neighbour(n, c, l).filter(|&e| lat.present(e)) else {
+                        continue;
+                    };
+                    let link = lat.link(n, e);
+                    let ue = state.get(cur, e);
+                    let mut worst = f32::NEG_INFINITY;
+                    for a in 0..3 {
+                        worst = worst.max((un[a] - ue[a]).abs() - link.d[a]);
+                    }
+                    if worst > v.mm {
+                        v.mm = worst;
+                        v.link = (n as u32, e as u32);
+                    }
+                    if worst > tol_mm {
+                        v.count += 1;
+                        v.kinds |= kinds_of(lat, n) | kinds_of(lat, e);
+                    }
+                }
+            }
+        }
+    }
+    v
+}
+
+/// The constraint kinds element `n` brings to a link.
+fn kinds_of(lat: &ElementLattice, n: usize) -> Kinds {
+    let cell = lat.cells[n];
+    let mut k = 0;
+    if cell & FIXED != 0 {
+        k |= FIXED_END;
+    }
+    if cell & HELD != 0 {
+        k |= HELD_END;
+    }
+    if lat.material(n).d == [0.0; 3] {
+        k |= RIGID_END;
+    }
+    k
+}
