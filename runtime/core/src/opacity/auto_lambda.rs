@@ -16,11 +16,12 @@
 //!    so a leaking λ costs little);
 //! 2. for each step taken, the growth ratio `r_k = V(λ_{k+1}) / V(λ_k)`
 //!    (steps from regions under [`MIN_VOXELS`] are skipped);
-//! 3. λ is the **largest** `λ_k` with `r_k ≤ min r + FLAT_TOL`
-//!    ([`FLAT_TOL`]; the largest, so a region that no λ changes — an
-//!    isolated organ — takes the most complete map). Without any ratio
-//!    (the first step already jumps) it is the last candidate before the
-//!    jump.
+//! 3. λ is the **largest** `λ_k` whose step is nearly the flattest:
+//!    `r_k − 1 ≤ (1 + FLAT_TOL) (min r − 1)` ([`FLAT_TOL`] = 0.25; the
+//!    largest, so a region that no λ changes — an isolated organ — takes
+//!    the most complete map, and a near-tie is not decided by noise in
+//!    favour of a half-grown map). Without any ratio (the first step
+//!    already jumps) it is the last candidate before the jump.
 //!
 //! The map is then grown once more at that λ. Figures (Dice per organ for
 //! this rule and for fixed λ on `phantom:abdomen`) are in the README and in
@@ -50,8 +51,10 @@ pub const CANDIDATES: [f32; 11] = [
 /// within a √2 step of λ.
 pub const JUMP: f64 = 1.0;
 
-/// Ratios within this of the smallest count as equally flat.
-pub const FLAT_TOL: f64 = 0.01;
+/// Steps whose growth `r − 1` is within `(1 + FLAT_TOL)` times the
+/// flattest step's count as equally flat (0.25: measured on
+/// `phantom:abdomen` at 3 and 2 mm, see the README).
+pub const FLAT_TOL: f64 = 0.25;
 
 /// Regions smaller than this (voxels at opacity ≥ 0.5) do not start a
 /// ratio: a seed that has not spread yet.
@@ -103,7 +106,7 @@ pub fn pick(trials: &[Trial]) -> f32 {
     };
     ratios
         .iter()
-        .filter(|r| r.1 <= min + FLAT_TOL)
+        .filter(|r| r.1 - 1.0 <= (1.0 + FLAT_TOL) * (min - 1.0))
         .map(|r| r.0)
         .reduce(f32::max)
         .unwrap_or(CANDIDATES[0])
