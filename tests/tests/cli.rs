@@ -693,3 +693,96 @@ fn warnings_of_plugins_land_in_metrics_whatever_the_log_filter() {
     assert!(o.status.success(), "{}", text(&o));
     assert_eq!(metrics(&out)["warnings"], serde_json::json!([]));
 }
+
+/// `lambda = "auto"` and the growth bounds on the labelled abdomen: the λ
+/// used, its trials and what stopped each map reach `metrics.json`; the
+/// one-off `voxflex roi` takes `--lambda auto` and refuses bad values
+/// naming the option.
+#[test]
+fn roi_auto_lambda_and_bounds_reach_the_notes_and_the_cli() {
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let s = format!(
+        "{}\n[[roi]]\nname = \"liver\"\nseed = [-95.0, -10.0, 30.0]\nlambda = \"auto\"\n\
+         [[roi]]\nname = \"near\"\nseed = [-95.0, -10.0, 30.0]\nmax_distance_mm = 25\n",
+        scene(
+            "cpu",
+            "abdomen",
+            48,
+            1,
+            "affine",
+            "field = \"twist\"\nangle_deg = 5",
+            &out
+        )
+    );
+    std::fs::write(tmp.path().join("s.toml"), s).unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&out);
+    let maps = &m["stages"]["roi"]["notes"]["maps"];
+    let liver = &maps["liver"];
+    let lambda = liver["lambda"].as_f64().unwrap();
+    assert!((1.0..=32.0).contains(&lambda) && lambda < 30.0, "{m}");
+    assert!(
+        !liver["lambda_auto_trials"].as_array().unwrap().is_empty(),
+        "{m}"
+    );
+    assert_eq!(liver["stopped_by"], "converged", "{m}");
+    let near = &maps["near"];
+    assert_eq!(near["lambda"].as_f64(), Some(30.0), "{m}");
+    assert!(
+        near["stopped_by"]
+            .as_str()
+            .unwrap()
+            .contains("max_distance_mm"),
+        "{m}"
+    );
+
+    let o = voxflex(
+        &[
+            "roi",
+            "phantom:abdomen",
+            "--dims",
+            "48,48,48",
+            "--seed",
+            "-95,-10,30",
+            "--lambda",
+            "auto",
+            "--out",
+            "l.nii.gz",
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("(auto)"),
+        "{}",
+        text(&o)
+    );
+    for (opt, val) in [
+        ("--lambda", "soon"),
+        ("--intensity", "200,100"),
+        ("--max-distance-mm", "-3"),
+    ] {
+        let o = voxflex(
+            &[
+                "roi",
+                "phantom:abdomen",
+                "--dims",
+                "24,24,24",
+                "--seed",
+                "-95,-10,30",
+                opt,
+                val,
+                "--out",
+                "x.nii.gz",
+            ],
+            tmp.path(),
+        );
+        assert!(!o.status.success(), "{opt} {val}: {}", text(&o));
+        let key = opt.trim_start_matches("--").replace('-', "_");
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(err.contains(&key) || err.contains(opt), "{opt}: {err}");
+    }
+}

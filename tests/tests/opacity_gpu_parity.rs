@@ -1,7 +1,7 @@
 //! The opacity growth's WGSL path against its rayon twin on a real device
 //! (lavapipe in CI): identical maps and identical step / visit / useful
 //! counts after every step and at convergence, several growths sharing one
-//! uploaded volume, and clean refusals. The checks live in
+//! uploaded volume, bounded and automatic-λ maps, and clean refusals. The checks live in
 //! `voxflex_core::opacity::parity`; on a machine without an adapter these
 //! tests print SKIPPED, except under `CI=true`.
 
@@ -26,4 +26,9 @@ fn several_maps_share_one_volume() {
 #[test]
 fn oversized_and_mismatched_volumes_are_refused() {
     run(parity::check_refusals);
+}
+
+#[test]
+fn bounded_and_auto_lambda_maps_are_identical() {
+    run(parity::check_limits_match_cpu);
 }

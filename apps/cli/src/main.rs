@@ -73,9 +73,15 @@ enum Command {
         /// Output file (.nii or .nii.gz).
         #[arg(long)]
         out: PathBuf,
-        /// Extinction scale λ.
-        #[arg(long, default_value_t = 30.0)]
-        lambda: f32,
+        /// Extinction scale λ: a positive number, or `auto` (the plateau rule).
+        #[arg(long, default_value = "30")]
+        lambda: String,
+        /// Intensity window lo,hi (volume units): voxels outside never rise above o_min.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+        intensity: Option<Vec<f32>>,
+        /// Largest Euclidean distance from the seed (mm) a raised voxel may have.
+        #[arg(long, allow_hyphen_values = true)]
+        max_distance_mm: Option<f64>,
         /// Opacity outside the region.
         #[arg(long, default_value_t = 0.03)]
         o_min: f32,
@@ -194,11 +200,26 @@ fn dispatch(command: Command) -> Result<()> {
             seed,
             out,
             lambda,
+            intensity,
+            max_distance_mm,
             o_min,
             o_max,
             steps,
             dims,
-        } => roi(volume, dims, seed, out, lambda, o_min, o_max, steps),
+        } => roi(
+            volume,
+            dims,
+            seed,
+            out,
+            RoiArgs {
+                lambda,
+                intensity,
+                max_distance_mm,
+                o_min,
+                o_max,
+                steps,
+            },
+        ),
         Command::Render {
             volume,
             out,
@@ -391,18 +412,26 @@ fn info(source: String, dims: Option<Vec<usize>>) -> Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The growth options of `voxflex roi`.
+struct RoiArgs {
+    lambda: String,
+    intensity: Option<Vec<f32>>,
+    max_distance_mm: Option<f64>,
+    o_min: f32,
+    o_max: f32,
+    steps: Option<usize>,
+}
+
 fn roi(
     source: String,
     dims: Option<Vec<usize>>,
     seed: Vec<f64>,
     out: PathBuf,
-    lambda: f32,
-    o_min: f32,
-    o_max: f32,
-    steps: Option<usize>,
+    a: RoiArgs,
 ) -> Result<()> {
-    use voxflex_core::opacity::{CpuGrowth, GrowthParams, Seed};
+    use voxflex_core::opacity::{
+        GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi,
+    };
     let [x, y, z] = seed[..] else {
         bail!("--seed needs three millimetre coordinates: x,y,z");
     };
@@ -410,26 +439,48 @@ fn roi(
     if !(name.ends_with(".nii") || name.ends_with(".nii.gz")) {
         bail!("--out `{name}` must end in .nii or .nii.gz");
     }
+    let lambda = match a.lambda.trim() {
+        "auto" => LambdaChoice::Auto,
+        l => match l.parse::<f32>() {
+            Ok(v) if v.is_finite() && v > 0.0 => LambdaChoice::Fixed(v),
+            _ => bail!("--lambda `{l}` must be a positive number or `auto`"),
+        },
+    };
+    let intensity = match a.intensity.as_deref() {
+        None => None,
+        Some(&[lo, hi]) => Some([lo, hi]),
+        Some(_) => bail!("--intensity needs two values: lo,hi"),
+    };
     let volume = load_volume(&source, dims)?;
-    let params = GrowthParams {
-        o_min,
-        o_max,
+    let req = RoiRequest {
+        seed: Seed::World(voxflex_core::glam::DVec3::new(x, y, z)),
+        params: GrowthParams {
+            o_min: a.o_min,
+            o_max: a.o_max,
+            ..GrowthParams::default()
+        },
         lambda,
-        ..GrowthParams::default()
+        limits: GrowthLimits {
+            intensity,
+            max_distance_mm: a.max_distance_mm,
+        },
+        steps: a.steps,
     };
-    let seed = Seed::World(voxflex_core::glam::DVec3::new(x, y, z));
-    let mut growth = CpuGrowth::new(volume.view(), &seed, params)?;
-    let report = match steps {
-        Some(n) => growth.step(volume.view(), n)?,
-        None => growth.run(volume.view())?,
-    };
-    let map = growth.map();
-    let written = voxflex_runtime::visualise::map_volume(&volume.grid, &map);
+    let o = grow_roi(volume.view(), &req, None)?;
+    for w in o.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let (report, map) = (o.grown.report, &o.grown.map);
+    let written = voxflex_runtime::visualise::map_volume(&volume.grid, map);
     voxflex_core::io::write_volume(&out, written.view())?;
     println!(
-        "{}: {} steps, {} visits ({:.0}% useful), map box {:?} ({} bytes) → {}",
+        "{}: lambda {}{}, {} ({} steps), {} voxels ≥ 0.5, {} visits ({:.0}% useful), map box {:?} ({} bytes) → {}",
         source,
+        o.lambda,
+        if o.auto.is_some() { " (auto)" } else { "" },
+        o.stop(),
         report.steps,
+        o.voxels,
         report.visits,
         100.0 * report.useful as f64 / report.visits.max(1) as f64,
         map.dims,

@@ -12,6 +12,7 @@
 //! | `cube` | u8 | 100 × 100 × 100 | homogeneous cube 100 in air 0 (see [`cube`]) |
 //! | `rings` | u8 | 100 × 100 × 100 | annulus, soft half 100 / hard half 200 (see [`rings`]) |
 //! | `ramp` | f32 | 100 × 100 × 100 | linear field `a·x + b·y + c·z` (see [`ramp`]) |
+//! | `abdomen` | i16 (HU) | 360 × 280 × 240 | labelled portal-venous contrast CT of the upper abdomen, with noise (see [`abdomen`]) |
 //!
 //! Axes follow DICOM/LPS: +x toward the patient's left, +y posterior, +z
 //! superior — what [`crate::io::png`] displays upright.
@@ -27,6 +28,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::path::PathBuf;
 
+pub mod abdomen;
+pub use abdomen::{LabelledVolume, abdomen_labelled};
+
 /// The built-in phantoms.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PhantomKind {
@@ -38,15 +42,18 @@ pub enum PhantomKind {
     Rings,
     /// Linear f32 field ([`ramp`]).
     Ramp,
+    /// Labelled abdominal contrast CT, i16 Hounsfield units ([`abdomen`]).
+    Abdomen,
 }
 
 impl PhantomKind {
     /// Every phantom, in documentation order.
-    pub const ALL: [PhantomKind; 4] = [
+    pub const ALL: [PhantomKind; 5] = [
         PhantomKind::Head,
         PhantomKind::Cube,
         PhantomKind::Rings,
         PhantomKind::Ramp,
+        PhantomKind::Abdomen,
     ];
 
     /// The name used in `phantom:<name>` sources.
@@ -56,6 +63,7 @@ impl PhantomKind {
             PhantomKind::Cube => "cube",
             PhantomKind::Rings => "rings",
             PhantomKind::Ramp => "ramp",
+            PhantomKind::Abdomen => "abdomen",
         }
     }
 
@@ -63,6 +71,7 @@ impl PhantomKind {
     pub fn size_mm(self) -> DVec3 {
         match self {
             PhantomKind::Head => HEAD_SIZE_MM,
+            PhantomKind::Abdomen => abdomen::ABDOMEN_SIZE_MM,
             PhantomKind::Cube | PhantomKind::Rings | PhantomKind::Ramp => DVec3::splat(100.0),
         }
     }
@@ -82,6 +91,7 @@ impl PhantomKind {
             PhantomKind::Cube => cube(dims),
             PhantomKind::Rings => rings(dims),
             PhantomKind::Ramp => ramp(dims),
+            PhantomKind::Abdomen => abdomen::abdomen(dims),
         })
     }
 }
@@ -112,7 +122,7 @@ impl std::str::FromStr for PhantomKind {
 pub enum PhantomError {
     /// No built-in phantom has this name.
     #[error(
-        "unknown phantom `{name}`; built-in phantoms: head, cube, rings, ramp (e.g. `phantom:head`)"
+        "unknown phantom `{name}`; built-in phantoms: head, cube, rings, ramp, abdomen (e.g. `phantom:head`)"
     )]
     UnknownName {
         /// The name asked for.
@@ -494,7 +504,7 @@ mod tests {
     fn names_dims_and_sources() {
         assert_eq!(
             phantom("skull", [4, 4, 4]).unwrap_err().to_string(),
-            "unknown phantom `skull`; built-in phantoms: head, cube, rings, ramp (e.g. `phantom:head`)"
+            "unknown phantom `skull`; built-in phantoms: head, cube, rings, ramp, abdomen (e.g. `phantom:head`)"
         );
         assert_eq!(
             phantom("head", [4, 0, 4]).unwrap_err(),

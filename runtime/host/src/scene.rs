@@ -327,9 +327,18 @@ pub struct RoiSettings {
     /// Seed as a slice click.
     #[serde(default)]
     pub seed_slice: Option<SliceSeed>,
-    /// Extinction scale λ (default 30).
+    /// Extinction scale λ: a number (default 30) or `"auto"` (the plateau
+    /// rule, `voxflex_core::opacity::auto_lambda`).
     #[serde(default = "default_lambda")]
-    pub lambda: f32,
+    pub lambda: LambdaSetting,
+    /// Intensity window `[lo, hi]` (volume units, HU for CT): voxels outside
+    /// never rise above `o_min`.
+    #[serde(default)]
+    pub intensity: Option<[f32; 2]>,
+    /// Largest Euclidean distance (world mm) from the seed voxel's centre a
+    /// raised voxel may have.
+    #[serde(default)]
+    pub max_distance_mm: Option<f64>,
     /// Opacity outside the region (default 0.03).
     #[serde(default = "default_o_min")]
     pub o_min: f32,
@@ -349,8 +358,19 @@ pub struct RoiSettings {
     pub gaussian_tf: bool,
 }
 
-fn default_lambda() -> f32 {
-    30.0
+fn default_lambda() -> LambdaSetting {
+    LambdaSetting::Value(30.0)
+}
+
+/// `[[roi]] lambda`: a number or a word (only `"auto"` is valid; checked
+/// when the scene is loaded).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum LambdaSetting {
+    /// A fixed λ.
+    Value(f32),
+    /// `"auto"`.
+    Word(String),
 }
 fn default_o_min() -> f32 {
     0.03
@@ -520,6 +540,37 @@ impl Scene {
                 return Err(invalid(
                     "seed",
                     "must be three finite millimetre coordinates".into(),
+                ));
+            }
+            match &roi.lambda {
+                LambdaSetting::Value(l) if !(l.is_finite() && *l > 0.0) => {
+                    return Err(invalid(
+                        "lambda",
+                        format!("{l} must be a positive number or \"auto\" (default 30)"),
+                    ));
+                }
+                LambdaSetting::Word(w) if w != "auto" => {
+                    return Err(invalid(
+                        "lambda",
+                        format!("\"{w}\" is not a λ; use a positive number or \"auto\""),
+                    ));
+                }
+                _ => {}
+            }
+            if let Some([lo, hi]) = roi.intensity
+                && !(lo.is_finite() && hi.is_finite() && lo <= hi)
+            {
+                return Err(invalid(
+                    "intensity",
+                    format!("[{lo}, {hi}] must be two finite values with lo ≤ hi (volume units)"),
+                ));
+            }
+            if let Some(d) = roi.max_distance_mm
+                && !(d.is_finite() && d > 0.0)
+            {
+                return Err(invalid(
+                    "max_distance_mm",
+                    format!("{d} must be a positive finite distance in mm"),
                 ));
             }
         }
@@ -809,5 +860,38 @@ kind = "grab"
             .unwrap_err()
             .to_string();
         assert!(e.contains("never happens"), "{e}");
+    }
+    #[test]
+    fn roi_lambda_auto_and_bounds_parse_and_bad_values_name_the_key() {
+        let roi = |extra: &str| format!("{GOOD}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{extra}\n");
+        let s = Scene::parse(
+            &roi("lambda = \"auto\"\nintensity = [60, 170.5]\nmax_distance_mm = 80"),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        let r = &s.rois[0];
+        assert_eq!(r.lambda, LambdaSetting::Word("auto".into()));
+        assert_eq!(r.intensity, Some([60.0, 170.5]));
+        assert_eq!(r.max_distance_mm, Some(80.0));
+        let s = Scene::parse(&roi("lambda = 12"), Path::new("t.toml")).unwrap();
+        assert_eq!(s.rois[0].lambda, LambdaSetting::Value(12.0));
+        assert_eq!(s.rois[0].intensity, None);
+        let s = Scene::parse(&roi(""), Path::new("t.toml")).unwrap();
+        assert_eq!(s.rois[0].lambda, LambdaSetting::Value(30.0));
+        for (extra, key) in [
+            ("lambda = \"automatic\"", "`lambda`"),
+            ("lambda = -3", "`lambda`"),
+            ("lambda = nan", "`lambda`"),
+            ("intensity = [200, 100]", "`intensity`"),
+            ("intensity = [nan, 100]", "`intensity`"),
+            ("max_distance_mm = -1", "`max_distance_mm`"),
+            ("max_distance_mm = 0", "`max_distance_mm`"),
+            ("max_distance_mm = inf", "`max_distance_mm`"),
+        ] {
+            let e = Scene::parse(&roi(extra), Path::new("t.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key), "{extra}: {e}");
+        }
     }
 }

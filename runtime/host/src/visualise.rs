@@ -6,7 +6,7 @@
 use crate::metrics::RunMetrics;
 use crate::pipeline::RunError;
 use crate::plugin_loader::LoadedPlugin;
-use crate::scene::{ProjectionName, RenderSettings, RoiSettings, Scene, SliceName};
+use crate::scene::{LambdaSetting, ProjectionName, RenderSettings, RoiSettings, Scene, SliceName};
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -19,9 +19,9 @@ use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
 use voxflex_core::io::png::SliceAxis;
 use voxflex_core::io::{write_atomically, write_volume};
-use voxflex_core::opacity::Growth;
 use voxflex_core::opacity::{
-    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, OpacityMap, Seed, SeedStats,
+    GpuOpacityVolume, GrowthLimits, GrowthParams, LambdaChoice, OpacityMap, RoiOutcome, RoiRequest,
+    Seed, SeedStats, grow_roi,
 };
 use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
 use voxflex_core::volume::{Volume, VoxelData};
@@ -44,6 +44,55 @@ pub fn roi_seed(roi: &RoiSettings) -> Seed {
     }
 }
 
+/// The core request of a `[[roi]]` table.
+pub fn roi_request(roi: &RoiSettings) -> RoiRequest {
+    RoiRequest {
+        seed: roi_seed(roi),
+        params: GrowthParams {
+            o_min: roi.o_min,
+            o_max: roi.o_max,
+            ..GrowthParams::default()
+        },
+        lambda: match roi.lambda {
+            LambdaSetting::Value(l) => LambdaChoice::Fixed(l),
+            // Anything but "auto" is refused when the scene loads.
+            LambdaSetting::Word(_) => LambdaChoice::Auto,
+        },
+        limits: GrowthLimits {
+            intensity: roi.intensity,
+            max_distance_mm: roi.max_distance_mm,
+        },
+        steps: roi.steps,
+    }
+}
+
+/// The `metrics.json` notes of one map: λ used (and the automatic search's
+/// trials), what stopped it, its size and any warnings.
+pub fn roi_notes(out: &RoiOutcome) -> serde_json::Value {
+    let mut m = serde_json::Map::new();
+    m.insert("lambda".into(), (out.lambda as f64).into());
+    if let Some(a) = &out.auto {
+        let trials: Vec<serde_json::Value> = a
+            .trials
+            .iter()
+            .map(|t| {
+                serde_json::json!({
+                    "lambda": t.lambda, "voxels": t.voxels, "steps": t.steps, "aborted": t.aborted
+                })
+            })
+            .collect();
+        m.insert("lambda_auto_trials".into(), trials.into());
+    }
+    m.insert("stopped_by".into(), out.stop().into());
+    m.insert("steps".into(), out.grown.report.steps.into());
+    m.insert("converged".into(), out.grown.report.converged.into());
+    m.insert("voxels_above_half".into(), out.voxels.into());
+    m.insert("seed_mean".into(), (out.grown.stats.mean as f64).into());
+    m.insert("seed_sigma".into(), (out.grown.stats.sigma as f64).into());
+    m.insert("warnings".into(), out.warnings().into());
+    m.into()
+}
+
 /// Grows every `[[roi]]` map over `volume`, on the GPU when one is given.
 pub fn grow_rois(
     scene: &Scene,
@@ -60,42 +109,24 @@ pub fn grow_rois(
         }
         _ => None,
     };
-    for roi in &scene.rois {
-        let params = GrowthParams {
-            o_min: roi.o_min,
-            o_max: roi.o_max,
-            lambda: roi.lambda,
-            ..GrowthParams::default()
+    let mut notes = serde_json::Map::new();
+    for (n, roi) in scene.rois.iter().enumerate() {
+        let name = roi.name.clone().unwrap_or_else(|| n.to_string());
+        let req = roi_request(roi);
+        let shared = match (gpu, &uploaded) {
+            (Some(g), Some(values)) => Some((g.as_ref(), values)),
+            _ => None,
         };
-        let seed = roi_seed(roi);
-        let (map, report) = match (gpu, &uploaded) {
-            (Some(g), Some(values)) => {
-                let mut growth = GpuGrowth::new(g.as_ref(), values, volume.view(), &seed, params)
-                    .map_err(roi_err)?;
-                let report = match roi.steps {
-                    Some(n) => growth.step(g.as_ref(), values, n),
-                    None => growth.run(g.as_ref(), values),
-                }
-                .map_err(roi_err)?;
-                let map = growth.map(g.as_ref()).map_err(roi_err)?;
-                stats.push(*growth.stats());
-                growth.release(g.as_ref());
-                (map, report)
-            }
-            _ => {
-                let mut growth = CpuGrowth::new(volume.view(), &seed, params).map_err(roi_err)?;
-                let report = match roi.steps {
-                    Some(n) => growth.step(volume.view(), n),
-                    None => growth.run(volume.view()),
-                }
-                .map_err(roi_err)?;
-                stats.push(*growth.stats());
-                (growth.map(), report)
-            }
-        };
+        let out = grow_roi(volume.view(), &req, shared).map_err(roi_err)?;
+        for w in out.warnings() {
+            tracing::warn!("[[roi]] {name}: {w}");
+        }
+        notes.insert(name, roi_notes(&out));
+        let report = out.grown.report;
+        stats.push(out.grown.stats);
         visits += report.visits;
         useful += report.useful;
-        maps.push(map);
+        maps.push(out.grown.map);
     }
     if let (Some(g), Some(values)) = (gpu, uploaded) {
         values.release(g.as_ref());
@@ -107,6 +138,7 @@ pub fn grow_rois(
         "useful_fraction".into(),
         (useful as f64 / visits.max(1) as f64).into(),
     );
+    stage.notes.insert("maps".into(), notes.into());
     stage.notes.insert(
         "map_bytes".into(),
         maps.iter().map(OpacityMap::bytes).sum::<usize>().into(),

@@ -135,6 +135,41 @@ pub enum OpacityError {
         /// Dimensions of the GPU volume.
         actual: [usize; 3],
     },
+    /// `intensity = [lo, hi]` is not two finite values with `lo ≤ hi`.
+    #[error(
+        "intensity = [{lo}, {hi}] must be two finite values (the volume's units) with lo ≤ hi; \
+         voxels outside the window never rise above o_min"
+    )]
+    BadIntensityWindow {
+        /// Lower bound given.
+        lo: f32,
+        /// Upper bound given.
+        hi: f32,
+    },
+    /// `max_distance_mm` is not a positive finite number.
+    #[error(
+        "max_distance_mm = {max_distance_mm} must be a positive finite distance in mm (Euclidean, \
+         from the seed voxel's centre)"
+    )]
+    BadMaxDistance {
+        /// The value given.
+        max_distance_mm: f64,
+    },
+    /// The seed voxel's own value lies outside the intensity window.
+    #[error(
+        "the seed voxel {voxel:?} holds {value}, outside intensity = [{lo}, {hi}]; widen the \
+         window or move the seed"
+    )]
+    SeedOutsideWindow {
+        /// Seed voxel index.
+        voxel: [usize; 3],
+        /// Its value.
+        value: f32,
+        /// Window lower bound.
+        lo: f32,
+        /// Window upper bound.
+        hi: f32,
+    },
     /// A GPU service call failed.
     #[error(transparent)]
     Gpu(#[from] GpuError),

@@ -95,12 +95,22 @@
 //! phantom converges in ~50 steps instead of ~1350. Step-by-step states
 //! equal the plain Jacobi iteration until the first pump.
 
+//! # Bounds and the automatic λ
+//!
+//! On contrast CT the paper's λ = 30 lets a seed in the liver flow through
+//! vessels and touching organs of similar enhancement. [`GrowthLimits`]
+//! (an intensity window, a Euclidean distance from the seed) block voxels
+//! outright ([`limits`]); `lambda = "auto"` picks the largest λ before the
+//! region jumps ([`auto_lambda`]); [`grow_roi`] runs either on either
+//! backend and says what stopped the growth ([`roi`]).
+
 //! # Transfer function
 //!
 //! [`GaussianTf`] / [`gaussian_tf()`] is the paper's automatic transfer
 //! function `f(x) = t(x) · (a + b · g(x))`, `g` a Gaussian at `d_s` with
 //! standard deviation σ_s, `a = 0.01`, `b = 0.99`.
 
+pub mod auto_lambda;
 pub mod bounds;
 pub mod cpu;
 mod error;
@@ -108,25 +118,34 @@ pub mod extinction;
 mod frontier;
 pub mod gaussian_tf;
 pub mod gpu;
+pub mod limits;
 pub mod params;
 #[doc(hidden)]
 pub mod parity;
 pub mod report;
+pub mod roi;
+pub mod runner;
 pub mod seed;
 pub mod set;
 pub mod state;
 
 #[cfg(test)]
+mod roi_tests;
+#[cfg(test)]
 mod tests;
 
+pub use auto_lambda::AutoLambda;
 pub use bounds::VoxelBounds;
 pub use cpu::CpuGrowth;
 pub use error::OpacityError;
 pub use extinction::Extinction;
 pub use gaussian_tf::{GaussianTf, gaussian_tf};
 pub use gpu::{GpuGrowth, GpuOpacityVolume};
+pub use limits::{GrowthLimits, LimitHits};
 pub use params::GrowthParams;
 pub use report::GrowthReport;
+pub use roi::{LambdaChoice, RoiOutcome, RoiRequest, grow_roi};
+pub use runner::{CpuRunner, GpuRunner, GrowRunner, Grown};
 pub use seed::{Seed, SeedStats, seed_stats};
 pub use set::{OpacityMapSet, combine_max};
 pub use state::{Growth, GrowthState};

@@ -458,3 +458,63 @@ pub fn check_refusals(gpu: &dyn GpuService) -> Result<(), String> {
     gv.release(gpu);
     out
 }
+
+/// Bounded maps and the automatic λ on both paths, through
+/// [`super::grow_roi`]: `phantom:abdomen` (64 × 50 × 43, 5.6 mm) seeded in
+/// the liver with an intensity window, a distance bound, both, and
+/// `lambda = "auto"` — identical maps, counts, λ and bound hits.
+pub fn check_limits_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    use super::limits::GrowthLimits;
+    use super::roi::{LambdaChoice, RoiRequest, grow_roi};
+    let ph = crate::phantom::abdomen_labelled([64, 50, 43]);
+    let v = ph.volume.view();
+    let seed = Seed::World(crate::phantom::abdomen::SEEDS[0].2);
+    let cases = [
+        (Some([80.0, 150.0]), None, LambdaChoice::Fixed(30.0)),
+        (None, Some(40.0), LambdaChoice::Fixed(30.0)),
+        (Some([60.0, 170.0]), Some(60.0), LambdaChoice::Fixed(8.0)),
+        (None, None, LambdaChoice::Auto),
+    ];
+    let gv = GpuOpacityVolume::upload(gpu, v).map_err(e)?;
+    let res = (|| {
+        for (intensity, max_distance_mm, lambda) in cases {
+            let what = format!(
+                "intensity {intensity:?}, max_distance_mm {max_distance_mm:?}, lambda {lambda}"
+            );
+            let req = RoiRequest {
+                seed,
+                params: GrowthParams::default(),
+                lambda,
+                limits: GrowthLimits {
+                    intensity,
+                    max_distance_mm,
+                },
+                steps: None,
+            };
+            let g = grow_roi(v, &req, Some((gpu, &gv))).map_err(e)?;
+            let c = grow_roi(v, &req, None).map_err(e)?;
+            same(
+                &what,
+                &g.grown.map,
+                &c.grown.map,
+                &g.grown.report,
+                &c.grown.report,
+            )?;
+            if g.lambda != c.lambda || g.hits != c.hits {
+                return Err(format!(
+                    "{what}: GPU λ {} hits {:?}, CPU λ {} hits {:?}",
+                    g.lambda, g.hits, c.lambda, c.hits
+                ));
+            }
+            if intensity.is_some() && c.hits.intensity == 0 {
+                return Err(format!("{what}: the window never held the growth back"));
+            }
+            if max_distance_mm.is_some() && c.hits.distance == 0 {
+                return Err(format!("{what}: the distance bound was never reached"));
+            }
+        }
+        Ok(())
+    })();
+    gv.release(gpu);
+    res
+}

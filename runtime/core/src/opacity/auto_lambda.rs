@@ -1,0 +1,148 @@
+//! The automatic λ (`lambda = "auto"`): λ where the grown region's size
+//! is flattest in λ — the plateau rule.
+//!
+//! The converged map grows monotonically with λ (a larger λ lowers every
+//! positive extinction). Let `V(λ)` be the voxels at opacity ≥ 0.5. At
+//! small λ the region is held back inside the organ by noise (the seed's
+//! 1-ring σ_s underestimates correlated noise), so `V` rises quickly as λ
+//! grows and the organ fills; at large λ opacity flows further into every
+//! touching structure (a depth ∝ λ) or jumps across a contact into a
+//! neighbour, so `V` rises again. Between the two `V(λ)` is flattest. The
+//! rule:
+//!
+//! 1. grow at λ = [`CANDIDATES`] (√2 apart, 1 … 32), in increasing order,
+//!    stopping early at a **jump**: `V(λ_{k+1}) > (1 + JUMP) V(λ_k)`
+//!    ([`JUMP`]; such a growth is cut short as soon as it passes the bound,
+//!    so a leaking λ costs little);
+//! 2. for each step taken, the growth ratio `r_k = V(λ_{k+1}) / V(λ_k)`
+//!    (steps from regions under [`MIN_VOXELS`] are skipped);
+//! 3. λ is the **largest** `λ_k` whose step is nearly the flattest:
+//!    `r_k − 1 ≤ (1 + FLAT_TOL) (min r − 1)` ([`FLAT_TOL`] = 0.25; the
+//!    largest, so a region that no λ changes — an isolated organ — takes
+//!    the most complete map, and a near-tie is not decided by noise in
+//!    favour of a half-grown map). Without any ratio (the first step
+//!    already jumps) it is the last candidate before the jump.
+//!
+//! The map is then grown once more at that λ. Figures (Dice per organ for
+//! this rule and for fixed λ on `phantom:abdomen`) are in the README and in
+//! `docs/roi_dice_vs_lambda.md`.
+
+use super::OpacityError;
+use super::params::GrowthParams;
+use super::runner::{GrowRunner, Grown, voxels_above_half};
+
+/// λ tried, in order: `2^(k/2)`, k = 0 … 10.
+pub const CANDIDATES: [f32; 11] = [
+    1.0,
+    std::f32::consts::SQRT_2,
+    2.0,
+    2.828_427,
+    4.0,
+    5.656_854,
+    8.0,
+    11.313_708,
+    16.0,
+    22.627_417,
+    32.0,
+];
+
+/// Relative growth between two candidates that counts as a jump (a leak):
+/// `V(λ_{k+1}) > (1 + JUMP) · V(λ_k)`, i.e. the region more than doubles
+/// within a √2 step of λ.
+pub const JUMP: f64 = 1.0;
+
+/// Steps whose growth `r − 1` is within `(1 + FLAT_TOL)` times the
+/// flattest step's count as equally flat (0.25: measured on
+/// `phantom:abdomen` at 3 and 2 mm, see the README).
+pub const FLAT_TOL: f64 = 0.25;
+
+/// Regions smaller than this (voxels at opacity ≥ 0.5) do not start a
+/// ratio: a seed that has not spread yet.
+pub const MIN_VOXELS: usize = 27;
+
+/// One candidate λ tried by the search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trial {
+    /// λ.
+    pub lambda: f32,
+    /// Voxels at opacity ≥ 0.5 (a lower bound when `aborted`).
+    pub voxels: usize,
+    /// Growth steps run.
+    pub steps: u64,
+    /// Cut short at the jump bound.
+    pub aborted: bool,
+}
+
+/// What the search found.
+#[derive(Clone, Debug)]
+pub struct AutoLambda {
+    /// The λ chosen.
+    pub lambda: f32,
+    /// Every candidate tried, in order.
+    pub trials: Vec<Trial>,
+    /// The growth at the chosen λ.
+    pub grown: Grown,
+}
+
+/// The λ the rule picks from the trials (in increasing λ; the last may
+/// have jumped). See the module docs.
+pub fn pick(trials: &[Trial]) -> f32 {
+    let ok = |t: &&Trial| !t.aborted;
+    let mut ratios = vec![];
+    for w in trials.windows(2) {
+        if w[0].voxels >= MIN_VOXELS && !w[0].aborted {
+            let r = w[1].voxels as f64 / w[0].voxels as f64;
+            if r <= 1.0 + JUMP {
+                ratios.push((w[0].lambda, r));
+            }
+        }
+    }
+    let Some(min) = ratios.iter().map(|r| r.1).reduce(f64::min) else {
+        return trials
+            .iter()
+            .rev()
+            .find(ok)
+            .map_or(CANDIDATES[0], |t| t.lambda);
+    };
+    ratios
+        .iter()
+        .filter(|r| r.1 - 1.0 <= (1.0 + FLAT_TOL) * (min - 1.0))
+        .map(|r| r.0)
+        .reduce(f32::max)
+        .unwrap_or(CANDIDATES[0])
+}
+
+/// Runs the search with `runner` (see the module docs); `params.lambda` is
+/// ignored, the other fields are used as given, `steps` caps every trial.
+pub fn auto_lambda(
+    runner: &mut dyn GrowRunner,
+    params: GrowthParams,
+    steps: Option<usize>,
+) -> Result<AutoLambda, OpacityError> {
+    let mut trials: Vec<Trial> = Vec::new();
+    for &lambda in &CANDIDATES {
+        let bound = trials
+            .last()
+            .map(|t| t.voxels)
+            .filter(|&v| v >= MIN_VOXELS)
+            .map(|v| ((1.0 + JUMP) * v as f64).floor() as usize);
+        let grown = runner.grow(GrowthParams { lambda, ..params }, steps, bound)?;
+        let voxels = voxels_above_half(&grown.map);
+        trials.push(Trial {
+            lambda,
+            voxels,
+            steps: grown.report.steps,
+            aborted: grown.aborted,
+        });
+        if bound.is_some_and(|b| voxels > b) {
+            break;
+        }
+    }
+    let lambda = pick(&trials);
+    let grown = runner.grow(GrowthParams { lambda, ..params }, steps, None)?;
+    Ok(AutoLambda {
+        lambda,
+        trials,
+        grown,
+    })
+}
