@@ -32,7 +32,7 @@ fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind) -> Fem {
     let params = FemParams {
         solver,
         cg_tolerance: 1e-6,
-        cg_max_iterations: 400,
+        cg_max_iterations: Some(400),
         ..FemParams::default()
     };
     let mut m = Fem::with_mesh(mesh, materials, DVec3::new(0.0, 0.0, -9810.0), params)
