@@ -50,7 +50,7 @@ pub enum SolverKind {
 #[serde(rename_all = "kebab-case")]
 pub enum PreconditionerKind {
     /// Incomplete Cholesky for the static solver (bending-dominated, where
-    /// block Jacobi needs thousands of iterations), block Jacobi for the
+    /// block Jacobi needs about twice the iterations), block Jacobi for the
     /// implicit steps (mass-dominated, where it converges in tens and
     /// costs no factorisation) and on the GPU.
     #[default]
