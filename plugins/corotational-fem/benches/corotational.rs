@@ -4,10 +4,13 @@
 //! - the implicit step with exactly 20 CG iterations on ~20 k tetrahedra
 //!   (a box of 20 × 20 × 10 cells), median of 15 steps, and its parts;
 //! - the cantilever of `tests/reference/cantilever.json`: for each mesh
-//!   level and CG tolerance, the static solve's time and its tip error
-//!   against the independent linear solution on the same mesh and against
-//!   beam theory (u = 4 for the load 1, scaled: the solve uses a small load
-//!   so rotations stay negligible).
+//!   level and preconditioner (incomplete Cholesky, block Jacobi), the
+//!   static solve's time, Newton and CG iterations, unconverged solves and
+//!   its tip error against the independent linear solution on the same
+//!   mesh and against beam theory (u = 4 for the load 1, scaled: the solve
+//!   uses a small load so rotations stay negligible);
+//! - the slender cantilever 8 × 1 × 0.5 of issue 12 at two mesh sizes,
+//!   the same figures per preconditioner, against block Jacobi at 1e-11.
 //!
 //! `-- step` or `-- cantilever` runs one part.
 
@@ -17,7 +20,7 @@ use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
 use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
 use voxflex_core::proxy::uniform_proxy;
-use voxflex_corotational_fem::{CorotationalFem, FemParams, SolverKind};
+use voxflex_corotational_fem::{CorotationalFem, FemParams, PreconditionerKind, SolverKind};
 
 type Fem = MeshModel<CorotationalFem>;
 
@@ -42,7 +45,7 @@ fn implicit_step() {
     let params = FemParams {
         solver: SolverKind::Dynamic,
         cg_tolerance: 1e-30,
-        cg_max_iterations: 20,
+        cg_max_iterations: Some(20),
         ..FemParams::default()
     };
     let material = ElasticMaterial::new(3000.0, 0.45, 1e-6);
@@ -78,38 +81,55 @@ fn cantilever() {
     );
     let reference: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(path).expect("reference")).expect("JSON");
-    println!("cantilever (E = 1000, ν = 0.3, 10 × 1 × 1, tip traction; static solve, small load):");
     println!(
-        "   r  tetrahedra  CG tolerance  time (ms)  CG iterations  tip u/P  rel. error vs same mesh  vs beam theory (4)"
+        "cantilever (E = 1000, ν = 0.3, 10 × 1 × 1, tip traction; static Newton solve, small load, CG tolerance 1e-6, derived cap):"
+    );
+    println!(
+        "   r  tetrahedra  preconditioner        time (ms)  Newton  CG iterations  unconverged  tip u/P  rel. error vs same mesh  vs beam theory (4)"
     );
     for level in reference["levels"].as_array().unwrap() {
         let r = level["r"].as_u64().unwrap() as usize;
         let expected = level["tip_uz_mean"].as_f64().unwrap();
-        for tolerance in [1e-3, 1e-6, 1e-9] {
+        for pre in [
+            PreconditionerKind::IncompleteCholesky,
+            PreconditionerKind::BlockJacobi,
+        ] {
             // The fastest of three solves (the first warms caches and threads).
-            let runs: Vec<(f64, f64, u32, usize)> = (0..3).map(|_| solve(r, tolerance)).collect();
-            let (ms, tip, iterations, tets) = runs
-                .iter()
-                .copied()
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .unwrap();
+            let runs: Vec<Solve> = (0..3).map(|_| solve(r, pre)).collect();
+            let best = runs.iter().min_by(|a, b| a.ms.total_cmp(&b.ms)).unwrap();
             println!(
-                "{r:4}  {tets:10}  {tolerance:12.0e}  {ms:9.2}  {iterations:13}  {tip:7.4}  {:22.2e}  {:17.2} %",
-                (tip - expected).abs() / expected.abs(),
-                100.0 * (tip + 4.0).abs() / 4.0,
+                "{r:4}  {:10}  {:20}  {:9.2}  {:6}  {:13}  {:11}  {:7.4}  {:22.2e}  {:17.2} %",
+                best.tets,
+                format!("{pre:?}"),
+                best.ms,
+                best.newton,
+                best.iterations,
+                best.unconverged,
+                best.tip,
+                (best.tip - expected).abs() / expected.abs(),
+                100.0 * (best.tip + 4.0).abs() / 4.0,
             );
         }
     }
 }
 
-/// One static cantilever solve at level `r`: (ms, mean tip u_z / P, CG
-/// iterations, tetrahedra).
-fn solve(r: usize, tolerance: f64) -> (f64, f64, u32, usize) {
+/// One static cantilever solve's figures.
+struct Solve {
+    ms: f64,
+    /// Mean tip u_z / P.
+    tip: f64,
+    iterations: u32,
+    newton: f64,
+    unconverged: f64,
+    tets: usize,
+}
+
+/// One static cantilever solve at level `r` with the default settings but
+/// the preconditioner.
+fn solve(r: usize, preconditioner: PreconditionerKind) -> Solve {
     let params = FemParams {
         solver: SolverKind::Static,
-        cg_tolerance: tolerance,
-        cg_max_iterations: 100_000,
-        static_iterations: 2,
+        preconditioner,
         ..FemParams::default()
     };
     let p = 1e-4;
@@ -119,7 +139,103 @@ fn solve(r: usize, tolerance: f64) -> (f64, f64, u32, usize) {
     m.step(frame(0.0)).unwrap();
     let ms = t.elapsed().as_secs_f64() * 1e3;
     let tip = cantilever::tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u) / p;
-    (ms, tip, m.last_solve().iterations, tets)
+    let notes = m.notes().unwrap();
+    Solve {
+        ms,
+        tip,
+        iterations: m.last_solve().iterations,
+        newton: notes["newton_iterations"],
+        unconverged: notes["unconverged_solves"],
+        tets,
+    }
+}
+
+/// The slender beam of issue 12 (8 × 1 × 0.5 mm, E = 1000, ν = 0.3,
+/// clamped, tip force 0.01 µN in −z: 1 % deflection) meshed with cells of
+/// `h` mm, statically solved with the default settings but the
+/// preconditioner; against the same mesh solved with block Jacobi to 1e-11.
+fn slender() {
+    println!(
+        "slender cantilever 8 × 1 × 0.5 (tip force 0.01, static, default settings; error vs block Jacobi at CG 1e-11):"
+    );
+    println!(
+        "      h  tetrahedra  preconditioner        time (ms)  Newton  CG iterations  unconverged  tip error"
+    );
+    for h in [0.25, 0.125] {
+        let reference = {
+            let params = FemParams {
+                solver: SolverKind::Static,
+                preconditioner: PreconditionerKind::BlockJacobi,
+                cg_tolerance: 1e-11,
+                cg_max_iterations: Some(1_000_000),
+                static_tolerance: 1e-10,
+                ..FemParams::default()
+            };
+            let mut m = slender_beam(h, params);
+            m.step(frame(0.0)).unwrap();
+            slender_tip(&m)
+        };
+        for pre in [
+            PreconditionerKind::IncompleteCholesky,
+            PreconditionerKind::BlockJacobi,
+        ] {
+            let params = FemParams {
+                solver: SolverKind::Static,
+                preconditioner: pre,
+                ..FemParams::default()
+            };
+            let mut best: Option<(f64, Fem)> = None;
+            for _ in 0..2 {
+                let mut m = slender_beam(h, params.clone());
+                let t = Instant::now();
+                m.step(frame(0.0)).unwrap();
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                if best.as_ref().is_none_or(|(b, _)| ms < *b) {
+                    best = Some((ms, m));
+                }
+            }
+            let (ms, mut m) = best.unwrap();
+            let notes = m.notes().unwrap();
+            println!(
+                "{h:7}  {:10}  {:20}  {ms:9.1}  {:6}  {:13}  {:11}  {:9.1e}",
+                notes["proxy_tetrahedra"],
+                format!("{pre:?}"),
+                notes["newton_iterations"],
+                notes["solver_iterations"],
+                notes["unconverged_solves"],
+                (slender_tip(&m) - reference).abs() / reference.abs(),
+            );
+        }
+    }
+}
+
+fn slender_beam(h: f64, params: FemParams) -> Fem {
+    let cells = [8.0 / h, 1.0 / h, 0.5 / h].map(|c| c.round() as usize + 1);
+    let grid = Grid::new(cells, DVec3::splat(h), DVec3::ZERO);
+    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).expect("beam");
+    let material = ElasticMaterial::new(1000.0, 0.3, 1e-6);
+    let mut m = Fem::with_mesh(mesh, vec![material], DVec3::ZERO, params).expect("model");
+    m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 0.51]")
+        .unwrap();
+    m.interact(
+        "kind = \"load\"\nmin = [7.99, -0.01, -0.01]\nmax = [8.01, 1.01, 0.51]\ntraction = [0, 0, -0.02]",
+    )
+    .unwrap();
+    m
+}
+
+/// Mean u_z (mm) of the face x = 8.
+fn slender_tip(m: &Fem) -> f64 {
+    let mesh = m.mesh().unwrap();
+    let u = &m.state().unwrap().u;
+    let tip: Vec<f64> = mesh
+        .nodes
+        .iter()
+        .zip(u)
+        .filter(|(x, _)| (x.x - 8.0).abs() < 1e-9)
+        .map(|(_, d)| d.z)
+        .collect();
+    tip.iter().sum::<f64>() / tip.len() as f64
 }
 
 fn main() {
@@ -135,5 +251,6 @@ fn main() {
     }
     if all || only("cantilever") {
         cantilever();
+        slender();
     }
 }

@@ -32,7 +32,7 @@ fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind) -> Fem {
     let params = FemParams {
         solver,
         cg_tolerance: 1e-6,
-        cg_max_iterations: 400,
+        cg_max_iterations: Some(400),
         ..FemParams::default()
     };
     let mut m = Fem::with_mesh(mesh, materials, DVec3::new(0.0, 0.0, -9810.0), params)
@@ -192,4 +192,41 @@ fn a_carve_on_the_gpu_backend_rebuilds_the_device_map() {
     for buf in bufs {
         gpu.destroy_buffer(buf);
     }
+}
+
+#[test]
+fn gpu_unconverged_solves_are_counted_like_rayons() {
+    // The same capped implicit step (3 CG iterations) on both paths: each
+    // counts one unconverged solve, and the worst residuals agree.
+    let Some(gpu) = test_gpu() else { return };
+    let capped = |gpu: Option<Arc<dyn GpuService>>| {
+        let grid = Grid::new([13, 4, 4], DVec3::splat(1.0), DVec3::new(-20.0, 5.0, 40.0));
+        let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
+        let params = FemParams {
+            cg_max_iterations: Some(3),
+            ..FemParams::default()
+        };
+        let material = ElasticMaterial::new(3000.0, 0.45, 1e-3);
+        let mut m = Fem::with_mesh(mesh, vec![material], DVec3::new(0.0, 0.0, -9810.0), params)
+            .unwrap()
+            .with_gpu(gpu);
+        m.interact("kind = \"fix\"\nmin = [-20.1, 4.9, 39.9]\nmax = [-19.9, 8.1, 43.1]")
+            .unwrap();
+        m
+    };
+    let mut cpu = capped(None);
+    let mut dev = capped(Some(gpu));
+    dev.use_gpu().unwrap();
+    let frame = FrameInfo {
+        frame: 0,
+        frames: 1,
+        dt_s: 1.0 / 30.0,
+    };
+    cpu.step(frame).unwrap();
+    dev.step(frame).unwrap();
+    let (a, b) = (cpu.notes().unwrap(), dev.notes().unwrap());
+    assert_eq!(a["unconverged_solves"], 1.0, "{a:?}");
+    assert_eq!(b["unconverged_solves"], 1.0, "{b:?}");
+    let (ra, rb) = (a["worst_residual"], b["worst_residual"]);
+    assert!(ra > 1e-6 && (ra - rb).abs() <= 1e-3 * ra, "{ra} vs {rb}");
 }

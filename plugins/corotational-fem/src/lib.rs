@@ -26,6 +26,8 @@
 //! cg_tolerance = 1e-6
 //! ```
 
+#[cfg(test)]
+mod convergence_tests;
 pub mod element;
 #[cfg(test)]
 mod gpu_tests;
@@ -34,6 +36,6 @@ pub mod solver;
 #[cfg(test)]
 mod tests;
 
-pub use solver::{CorotationalFem, FemParams, SolverKind};
+pub use solver::{CorotationalFem, FemParams, PreconditionerKind, SolverKind, StaticStats};
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);

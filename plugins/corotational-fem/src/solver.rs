@@ -3,25 +3,35 @@
 //! elastic force `f_int = K_rot u − f0`, linear in `u` for fixed rotations.
 //!
 //! - **Quasi-static** (`solver = "static"`): the equilibrium
-//!   `K_rot u = f_ext + f0`, re-linearised about the new rotations up to
-//!   `static_iterations` times per frame (until the largest change is below
-//!   `static_tolerance` mm).
+//!   `f_int(u) = f_ext` by Newton iterations with the warped stiffness
+//!   `K_rot` as tangent and a backtracking line search on the force
+//!   residual, load-stepped when a whole frame's step does not converge;
+//!   converged when the force residual is below `static_tolerance` of the
+//!   force scale, and an error (not a wrong answer) when it cannot be.
 //! - **Implicit backward Euler** (`solver = "dynamic"`), one linearisation
 //!   per step of `h` seconds with lumped masses `M` and Rayleigh damping
 //!   `D = α M + β K_rot`:
 //!   `(M + h D + h² K_rot) v⁺ = M v + h (f_ext − f_int(u))`, `u⁺ = u + h v⁺`.
 //!
 //! Both assemble the warped stiffness into a [`BlockMatrix`] and solve with
-//! block-Jacobi PCG, warm-started from the last answer.
+//! PCG (incomplete Cholesky for the static solves, block Jacobi for the
+//! implicit steps and on the GPU, by default), warm-started from the last
+//! answer; a linear solve that stops above `cg_tolerance` warns and is
+//! counted in the model's notes.
+
+mod newton;
+
+pub use newton::SMALLEST_LOAD_STEP;
 
 use crate::element::Element;
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::sync::Arc;
+use voxflex_core::deformation::ModelNotes;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
-use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings};
+use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_core::mesh_model::{
     BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
@@ -39,6 +49,22 @@ pub enum SolverKind {
     Dynamic,
 }
 
+/// The PCG's preconditioner (`preconditioner = "…"`).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum PreconditionerKind {
+    /// Incomplete Cholesky for the static solver (bending-dominated, where
+    /// block Jacobi needs about twice the iterations), block Jacobi for the
+    /// implicit steps (mass-dominated, where it converges in tens and
+    /// costs no factorisation) and on the GPU.
+    #[default]
+    Auto,
+    /// IC(0) on the block pattern (CPU only).
+    IncompleteCholesky,
+    /// Each node's 3 × 3 diagonal block inverted (CPU and GPU).
+    BlockJacobi,
+}
+
 /// The solver's keys of `[model.params.corotational-fem]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -49,14 +75,21 @@ pub struct FemParams {
     /// PCG stops at this relative residual (default 1e-6).
     #[serde(default = "pcg::default_tolerance")]
     pub cg_tolerance: f64,
-    /// PCG iteration cap per solve (default 200).
-    #[serde(default = "pcg::default_max_iterations")]
-    pub cg_max_iterations: u32,
-    /// Re-linearisations per frame of the static solve (default 8).
+    /// PCG iteration cap per solve; `None` (the default) derives it from
+    /// the problem size ([`pcg::size_cap`]).
+    #[serde(default)]
+    pub cg_max_iterations: Option<u32>,
+    /// The PCG's preconditioner (default `"auto"`).
+    #[serde(default)]
+    pub preconditioner: PreconditionerKind,
+    /// Newton iterations per load step of the static solve (default 25).
     #[serde(default = "default_static_iterations")]
     pub static_iterations: u32,
-    /// The static solve stops re-linearising when no node moves more than
-    /// this, mm (default 1e-6).
+    /// The static solve has converged when the force residual
+    /// `|f_ext − f_int(u)|` on the free nodes is at most this fraction of
+    /// the force scale (the largest of `|f_ext|` there, `|f_int(u)|` over
+    /// all nodes, reactions included, and the residual the load step
+    /// started from) (default 1e-6).
     #[serde(default = "default_static_tolerance")]
     pub static_tolerance: f64,
     /// Implicit steps per frame (default 1).
@@ -71,7 +104,7 @@ pub struct FemParams {
 }
 
 fn default_static_iterations() -> u32 {
-    8
+    25
 }
 fn default_static_tolerance() -> f64 {
     1e-6
@@ -91,7 +124,8 @@ impl Default for FemParams {
         Self {
             solver: SolverKind::default(),
             cg_tolerance: pcg::default_tolerance(),
-            cg_max_iterations: pcg::default_max_iterations(),
+            cg_max_iterations: None,
+            preconditioner: PreconditionerKind::default(),
             static_iterations: default_static_iterations(),
             static_tolerance: default_static_tolerance(),
             substeps: one(),
@@ -104,14 +138,14 @@ impl Default for FemParams {
 impl FemParams {
     fn validate(&self) -> Result<(), ModelError> {
         let fail = |m: String| Err(ModelError(format!("corotational-fem params: {m}")));
-        CgSettings::checked(self.cg_tolerance, self.cg_max_iterations)
+        CgSettings::checked(self.cg_tolerance, self.cg_max_iterations.unwrap_or(1))
             .map_err(|m| ModelError(format!("corotational-fem params: {m}")))?;
         if self.static_iterations == 0 || self.substeps == 0 {
             return fail("static_iterations and substeps must be ≥ 1".into());
         }
-        if self.static_tolerance.is_nan() || self.static_tolerance <= 0.0 {
+        if !(self.static_tolerance > 0.0 && self.static_tolerance < 1.0) {
             return fail(format!(
-                "static_tolerance {} must be > 0 (mm)",
+                "static_tolerance {} must lie in (0, 1) (a relative force residual)",
                 self.static_tolerance
             ));
         }
@@ -121,6 +155,27 @@ impl FemParams {
         }
         Ok(())
     }
+
+    /// The preconditioner the CPU PCG uses for this solver.
+    fn cpu_preconditioner(&self) -> Preconditioner {
+        match (self.preconditioner, self.solver) {
+            (PreconditionerKind::BlockJacobi, _)
+            | (PreconditionerKind::Auto, SolverKind::Dynamic) => Preconditioner::BlockJacobi,
+            _ => Preconditioner::IncompleteCholesky,
+        }
+    }
+}
+
+/// Figures of the static solves since the solver was built (→ notes).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StaticStats {
+    /// Newton iterations (linear solves) summed over the run.
+    pub newton_iterations: u64,
+    /// Load steps summed over the run (one per frame when no step had to
+    /// be cut back).
+    pub load_steps: u64,
+    /// The relative force residual at the end of the last static frame.
+    pub force_residual: f64,
 }
 
 /// The corotational FEM solver.
@@ -136,12 +191,27 @@ pub struct CorotationalFem {
     f0: Vec<DVec3>,
     /// The PCG's WGSL twin, on the GPU backend.
     gpu: Option<GpuPcg>,
+    /// The static solves' figures.
+    stats: StaticStats,
+}
+
+/// Which part of the rotations' own stiffness the tangent carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Twist {
+    /// None: `R K Rᵀ` (the implicit steps).
+    None,
+    /// The exact Hessian (indefinite where elements are compressed).
+    Full,
+    /// Its positive part only (positive definite).
+    Clamped,
 }
 
 impl CorotationalFem {
     /// Rotations from `u`, the warped stiffness assembled with `diagonal`
-    /// on the diagonal blocks and scaled by `k_scale`, and `f0` per node.
-    fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>) {
+    /// on the diagonal blocks and scaled by `k_scale`, and `f0` per node;
+    /// with `twist`, each element's rotation stiffness too
+    /// ([`Element::add_twist_stiffness`]; the static Newton tangent).
+    fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>, twist: Twist) {
         let elements = &self.elements;
         self.blocks
             .par_chunks_mut(16)
@@ -151,6 +221,11 @@ impl CorotationalFem {
             .for_each(|((k, f0), e)| {
                 let ue = e.nodes.map(|n| u[n as usize]);
                 e.corotate(e.rotation(ue), k, f0);
+                match twist {
+                    Twist::None => {}
+                    Twist::Full => e.add_twist_stiffness(ue, k, false),
+                    Twist::Clamped => e.add_twist_stiffness(ue, k, true),
+                }
                 if k_scale != 1.0 {
                     for b in k.iter_mut() {
                         *b *= k_scale;
@@ -162,77 +237,90 @@ impl CorotationalFem {
     }
 
     /// Solves the assembled system on the GPU when there is one, else with
-    /// the rayon PCG.
+    /// the rayon PCG; warns when the solve stops above its tolerance and
+    /// counts it in `report`.
     fn solve(
         &self,
         bc: &Boundary,
         free: &[bool],
         rhs: &[DVec3],
         x: &mut [DVec3],
+        report: &mut SolveReport,
     ) -> Result<CgOutcome, ModelError> {
-        match &self.gpu {
+        let out = self.solve_quietly(bc, free, rhs, x)?;
+        let what = match self.params.solver {
+            SolverKind::Static => "static (Newton)",
+            SolverKind::Dynamic => "implicit step's",
+        };
+        let keys = if self.gpu.is_some() {
+            "raise cg_max_iterations (or run the static solver on the CPU backend, \
+             whose default preconditioner is incomplete Cholesky)"
+        } else if self.params.cpu_preconditioner() == Preconditioner::BlockJacobi {
+            "raise cg_max_iterations or set preconditioner = \"incomplete-cholesky\""
+        } else {
+            "raise cg_max_iterations or loosen cg_tolerance"
+        };
+        let converged = pcg::warn_unconverged(Self::NAME, what, out, self.settings(free), keys);
+        report.add_solve(out, converged);
+        Ok(out)
+    }
+
+    /// The solve of [`CorotationalFem::solve`], neither warning nor
+    /// counted: for a Newton direction tried first with the exact,
+    /// possibly indefinite, tangent.
+    fn solve_quietly(
+        &self,
+        bc: &Boundary,
+        free: &[bool],
+        rhs: &[DVec3],
+        x: &mut [DVec3],
+    ) -> Result<CgOutcome, ModelError> {
+        let settings = self.settings(free);
+        Ok(match &self.gpu {
             Some(g) => g
-                .solve(&self.matrix, free, &bc.hanging, rhs, x, self.settings())
-                .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}"))),
-            None => Ok(pcg::solve(&self.matrix, bc, free, rhs, x, self.settings())),
+                .solve(&self.matrix, free, &bc.hanging, rhs, x, settings)
+                .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}")))?,
+            None => pcg::solve_with(
+                &self.matrix,
+                bc,
+                free,
+                rhs,
+                x,
+                settings,
+                self.params.cpu_preconditioner(),
+            ),
+        })
+    }
+
+    /// The PCG settings: the scene's cap, or one derived from the number
+    /// of free nodes.
+    fn settings(&self, free: &[bool]) -> CgSettings {
+        CgSettings {
+            tolerance: self.params.cg_tolerance,
+            max_iterations: self
+                .params
+                .cg_max_iterations
+                .unwrap_or_else(|| pcg::size_cap(free.iter().filter(|f| **f).count())),
         }
     }
 
-    fn settings(&self) -> CgSettings {
-        CgSettings {
-            tolerance: self.params.cg_tolerance,
-            max_iterations: self.params.cg_max_iterations,
-        }
+    /// The figures of the static solves so far.
+    pub fn static_stats(&self) -> StaticStats {
+        self.stats
     }
 
     /// The elastic force on every node at displacements `u` (µN), each
     /// element rotated by its own `R(u)`: `Σ R K (Rᵀ x − X)`.
     pub fn elastic_forces(&self, u: &[DVec3]) -> Vec<DVec3> {
+        let per_corner: Vec<DVec3> = self
+            .elements
+            .par_iter()
+            .with_min_len(256)
+            .flat_map_iter(|e| e.elastic_force(e.nodes.map(|n| u[n as usize])))
+            .collect();
         let mut f = vec![DVec3::ZERO; u.len()];
-        for e in &self.elements {
-            let fe = e.elastic_force(e.nodes.map(|n| u[n as usize]));
-            for (a, &n) in e.nodes.iter().enumerate() {
-                f[n as usize] += fe[a];
-            }
-        }
+        self.matrix.sum_corners(&per_corner, &mut f);
         f
-    }
-
-    fn step_static(
-        &mut self,
-        bc: &Boundary,
-        state: &mut NodeState,
-    ) -> Result<SolveReport, ModelError> {
-        let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
-        let mut report = SolveReport {
-            substeps: 1,
-            ..SolveReport::default()
-        };
-        bc.impose(&mut state.u);
-        for _ in 0..self.params.static_iterations {
-            self.linearise(&state.u, 1.0, None);
-            let rhs: Vec<DVec3> = bc
-                .force
-                .iter()
-                .zip(&self.f0)
-                .map(|(f, g)| *f + *g)
-                .collect();
-            let before = state.u.clone();
-            let out = self.solve(bc, &free, &rhs, &mut state.u)?;
-            report.iterations += out.iterations;
-            report.residual = out.residual;
-            let change = state
-                .u
-                .iter()
-                .zip(&before)
-                .map(|(a, b)| (*a - *b).abs().max_element())
-                .fold(0.0, f64::max);
-            if change <= self.params.static_tolerance {
-                break;
-            }
-        }
-        state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
-        Ok(report)
     }
 
     fn step_dynamic(
@@ -248,7 +336,7 @@ impl CorotationalFem {
         for s in 1..=self.params.substeps {
             // A = (1 + hα) M + (hβ + h²) K_rot.
             let diagonal: Vec<f64> = self.masses.iter().map(|m| (1.0 + h * alpha) * m).collect();
-            self.linearise(&state.u, h * beta + h * h, Some(&diagonal));
+            self.linearise(&state.u, h * beta + h * h, Some(&diagonal), Twist::None);
             // f_int(u) = K_rot u − f0, with K_rot = A's stiffness part / (hβ + h²).
             let k_u = {
                 let mut ku = vec![DVec3::ZERO; state.u.len()];
@@ -276,9 +364,7 @@ impl CorotationalFem {
             for &(n, target) in &bc.driven {
                 v[n as usize] = (target - state.u[n as usize]) / (h * remaining);
             }
-            let out = self.solve(bc, &free, &rhs, &mut v)?;
-            report.iterations += out.iterations;
-            report.residual = out.residual;
+            self.solve(bc, &free, &rhs, &mut v, &mut report)?;
             for (u, vn) in state.u.iter_mut().zip(&v) {
                 *u += h * *vn;
             }
@@ -299,6 +385,14 @@ impl MeshSolver for CorotationalFem {
     const GPU: bool = true;
 
     fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        if self.params.preconditioner == PreconditionerKind::IncompleteCholesky {
+            return Err(ModelError(
+                "corotational-fem: preconditioner = \"incomplete-cholesky\" has no GPU path; \
+                 use preconditioner = \"block-jacobi\" or \"auto\" with backend = \"gpu\", \
+                 or backend = \"cpu\""
+                    .into(),
+            ));
+        }
         self.gpu = Some(
             GpuPcg::new(gpu, &self.matrix)
                 .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}")))?,
@@ -323,9 +417,24 @@ impl MeshSolver for CorotationalFem {
             corner_f0: vec![DVec3::ZERO; 4 * elements.len()],
             f0: vec![DVec3::ZERO; n],
             gpu: None,
+            stats: StaticStats::default(),
             elements,
             params,
         })
+    }
+
+    /// `newton_iterations` and `load_steps` summed over the run, and
+    /// `newton_force_residual` (relative, at the end of the last static
+    /// frame), for the static solver.
+    fn notes(&self, notes: &mut ModelNotes) {
+        if self.params.solver == SolverKind::Static {
+            notes.insert(
+                "newton_iterations".into(),
+                self.stats.newton_iterations as f64,
+            );
+            notes.insert("load_steps".into(), self.stats.load_steps as f64);
+            notes.insert("newton_force_residual".into(), self.stats.force_residual);
+        }
     }
 
     fn step(

@@ -210,8 +210,7 @@ impl MassSpring {
             bc.impose(&mut state.u);
             return Ok(SolveReport {
                 substeps,
-                iterations: 0,
-                residual: 0.0,
+                ..SolveReport::default()
             });
         }
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
@@ -259,8 +258,7 @@ impl MassSpring {
         bc.impose(&mut state.u);
         Ok(SolveReport {
             substeps,
-            iterations: 0,
-            residual: 0.0,
+            ..SolveReport::default()
         })
     }
 
@@ -364,11 +362,19 @@ impl MassSpring {
             *u += h * *v;
         }
         bc.impose(&mut state.u);
-        Ok(SolveReport {
+        let converged = pcg::warn_unconverged(
+            Self::NAME,
+            "implicit step's",
+            out,
+            settings,
+            "raise cg_max_iterations, lower the time step or raise damping",
+        );
+        let mut report = SolveReport {
             substeps: 1,
-            iterations: out.iterations,
-            residual: out.residual,
-        })
+            ..SolveReport::default()
+        };
+        report.add_solve(out, converged);
+        Ok(report)
     }
 }
 

@@ -18,6 +18,7 @@ pub mod boundary;
 pub mod cantilever;
 pub mod carve;
 pub mod cut;
+pub mod ichol;
 pub mod material;
 mod model;
 pub mod params;
@@ -32,6 +33,7 @@ pub use model::MeshModel;
 pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
 pub use pcg::{CgOutcome, CgSettings};
 
+use crate::deformation::ModelNotes;
 use crate::error::GpuError;
 use crate::error::ModelError;
 use crate::gpu::{BufferId, GpuService, GpuServiceExt};
@@ -99,6 +101,21 @@ pub struct SolveReport {
     pub iterations: u32,
     /// Relative residual of the last linear solve (0 for explicit steps).
     pub residual: f64,
+    /// The largest relative residual of the step's linear solves.
+    pub worst_residual: f64,
+    /// Linear solves of the step that stopped above their tolerance.
+    pub unconverged: u32,
+}
+
+impl SolveReport {
+    /// Counts one linear solve: its iterations, residual, and whether it
+    /// converged (`converged`, see [`pcg::warn_unconverged`]).
+    pub fn add_solve(&mut self, out: CgOutcome, converged: bool) {
+        self.iterations += out.iterations;
+        self.residual = out.residual;
+        self.worst_residual = self.worst_residual.max(out.residual);
+        self.unconverged += u32::from(!converged);
+    }
 }
 
 /// A deformation solver on a tetrahedral proxy: the only part a mesh-based
@@ -131,6 +148,12 @@ pub trait MeshSolver: Send + Sized + 'static {
             "{}: no GPU path; use backend = \"cpu\" (or \"auto\")",
             Self::NAME
         )))
+    }
+
+    /// Adds the solver's own figures to the model's notes (→
+    /// `metrics.json`); the default adds none.
+    fn notes(&self, notes: &mut ModelNotes) {
+        let _ = notes;
     }
 
     /// Advances `state` by `dt_s` seconds under `bc` (a static solver finds

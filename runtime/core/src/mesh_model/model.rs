@@ -73,6 +73,10 @@ struct SolveTotals {
     steps: u64,
     substeps: u64,
     iterations: u64,
+    /// Linear solves that stopped above their tolerance, and the largest
+    /// relative residual of any solve.
+    unconverged: u64,
+    worst_residual: f64,
 }
 
 /// The device side of `map` on the GPU backend.
@@ -740,6 +744,8 @@ impl<S: MeshSolver> MeshModel<S> {
         self.totals.steps += 1;
         self.totals.substeps += u64::from(self.last.substeps);
         self.totals.iterations += u64::from(self.last.iterations);
+        self.totals.unconverged += u64::from(self.last.unconverged);
+        self.totals.worst_residual = self.totals.worst_residual.max(self.last.worst_residual);
         if let Some(n) = b
             .state
             .u
@@ -958,7 +964,10 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
     /// `bound_points_outside_proxy` (bound to the nearest tetrahedron with
     /// clamped weights), `steps`, `substeps` and `solver_iterations` summed
     /// over the run, and `last_residual` (relative, of the last linear
-    /// solve; 0 for explicit steps).
+    /// solve; 0 for explicit steps), `worst_residual` (the largest relative
+    /// residual of any linear solve of the run) and `unconverged_solves`
+    /// (linear solves that stopped above their tolerance), then the
+    /// solver's own notes.
     fn notes(&mut self) -> Result<ModelNotes, ModelError> {
         let mut notes = ModelNotes::new();
         if let Some(b) = &self.built {
@@ -974,6 +983,11 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         notes.insert("substeps".into(), self.totals.substeps as f64);
         notes.insert("solver_iterations".into(), self.totals.iterations as f64);
         notes.insert("last_residual".into(), self.last.residual);
+        notes.insert("worst_residual".into(), self.totals.worst_residual);
+        notes.insert("unconverged_solves".into(), self.totals.unconverged as f64);
+        if let Some(b) = &self.built {
+            b.solver.notes(&mut notes);
+        }
         Ok(notes)
     }
 

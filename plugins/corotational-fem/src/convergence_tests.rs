@@ -1,0 +1,268 @@
+//! The static solve converges, or says so (issue 12): the slender
+//! cantilever 8 × 1 × 0.5 mm under the default settings against the same
+//! mesh solved to a tight tolerance with block Jacobi and a huge cap; the
+//! static solve under large rotation against the Euler elastica; mirrored
+//! loads give mirrored tips; unconverged solves are counted and a load the
+//! static solve cannot carry is refused.
+
+use crate::solver::{CorotationalFem, FemParams, PreconditionerKind, SolverKind};
+use voxflex_core::deformation::{DeformationModel, FrameInfo};
+use voxflex_core::glam::DVec3;
+use voxflex_core::grid::Grid;
+use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_core::proxy::uniform_proxy;
+
+type Fem = MeshModel<CorotationalFem>;
+
+/// Beam length, width (y) and thickness (z), mm.
+const L: f64 = 8.0;
+const W: f64 = 1.0;
+const T: f64 = 0.5;
+
+fn frame() -> FrameInfo {
+    FrameInfo {
+        frame: 0,
+        frames: 1,
+        dt_s: 0.0,
+    }
+}
+
+/// The beam meshed with cells of `h` mm (five tetrahedra each), E = 1000
+/// Pa, ν = 0.3, clamped at x = 0, with a total force `p` µN in −z spread
+/// over the face x = L as a traction.
+fn beam(h: f64, p: f64, params: FemParams) -> Fem {
+    beam_held(h, p, params, true)
+}
+
+/// [`beam`], clamped or not.
+fn beam_held(h: f64, p: f64, params: FemParams, clamped: bool) -> Fem {
+    let cells = [L / h, W / h, T / h].map(|c| c.round() as usize + 1);
+    let grid = Grid::new(cells, DVec3::splat(h), DVec3::ZERO);
+    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
+    let mut m = Fem::with_mesh(
+        mesh,
+        vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
+        DVec3::ZERO,
+        params,
+    )
+    .unwrap();
+    if clamped {
+        m.interact("kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, 1.01, 0.51]")
+            .unwrap();
+    }
+    m.interact(&format!(
+        "kind = \"load\"\nmin = [7.99, -0.01, -0.01]\nmax = [8.01, 1.01, 0.51]\ntraction = [0, 0, {}]",
+        -p / (W * T)
+    ))
+    .unwrap();
+    m
+}
+
+/// The mean position (mm) of the nodes on the face x = L.
+fn tip(m: &Fem) -> DVec3 {
+    let mesh = m.mesh().unwrap();
+    let u = &m.state().unwrap().u;
+    let (sum, n) = mesh
+        .nodes
+        .iter()
+        .zip(u)
+        .filter(|(x, _)| (x.x - L).abs() < 1e-9)
+        .fold((DVec3::ZERO, 0), |(s, n), (x, d)| (s + *x + *d, n + 1));
+    sum / n as f64
+}
+
+fn static_default() -> FemParams {
+    FemParams {
+        solver: SolverKind::Static,
+        ..FemParams::default()
+    }
+}
+
+fn tight_block_jacobi() -> FemParams {
+    FemParams {
+        solver: SolverKind::Static,
+        cg_tolerance: 1e-11,
+        cg_max_iterations: Some(100_000),
+        preconditioner: PreconditionerKind::BlockJacobi,
+        static_tolerance: 1e-10,
+        ..FemParams::default()
+    }
+}
+
+#[test]
+fn the_slender_cantilever_converges_with_the_default_settings() {
+    // A small load (tip deflection ~1 % of the length): the linear regime.
+    let p = 0.01;
+    for h in [0.25, 0.125] {
+        let mut m = beam(h, p, static_default());
+        m.step(frame()).unwrap();
+        let mut reference = beam(h, p, tight_block_jacobi());
+        reference.step(frame()).unwrap();
+        let (got, want) = (tip(&m).z - T / 2.0, tip(&reference).z - T / 2.0);
+        assert!(want < -0.01, "h = {h}: the reference deflects ({want} mm)");
+        assert!(
+            (got - want).abs() <= 1e-4 * want.abs(),
+            "h = {h}: tip deflection {got:.6e} mm against the converged {want:.6e} mm \
+             ({:.1} %)",
+            100.0 * got / want
+        );
+        let notes = m.notes().unwrap();
+        assert!(notes["last_residual"] <= 1e-6, "h = {h}: {notes:?}");
+    }
+}
+
+/// The tip-loaded cantilever's Euler elastica (inextensible, dead load in
+/// −z): `θ'' = −α cos θ` on `s ∈ [0, 1]` with `α = P L² / EI`, clamped
+/// (`θ(0) = 0`) and moment-free at the tip (`θ'(1) = 0`), by shooting on
+/// `θ'(0)` (bisection, RK4 with 4,000 steps). Returns the tip's `(x, z)`
+/// as fractions of the length (z downward negative).
+fn elastica_tip(alpha: f64) -> (f64, f64) {
+    let shoot = |k0: f64| {
+        // State: θ, θ', x, z.
+        let f = |y: [f64; 4]| [y[1], -alpha * y[0].cos(), y[0].cos(), -y[0].sin()];
+        let steps = 4000;
+        let h = 1.0 / steps as f64;
+        let mut y = [0.0, k0, 0.0, 0.0];
+        let add = |y: [f64; 4], k: [f64; 4], c: f64| [0, 1, 2, 3].map(|i| y[i] + c * k[i]);
+        for _ in 0..steps {
+            let k1 = f(y);
+            let k2 = f(add(y, k1, h / 2.0));
+            let k3 = f(add(y, k2, h / 2.0));
+            let k4 = f(add(y, k3, h));
+            y = [0, 1, 2, 3].map(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+        }
+        y
+    };
+    // θ'(1) < 0 at k0 = 0 and ≥ 0 at k0 = α.
+    let (mut lo, mut hi) = (0.0, alpha);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if shoot(mid)[1] < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let y = shoot(0.5 * (lo + hi));
+    (y[2], y[3])
+}
+
+#[test]
+fn the_elastica_reference_matches_its_small_and_known_values() {
+    // Small load: the linear beam's tip deflection α/3.
+    let (x, z) = elastica_tip(0.01);
+    assert!(
+        (z + 0.01 / 3.0).abs() < 1e-6 && (x - 1.0).abs() < 1e-4,
+        "{x} {z}"
+    );
+    // Bisshopp & Drucker (1945): PL²/EI = 1 puts the tip at
+    // (1 − 0.05643, −0.30172) L, and PL²/EI = 10 at δ/L = 0.8106.
+    let (x, z) = elastica_tip(1.0);
+    assert!(
+        (x - 0.94357).abs() < 2e-5 && (z + 0.30172).abs() < 2e-5,
+        "{x} {z}"
+    );
+    let (_, z) = elastica_tip(10.0);
+    assert!((z + 0.8106).abs() < 1e-4, "{z}");
+}
+
+#[test]
+fn the_static_solve_follows_the_elastica_under_large_rotation() {
+    let h = 0.25;
+    // EI of this mesh: P1 tetrahedra lock in bending, so the mesh is
+    // stiffer than the beam; its small-load response (δ = P L³ / 3 EI)
+    // measures the bending stiffness it has, which removes the
+    // discretisation's stiffness error from the comparison.
+    let small = 1e-4;
+    let mut m = beam(h, small, static_default());
+    m.step(frame()).unwrap();
+    let delta = T / 2.0 - tip(&m).z;
+    let ei = small * L.powi(3) / (3.0 * delta);
+    let beam_ei = 1000.0 * W * T.powi(3) / 12.0;
+    assert!(
+        ei > beam_ei && ei < 3.0 * beam_ei,
+        "EI of the mesh {ei} vs beam {beam_ei}"
+    );
+    for alpha in [3.0, 10.0, 30.0] {
+        let p = alpha * ei / (L * L);
+        let mut m = beam(h, p, static_default());
+        m.step(frame()).unwrap();
+        let (ex, ez) = elastica_tip(alpha);
+        let got = tip(&m);
+        let (dx, dz) = (got.x / L - ex, (got.z - T / 2.0) / L - ez);
+        let notes = m.notes().unwrap();
+        eprintln!(
+            "α = {alpha}: tip ({:.4}, {:.4}) L vs elastica ({ex:.4}, {ez:.4}) L; {notes:?}",
+            got.x / L,
+            (got.z - T / 2.0) / L
+        );
+        assert!(
+            dx.abs() <= 0.02 && dz.abs() <= 0.02,
+            "α = {alpha}: tip ({:.4}, {:.4}) L, elastica ({ex:.4}, {ez:.4}) L",
+            got.x / L,
+            (got.z - T / 2.0) / L
+        );
+        assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
+        assert_eq!(notes["unconverged_solves"], 0.0, "{notes:?}");
+    }
+}
+
+#[test]
+fn loads_of_opposite_sign_give_mirrored_tips() {
+    let h = 0.25;
+    let p = 0.5;
+    let mut down = beam(h, p, static_default());
+    down.step(frame()).unwrap();
+    let mut up = beam(h, -p, static_default());
+    up.step(frame()).unwrap();
+    let (a, b) = (tip(&down), tip(&up));
+    let deflection = T / 2.0 - a.z;
+    assert!(deflection > 1.0, "a large deflection ({deflection} mm)");
+    assert!(
+        (a.x - b.x).abs() <= 1e-5 * deflection
+            && (a.z - T / 2.0 + b.z - T / 2.0).abs() <= 1e-5 * deflection
+            && (a.y - b.y).abs() <= 1e-5 * deflection,
+        "down {a}, up {b}"
+    );
+}
+
+#[test]
+fn a_load_the_static_solve_cannot_carry_is_refused_naming_what_to_change() {
+    // A beam that nothing holds has no static equilibrium under a load:
+    // the solve gives up with an error, not a wrong state.
+    let params = FemParams {
+        static_iterations: 3,
+        ..static_default()
+    };
+    let mut m = beam_held(0.5, 0.1, params, false);
+    let e = m.step(frame()).unwrap_err().0;
+    assert!(
+        e.contains("did not converge")
+            && e.contains("static_iterations")
+            && e.contains("solver = \"dynamic\"")
+            && e.contains("frames"),
+        "{e}"
+    );
+    let u = &m.state().unwrap().u;
+    assert!(u.iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn an_unconverged_linear_solve_is_counted_in_the_notes() {
+    let params = FemParams {
+        cg_max_iterations: Some(3),
+        preconditioner: PreconditionerKind::BlockJacobi,
+        ..FemParams::default()
+    };
+    let mut m = beam(0.25, 0.01, params);
+    m.step(FrameInfo {
+        frame: 0,
+        frames: 1,
+        dt_s: 1.0 / 30.0,
+    })
+    .unwrap();
+    let notes = m.notes().unwrap();
+    assert_eq!(notes["unconverged_solves"], 1.0, "{notes:?}");
+    assert!(notes["worst_residual"] > 1e-6, "{notes:?}");
+    assert_eq!(notes["worst_residual"], notes["last_residual"], "{notes:?}");
+}

@@ -1,0 +1,283 @@
+//! The static solve: Newton iterations on the corotational forces with a
+//! line search on the total potential, and load stepping (see
+//! [`CorotationalFem::step_static`]).
+
+use super::{CorotationalFem, Twist};
+use rayon::prelude::*;
+use voxflex_core::error::ModelError;
+use voxflex_core::glam::DVec3;
+use voxflex_core::mesh_model::{Boundary, NodeState, SolveReport};
+
+/// Load steps are halved down to this fraction of a frame's load change
+/// before the static solve gives up.
+pub const SMALLEST_LOAD_STEP: f64 = 1.0 / 1024.0;
+
+/// Backtracking halves the Newton step down to this fraction before the
+/// load step is declared failed.
+const SMALLEST_LINE_STEP: f64 = 1.0 / 64.0;
+
+/// A Newton iterate's figures: relative force residual, residual force
+/// per node (µN), total potential and the largest potential met (µN·mm),
+/// and the force-scale floor of its load step (µN).
+struct Point {
+    residual: f64,
+    g: Vec<DVec3>,
+    potential: f64,
+    scale: f64,
+    floor: f64,
+}
+
+/// One Newton solve's end: converged or not, with its relative force
+/// residual.
+struct NewtonEnd {
+    converged: bool,
+    residual: f64,
+}
+
+/// Euclidean norm over the free nodes.
+fn free_norm(v: &[DVec3], free: &[bool]) -> f64 {
+    v.iter()
+        .zip(free)
+        .filter(|(_, f)| **f)
+        .map(|(x, _)| x.length_squared())
+        .sum::<f64>()
+        .sqrt()
+}
+
+fn norm(v: &[DVec3]) -> f64 {
+    v.iter().map(|x| x.length_squared()).sum::<f64>().sqrt()
+}
+
+impl CorotationalFem {
+    /// The total potential `Σ_e E_e(u) − f_ext · u` (µN·mm): the static
+    /// solve's merit function, whose gradient is `f_int − f_ext`.
+    fn potential(&self, u: &[DVec3], f_ext: &[DVec3]) -> f64 {
+        let strain: f64 = self
+            .elements
+            .par_iter()
+            .with_min_len(256)
+            .map(|e| e.energy(e.nodes.map(|n| u[n as usize])))
+            .sum();
+        strain - f_ext.iter().zip(u).map(|(f, x)| f.dot(*x)).sum::<f64>()
+    }
+
+    /// The static equilibrium `f_int(u) = f_ext` on the free nodes, by
+    /// Newton iterations with load stepping.
+    ///
+    /// From the state `u0` it is given, the solve follows the path
+    /// `f_ext(λ) = λ f + (1 − λ) f_int(u0)` with the imposed displacements
+    /// moving linearly from their values in `u0` to their targets, so that
+    /// `u0` solves `λ = 0` exactly and `λ = 1` is the frame's problem. It
+    /// first tries the whole step; a load step whose Newton iterations do
+    /// not converge is halved (down to [`SMALLEST_LOAD_STEP`]), and a
+    /// converged one doubles the next. Giving up is a [`ModelError`] that
+    /// leaves the last converged state.
+    pub(super) fn step_static(
+        &mut self,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
+        let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
+        let mut report = SolveReport {
+            substeps: 1,
+            ..SolveReport::default()
+        };
+        let u0 = state.u.clone();
+        let f_int0 = self.elastic_forces(&u0);
+        let mut target = u0.clone();
+        bc.impose(&mut target);
+        let (mut done, mut step) = (0.0f64, 1.0f64);
+        let mut newton = 0u64;
+        let mut last = NewtonEnd {
+            converged: false,
+            residual: f64::NAN,
+        };
+        while done < 1.0 {
+            let lambda = (done + step).min(1.0);
+            let f_ext: Vec<DVec3> = bc
+                .force
+                .iter()
+                .zip(&f_int0)
+                .map(|(f, g)| lambda * *f + (1.0 - lambda) * *g)
+                .collect();
+            let mut trial = state.u.clone();
+            for (n, c) in free.iter().enumerate() {
+                if !c {
+                    trial[n] = u0[n].lerp(target[n], lambda);
+                }
+            }
+            bc.tie(&mut trial);
+            let (end, iterations) = self.newton(bc, &free, &f_ext, &mut trial, &mut report)?;
+            newton += u64::from(iterations);
+            last = end;
+            self.stats.load_steps += 1;
+            if last.converged {
+                state.u = trial;
+                done = lambda;
+                step = (2.0 * step).min(1.0);
+            } else {
+                step *= 0.5;
+                if step < SMALLEST_LOAD_STEP {
+                    break;
+                }
+            }
+        }
+        self.stats.newton_iterations += newton;
+        self.stats.force_residual = last.residual;
+        state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
+        if done < 1.0 {
+            return Err(ModelError(format!(
+                "corotational-fem: the static solve did not converge: relative force residual \
+                 {:.2e} above static_tolerance {:.1e} after {newton} Newton iterations, with \
+                 this frame's loads and imposed displacements applied only to {:.4} (load steps \
+                 down to 1/{}); the step is too large for a quasi-static solve from this state: \
+                 ramp the load in over more frames (`frames` of the load or grab interaction), \
+                 raise static_iterations ({}), or use solver = \"dynamic\" (a piece that \
+                 nothing fixes or grabs has no static equilibrium at all)",
+                last.residual,
+                self.params.static_tolerance,
+                done,
+                (1.0 / SMALLEST_LOAD_STEP) as u32,
+                self.params.static_iterations,
+            )));
+        }
+        Ok(report)
+    }
+
+    /// The relative force residual `|f_ext − f_int(u)|` (free nodes, hanging
+    /// nodes' forces moved onto their masters) over the force scale — the
+    /// largest of `|f_ext|` there, `|f_int(u)|` over all nodes (reactions
+    /// included) and `floor` (µN; the residual a load step starts from, so
+    /// that a step whose answer is stress-free, such as a grabbed piece
+    /// moving rigidly, still has a scale) — and the residual force per node.
+    fn force_residual(
+        &self,
+        bc: &Boundary,
+        free: &[bool],
+        f_ext: &[DVec3],
+        u: &[DVec3],
+        floor: f64,
+    ) -> (f64, Vec<DVec3>) {
+        let f_int = self.elastic_forces(u);
+        let mut g: Vec<DVec3> = f_ext.iter().zip(&f_int).map(|(a, b)| *a - *b).collect();
+        let mut ext = f_ext.to_vec();
+        bc.untie(&mut g);
+        bc.untie(&mut ext);
+        let scale = free_norm(&ext, free).max(norm(&f_int)).max(floor);
+        let r = free_norm(&g, free);
+        let relative = if scale > 0.0 { r / scale } else { r };
+        (
+            if relative.is_finite() {
+                relative
+            } else {
+                f64::INFINITY
+            },
+            g,
+        )
+    }
+
+    /// Newton iterations on `f_int(u) = f_ext` from `u` (imposed values in
+    /// place). The tangent is the potential's exact Hessian (`R K Rᵀ` plus
+    /// the rotations' own stiffness); where that solve fails (an
+    /// indefinite Hessian: compressed elements, or far from equilibrium)
+    /// or gives no descent, the iteration is redone with its positive part
+    /// only. The step is backtracked until it lowers the total potential
+    /// enough (Armijo; the force is the potential's gradient, and along a
+    /// descent direction it must fall) — or, once the potential's change
+    /// is below its rounding, the force residual. Returns how it ended and
+    /// the iterations taken.
+    fn newton(
+        &mut self,
+        bc: &Boundary,
+        free: &[bool],
+        f_ext: &[DVec3],
+        u: &mut Vec<DVec3>,
+        report: &mut SolveReport,
+    ) -> Result<(NewtonEnd, u32), ModelError> {
+        let tolerance = self.params.static_tolerance;
+        let (_, g) = self.force_residual(bc, free, f_ext, u, 0.0);
+        let floor = free_norm(&g, free);
+        let (residual, g) = self.force_residual(bc, free, f_ext, u, floor);
+        let potential = self.potential(u, f_ext);
+        let mut at = Point {
+            residual,
+            g,
+            potential,
+            scale: potential.abs(),
+            floor,
+        };
+        let mut iterations = 0;
+        while at.residual > tolerance && iterations < self.params.static_iterations {
+            iterations += 1;
+            let mut moved = false;
+            for twist in [Twist::Full, Twist::Clamped] {
+                self.linearise(u, 1.0, None, twist);
+                let mut du = vec![DVec3::ZERO; u.len()];
+                if twist == Twist::Full {
+                    let out = self.solve_quietly(bc, free, &at.g, &mut du)?;
+                    if !out.converged(self.settings(free)) {
+                        report.iterations += out.iterations;
+                        continue;
+                    }
+                    report.add_solve(out, true);
+                } else {
+                    self.solve(bc, free, &at.g, &mut du, report)?;
+                }
+                if let Some(next) = self.line_search(bc, free, f_ext, u, &du, &at) {
+                    at = next;
+                    moved = true;
+                    break;
+                }
+            }
+            if !moved {
+                break;
+            }
+        }
+        Ok((
+            NewtonEnd {
+                converged: at.residual <= tolerance,
+                residual: at.residual,
+            },
+            iterations,
+        ))
+    }
+
+    /// Backtracks along `du` from `u` (halving down to
+    /// [`SMALLEST_LINE_STEP`]); moves `u` and returns the new point, or
+    /// `None` when `du` is no descent direction or no step is accepted.
+    fn line_search(
+        &self,
+        bc: &Boundary,
+        free: &[bool],
+        f_ext: &[DVec3],
+        u: &mut Vec<DVec3>,
+        du: &[DVec3],
+        at: &Point,
+    ) -> Option<Point> {
+        // The potential's slope along du is −g · du.
+        let descent: f64 = at.g.iter().zip(du).map(|(a, b)| a.dot(*b)).sum();
+        if descent.is_nan() || descent <= 0.0 {
+            return None;
+        }
+        let mut s = 1.0;
+        while s >= SMALLEST_LINE_STEP {
+            let mut trial: Vec<DVec3> = u.iter().zip(du).map(|(a, d)| *a + s * *d).collect();
+            bc.tie(&mut trial);
+            let (r, g) = self.force_residual(bc, free, f_ext, &trial, at.floor);
+            let p = self.potential(&trial, f_ext);
+            let flat = (p - at.potential).abs() <= 1e-11 * at.scale;
+            if p <= at.potential - 1e-4 * s * descent || flat && r < at.residual {
+                *u = trial;
+                return Some(Point {
+                    residual: r,
+                    g,
+                    potential: p,
+                    scale: at.scale.max(p.abs()),
+                    floor: at.floor,
+                });
+            }
+            s *= 0.5;
+        }
+        None
+    }
+}
