@@ -669,8 +669,8 @@ fn a_large_bend_needs_the_max_output_factor_key() {
     use voxflex_core::volume::{Volume, VoxelData};
     plugin_dir(&["affine"]);
     let tmp = tempfile::tempdir().unwrap();
-    // A 4 × 4 × 64 mm beam (1 mm voxels) with a ramp along it.
-    let grid = Grid::new([4, 4, 64], DVec3::ONE, DVec3::ZERO);
+    // A 4 × 4 × 128 mm beam (1 mm voxels) with a ramp along it.
+    let grid = Grid::new([4, 4, 128], DVec3::ONE, DVec3::ZERO);
     let values = (0..grid.len())
         .map(|l| {
             let [i, j, k] = grid.unlinear(l);
