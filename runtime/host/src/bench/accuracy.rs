@@ -97,7 +97,7 @@ pub(super) fn run(args: &BenchArgs) -> Result<String, BenchError> {
     );
     let _ = writeln!(
         out,
-        "error: |resampled − f64 trilinear sample of the source at the exact preimage|, HU, \
+        "error = |resampled − f64 trilinear sample of the source at the exact preimage| (HU), \
          over output voxels whose preimage is ≥ 1 voxel inside the source"
     );
     let _ = writeln!(
