@@ -13,7 +13,7 @@ struct Params {
     oorg: vec4<i32>,  // source index of output voxel (0,0,0); w = 1 when a mask is bound
     odim: vec4<u32>,  // output dims x, y, z; w = output element index of the bound slab's start
     clo: vec4<i32>,   // clip box (voxels that may be written), lower corner, source index units
-    chi: vec4<i32>,   // clip box upper corner (inclusive); w unused
+    chi: vec4<i32>,   // clip box upper corner (inclusive); w = interpolation (0 tetrahedral, 1 trilinear)
     misc: vec4<f32>,  // x = background value
 }
 

@@ -1,6 +1,9 @@
 // voxflex resampler, pass 2: one invocation per output voxel of the clip box.
 // Replaces the owner key by the value interpolated in the owner tetrahedron
-// (raster.rs: barycentric, interpolate), or the background.
+// (raster.rs: barycentric, interpolate), or in trilinear mode (P.chi.w == 1)
+// by the trilinear sample of the source at the owner's barycentric rest
+// position (raster.rs: rest_offset, trilinear_axis, trilinear), or the
+// background.
 
 @group(0) @binding(6) var<storage, read_write> OUT: array<u32>;
 @group(0) @binding(8) var<storage, read> VALUES: array<f32>;
@@ -30,13 +33,16 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let parity = (ci + cj + ck) & 1u;
     var p: array<vec3<f32>, 4>;
     var v: vec4<f32>;
+    var off: array<vec3<f32>, 4>;
     for (var a = 0u; a < 4u; a++) {
         let c = TETS[parity * 20u + t * 4u + a];
-        let i = ci + (c & 1u);
-        let j = cj + ((c >> 1u) & 1u);
-        let k = ck + (c >> 2u);
+        let oc = vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u);
+        let i = ci + oc.x;
+        let j = cj + oc.y;
+        let k = ck + oc.z;
         p[a] = vertex_position(i, j, k);
         v[a] = VALUES[i + P.vdim.x * (j + P.vdim.y * k)];
+        off[a] = vec3<f32>(oc);
     }
     let q = vec3<f32>(f32(x), f32(y), f32(z));
     var w: vec4<f32>;
@@ -45,10 +51,52 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         let dd = plane_eval(f, p[a]);
         w[a] = select(0.0, plane_eval(f, q) / dd, dd != 0.0);
     }
+    if P.chi.w == 1 {
+        OUT[o] = bitcast<u32>(trilinear_at(vec3<i32>(vec3<u32>(ci, cj, ck)), w, off));
+        return;
+    }
     var val = ((w.x * v.x + w.y * v.y) + w.z * v.z) + w.w * v.w;
     if w.w == 1.0 { val = v.w; }
     if w.z == 1.0 { val = v.z; }
     if w.y == 1.0 { val = v.y; }
     if w.x == 1.0 { val = v.x; }
     OUT[o] = bitcast<u32>(val);
+}
+
+// raster.rs: lerp — exactly `a` when `f == 0` (a NaN neighbour never leaks in).
+fn lerp0(a: f32, b: f32, f: f32) -> f32 {
+    if f == 0.0 {
+        return a;
+    }
+    return a + f * (b - a);
+}
+
+fn source_at(x: i32, y: i32, z: i32) -> f32 {
+    return VALUES[u32(x) + P.vdim.x * (u32(y) + P.vdim.y * u32(z))];
+}
+
+// Trilinear sample of the source at the rest position `cell + Σ w_a off_a`
+// (or exactly `off_a` where `w_a == 1`), clamped to the grid
+// (raster.rs: rest_offset, trilinear_axis, trilinear).
+fn trilinear_at(cell: vec3<i32>, w: vec4<f32>, off: array<vec3<f32>, 4>) -> f32 {
+    var r = ((w.x * off[0] + w.y * off[1]) + w.z * off[2]) + w.w * off[3];
+    if w.w == 1.0 { r = off[3]; }
+    if w.z == 1.0 { r = off[2]; }
+    if w.y == 1.0 { r = off[1]; }
+    if w.x == 1.0 { r = off[0]; }
+    let n = vec3<i32>(P.vdim.xyz);
+    let fl = floor(r);
+    let g = cell + vec3<i32>(fl);
+    let last = n - vec3<i32>(1);
+    let i0 = clamp(g, vec3<i32>(0), last);
+    let i1 = min(i0 + vec3<i32>(1), last);
+    let clamped = (g < vec3<i32>(0)) | (g > n - vec3<i32>(2));
+    let f = select(r - fl, vec3<f32>(0.0), clamped);
+    let x00 = lerp0(source_at(i0.x, i0.y, i0.z), source_at(i1.x, i0.y, i0.z), f.x);
+    let x10 = lerp0(source_at(i0.x, i1.y, i0.z), source_at(i1.x, i1.y, i0.z), f.x);
+    let x01 = lerp0(source_at(i0.x, i0.y, i1.z), source_at(i1.x, i0.y, i1.z), f.x);
+    let x11 = lerp0(source_at(i0.x, i1.y, i1.z), source_at(i1.x, i1.y, i1.z), f.x);
+    let y0 = lerp0(x00, x10, f.y);
+    let y1 = lerp0(x01, x11, f.y);
+    return lerp0(y0, y1, f.z);
 }

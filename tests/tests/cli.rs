@@ -786,3 +786,116 @@ fn roi_auto_lambda_and_bounds_reach_the_notes_and_the_cli() {
         assert!(err.contains(&key) || err.contains(opt), "{opt}: {err}");
     }
 }
+
+/// A legitimate large bend of a thin beam needs an output grid more than 8×
+/// the source's voxels: refused by default with a message naming the scene
+/// key `[resample] max_output_factor` and its value, accepted once the key
+/// is raised; the interpolation key reaches the resampler (the two modes
+/// give different volumes).
+#[test]
+fn a_large_bend_needs_the_max_output_factor_key() {
+    use voxflex_core::glam::DVec3;
+    use voxflex_core::grid::Grid;
+    use voxflex_core::volume::{Volume, VoxelData};
+    plugin_dir(&["affine"]);
+    let tmp = tempfile::tempdir().unwrap();
+    // A 4 × 4 × 128 mm beam (1 mm voxels) with a ramp along it.
+    let grid = Grid::new([4, 4, 128], DVec3::ONE, DVec3::ZERO);
+    let values = (0..grid.len())
+        .map(|l| {
+            let [i, j, k] = grid.unlinear(l);
+            (10 * k + 3 * i + j) as i16 + if (i + j + k) % 3 == 0 { 100 } else { 0 }
+        })
+        .collect();
+    let beam = Volume::new(grid, VoxelData::I16(values)).unwrap();
+    voxflex_core::io::write_volume(&tmp.path().join("beam.nii"), beam.view()).unwrap();
+    let write = |name: &str, resample: &str| {
+        let text = format!(
+            r#"[scene]
+backend = "cpu"
+
+[volume]
+source = "beam.nii"
+
+[model]
+plugin = "affine"
+[model.params]
+field = "bend"
+axis = "z"
+towards = "x"
+angle_deg = 270
+
+[resample]
+background = -1000
+{resample}
+
+[output]
+dir = "{name}"
+slices = []
+nifti = "deformed.nii"
+"#
+        );
+        std::fs::write(tmp.path().join(format!("{name}.toml")), text).unwrap();
+    };
+    write("default", "");
+    let o = voxflex(&["run", "default.toml"], tmp.path());
+    assert!(
+        !o.status.success(),
+        "the bend fit the default limit\n{}",
+        text(&o)
+    );
+    let msg = text(&o);
+    assert!(
+        msg.contains("`[resample] max_output_factor` = 8")
+            && msg.contains("raise `[resample] max_output_factor`"),
+        "{msg}"
+    );
+
+    write("raised", "max_output_factor = 40");
+    let o = voxflex(&["run", "raised.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let m = metrics(&tmp.path().join("raised"));
+    let dims: Vec<u64> = m["output_dims"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d.as_u64().unwrap())
+        .collect();
+    let voxels: u64 = dims.iter().product();
+    assert!(
+        voxels > 8 * grid.len() as u64,
+        "output {dims:?} is within the default limit"
+    );
+
+    write(
+        "tetrahedral",
+        "max_output_factor = 40\ninterpolation = \"tetrahedral\"",
+    );
+    let o = voxflex(&["run", "tetrahedral.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let read = |name: &str| {
+        voxflex_core::io::read_volume(
+            &tmp.path().join(name).join("deformed.nii"),
+            &Default::default(),
+        )
+        .unwrap()
+    };
+    let (tri, tet) = (read("raised"), read("tetrahedral"));
+    assert_eq!(tri.grid.dims, tet.grid.dims);
+    let differ = (0..tri.grid.len())
+        .filter(|&l| tri.data.as_slice().get_f32(l) != tet.data.as_slice().get_f32(l))
+        .count();
+    assert!(
+        differ > 0,
+        "interpolation = \"tetrahedral\" changed nothing"
+    );
+
+    write("bad", "max_output_factor = 0");
+    let o = voxflex(&["validate", "bad.toml"], tmp.path());
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("bad.toml:17:1: `[resample] max_output_factor` = 0"),
+        "{}",
+        text(&o)
+    );
+}

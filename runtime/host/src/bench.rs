@@ -10,6 +10,12 @@
 //! - resampling memory beyond the input and output volumes, bytes/voxel;
 //! - plugin-boundary overhead per frame (the C-ABI calls, timed with a no-op
 //!   step) as a fraction of the frame.
+//!
+//! `--accuracy` reports instead, per interpolation mode, resampling time and
+//! error against an f64 reference under affine, twist and bend (see
+//! [`accuracy`]).
+
+mod accuracy;
 
 use crate::backend::{self, BackendChoice};
 use crate::plugin_loader;
@@ -23,7 +29,7 @@ use voxflex_core::deformation::{
 };
 use voxflex_core::phantom::phantom;
 use voxflex_core::resample::gpu::GpuSource;
-use voxflex_core::resample::{DisplacementsRef, ResampleParams, Resampler};
+use voxflex_core::resample::{DisplacementsRef, Interpolation, ResampleParams, Resampler};
 use voxflex_core::volume::Volume;
 
 /// Arguments of `voxflex bench`.
@@ -48,6 +54,14 @@ pub struct BenchArgs {
     /// Also write the figures as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Resampler interpolation (tetrahedral | trilinear; default: the
+    /// resampler's default, trilinear).
+    #[arg(long)]
+    pub interpolation: Option<Interpolation>,
+    /// Measure both interpolation modes instead: resample time and error
+    /// (HU) against an f64 reference under affine, twist and bend.
+    #[arg(long)]
+    pub accuracy: bool,
 }
 
 /// Running the benchmark failed.
@@ -108,6 +122,9 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     if !(args.local_fraction > 0.0 && args.local_fraction < 1.0) {
         return Err(err("--local-fraction must be in (0, 1)"));
     }
+    if args.accuracy {
+        return accuracy::run(args);
+    }
     let repeat = args.repeat.max(1);
     let resolved = backend::resolve(args.backend).map_err(err)?;
     let gpu = resolved.gpu_service();
@@ -151,13 +168,19 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         resolved.reason
     );
     let _ = writeln!(out, "threads: {}", rayon::current_num_threads());
+    let interpolation = args
+        .interpolation
+        .unwrap_or(ResampleParams::default().interpolation);
+    let _ = writeln!(out, "interpolation: {interpolation}");
 
     let mut results = vec![];
     for (label, params) in [("full", &full_params), ("local", &local_params)] {
         let mut case = make_case(params, &plugin, &services, &volume, resolved.backend)?;
+        let defaults = ResampleParams::default();
         let mut resampler = Resampler::new(ResampleParams {
             background,
-            ..Default::default()
+            interpolation: args.interpolation.unwrap_or(defaults.interpolation),
+            ..defaults
         });
         let (mut map_t, mut res_t, mut touched) = (vec![], vec![], 0u64);
         // Frame 0 brings the field in and resamples in full; frames 1..=repeat

@@ -307,10 +307,15 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
                 .as_ref()
                 .and_then(|r| r.background)
                 .unwrap_or_else(|| source.value_range().0);
-            let resampler = Resampler::new(ResampleParams {
+            let params = ResampleParams {
                 background,
                 ..ResampleParams::default()
-            });
+            };
+            let params = match &scene.resample {
+                Some(r) => r.apply(params),
+                None => params,
+            };
+            let resampler = Resampler::new(params);
             Some(DeformStages {
                 model: Box::new(model),
                 binding,

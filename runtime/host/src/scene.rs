@@ -22,6 +22,10 @@
 //! field = "twist"
 //! angle_deg = 40
 //!
+//! [resample]
+//! interpolation = "trilinear"   # or "tetrahedral"
+//! max_output_factor = 8         # largest output, × the source's voxels
+//!
 //! [output]
 //! dir = "out/demo"
 //! slices = ["axial", "coronal", "sagittal"]
@@ -32,6 +36,7 @@
 use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+use voxflex_core::resample::{Interpolation, ResampleParams};
 
 /// A scene file could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -148,6 +153,28 @@ pub struct ResampleSettings {
     /// source volume's minimum).
     #[serde(default)]
     pub background: Option<f32>,
+    /// Pass 2's interpolant: `"trilinear"` (default) samples the source
+    /// trilinearly at each output voxel's rest position; `"tetrahedral"`
+    /// interpolates the owner tetrahedron's vertex values (the paper's).
+    #[serde(default)]
+    pub interpolation: Option<Interpolation>,
+    /// Largest output grid, as a multiple of the source's voxel count
+    /// (finite, ≥ 1; default 8): guards against displacements in the wrong
+    /// units; raise it for large legitimate deformations.
+    #[serde(default)]
+    pub max_output_factor: Option<f64>,
+}
+
+impl ResampleSettings {
+    /// `base` with the keys this table sets.
+    pub fn apply(&self, base: ResampleParams) -> ResampleParams {
+        ResampleParams {
+            background: self.background.unwrap_or(base.background),
+            interpolation: self.interpolation.unwrap_or(base.interpolation),
+            max_output_factor: self.max_output_factor.unwrap_or(base.max_output_factor),
+            ..base
+        }
+    }
 }
 
 /// Slice orientation names for `[output] slices`.
@@ -478,6 +505,18 @@ impl Scene {
             && !b.is_finite()
         {
             return Err(invalid("background", "must be a finite number".into()));
+        }
+        if let Some(f) = file.resample.as_ref().and_then(|r| r.max_output_factor)
+            && !(f.is_finite() && f >= 1.0)
+        {
+            return Err(SceneError::Invalid {
+                location: locate_key(text, path, "max_output_factor"),
+                message: format!(
+                    "`[resample] max_output_factor` = {f}: must be a finite number ≥ 1 (the largest \
+                     output grid as a multiple of the source's voxel count; default {})",
+                    ResampleParams::default().max_output_factor
+                ),
+            });
         }
         if let Some(o) = &file.output {
             if let Some(w) = o.window
@@ -861,6 +900,7 @@ kind = "grab"
             .to_string();
         assert!(e.contains("never happens"), "{e}");
     }
+
     #[test]
     fn roi_lambda_auto_and_bounds_parse_and_bad_values_name_the_key() {
         let roi = |extra: &str| format!("{GOOD}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{extra}\n");
@@ -893,5 +933,46 @@ kind = "grab"
                 .to_string();
             assert!(e.contains(key), "{extra}: {e}");
         }
+    }
+
+    #[test]
+    fn resample_keys_are_read_and_validated() {
+        let with = |table: &str| format!("{GOOD}\n[resample]\n{table}\n");
+        let s = Scene::parse(
+            &with("interpolation = \"tetrahedral\"\nmax_output_factor = 40"),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        let r = s.resample.unwrap();
+        let p = r.apply(ResampleParams::default());
+        assert_eq!(p.interpolation, Interpolation::Tetrahedral);
+        assert_eq!(p.max_output_factor, 40.0);
+        assert_eq!(
+            p.background,
+            ResampleParams::default().background,
+            "unset keys keep the base"
+        );
+        let p = ResampleSettings::default().apply(ResampleParams::default());
+        assert_eq!(p, ResampleParams::default());
+        for bad in ["nan", "0", "-3", "0.5", "inf"] {
+            let text = with(&format!("max_output_factor = {bad}"));
+            let e = Scene::parse(&text, Path::new("t.toml"))
+                .unwrap_err()
+                .to_string();
+            let line = text
+                .lines()
+                .position(|l| l.starts_with("max_output_factor"))
+                .unwrap()
+                + 1;
+            assert!(
+                e.starts_with(&format!("t.toml:{line}:1: `[resample] max_output_factor`"))
+                    && e.contains("≥ 1"),
+                "{bad}: {e}"
+            );
+        }
+        let e = Scene::parse(&with("interpolation = \"cubic\""), Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cubic") && e.contains("trilinear"), "{e}");
     }
 }

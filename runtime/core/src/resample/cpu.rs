@@ -11,20 +11,25 @@
 //!   `sampling_mesh::WEAK_OWNER`), then `fetch_min(key)` after a relaxed
 //!   load, so voxels that already hold a smaller key cost no atomic
 //!   read-modify-write;
-//! - pass 2: one task per output row; owner → barycentric weights → value,
-//!   eight voxels per SIMD operation through `super::fill_lanes`.
+//! - pass 2: one task per output row; owner → barycentric weights → value
+//!   (the owner's vertex values, or in trilinear mode a trilinear sample of
+//!   the source at the barycentric rest position), eight voxels per SIMD
+//!   operation through `super::fill_lanes`.
 //!
 //! The output `Vec<f32>` is viewed as `[AtomicU32]` during a call; no other
 //! per-voxel memory is used.
 
 use super::blocks::BlockBounds;
-use super::fill_lanes::{FILL_LANES, FillGroup, interpolate_group};
+use super::fill_lanes::{
+    FILL_LANES, FillGroup, interpolate_group, rest_group, trilinear_corners, trilinear_group,
+};
 use super::lanes::{LANES, LaneCtx, raster_group};
 use super::sampling_mesh::{
     CELL_TETS, OWNER_ID, TetDecoder, cell_parity, corner_offset, deformed_coordinate,
 };
 use super::{
-    DisplacementsRef, Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, VoxelBox,
+    DisplacementsRef, Interpolation, Job, KernelConsts, Kernels, OutputGrid, ResampleError,
+    TetMask, VoxelBox,
 };
 use crate::volume::{Sample, VoxelSlice};
 use rayon::prelude::*;
@@ -127,7 +132,14 @@ impl Kernels for CpuKernels<'_> {
             .for_each(|&b| raster_block(&ctx, &lanes, b as usize, out));
         let t2 = std::time::Instant::now();
         if self.fill {
-            crate::with_voxels!(self.source, |s| fill(s, &ctx, out));
+            match job.consts.interpolation {
+                Interpolation::Tetrahedral => {
+                    crate::with_voxels!(self.source, |s| fill::<_, false>(s, &ctx, out))
+                }
+                Interpolation::Trilinear => {
+                    crate::with_voxels!(self.source, |s| fill::<_, true>(s, &ctx, out))
+                }
+            }
         }
         let t3 = std::time::Instant::now();
         tracing::trace!(
@@ -271,8 +283,10 @@ fn flush(
 }
 
 /// Pass 2 over the region: owner key → interpolated value (f32 bits), eight
-/// voxels of a row at a time (`super::fill_lanes`).
-fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
+/// voxels of a row at a time (`super::fill_lanes`); `TRI`: trilinear mode.
+fn fill<T: Sample, const TRI: bool>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
+    let dims = ctx.c.mesh.vertex_dims();
+    assert_eq!(src.len(), dims[0] * dims[1] * dims[2]);
     let r = ctx.clip;
     let d = r.dims();
     let bg = ctx.c.background.to_bits();
@@ -283,6 +297,8 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
         // One group per row: lanes without an owner keep stale corners, and
         // their results are discarded.
         let mut g = FillGroup::default();
+        // Trilinear mode: each lane's owner cell (source cell indices).
+        let mut cells = [[0i32; FILL_LANES]; 3];
         g.q[1] = [y as f32; FILL_LANES];
         g.q[2] = [z as f32; FILL_LANES];
         for (c, chunk) in out[base..base + d[0]].chunks(FILL_LANES).enumerate() {
@@ -307,14 +323,25 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
                     for a in 0..4 {
                         for axis in 0..3 {
                             g.p[a][axis][l] = g.p[a][axis][l - 1];
+                            g.o[a][axis][l] = g.o[a][axis][l - 1];
                         }
                         g.v[a][l] = g.v[a][l - 1];
                     }
+                    for c in &mut cells {
+                        c[l] = c[l - 1];
+                    }
                 } else {
-                    gather(ctx, src, owner, l, &mut g);
+                    let cell = gather::<T, TRI>(ctx, src, owner, l, &mut g);
+                    for axis in 0..3 {
+                        cells[axis][l] = cell[axis] as i32;
+                    }
                 }
             }
-            let v = interpolate_group(&g);
+            let v = if TRI {
+                sample_group(src, dims, &g, &cells)
+            } else {
+                interpolate_group(&g)
+            };
             for (l, a) in chunk.iter().enumerate() {
                 a.store(
                     if owners[l] == u32::MAX {
@@ -330,9 +357,17 @@ fn fill<T: Sample>(src: &[T], ctx: &RasterCtx<'_>, out: &[AtomicU32]) {
 }
 
 /// Lane `l` of `g`: the corners (source index units) and source values of
-/// the tetrahedron of owner key `owner` (its id, maybe with `WEAK_OWNER`).
+/// the tetrahedron of owner key `owner` (its id, maybe with `WEAK_OWNER`;
+/// trilinear mode, `TRI`: the corners' offsets in the cell instead of the
+/// values); returns the owner's cell.
 #[inline(always)]
-fn gather<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, l: usize, g: &mut FillGroup) {
+fn gather<T: Sample, const TRI: bool>(
+    ctx: &RasterCtx<'_>,
+    src: &[T],
+    owner: u32,
+    l: usize,
+    g: &mut FillGroup,
+) -> [usize; 3] {
     let mesh = &ctx.c.mesh;
     let (cell, t) = ctx.decoder.decode(owner & OWNER_ID);
     let [nx, ny, _] = mesh.vertex_dims();
@@ -358,6 +393,44 @@ fn gather<T: Sample>(ctx: &RasterCtx<'_>, src: &[T], owner: u32, l: usize, g: &m
         g.p[a][0][l] = deformed_coordinate(cell[0] + o[0], dx, inv[0]);
         g.p[a][1][l] = deformed_coordinate(cell[1] + o[1], dy, inv[1]);
         g.p[a][2][l] = deformed_coordinate(cell[2] + o[2], dz, inv[2]);
-        g.v[a][l] = v.to_f32();
+        if TRI {
+            for (dst, &off) in g.o[a].iter_mut().zip(&o) {
+                dst[l] = off as f32;
+            }
+        } else {
+            g.v[a][l] = v.to_f32();
+        }
     }
+    cell
+}
+
+/// Trilinear mode: the sample of the source at every lane's barycentric
+/// rest position (lanes without an owner compute garbage from stale or zero
+/// corners, in bounds, and are discarded by the caller).
+#[inline(always)]
+fn sample_group<T: Sample>(
+    src: &[T],
+    dims: [usize; 3],
+    g: &FillGroup,
+    cells: &[[i32; FILL_LANES]; 3],
+) -> [f32; FILL_LANES] {
+    let rest = rest_group(g);
+    let n = dims.map(|d| d as i32);
+    let c = trilinear_corners(cells, &rest, n);
+    let mut v = [[0f32; FILL_LANES]; 8];
+    let (nx, ny) = (dims[0], dims[0] * dims[1]);
+    for l in 0..FILL_LANES {
+        let xs = [c.i0[0][l] as usize, c.i1[0][l] as usize];
+        let ys = [c.i0[1][l] as usize * nx, c.i1[1][l] as usize * nx];
+        let zs = [c.i0[2][l] as usize * ny, c.i1[2][l] as usize * ny];
+        for (k, corner) in v.iter_mut().enumerate() {
+            let i = xs[k & 1] + ys[(k >> 1) & 1] + zs[k >> 2];
+            debug_assert!(i < src.len());
+            // SAFETY: `trilinear_corners` clamps every index to
+            // `0..dims[axis]`, and `fill` asserted `src.len()` is the
+            // product of `dims`.
+            corner[l] = unsafe { src.get_unchecked(i) }.to_f32();
+        }
+    }
+    trilinear_group(&v, &c.f)
 }

@@ -11,7 +11,8 @@
 //! - `clear` — `u32::MAX` ("no owner") over the clip box;
 //! - `raster` (pass 1) — one invocation per cell of the listed blocks,
 //!   `atomicMin(tet id)` into `array<atomic<u32>>`;
-//! - `fill` (pass 2) — one invocation per voxel of the clip box.
+//! - `fill` (pass 2) — one invocation per voxel of the clip box; the
+//!   interpolation mode is `Params.chi.w` (0 tetrahedral, 1 trilinear).
 //!
 //! Bindings (group 0): 0 parameters, 1–3 displacements x/y/z (f32, mm),
 //! 4 block list, 5 block bounds, 6 output (slab), 7 mask (u8 per cell packed
@@ -340,6 +341,7 @@ impl GpuKernels<'_> {
             bdim: [bd[0] as u32, bd[1] as u32, bd[2] as u32, 0],
             inv: [c.inv_spacing[0], c.inv_spacing[1], c.inv_spacing[2], c.eps],
             oorg: [0, 0, 0, self.has_mask as i32],
+            chi: [0, 0, 0, c.interpolation.code()],
             misc: [c.background, 0.0, 0.0, 0.0],
             ..Default::default()
         }

@@ -21,14 +21,18 @@
 //!    key* and `atomic-min`s that key into the output, viewed as `u32` (the
 //!    CPU evaluates eight cells per SIMD lane group); pass 2 runs per output
 //!    voxel and replaces the key by the value interpolated with the owner's
-//!    barycentric weights (f32 bits, in place). The key is the tetrahedron
-//!    id with [`sampling_mesh::WEAK_OWNER`] set on weak claims (a tetrahedron
-//!    that did not move, is inverted, or touches the centre only at a still
-//!    vertex), so where the deformed mesh overlaps itself moved tissue wins
-//!    over the still air and inverted cells beneath it, in every direction;
-//!    the smallest id decides among equal claims (shared faces). The result
-//!    does not depend on thread timing and is the same on CPU and GPU. An
-//!    unmoved voxel reproduces its source value bit for bit.
+//!    barycentric weights (f32 bits, in place): the owner's vertex values
+//!    ([`Interpolation::Tetrahedral`], the paper's) or a trilinear sample of
+//!    the source at the barycentric rest position
+//!    ([`Interpolation::Trilinear`]; see [`interpolation`]). The key is the
+//!    tetrahedron id with [`sampling_mesh::WEAK_OWNER`] set on weak claims (a
+//!    tetrahedron that did not move, is inverted, or touches the centre only
+//!    at a still vertex), so where the deformed mesh overlaps itself moved
+//!    tissue wins over the still air and inverted cells beneath it, in every
+//!    direction; the smallest id decides among equal claims (shared faces).
+//!    The result does not depend on thread timing and is the same on CPU and
+//!    GPU. An unmoved voxel reproduces its source value bit for bit in both
+//!    modes.
 //! 5. **Removed tetrahedra** ([`TetMask`]) are skipped (cuts).
 //! 6. **Dirty-region resampling** ([`plan`]): after a localised change only
 //!    the output box `R` that the moved cells covered before or cover now is
@@ -59,10 +63,12 @@
 //! (24 bytes per 64 cells) so the CPU can size the output and plan the
 //! dirty region. See [`gpu`].
 
+pub mod accuracy;
 pub mod blocks;
 pub mod cpu;
 mod fill_lanes;
 pub mod gpu;
+pub mod interpolation;
 mod lanes;
 pub mod output_grid;
 #[doc(hidden)]
@@ -75,6 +81,7 @@ pub mod tet_mask;
 #[cfg(test)]
 mod tests;
 
+pub use interpolation::Interpolation;
 pub use output_grid::{OutputGrid, VoxelBox};
 pub use sampling_mesh::SamplingMesh;
 pub use tet_mask::{TetMask, tets_at_vertex, tets_cut_by, tets_on_edge};
@@ -138,13 +145,18 @@ pub enum ResampleError {
     /// The deformed volume would need a larger output than allowed.
     #[error(
         "the deformed volume needs an output grid of {dims:?} voxels, more than the {max_voxels} \
-         allowed; check the displacement field (millimetres?) or raise ResampleParams::max_output_factor"
+         allowed by `[resample] max_output_factor` = {max_output_factor} (times the source's \
+         voxels); check the displacement field (millimetres?) or raise `[resample] \
+         max_output_factor` (ResampleParams::max_output_factor)"
     )]
     OutputTooLarge {
         /// Output dimensions that would be needed.
         dims: [usize; 3],
         /// The limit, voxels.
         max_voxels: u64,
+        /// The limit as a multiple of the source's voxel count
+        /// ([`ResampleParams::max_output_factor`] as applied, ≥ 1).
+        max_output_factor: f64,
     },
     /// A tetrahedron address is out of range.
     #[error(
@@ -207,8 +219,12 @@ pub struct ResampleParams {
     /// growing deformation does not reallocate every frame.
     pub growth_margin: usize,
     /// Largest output allowed, as a multiple of the source's voxel count
-    /// (guards against displacements given in the wrong units).
+    /// (guards against displacements given in the wrong units; values below
+    /// 1 act as 1). Scene key `[resample] max_output_factor`.
     pub max_output_factor: f64,
+    /// The interpolant of pass 2 (see [`interpolation`]). Scene key
+    /// `[resample] interpolation`.
+    pub interpolation: Interpolation,
 }
 
 impl Default for ResampleParams {
@@ -218,6 +234,7 @@ impl Default for ResampleParams {
             inclusion_epsilon: 1e-6,
             growth_margin: 4,
             max_output_factor: 8.0,
+            interpolation: Interpolation::default(),
         }
     }
 }
@@ -275,6 +292,7 @@ pub(crate) struct KernelConsts {
     pub inv_spacing: [f32; 3],
     pub eps: f32,
     pub background: f32,
+    pub interpolation: Interpolation,
 }
 
 /// One rasterisation: clear `region`, rasterise `blocks` clipped to it, fill it.

@@ -153,6 +153,9 @@ impl OutputGrid {
             return Err(ResampleError::OutputTooLarge {
                 dims: dims.map(|d| d as usize),
                 max_voxels,
+                // Only the caller knows the source's voxel count; the
+                // planner (`plan::drive`) fills the factor in.
+                max_output_factor: f64::NAN,
             });
         }
         Ok(Some(OutputGrid {

@@ -2,14 +2,18 @@
 //! that any crate owning a real device (the integration tests, through the
 //! host's GPU context) can run them, plus the test fields they use.
 //!
-//! Every `check_*` returns `Err(description)` on the first disagreement.
+//! Every `check_*` runs in both [`Interpolation`] modes and returns
+//! `Err(description)` (naming the mode) on the first disagreement.
 //! Identity must match bit for bit; other fields within `1e-5` of the data
 //! range per voxel (GPUs may fuse multiply-adds, so boundary decisions and
 //! the last bits can differ; at most [`MAX_COVERAGE_MISMATCH`] of the voxels
 //! may differ in being covered at all).
 
 use super::gpu::GpuSource;
-use super::{DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, Resampler, TetMask};
+use super::{
+    DisplacementsRef, Interpolation, ResampleError, ResampleOutput, ResampleParams, Resampler,
+    TetMask,
+};
 use crate::deformation::DirtyRegion;
 use crate::gpu::LimitedBinding;
 use crate::gpu::{BufferId, GpuService, GpuServiceExt};
@@ -110,6 +114,42 @@ pub fn affine(
         move |p| centre + m * (p - centre) + t,
         move |p| centre + mi * (p - t - centre),
     )
+}
+
+/// Barr's bend (1984) of the z axis towards x about `centre` (mm) with
+/// curvature `k` (1/mm): the line `x = y = 0` (relative to `centre`) goes
+/// onto a circle of radius `1/k` through `centre`, lengths along it kept;
+/// points with `x < 1/k` keep their distance `1/k − x` from the bend's
+/// centre line. The same formula as the `affine` plugin's `bend`. Returns
+/// the map and its exact inverse (valid for `x < 1/k` and `|k z| < π`).
+pub fn bend_zx(
+    centre: DVec3,
+    k: f64,
+) -> (
+    impl Fn(DVec3) -> DVec3 + Sync,
+    impl Fn(DVec3) -> DVec3 + Sync,
+) {
+    let map = move |p: DVec3| {
+        let q = p - centre;
+        if k == 0.0 {
+            return p;
+        }
+        let (s, c) = (k * q.z).sin_cos();
+        let r = 1.0 / k - q.x;
+        centre + DVec3::new(1.0 / k - r * c, q.y, r * s)
+    };
+    let inverse = move |p: DVec3| {
+        let q = p - centre;
+        if k == 0.0 {
+            return p;
+        }
+        // q.x = 1/k − r cos θ, q.z = r sin θ.
+        let (rc, rs) = (1.0 / k - q.x, q.z);
+        let theta = rs.atan2(rc);
+        let r = rc.hypot(rs);
+        centre + DVec3::new(1.0 / k - r, q.y, theta / k)
+    };
+    (map, inverse)
 }
 
 /// A smooth bump confined to the ball of `radius` mm around `at`: moves
@@ -317,9 +357,17 @@ fn twisted(grid: &Grid) -> Field {
 /// Identity field: the GPU output equals the source bit for bit, on the
 /// source grid (i16 head phantom and an f32 ramp).
 pub fn check_identity_bitwise(gpu: &dyn GpuService) -> Result<(), String> {
+    for mode in Interpolation::ALL {
+        identity_bitwise(gpu, mode).map_err(|m| format!("{mode}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn identity_bitwise(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
     let params = ResampleParams {
         background: -1234.5,
+        interpolation,
         ..Default::default()
     };
     for vol in [head_i16(&grid), ramp(&grid, DVec3::new(1.0, -2.0, 0.5))] {
@@ -343,9 +391,17 @@ pub fn check_identity_bitwise(gpu: &dyn GpuService) -> Result<(), String> {
 /// Twist + rotation + scale + translation (output growth): GPU within
 /// tolerance of CPU.
 pub fn check_deformed_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    for mode in Interpolation::ALL {
+        deformed_matches_cpu(gpu, mode).map_err(|m| format!("{mode}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn deformed_matches_cpu(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
     let params = ResampleParams {
         background: -3000.0,
+        interpolation,
         ..Default::default()
     };
     let f = twisted(&grid);
@@ -401,13 +457,23 @@ pub fn check_folds_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
 /// translation (output grown, slabbed) must still match bit for bit; and a
 /// source larger than one binding must fail with a clear error.
 pub fn check_output_slabs(gpu: &dyn GpuService) -> Result<(), String> {
+    for mode in Interpolation::ALL {
+        output_slabs(gpu, mode).map_err(|m| format!("{mode}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn output_slabs(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
     let limit = (grid.len() as u64 * 4).next_multiple_of(256) + 256;
     let small = LimitedBinding {
         inner: gpu,
         max_storage_buffer_binding_size: limit,
     };
-    let params = ResampleParams::default();
+    let params = ResampleParams {
+        interpolation,
+        ..Default::default()
+    };
     let vol = ramp(&grid, DVec3::new(0.3, 1.0, -0.7));
     let f = twisted(&grid);
     let want = cpu_run(&vol, &f, None, params)?;
@@ -470,9 +536,17 @@ pub fn check_output_slabs(gpu: &dyn GpuService) -> Result<(), String> {
 
 /// Removed tetrahedra: GPU within tolerance of CPU.
 pub fn check_mask_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    for mode in Interpolation::ALL {
+        mask_matches_cpu(gpu, mode).map_err(|m| format!("{mode}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn mask_matches_cpu(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
     let params = ResampleParams {
         background: -50.0,
+        interpolation,
         ..Default::default()
     };
     let mut mask = TetMask::new(&grid).map_err(e)?;
@@ -496,8 +570,18 @@ pub fn check_mask_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
 /// A sequence of local changes resampled by dirty region on the GPU equals
 /// a full GPU resample bit for bit, and the CPU within tolerance.
 pub fn check_dirty_matches_full(gpu: &dyn GpuService) -> Result<(), String> {
+    for mode in Interpolation::ALL {
+        dirty_matches_full(gpu, mode).map_err(|m| format!("{mode}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn dirty_matches_full(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
-    let params = ResampleParams::default();
+    let params = ResampleParams {
+        interpolation,
+        ..Default::default()
+    };
     let vol = head_i16(&grid);
     let base = twisted(&grid);
     let inputs = GpuInputs::new(gpu, &vol, &base)?;

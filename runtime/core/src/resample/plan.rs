@@ -135,13 +135,25 @@ pub(crate) fn drive<K: Kernels>(
         ],
         eps: params.inclusion_epsilon.max(0.0),
         background: params.background,
+        interpolation: params.interpolation,
     };
     let mask_now = MaskState {
         generation: mask.map(|m| m.generation()),
         changed: mask.and_then(|m| m.changed_cells()),
     };
-    let max_voxels =
-        (params.max_output_factor.max(1.0) * grid.len() as f64).min(u32::MAX as f64 - 1.0) as u64;
+    let factor = params.max_output_factor.max(1.0);
+    let max_voxels = (factor * grid.len() as f64).min(u32::MAX as f64 - 1.0) as u64;
+    // Names the factor (and so the scene key) in the output-size error.
+    let name_factor = |e: ResampleError| match e {
+        ResampleError::OutputTooLarge {
+            dims, max_voxels, ..
+        } => ResampleError::OutputTooLarge {
+            dims,
+            max_voxels,
+            max_output_factor: factor,
+        },
+        e => e,
+    };
     let nblocks = layout.count();
 
     // Decide: full, dirty, or nothing.
@@ -194,7 +206,8 @@ pub(crate) fn drive<K: Kernels>(
             .map(|s| s.output);
         let base = previous.unwrap_or(OutputGrid::same_as_source(grid.dims));
         output = base
-            .grown_to_cover(&need, params.growth_margin, max_voxels)?
+            .grown_to_cover(&need, params.growth_margin, max_voxels)
+            .map_err(name_factor)?
             .unwrap_or(base);
         report.output_grid_changed = previous != Some(output);
         k.allocate_output(&output)?;
@@ -224,7 +237,8 @@ pub(crate) fn drive<K: Kernels>(
         let need = VoxelBox::from_continuous(new_u.min, new_u.max, 0);
         if let Some(grown) = s
             .output
-            .grown_to_cover(&need, params.growth_margin, max_voxels)?
+            .grown_to_cover(&need, params.growth_margin, max_voxels)
+            .map_err(name_factor)?
         {
             s.output = grown;
             k.allocate_output(&grown)?;

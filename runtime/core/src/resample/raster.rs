@@ -393,6 +393,63 @@ pub(crate) fn interpolate(w: [f32; 4], v: [f32; 4]) -> f32 {
 }
 
 #[cfg(test)]
+/// Trilinear mode, step 1: the rest position of a voxel centre relative to
+/// its owner's cell (source voxel index units), `Σ λ_a o_a` with `o_a` the
+/// owner's corner offsets (0 or 1 per axis), or exactly `o_a` when
+/// `λ_a == 1` (first such vertex, as [`interpolate`]).
+#[inline(always)]
+pub(crate) fn rest_offset(w: [f32; 4], o: [[f32; 3]; 4]) -> [f32; 3] {
+    for a in 0..4 {
+        if w[a] == 1.0 {
+            return o[a];
+        }
+    }
+    let mut r = [0.0; 3];
+    for ax in 0..3 {
+        r[ax] = ((w[0] * o[0][ax] + w[1] * o[1][ax]) + w[2] * o[2][ax]) + w[3] * o[3][ax];
+    }
+    r
+}
+
+#[cfg(test)]
+/// Trilinear mode, step 2: lower corner `i0`, upper corner `i1` and
+/// fraction `f` along one axis for the rest position `cell + r` (source
+/// index units), clamped to `[0, n − 1]`: outside, or exactly on the last
+/// voxel, the fraction is 0 (`i1 = min(i0 + 1, n − 1)` is then ignored).
+#[inline(always)]
+pub(crate) fn trilinear_axis(cell: i32, r: f32, n: i32) -> (i32, i32, f32) {
+    let fl = floor_i32(r);
+    let g = cell.saturating_add(fl);
+    let clamped = g < 0 || g >= n - 1;
+    let i0 = g.max(0).min(n - 1);
+    let i1 = (i0 + 1).min(n - 1);
+    (i0, i1, if clamped { 0.0 } else { r - fl as f32 })
+}
+
+#[cfg(test)]
+/// `a + f (b − a)`, or exactly `a` when `f == 0` (so a zero-weight
+/// neighbour never matters, even when it is NaN).
+#[inline(always)]
+pub(crate) fn lerp(a: f32, b: f32, f: f32) -> f32 {
+    if f == 0.0 { a } else { a + f * (b - a) }
+}
+
+#[cfg(test)]
+/// Trilinear mode, step 3: the sample from the eight corner values
+/// (`v[c]`, corner `c = cx + 2 cy + 4 cz` of the `i0`/`i1` box) and the
+/// fractions: x first, then y, then z.
+#[inline(always)]
+pub(crate) fn trilinear(v: [f32; 8], f: [f32; 3]) -> f32 {
+    let x00 = lerp(v[0], v[1], f[0]);
+    let x10 = lerp(v[2], v[3], f[0]);
+    let x01 = lerp(v[4], v[5], f[0]);
+    let x11 = lerp(v[6], v[7], f[0]);
+    let y0 = lerp(x00, x10, f[1]);
+    let y1 = lerp(x01, x11, f[1]);
+    lerp(y0, y1, f[2])
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
@@ -499,6 +556,50 @@ mod tests {
             }
         }
         Ok(())
+    }
+
+    #[test]
+    fn trilinear_reference_matches_the_product_formula_and_clamps() {
+        // Interior: the lerp cascade equals Σ Π weights · values (f64).
+        let v = [3.0f32, -7.5, 11.0, 2.25, -1000.0, 1500.0, 40.0, 41.0];
+        for f in [[0.25f32, 0.5, 0.75], [0.1, 0.9, 0.3], [0.0, 0.6, 0.0]] {
+            let mut want = 0.0f64;
+            for (c, &val) in v.iter().enumerate() {
+                let mut w = 1.0f64;
+                for a in 0..3 {
+                    let bit = (c >> a) & 1;
+                    w *= if bit == 1 {
+                        f[a] as f64
+                    } else {
+                        1.0 - f[a] as f64
+                    };
+                }
+                want += w * val as f64;
+            }
+            let got = trilinear(v, f) as f64;
+            assert!((got - want).abs() < 1e-3, "{f:?}: {got} vs {want}");
+        }
+        // Zero fractions select the lower corner exactly, NaN neighbours ignored.
+        let mut n = [f32::NAN; 8];
+        n[0] = -0.0;
+        assert_eq!(trilinear(n, [0.0; 3]).to_bits(), (-0.0f32).to_bits());
+        // Clamping: below 0, at and beyond the last voxel, the fraction is 0.
+        assert_eq!(trilinear_axis(0, -0.25, 5), (0, 1, 0.0));
+        assert_eq!(trilinear_axis(3, 1.0, 5), (4, 4, 0.0));
+        assert_eq!(trilinear_axis(3, 1.5, 5), (4, 4, 0.0));
+        assert_eq!(trilinear_axis(2, 1.25, 5), (3, 4, 0.25));
+        assert_eq!(trilinear_axis(2, -0.25, 5), (1, 2, 0.75));
+        assert_eq!(trilinear_axis(2, f32::NAN, 5).0, 2);
+        // A weight of exactly 1 gives that corner's offset exactly.
+        let o = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [1.0, 1.0, 1.0],
+        ];
+        assert_eq!(rest_offset([1e-9, 1.0, -1e-9, 0.0], o), o[1]);
+        let r = rest_offset([0.25, 0.25, 0.25, 0.25], o);
+        assert_eq!(r, [0.75, 0.5, 0.25]);
     }
 
     #[test]

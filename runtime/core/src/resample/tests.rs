@@ -72,8 +72,15 @@ fn identity_is_bit_exact() {
     special[300] = f32::MAX;
     special[grid.len() - 1] = -7.25;
     let f32_vol = Volume::new(grid, VoxelData::F32(special)).unwrap();
-    for vol in [head, f32_vol] {
-        let (out, rep) = run(&vol, &Field::zero(&grid), None, ResampleParams::default());
+    for (vol, interpolation) in [head, f32_vol]
+        .into_iter()
+        .flat_map(|v| Interpolation::ALL.map(|m| (v.clone(), m)))
+    {
+        let params = ResampleParams {
+            interpolation,
+            ..Default::default()
+        };
+        let (out, rep) = run(&vol, &Field::zero(&grid), None, params);
         assert_eq!(
             out.grid, grid,
             "identity output grid must be the input grid"
@@ -85,7 +92,7 @@ fn identity_is_bit_exact() {
             assert_eq!(
                 v.to_bits(),
                 src.get_f32(l).to_bits(),
-                "voxel {:?}",
+                "{interpolation}: voxel {:?}",
                 grid.unlinear(l)
             );
         }
@@ -107,11 +114,41 @@ fn check_ramp(
     let vol = ramp(&grid, a);
     let (lo, hi) = vol.value_range();
     let range = (hi - lo) as f64;
-    let params = ResampleParams {
-        background: -1e6,
-        ..Default::default()
-    };
-    let (out, rep) = run(&vol, &Field::from_map(&grid, map), None, params);
+    let field = Field::from_map(&grid, map);
+    for interpolation in Interpolation::ALL {
+        let params = ResampleParams {
+            background: -1e6,
+            interpolation,
+            ..Default::default()
+        };
+        check_ramp_mode(
+            &grid,
+            &vol,
+            &field,
+            &inv,
+            a,
+            range,
+            margin,
+            expect_growth,
+            params,
+        );
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn check_ramp_mode(
+    grid: &Grid,
+    vol: &Volume,
+    field: &Field,
+    inv: &impl Fn(DVec3) -> DVec3,
+    a: DVec3,
+    range: f64,
+    margin: f64,
+    expect_growth: bool,
+    params: ResampleParams,
+) {
+    let grid = *grid;
+    let (out, rep) = run(vol, field, None, params);
     assert_eq!(out.grid.spacing, grid.spacing);
     assert!(rep.output_grid_changed);
     if expect_growth {
@@ -159,7 +196,10 @@ fn check_ramp(
         inside > grid.len() / 2 && outside > 0,
         "inside {inside}, outside {outside}"
     );
-    eprintln!("ramp: {inside} voxels inside, worst relative error {worst:e}");
+    eprintln!(
+        "ramp ({}): {inside} voxels inside, worst relative error {worst:e}",
+        params.interpolation
+    );
 }
 
 #[test]
@@ -191,6 +231,46 @@ fn twist_ramp_matches_analytic() {
     // between the mesh's vertex planes (where the twist is not planar-linear).
     let dz = DVec3::new(0.0, 0.0, 0.37 * 1.2);
     check_ramp(grid, move |p| tw(p) + dz, move |p| untw(p - dz), 0.02, true);
+}
+
+/// A smooth but non-linear f32 volume (values within ±100).
+fn bumpy(grid: &Grid) -> Volume {
+    let v = (0..grid.len())
+        .map(|l| {
+            let [i, j, k] = grid.unlinear(l);
+            let (x, y, z) = (i as f64, j as f64, k as f64);
+            (60.0 * (0.9 * x + 0.4 * y * z).sin() + 40.0 * (1.3 * y - 0.7 * x * z).cos()) as f32
+        })
+        .collect();
+    Volume::new(*grid, VoxelData::F32(v)).unwrap()
+}
+
+/// f64 trilinear sample of `vol` at a point in **source voxel index** units,
+/// clamped to the grid.
+fn trilinear64(vol: &Volume, r: DVec3) -> f64 {
+    let d = vol.grid.dims;
+    let src = vol.data.as_slice();
+    let mut i0 = [0usize; 3];
+    let mut f = [0f64; 3];
+    for a in 0..3 {
+        let n = d[a] as f64;
+        let x = r[a].clamp(0.0, n - 1.0);
+        let lo = x.floor().min(n - 2.0);
+        i0[a] = lo as usize;
+        f[a] = x - lo;
+    }
+    let mut v = 0.0;
+    for c in 0..8 {
+        let o = [c & 1, (c >> 1) & 1, c >> 2];
+        let mut w = 1.0;
+        for a in 0..3 {
+            w *= if o[a] == 1 { f[a] } else { 1.0 - f[a] };
+        }
+        if w != 0.0 {
+            v += w * src.get_f32(vol.grid.linear(i0[0] + o[0], i0[1] + o[1], i0[2] + o[2])) as f64;
+        }
+    }
+    v
 }
 
 /// f64 barycentric coordinates of `q` in the tetrahedron `p`.
@@ -233,13 +313,20 @@ fn tet_points(
 fn check_owners(grid: &Grid, f: &Field, mask: &TetMask) -> Result<(), TestCaseError> {
     let grid = *grid;
     let mesh = SamplingMesh::new(&grid).unwrap();
-    let vol = ramp(&grid, DVec3::new(1.0, 2.0, -1.5));
+    // Values that are not linear, so the two interpolants differ.
+    let vol = bumpy(&grid);
     let params = ResampleParams {
         background: -99.0,
+        interpolation: Interpolation::Tetrahedral,
         ..Default::default()
     };
     let (og, own) = owners(&vol, f, Some(mask), params);
     let (out, _) = run(&vol, f, Some(mask), params);
+    let tri_params = ResampleParams {
+        interpolation: Interpolation::Trilinear,
+        ..params
+    };
+    let (tri, _) = run(&vol, f, Some(mask), tri_params);
     let mut tets = Vec::new();
     // Orientations that f32 rounding could flip are not compared.
     let mut unsure = Vec::new();
@@ -311,6 +398,7 @@ fn check_owners(grid: &Grid, f: &Field, mask: &TetMask) -> Result<(), TestCaseEr
         }
         if o == u32::MAX {
             prop_assert_eq!(out.values[l], params.background);
+            prop_assert_eq!(tri.values[l], params.background);
         } else {
             let o = o & sampling_mesh::OWNER_ID;
             prop_assert!(
@@ -335,6 +423,22 @@ fn check_owners(grid: &Grid, f: &Field, mask: &TetMask) -> Result<(), TestCaseEr
                 "voxel {:?}: {} vs {}",
                 q,
                 out.values[l],
+                want
+            );
+            // Trilinear: the f64 sample at the f64 barycentric rest position.
+            let rest = mesh
+                .tet_vertices(*cell, *t)
+                .iter()
+                .zip(w)
+                .fold(DVec3::ZERO, |r, (v, w)| {
+                    r + w * DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)
+                });
+            let want = trilinear64(&vol, rest);
+            prop_assert!(
+                (tri.values[l] as f64 - want).abs() < 2e-3,
+                "trilinear voxel {:?}: {} vs {}",
+                q,
+                tri.values[l],
                 want
             );
         }
@@ -372,6 +476,66 @@ proptest! {
         }
         check_owners(&grid, &f, &mask)?;
     }
+}
+
+/// Affine field on the head phantom (sharp edges): trilinear mode equals
+/// f64 trilinear sampling of the source at the analytic inverse map, up to
+/// the rest-position error (the mesh maps an affine field exactly, so only
+/// f32 rounding is left: ≤ 0.05 HU at edges of 2500 HU per voxel); the
+/// tetrahedral mode differs by far more (so the comparison can fail).
+#[test]
+fn affine_head_trilinear_matches_trilinear_of_the_inverse_map() {
+    let grid = Grid::new(
+        [36, 32, 28],
+        DVec3::new(0.9, 1.0, 1.2),
+        DVec3::new(-15.0, 2.0, 7.0),
+    );
+    let vol = head_i16(&grid);
+    let (m, inv) = affine(
+        grid.centre(),
+        DVec3::new(0.3, -0.5, 1.0),
+        17.0,
+        1.07,
+        DVec3::new(1.3, -0.6, 2.2),
+    );
+    let f = Field::from_map(&grid, m);
+    let n = DVec3::new(
+        grid.dims[0] as f64 - 1.0,
+        grid.dims[1] as f64 - 1.0,
+        grid.dims[2] as f64 - 1.0,
+    );
+    let mut worst = [0f64; 2];
+    for (slot, interpolation) in Interpolation::ALL.into_iter().enumerate() {
+        let params = ResampleParams {
+            background: f32::NAN,
+            interpolation,
+            ..Default::default()
+        };
+        let (out, _) = run(&vol, &f, None, params);
+        let mut count = 0;
+        for l in 0..out.grid.len() {
+            let [i, j, k] = out.grid.unlinear(l);
+            let w = out
+                .grid
+                .index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+            let r = grid.world_to_index(inv(w));
+            // Inside the source by a margin: the mesh covers the voxel.
+            if r.cmplt(DVec3::splat(0.01)).any() || r.cmpgt(n - 0.01).any() {
+                continue;
+            }
+            let v = out.values[l] as f64;
+            assert!(v.is_finite(), "{interpolation}: hole at {:?}", [i, j, k]);
+            worst[slot] = worst[slot].max((v - trilinear64(&vol, r)).abs());
+            count += 1;
+        }
+        assert!(count > grid.len() / 2, "only {count} voxels compared");
+    }
+    eprintln!(
+        "affine head: max |error| vs f64 trilinear of the inverse map: tetrahedral {:.3} HU, trilinear {:.4} HU",
+        worst[0], worst[1]
+    );
+    assert!(worst[1] <= 0.05, "trilinear mode: {} HU", worst[1]);
+    assert!(worst[0] > 100.0 * worst[1].max(1e-3), "{worst:?}");
 }
 
 #[test]
@@ -433,6 +597,12 @@ fn removing_a_cell_makes_its_interior_background() {
 /// voxels; a bump that pushes out of the output forces a full resample.
 #[test]
 fn dirty_region_equals_full_resample() {
+    for interpolation in Interpolation::ALL {
+        dirty_region_equals_full_resample_in(interpolation);
+    }
+}
+
+fn dirty_region_equals_full_resample_in(interpolation: Interpolation) {
     let grid = Grid::new(
         [40, 36, 32],
         DVec3::new(1.0, 1.1, 0.9),
@@ -442,6 +612,7 @@ fn dirty_region_equals_full_resample() {
     let params = ResampleParams {
         background: -1024.0,
         growth_margin: 2,
+        interpolation,
         ..Default::default()
     };
     let (tw, _) = twist_z(grid.centre(), 0.01);
@@ -490,7 +661,7 @@ fn dirty_region_equals_full_resample() {
             assert_eq!(
                 a.to_bits(),
                 b.to_bits(),
-                "step {n}: voxel {:?}",
+                "{interpolation} step {n}: voxel {:?}",
                 full.grid.unlinear(l)
             );
         }
