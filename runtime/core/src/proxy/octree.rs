@@ -46,6 +46,22 @@ pub struct OctreeProxy {
 }
 
 impl OctreeProxy {
+    /// Labelled voxels of the volume (`dims` voxels, `label(voxel)` as the
+    /// proxy was built with) that no leaf of their label covers
+    /// ([`super::unrepresented_voxels`]; leaves hold `x ..= x + s`).
+    pub fn unrepresented_voxels(
+        &self,
+        dims: [usize; 3],
+        label: &impl Fn([usize; 3]) -> Option<u16>,
+    ) -> usize {
+        let cells = self
+            .leaves
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, s))| (x, x.map(|v| v + s), self.mesh.labels[5 * i]));
+        super::unrepresented_voxels(dims, cells, label)
+    }
+
     /// Sets every hanging node's value from its masters (`values` per node,
     /// one axis).
     pub fn constrain(&self, values: &mut [f32]) {
@@ -102,17 +118,25 @@ pub fn octree_proxy(
             continue;
         }
         let crosses = (0..3).any(|a| x[a] + s > cells[a]);
-        let purity = if crosses || s > max_cell {
+        let purity = match if crosses || s > max_cell {
             None
         } else {
             pure_label(x, s, &label)
+        } {
+            // Empty voxels it owns, but labelled ones on its far faces
+            // (inside its tetrahedra): split, so a one-voxel object there
+            // keeps its unit cells instead of vanishing.
+            Some(None) if super::cell_label(x, x.map(|v| v + s), &label).is_some() => None,
+            p => p,
         };
         match purity {
             Some(Some(l)) => leaves.push((x, s, l)),
             Some(None) => {}
             None if s == 1 => {
-                // A unit cell of mixed voxels keeps the label of its first.
-                if let Some(l) = label(x) {
+                // A unit cell of mixed voxels (its eight corners) is kept
+                // when any is labelled, with their most frequent label
+                // (`super::cell_label`, the uniform proxy's rule).
+                if let Some(l) = super::cell_label(x, x.map(|v| v + 1), &label) {
                     leaves.push((x, 1, l));
                 }
             }
