@@ -9,10 +9,14 @@
 //! voxel centres, in world millimetres.
 //!
 //! **Features smaller than a cell** ([`cell_label`]): a cell is kept when
-//! *any* voxel of it (corners included) is labelled, and takes the most
-//! frequent label among its labelled voxels (ties to the lower label, i.e.
-//! the material listed first); only cells with no labelled voxel at all
-//! (air) are left out. So a one-voxel object or a one-voxel slab always
+//! *any* voxel it owns is labelled, and takes the most frequent label
+//! among its labelled voxels (ties to the lower label, i.e. the material
+//! listed first); only cells with no labelled voxel at all (air) are left
+//! out. A cell owns, along each axis, the voxels above its lower corner
+//! plane up to and including its upper one (the first cell of an axis
+//! owns its lower plane too), so every voxel has one owner, and cells of
+//! one voxel keep the rule of before (the label of their upper corner):
+//! a one-voxel gap of air still separates two pieces. So a one-voxel object or a one-voxel slab always
 //! gets the cells around it — it is never bound to nothing. What can still
 //! happen is that a minority material inside a cell (a thin plate of bone
 //! in soft tissue) moves with the cell's majority material:
@@ -124,8 +128,8 @@ pub fn unrepresented_voxels(
 
 /// A conforming tetrahedral proxy of `grid` with cells of `step` voxels;
 /// `label(voxel)` gives a voxel's material label or `None` outside the
-/// model (voxel indices). A cell is kept when any of its voxels is
-/// labelled, with its most frequent label ([`cell_label`]).
+/// model (voxel indices). A cell is kept when any voxel it owns is
+/// labelled, with its most frequent label ([`cell_label`]; see the module).
 pub fn uniform_proxy(
     grid: &Grid,
     step: usize,
@@ -169,7 +173,10 @@ fn uniform_cells(
                 let c = [i, j, k];
                 let lo = [0, 1, 2].map(|a| t[a][c[a]]);
                 let hi = [0, 1, 2].map(|a| t[a][c[a] + 1]);
-                let Some(l) = cell_label(lo, hi, label) else {
+                // The voxels it owns: above its lower corner plane up to
+                // its upper one (the first cell of an axis owns both).
+                let own = [0, 1, 2].map(|a| lo[a] + usize::from(c[a] > 0));
+                let Some(l) = cell_label(own, hi, label) else {
                     continue;
                 };
                 cells.push((lo, hi, l));
