@@ -6,9 +6,15 @@
 //   springs  vec4<f32> [s]   rest vector X_b − X_a (mm), rest length (mm)
 //   ends     vec2<u32> [s]   end nodes a, b
 //   kc       vec2<f32> [s]   stiffness (µN/mm), damping (µN·s/mm)
-//   force    vec4<f32> [s]   force on end a (µN), written by spring_forces
+//   force    vec4<f32> [s + 4 t]  force on end a (µN), written by spring_forces;
+//                            then per volume spring (tetrahedron) the force
+//                            on each of its corners, written by tet_forces
 //   start    u32 [n + 1]     node n's springs are incident[start[n] .. start[n + 1]]
-//   incident u32 [2 s]       spring index, top bit set where the node is end b
+//   incident u32 [2 s + 4 t] spring index, top bit set where the node is end b;
+//                            or a volume-spring corner's row s + 4 t + c (added)
+//   tets     vec4<u32> [t]   a volume spring's corners
+//   tet_geom vec4<f32> [3 t] rest edge vectors X_c − X_0 (c = 1, 2, 3; mm),
+//                            with κE/V₀ (µN/mm⁵), V₀ (mm³) and 0 in w
 //   u, v     vec4<f32> [n]   displacement (mm) and velocity (mm/s)
 //   node     vec4<f32> [n]   external force xyz (µN), mass (g)
 //   drive    vec4<f32> [2 n] per node: kind (w of the first: 0 free, 1 fixed,
@@ -18,7 +24,9 @@
 //   fnode    vec4<f32> [n]   total force per node (µN), when there are ties
 //   tie_*, untie_*           a hanging node's masters, a master's hanging
 //                            nodes: (node, weight bits) lists per node
-// Without hanging nodes a sub-step is spring_forces, integrate. With them it
+// A sub-step starts with spring_forces and, when there are volume springs,
+// tet_forces (kernel.rs `tet_forces`). Without hanging nodes it goes on with
+// integrate. With them it
 // is spring_forces, node_forces, integrate_tied (each free node adds the
 // forces of the hanging nodes it carries, Pᵀ f), tie_state (P u, P v): the
 // CPU's general path.
@@ -31,7 +39,7 @@ struct Params {
     h: f32,        // sub-step, s
     alpha: f32,    // mass damping, 1/s
     frac: f32,     // how far along their path driven nodes are after this sub-step
-    pad0: u32,
+    tets: u32,     // volume springs
     pad1: u32,
     pad2: u32,
 }
@@ -52,6 +60,8 @@ struct Params {
 @group(0) @binding(13) var<storage, read> tie_list: array<vec2<u32>>;
 @group(0) @binding(14) var<storage, read> untie_start: array<u32>;
 @group(0) @binding(15) var<storage, read> untie_list: array<vec2<u32>>;
+@group(0) @binding(16) var<storage, read> tets: array<vec4<u32>>;
+@group(0) @binding(17) var<storage, read> tet_geom: array<vec4<f32>>;
 
 const WG: u32 = 64u;
 const END_B: u32 = 0x80000000u;
@@ -93,7 +103,45 @@ fn spring_forces(
     force[s] = vec4<f32>(mag * dir, 0.0);
 }
 
-// The springs' force on node n (µN).
+// kernel.rs `tet_forces`: a volume spring smaller than at rest pushes its
+// corners along −k_v (V − V₀) ∂V/∂x; edges from displacement differences.
+@compute @workgroup_size(64)
+fn tet_forces(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let t = flat(gid, nwg);
+    if (t >= p.tets) {
+        return;
+    }
+    let c = tets[t];
+    let g1 = tet_geom[3u * t];
+    let g2 = tet_geom[3u * t + 1u];
+    let g3 = tet_geom[3u * t + 2u];
+    let u0 = u[c.x].xyz;
+    let d1 = g1.xyz + (u[c.y].xyz - u0);
+    let d2 = g2.xyz + (u[c.z].xyz - u0);
+    let d3 = g3.xyz + (u[c.w].xyz - u0);
+    let a1 = cross(d2, d3);
+    let vol = dot(d1, a1) / 6.0;
+    let row = p.springs + 4u * t;
+    if (vol >= g2.w) {
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            force[row + k] = vec4<f32>(0.0);
+        }
+        return;
+    }
+    let s = -g1.w * (vol - g2.w) / 6.0;
+    let f1 = s * a1;
+    let f2 = s * cross(d3, d1);
+    let f3 = s * cross(d1, d2);
+    force[row] = vec4<f32>(-(f1 + f2 + f3), 0.0);
+    force[row + 1u] = vec4<f32>(f1, 0.0);
+    force[row + 2u] = vec4<f32>(f2, 0.0);
+    force[row + 3u] = vec4<f32>(f3, 0.0);
+}
+
+// The springs' (and volume springs') force on node n (µN).
 fn spring_sum(n: u32) -> vec3<f32> {
     var f = vec3<f32>(0.0);
     for (var i = start[n]; i < start[n + 1u]; i = i + 1u) {

@@ -531,3 +531,35 @@ fn notes_count_points_bound_outside_the_proxy_and_the_solver_work() {
     assert!(notes["last_residual"] <= 1e-9, "{notes:?}");
     assert_eq!(notes["proxy_tetrahedra"], 50.0);
 }
+
+/// One-voxel objects at every offset inside a cell of 4 voxels, along each
+/// axis, and one-voxel slabs at every offset: each keeps a proxy cell,
+/// none is reported lost, and each resamples to its value after a shift
+/// (`mesh_model::small_features`). The rule before (a cell takes its
+/// centre voxel's label) refused to build a proxy for all but offset 2.
+#[test]
+fn one_voxel_objects_and_slabs_survive_at_every_offset() {
+    use voxflex_core::mesh_model::small_features::object_survives;
+    let params = "proxy = { kind = \"uniform\", step = 4 }\n\
+                  materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n\
+                  gravity = [0, 0, -9810]";
+    for axis in 0..3 {
+        for offset in 0..4 {
+            let mut v = [6usize; 3];
+            v[axis] = 4 + offset;
+            object_survives::<CorotationalFem>(params, [13, 13, 13], &[v], 3, [1, -2, 3])
+                .unwrap_or_else(|e| panic!("voxel {v:?}: {e}"));
+            let slab: Vec<[usize; 3]> = (0..13 * 13)
+                .map(|i| {
+                    let mut p = [0; 3];
+                    p[(axis + 1) % 3] = i % 13;
+                    p[(axis + 2) % 3] = i / 13;
+                    p[axis] = 4 + offset;
+                    p
+                })
+                .collect();
+            object_survives::<CorotationalFem>(params, [13, 13, 13], &slab, 3, [-1, 2, 1])
+                .unwrap_or_else(|e| panic!("slab at {axis} = {}: {e}", 4 + offset));
+        }
+    }
+}

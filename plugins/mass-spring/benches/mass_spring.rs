@@ -11,7 +11,9 @@
 //!   linear FEM reference — the error a mass-spring model makes, which
 //!   users trade against its speed.
 //!
-//! `-- substep`, `-- octree` or `-- cantilever` runs one part.
+//! - a one-voxel slab in a 128³ volume: the step and the map per frame.
+//!
+//! `-- substep`, `-- octree`, `-- slab` or `-- cantilever` runs one part.
 
 use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
@@ -32,6 +34,14 @@ fn frame(dt: f64) -> FrameInfo {
 }
 
 fn substep() {
+    // With the volume springs (the default) and without (`volume_stiffness
+    // = 0`, the springs-only model of before), interleaved.
+    for volume_stiffness in [1.0, 0.0, 1.0, 0.0] {
+        substep_with(volume_stiffness);
+    }
+}
+
+fn substep_with(volume_stiffness: f64) {
     let grid = Grid::new([33, 33, 17], DVec3::splat(2.0), DVec3::ZERO);
     let mesh = uniform_proxy(&grid, 1, |_| Some(0)).expect("box");
     let nodes = mesh.nodes.len();
@@ -40,12 +50,16 @@ fn substep() {
         mesh,
         vec![material],
         DVec3::new(0.0, 0.0, -9810.0),
-        SpringParams::default(),
+        SpringParams {
+            volume_stiffness,
+            ..SpringParams::default()
+        },
     )
     .expect("model");
     m.interact("kind = \"fix\"\nmin = [-1, -1, -1]\nmax = [0.5, 65, 33]")
         .unwrap();
     let springs = m.solver().unwrap().springs().ends.len();
+    let tets = m.solver().unwrap().volume_springs().k.len();
     let dt = m.solver().unwrap().stable_dt() * 200.0;
     m.step(frame(dt)).unwrap(); // warm-up
     let mut per = Vec::new();
@@ -56,7 +70,8 @@ fn substep() {
     }
     per.sort_by(f64::total_cmp);
     println!(
-        "explicit sub-step, {springs} springs, {nodes} nodes: {:.3} ms (median of 5 frames of {} sub-steps; min {:.3})",
+        "explicit sub-step, {springs} springs, {tets} volume springs (volume_stiffness = \
+         {volume_stiffness}), {nodes} nodes: {:.3} ms (median of 5 frames of {} sub-steps; min {:.3})",
         per[2],
         m.last_solve().substeps,
         per[0]
@@ -97,6 +112,74 @@ fn octree() {
         m.last_solve().substeps,
         per[0]
     );
+}
+
+/// A one-voxel slab in air (issue 12, item 8: "a 1-voxel slab runs at
+/// 45 ms/frame"): a 128³ volume of 1 mm voxels, tissue only at z = 64,
+/// uniform proxy of step 4, every voxel bound; per frame the solver's step
+/// and the map of all 128³ voxels, timed apart, under gravity with the
+/// slab's edge x = 0 fixed.
+fn slab() {
+    use voxflex_core::deformation::{DisplacementTarget, ExecutionBackend, RestPoints};
+    use voxflex_core::volume::{Volume, VoxelData};
+    let n = 128;
+    let grid = Grid::new([n, n, n], DVec3::ONE, DVec3::ZERO);
+    let mut data = vec![0f32; grid.len()];
+    for j in 0..n {
+        for i in 0..n {
+            data[grid.linear(i, j, 64)] = 100.0;
+        }
+    }
+    let volume = Volume::new(grid, VoxelData::F32(data)).expect("volume");
+    for integrator in ["explicit", "implicit"] {
+        let mut m = Springs::from_toml(&format!(
+            "proxy = {{ kind = \"uniform\", step = 4 }}\n\
+             materials = [{{ range = [50, 200], youngs_modulus = 3000 }}]\n\
+             gravity = [0, 0, -9810]\nintegrator = \"{integrator}\""
+        ))
+        .expect("params");
+        let t = Instant::now();
+        m.init(volume.view(), ExecutionBackend::Cpu).expect("init");
+        let id = m.bind(RestPoints::Lattice(grid)).expect("bind");
+        let setup = t.elapsed().as_secs_f64() * 1e3;
+        m.interact("kind = \"fix\"\nmin = [-1, -1, -1]\nmax = [0.5, 200, 200]")
+            .expect("fix");
+        let (mut x, mut y, mut z) = (
+            vec![0f32; grid.len()],
+            vec![0f32; grid.len()],
+            vec![0f32; grid.len()],
+        );
+        let (mut step, mut map) = (Vec::new(), Vec::new());
+        for _ in 0..6 {
+            let t = Instant::now();
+            m.step(frame(1.0 / 30.0)).expect("step");
+            step.push(t.elapsed().as_secs_f64() * 1e3);
+            let t = Instant::now();
+            m.map(
+                id,
+                DisplacementTarget::Cpu {
+                    x: &mut x,
+                    y: &mut y,
+                    z: &mut z,
+                },
+            )
+            .expect("map");
+            map.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        step.sort_by(f64::total_cmp);
+        map.sort_by(f64::total_cmp);
+        let mesh = m.mesh().expect("mesh");
+        println!(
+            "1-voxel slab, 128³ voxels, uniform step 4 ({} nodes, {} tetrahedra), {integrator}: \
+             proxy and binding {setup:.0} ms; per frame: step {:.2} ms ({} sub-steps), map {:.2} ms \
+             (medians of 6)",
+            mesh.nodes.len(),
+            mesh.tets.len(),
+            step[3],
+            m.last_solve().substeps,
+            map[3]
+        );
+    }
 }
 
 fn cantilever() {
@@ -189,13 +272,16 @@ fn tip(m: &Springs) -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let only = |k: &str| args.iter().any(|a| a == k);
-    let all = !only("substep") && !only("octree") && !only("cantilever");
+    let all = !only("substep") && !only("octree") && !only("cantilever") && !only("slab");
     println!(
         "voxflex-mass-spring bench: threads {}",
         rayon::current_num_threads()
     );
     if all || only("substep") {
         substep();
+    }
+    if all || only("slab") {
+        slab();
     }
     if all || only("octree") {
         octree();

@@ -2,7 +2,8 @@
 //! spring incidence and the node state mirrored in GPU buffers, and the two
 //! kernels of `shaders/mass-spring/springs.wgsl` (the twins of
 //! [`crate::kernel::SpringKernel::spring_pass`] and `integrate`) dispatched
-//! once each per sub-step. The state goes up at the start of a frame and
+//! once each per sub-step, plus `tet_forces` (the volume springs) when
+//! `volume_stiffness` is above 0. The state goes up at the start of a frame and
 //! comes back at its end (24 B per node each way), so interactions, the
 //! change test and the `.vtu` export work on the CPU copy as on the rayon
 //! path; a frame's sub-steps never leave the device except for their
@@ -40,6 +41,11 @@ pub struct GpuSprings {
     node: BufferId,
     drive: BufferId,
     spring_forces: PipelineId,
+    tet_forces: PipelineId,
+    /// Volume springs: count, corners, rest edges.
+    tets: usize,
+    tet_corners: BufferId,
+    tet_geom: BufferId,
     integrate: PipelineId,
     node_forces: PipelineId,
     integrate_tied: PipelineId,
@@ -58,7 +64,8 @@ impl GpuSprings {
     ) -> Result<Self, ModelError> {
         let limit = gpu.limits().max_storage_buffer_binding_size;
         let springs = kernel.springs();
-        if 16 * springs.max(2 * nodes) as u64 > limit {
+        let tets = kernel.tets();
+        if 16 * (springs + 4 * tets).max(2 * nodes).max(3 * tets) as u64 > limit {
             return Err(gpu_err(format!(
                 "{springs} springs and {nodes} nodes exceed this device's storage binding of {limit} \
                  bytes; use a coarser proxy or backend = \"cpu\""
@@ -66,6 +73,10 @@ impl GpuSprings {
         }
         let table = kernel.spring_table();
         let (start, incident) = kernel.incidence();
+        let (mut corners, mut geometry) = kernel.tet_table();
+        // Buffers of at least one element (none are bound empty).
+        corners.resize(tets.max(1), [0; 4]);
+        geometry.resize(3 * tets.max(1), [0.0; 4]);
         let g = &*gpu;
         let buffers = (|| {
             Ok::<_, voxflex_core::error::GpuError>((
@@ -73,7 +84,10 @@ impl GpuSprings {
                 g.upload(&table.geometry, "mass-spring springs")?,
                 g.upload(&table.ends, "mass-spring ends")?,
                 g.upload(&table.kc, "mass-spring stiffness and damping")?,
-                g.create_buffer(16 * springs.max(1) as u64, "mass-spring forces")?,
+                g.create_buffer(
+                    16 * (springs + 4 * tets).max(1) as u64,
+                    "mass-spring forces",
+                )?,
                 g.upload(&start, "mass-spring incidence start")?,
                 g.upload(&incident, "mass-spring incidence")?,
                 [
@@ -91,6 +105,14 @@ impl GpuSprings {
                 .compile(SPRINGS_WGSL, "spring_forces")
                 .map_err(gpu_err)?,
             integrate: gpu.compile(SPRINGS_WGSL, "integrate").map_err(gpu_err)?,
+            tet_forces: gpu.compile(SPRINGS_WGSL, "tet_forces").map_err(gpu_err)?,
+            tets,
+            tet_corners: gpu
+                .upload(&corners, "mass-spring volume springs")
+                .map_err(gpu_err)?,
+            tet_geom: gpu
+                .upload(&geometry, "mass-spring volume-spring rest edges")
+                .map_err(gpu_err)?,
             node_forces: gpu.compile(SPRINGS_WGSL, "node_forces").map_err(gpu_err)?,
             integrate_tied: gpu
                 .compile(SPRINGS_WGSL, "integrate_tied")
@@ -171,6 +193,14 @@ impl GpuSprings {
             bind(7, self.u),
             bind(8, self.v),
         ];
+        let tet_bindings = [
+            bind(0, self.params),
+            bind(4, self.force),
+            bind(7, self.u),
+            bind(16, self.tet_corners),
+            bind(17, self.tet_geom),
+        ];
+        let tet_groups = g.workgroups_for(self.tets as u64, 64).map_err(gpu_err)?;
         let node_bindings = [
             bind(0, self.params),
             bind(4, self.force),
@@ -209,7 +239,7 @@ impl GpuSprings {
                 (h as f32).to_bits(),
                 (alpha as f32).to_bits(),
                 frac.to_bits(),
-                0,
+                self.tets as u32,
                 0,
                 0,
             ];
@@ -217,6 +247,10 @@ impl GpuSprings {
                 .map_err(gpu_err)?;
             g.dispatch(self.spring_forces, &spring_bindings, spring_groups)
                 .map_err(gpu_err)?;
+            if self.tets > 0 {
+                g.dispatch(self.tet_forces, &tet_bindings, tet_groups)
+                    .map_err(gpu_err)?;
+            }
             match ties {
                 None => g
                     .dispatch(self.integrate, &node_bindings, node_groups)
@@ -294,6 +328,8 @@ impl Drop for GpuSprings {
             self.node,
             self.drive,
             self.fnode,
+            self.tet_corners,
+            self.tet_geom,
         ] {
             self.gpu.destroy_buffer(id);
         }

@@ -22,7 +22,7 @@
 //! (`e` the rest vector, `δ` the displacement difference), so a strain of
 //! 1e-6 is resolved in f32 on a model 100 mm from the origin.
 
-use super::solver::Springs;
+use super::solver::{Springs, VolumeSprings};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -32,6 +32,8 @@ use wide::{f32x4, f32x8};
 
 /// Springs per parallel task of [`SpringKernel::spring_pass`] (a multiple of 8).
 const CHUNK: usize = 4096;
+/// Volume springs per parallel task of [`SpringKernel::spring_pass`].
+const TET_CHUNK: usize = 1024;
 /// Nodes per parallel task of `SpringKernel::integrate` (tests).
 #[cfg(test)]
 const NODE_CHUNK: usize = 512;
@@ -56,6 +58,17 @@ struct SpringArrays {
     /// (ascending).
     b_start: Vec<u32>,
     b_list: Vec<u32>,
+    /// Volume springs (one per tetrahedron; none when `volume_stiffness`
+    /// is 0): corners, and per tetrahedron its rest edge vectors
+    /// `X_c − X_0` (c = 1, 2, 3; mm) with, in the fourth lanes, the
+    /// stiffness `κ E / V₀` (µN/mm⁵), the rest volume `V₀` (mm³) and 0.
+    tets: Vec<[u32; 4]>,
+    tet_geometry: Vec<[f32; 12]>,
+    /// Node `n`'s rows of the per-corner volume forces:
+    /// `t_list[t_start[n] .. t_start[n + 1]]`, indices into the force
+    /// array (after the padded springs: `padded + 4 t + corner`).
+    t_start: Vec<u32>,
+    t_list: Vec<u32>,
 }
 
 /// The springs and the node state as f32 arrays (see the module).
@@ -140,6 +153,20 @@ impl NodeRows<'_> {
     }
 }
 
+#[inline]
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[inline]
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
 /// Tags an incidence entry (GPU twin) where the node is the spring's end `b`.
 pub const END_B: u32 = 1 << 31;
 
@@ -159,7 +186,7 @@ pub struct SpringTable {
 }
 
 impl SpringArrays {
-    fn new(springs: &Springs, rest: &[DVec3]) -> Self {
+    fn new(springs: &Springs, volumes: &VolumeSprings, rest: &[DVec3]) -> Self {
         let n = rest.len();
         // Each spring turned to `a < b`, then sorted by (a, b).
         let mut order: Vec<(u32, u32, usize)> = springs
@@ -202,6 +229,38 @@ impl SpringArrays {
             b_list[fill[q as usize] as usize] = s as u32;
             fill[q as usize] += 1;
         }
+        let tet_geometry = volumes
+            .corners
+            .iter()
+            .zip(&volumes.k)
+            .map(|(c, &kv)| {
+                let x = c.map(|i| rest[i as usize]);
+                let [e1, e2, e3] = [1, 2, 3].map(|i| x[i] - x[0]);
+                let v0 = e1.dot(e2.cross(e3)) / 6.0;
+                [
+                    e1.x, e1.y, e1.z, kv, e2.x, e2.y, e2.z, v0, e3.x, e3.y, e3.z, 0.0,
+                ]
+                .map(|v| v as f32)
+            })
+            .collect();
+        let padded = m as u32;
+        let mut t_start = vec![0u32; n + 1];
+        for c in &volumes.corners {
+            for &i in c {
+                t_start[i as usize + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            t_start[i + 1] += t_start[i];
+        }
+        let mut fill = t_start.clone();
+        let mut t_list = vec![0u32; 4 * volumes.corners.len()];
+        for (t, c) in volumes.corners.iter().enumerate() {
+            for (corner, &i) in c.iter().enumerate() {
+                t_list[fill[i as usize] as usize] = padded + 4 * t as u32 + corner as u32;
+                fill[i as usize] += 1;
+            }
+        }
         Self {
             a,
             b,
@@ -211,6 +270,52 @@ impl SpringArrays {
             a_start,
             b_start,
             b_list,
+            tets: volumes.corners.clone(),
+            tet_geometry,
+            t_start,
+            t_list,
+        }
+    }
+
+    /// Rows of the force array: the padded springs, then four per volume
+    /// spring.
+    fn rows(&self) -> usize {
+        self.padded() + 4 * self.tets.len()
+    }
+
+    /// The per-corner forces (µN) of volume springs `first .. first +
+    /// out.len() / 4` at node state `state`, into `out` (four rows per
+    /// tetrahedron). A tetrahedron of current volume `V < V₀` pushes its
+    /// corners along `−k_v (V − V₀) ∂V/∂x_c`; one at or above its rest
+    /// volume exerts nothing (see `solver.rs`). Edges are the rest vectors
+    /// plus displacement differences, as for the springs.
+    fn tet_forces(&self, state: &[f32x8], first: usize, out: &mut [f32x4]) {
+        for (i, rows) in out.chunks_exact_mut(4).enumerate() {
+            let t = first + i;
+            let [c0, c1, c2, c3] = self.tets[t].map(|n| n as usize);
+            let g = &self.tet_geometry[t];
+            let u0 = split_row(state[c0]).0;
+            let edge = |c: usize, e: usize| -> [f32; 3] {
+                let u = split_row(state[c]).0;
+                [0, 1, 2].map(|k| g[4 * e + k] + (u[k] - u0[k]))
+            };
+            let (d1, d2, d3) = (edge(c1, 0), edge(c2, 1), edge(c3, 2));
+            let g1 = cross(d2, d3);
+            let v = dot(d1, g1) / 6.0;
+            let (kv, v0) = (g[3], g[7]);
+            if v >= v0 {
+                rows.fill(f32x4::ZERO);
+                continue;
+            }
+            // −k_v (V − V₀) ∂V/∂x, with ∂V/∂x_1 = (d2 × d3) / 6 and so on.
+            let s = -kv * (v - v0) / 6.0;
+            let (g2, g3) = (cross(d3, d1), cross(d1, d2));
+            let f = [g1, g2, g3].map(|gc| gc.map(|x| s * x));
+            let f0 = [0, 1, 2].map(|k| -(f[0][k] + f[1][k] + f[2][k]));
+            rows[0] = f32x4::from([f0[0], f0[1], f0[2], 0.0]);
+            for c in 0..3 {
+                rows[c + 1] = f32x4::from([f[c][0], f[c][1], f[c][2], 0.0]);
+            }
         }
     }
 
@@ -279,7 +384,11 @@ impl SpringArrays {
             b0 += f[pair[0] as usize];
             b1 += f[pair[1] as usize];
         }
-        (a0 + a1) - (b0 + b1)
+        let mut sum = (a0 + a1) - (b0 + b1);
+        for &row in &self.t_list[self.t_start[n] as usize..self.t_start[n + 1] as usize] {
+            sum += f[row as usize];
+        }
+        sum
     }
 
     /// One sub-step for the nodes `first .. first + rows.len()`, whose state
@@ -440,8 +549,9 @@ impl SpinBarrier {
 }
 
 impl SpringKernel {
-    /// The kernel's arrays for `springs` between `rest` node positions.
-    pub fn new(springs: &Springs, rest: &[DVec3]) -> Self {
+    /// The kernel's arrays for `springs` and `volumes` between `rest` node
+    /// positions.
+    pub fn new(springs: &Springs, volumes: &VolumeSprings, rest: &[DVec3]) -> Self {
         let n = rest.len();
         assert!(
             n < (u32::MAX / 8) as usize
@@ -449,11 +559,14 @@ impl SpringKernel {
                     .ends
                     .iter()
                     .flatten()
-                    .all(|&node| (node as usize) < n),
-            "spring ends must be nodes, and 8 × the node count must fit a u32"
+                    .all(|&node| (node as usize) < n)
+                && volumes.corners.iter().flatten().all(|&c| (c as usize) < n)
+                && springs.ends.len() + 4 * volumes.corners.len() < (u32::MAX / 2) as usize,
+            "spring ends and tetrahedron corners must be nodes, and 8 × the node count and the \
+             force rows must fit a u32"
         );
-        let springs = SpringArrays::new(springs, rest);
-        let f = vec![f32x4::ZERO; springs.padded()];
+        let springs = SpringArrays::new(springs, volumes, rest);
+        let f = vec![f32x4::ZERO; springs.rows()];
         Self {
             springs,
             state: vec![f32x8::ZERO; n.max(1)],
@@ -518,7 +631,9 @@ impl SpringKernel {
 
     /// The node → spring incidence as the GPU twin reads it: node `n`'s
     /// springs are `incident[start[n] .. start[n + 1]]`, each a spring
-    /// index with [`END_B`] set where `n` is its end `b`.
+    /// index with [`END_B`] set where `n` is its end `b`, then its
+    /// volume-spring corners as rows `springs + 4 t + corner` of the force
+    /// buffer (added).
     pub fn incidence(&self) -> (Vec<u32>, Vec<u32>) {
         let s = &self.springs;
         let mut start = Vec::with_capacity(self.nodes + 1);
@@ -528,18 +643,44 @@ impl SpringKernel {
             incident.extend(s.a_start[n]..s.a_start[n + 1]);
             let bs = &s.b_list[s.b_start[n] as usize..s.b_start[n + 1] as usize];
             incident.extend(bs.iter().map(|i| i | END_B));
+            // Volume-spring corners: rows after the unpadded springs.
+            let ts = &s.t_list[s.t_start[n] as usize..s.t_start[n + 1] as usize];
+            let shift = (s.padded() - self.springs()) as u32;
+            incident.extend(ts.iter().map(|i| i - shift));
             start.push(incident.len() as u32);
         }
         (start, incident)
     }
 
-    /// Per spring: the force on its end `a` (stretch and damping along it).
+    /// Volume springs (tetrahedra).
+    pub fn tets(&self) -> usize {
+        self.springs.tets.len()
+    }
+
+    /// The GPU twin's volume-spring buffers: corners (`[a, b, c, d]`) and
+    /// three rows per tetrahedron (rest edge vectors `X_c − X_0`, mm, with
+    /// `κ E / V₀`, `V₀` and 0 in the fourth lanes).
+    pub fn tet_table(&self) -> (Vec<[u32; 4]>, Vec<[f32; 4]>) {
+        let s = &self.springs;
+        let rows = s
+            .tet_geometry
+            .iter()
+            .flat_map(|g| [0, 1, 2].map(|r| [g[4 * r], g[4 * r + 1], g[4 * r + 2], g[4 * r + 3]]))
+            .collect();
+        (s.tets.clone(), rows)
+    }
+
+    /// Per spring: the force on its end `a` (stretch and damping along it);
+    /// per volume spring: the force on each corner.
     pub fn spring_pass(&mut self) {
         let (springs, state) = (&self.springs, &self.state);
-        self.f
-            .par_chunks_mut(CHUNK)
+        let (f, ft) = self.f.split_at_mut(springs.padded());
+        f.par_chunks_mut(CHUNK)
             .enumerate()
             .for_each(|(chunk, out)| springs.forces(state, chunk * CHUNK, out));
+        ft.par_chunks_mut(4 * TET_CHUNK)
+            .enumerate()
+            .for_each(|(chunk, out)| springs.tet_forces(state, chunk * TET_CHUNK, out));
     }
 
     /// The springs' force on node `n` (µN), after [`SpringKernel::spring_pass`].
@@ -572,6 +713,8 @@ impl SpringKernel {
     pub fn substeps(&mut self, count: u32, step: &Substep, fixup: Option<Fixup>) {
         let threads = rayon::current_num_threads().max(1);
         let parts = self.springs.partition(self.nodes, threads);
+        let (padded, tets) = (self.springs.padded(), self.springs.tets.len());
+        let tet_part = |t: usize| tets * t / threads..tets * (t + 1) / threads;
         let barrier = SpinBarrier::new(threads);
         let springs = &self.springs;
         let nodes = self.nodes;
@@ -599,6 +742,16 @@ impl SpringKernel {
                         f.part(spring_range.clone()),
                     )
                 };
+                let tr = tet_part(ctx.index());
+                if !tr.is_empty() {
+                    unsafe {
+                        springs.tet_forces(
+                            state.all(),
+                            tr.start,
+                            f.part(padded + 4 * tr.start..padded + 4 * tr.end),
+                        )
+                    };
+                }
                 barrier.wait();
                 if tied {
                     // Total forces, the hanging nodes' moved onto their
@@ -761,6 +914,7 @@ mod tests {
     struct Case {
         rest: Vec<DVec3>,
         springs: Springs,
+        volumes: VolumeSprings,
         u: Vec<DVec3>,
         v: Vec<DVec3>,
         ext: Vec<[f32; 4]>,
@@ -789,6 +943,19 @@ mod tests {
             list.k.push(1.0 + rnd());
             list.c.push(0.1 * rnd());
         }
+        // Volume springs on random corner quadruples (distinct corners).
+        let mut volumes = VolumeSprings::default();
+        for t in 0..springs / 3 {
+            let p = (rnd() * n as f64) as u32 % n as u32;
+            let c = [
+                p,
+                (p + 1 + t as u32 % 7) % n as u32,
+                (p + 9) % n as u32,
+                (p + 17 + t as u32 % 3) % n as u32,
+            ];
+            volumes.corners.push(c);
+            volumes.k.push(1e-3 * (1.0 + rnd()));
+        }
         let mut vectors = || -> Vec<DVec3> {
             (0..n)
                 .map(|_| DVec3::new(rnd(), rnd(), rnd()) - 0.5)
@@ -798,6 +965,7 @@ mod tests {
         Case {
             rest,
             springs: list,
+            volumes,
             u,
             v,
             ext: (0..n)
@@ -816,6 +984,7 @@ mod tests {
         let Case {
             rest,
             springs,
+            volumes,
             u,
             v,
             ext,
@@ -824,7 +993,7 @@ mod tests {
         } = case(n, 61);
         let (h, alpha) = (1e-3, 0.5);
 
-        let mut kernel = SpringKernel::new(&springs, &rest);
+        let mut kernel = SpringKernel::new(&springs, &volumes, &rest);
         kernel.load(&u, &v);
         let step = Substep {
             h: h as f32,
@@ -847,6 +1016,31 @@ mod tests {
             force[p] += mag * dir;
             force[q] -= mag * dir;
         }
+        // Volume springs: −k (V − V₀) ∂V/∂x where V < V₀.
+        let mut compressed = 0;
+        for (c, &k) in volumes.corners.iter().zip(&volumes.k) {
+            let c = c.map(|i| i as usize);
+            let x = c.map(|i| rest[i] + u[i]);
+            let x0 = c.map(|i| rest[i]);
+            let vol = |x: [DVec3; 4]| (x[1] - x[0]).dot((x[2] - x[0]).cross(x[3] - x[0])) / 6.0;
+            let (now, v0) = (vol(x), vol(x0));
+            if now >= v0 {
+                continue;
+            }
+            compressed += 1;
+            let g1 = (x[2] - x[0]).cross(x[3] - x[0]) / 6.0;
+            let g2 = (x[3] - x[0]).cross(x[1] - x[0]) / 6.0;
+            let g3 = (x[1] - x[0]).cross(x[2] - x[0]) / 6.0;
+            let s = -k * (now - v0);
+            force[c[0]] -= s * (g1 + g2 + g3);
+            force[c[1]] += s * g1;
+            force[c[2]] += s * g2;
+            force[c[3]] += s * g3;
+        }
+        assert!(
+            compressed > 2 && compressed < volumes.k.len(),
+            "both sides of the one-sided volume term are covered ({compressed})"
+        );
         for i in 0..n {
             let (ku, kv) = kernel.node(i);
             let (ku, kv) = (
@@ -894,7 +1088,7 @@ mod tests {
         };
         let pull =
             |s: u32, rows: &mut NodeRows| rows.set_node(0, [0.01 * s as f32, 0.0, 0.0], [0.0; 3]);
-        let mut expected = SpringKernel::new(&c.springs, &c.rest);
+        let mut expected = SpringKernel::new(&c.springs, &c.volumes, &c.rest);
         expected.load(&c.u, &c.v);
         for s in 1..=7 {
             expected.spring_pass();
@@ -906,7 +1100,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            let mut kernel = SpringKernel::new(&c.springs, &c.rest);
+            let mut kernel = SpringKernel::new(&c.springs, &c.volumes, &c.rest);
             kernel.load(&c.u, &c.v);
             pool.install(|| kernel.substeps(7, &step, Some(&pull)));
             for n in 0..c.rest.len() {
@@ -945,9 +1139,9 @@ mod tests {
         let tie = |_: u32, rows: &mut NodeRows| rows.tie(&hanging);
         let mut untie = Boundary::new(300);
         untie.hanging = hanging.clone();
-        let mut kernel = SpringKernel::new(&c.springs, &c.rest);
+        let mut kernel = SpringKernel::new(&c.springs, &c.volumes, &c.rest);
         kernel.load(&c.u, &c.v);
-        let mut reference = SpringKernel::new(&c.springs, &c.rest);
+        let mut reference = SpringKernel::new(&c.springs, &c.volumes, &c.rest);
         reference.load(&c.u, &c.v);
         for s in 1..=5 {
             reference.spring_pass();
@@ -989,7 +1183,7 @@ mod tests {
         }
         // The hanging nodes moved with their masters, and forces reached
         // the masters (they moved differently from an untied run).
-        let mut untied = SpringKernel::new(&c.springs, &c.rest);
+        let mut untied = SpringKernel::new(&c.springs, &c.volumes, &c.rest);
         untied.load(&c.u, &c.v);
         let plain = Substep {
             hanging: &[],

@@ -11,6 +11,23 @@
 //! uniaxial strain energy over its six edges instead, `E V / (6 L²)`,
 //! measured 4–8× too soft in bending on the cantilever.)
 //!
+//! **Volume springs** (`volume_stiffness = κ`, default 1): per
+//! tetrahedron the energy `½ k_v min(V − V₀, 0)²` with `k_v = κ E / V₀`
+//! (`V` its signed volume, `V₀` at rest, `E` its material's Young's
+//! modulus), so the force on corner `c` is `−k_v (V − V₀) ∂V/∂x_c` while
+//! the tetrahedron is smaller than at rest — inverted ones included — and
+//! nothing otherwise. Springs alone cannot untangle a mesh: a tetrahedron
+//! turned inside out has the same edge lengths as at rest, so it is an
+//! equilibrium of the springs (a released 100 mm grab left 24 tetrahedra
+//! inverted for good); the volume term pushes it back through. It acts in
+//! compression only because `∂V/∂x` is a face-area vector: in tension it
+//! grows with the square of the stretch, so a strongly stretched
+//! tetrahedron (next to a large grab) would stiffen far beyond the
+//! explicit step computed at rest, while a compressed one stays within it.
+//! `κ = 1` gives the volume term a bulk stiffness `E` (a linear solid of
+//! Poisson ratio 1/3 has bulk modulus `E`); `κ = 0` turns it off (the
+//! springs-only model of before).
+//!
 //! **Damping.** Along each spring, `c = damping_ratio · 2 √(k m̄)` on the
 //! relative velocity of its ends (`m̄` the ends' reduced mass), plus mass
 //! damping `α` on every node.
@@ -75,6 +92,11 @@ pub struct SpringParams {
     /// PCG iteration cap of the implicit step (default 200).
     #[serde(default = "pcg::default_max_iterations")]
     pub cg_max_iterations: u32,
+    /// Volume springs' stiffness `κ` as a multiple of each tetrahedron's
+    /// Young's modulus (dimensionless, ≥ 0; default 1; 0 turns them off):
+    /// see the module.
+    #[serde(default = "default_volume_stiffness")]
+    pub volume_stiffness: f64,
 }
 
 fn default_damping_ratio() -> f64 {
@@ -86,6 +108,9 @@ fn default_mass_damping() -> f64 {
 fn default_max_substeps() -> u32 {
     10_000
 }
+fn default_volume_stiffness() -> f64 {
+    1.0
+}
 
 impl Default for SpringParams {
     fn default() -> Self {
@@ -96,6 +121,7 @@ impl Default for SpringParams {
             max_substeps: default_max_substeps(),
             cg_tolerance: pcg::default_tolerance(),
             cg_max_iterations: pcg::default_max_iterations(),
+            volume_stiffness: default_volume_stiffness(),
         }
     }
 }
@@ -109,6 +135,13 @@ impl SpringParams {
         }
         if self.max_substeps == 0 {
             return fail("max_substeps must be ≥ 1".into());
+        }
+        if !valid(self.volume_stiffness) {
+            return fail(format!(
+                "volume_stiffness {} must be finite and ≥ 0 (a multiple of Young's modulus; \
+                 0 turns the volume springs off)",
+                self.volume_stiffness
+            ));
         }
         CgSettings::checked(self.cg_tolerance, self.cg_max_iterations)
             .map_err(|m| ModelError(format!("mass-spring params: {m}")))?;
@@ -129,12 +162,23 @@ pub struct Springs {
     pub c: Vec<f64>,
 }
 
+/// The volume springs, one per tetrahedron (see the module).
+#[derive(Clone, Debug, Default)]
+pub struct VolumeSprings {
+    /// Corners, the proxy's tetrahedron order.
+    pub corners: Vec<[u32; 4]>,
+    /// `k_v = κ E / V₀`, µN/mm⁵.
+    pub k: Vec<f64>,
+}
+
 /// The mass-spring solver.
 pub struct MassSpring {
     params: SpringParams,
     rest: Vec<DVec3>,
     masses: Vec<f64>,
     springs: Springs,
+    /// The volume springs (empty when `volume_stiffness` is 0).
+    volumes: VolumeSprings,
     /// Largest stable explicit step, s.
     stable_dt: f64,
     /// Per tetrahedron: its six edges' springs and its share of each
@@ -149,6 +193,14 @@ pub struct MassSpring {
     gpu_pcg: Option<GpuPcg>,
 }
 
+/// `∂V/∂x_c` (mm²) of the signed volume of the tetrahedron with corners
+/// `x` (mm), for its four corners.
+pub fn volume_gradient(x: [DVec3; 4]) -> [DVec3; 4] {
+    let [d1, d2, d3] = [1, 2, 3].map(|c| x[c] - x[0]);
+    let g = [d2.cross(d3), d3.cross(d1), d1.cross(d2)].map(|v| v / 6.0);
+    [-(g[0] + g[1] + g[2]), g[0], g[1], g[2]]
+}
+
 /// The corner pairs of a tetrahedron's six edges.
 const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
 
@@ -156,6 +208,11 @@ impl MassSpring {
     /// The springs.
     pub fn springs(&self) -> &Springs {
         &self.springs
+    }
+
+    /// The volume springs.
+    pub fn volume_springs(&self) -> &VolumeSprings {
+        &self.volumes
     }
 
     /// Largest stable explicit time step, s.
@@ -302,11 +359,33 @@ impl MassSpring {
                 )
             })
             .collect();
+        // Volume springs in compression: `k_v g gᵀ` (the Gauss–Newton
+        // part; the curvature term `k_v (V − V₀) ∂²V` is left out so the
+        // system stays positive definite), g = ∂V/∂x now.
+        let volumes = &self.volumes;
+        let vol_grad = |t: usize| -> Option<(f64, [DVec3; 4])> {
+            let c = volumes.corners.get(t)?;
+            let rest = c.map(|i| self.rest[i as usize]);
+            let now = c.map(|i| x[i as usize]);
+            let v0 = (rest[1] - rest[0]).dot((rest[2] - rest[0]).cross(rest[3] - rest[0]));
+            let v = (now[1] - now[0]).dot((now[2] - now[0]).cross(now[3] - now[0]));
+            (v < v0).then(|| (volumes.k[t], volume_gradient(now)))
+        };
         let blocks: Vec<DMat3> = self
             .tet_edges
             .par_iter()
-            .flat_map_iter(|edges| {
+            .enumerate()
+            .flat_map_iter(|(t, edges)| {
                 let mut k = [DMat3::ZERO; 16];
+                if let Some((kv, g)) = vol_grad(t) {
+                    for a in 0..4 {
+                        for b in 0..4 {
+                            let outer =
+                                DMat3::from_cols(g[a] * g[b].x, g[a] * g[b].y, g[a] * g[b].z);
+                            k[4 * a + b] += outer * (kv * h * h);
+                        }
+                    }
+                }
                 for (e, &(spring, share)) in edges.iter().enumerate() {
                     let (kk, cc) = tangents[spring as usize];
                     let block = (kk * (h * h) + cc * h) * share;
@@ -328,6 +407,15 @@ impl MassSpring {
             let t = tangents[i].0 * (state.v[a as usize] - state.v[b as usize]);
             kv[a as usize] += t;
             kv[b as usize] -= t;
+        }
+        for t in 0..volumes.corners.len() {
+            if let Some((k, g)) = vol_grad(t) {
+                let c = volumes.corners[t].map(|i| i as usize);
+                let rate: f64 = (0..4).map(|j| g[j].dot(state.v[c[j]])).sum();
+                for j in 0..4 {
+                    kv[c[j]] += k * rate * g[j];
+                }
+            }
         }
         let rhs: Vec<DVec3> = f
             .iter()
@@ -445,16 +533,38 @@ impl MeshSolver for MassSpring {
             })
             .collect();
         let n = mesh.nodes.len();
-        // Gershgorin: ω² ≤ max_i 2 Σ_j k_ij / m_i.
+        let volumes = if params.volume_stiffness > 0.0 {
+            VolumeSprings {
+                corners: mesh.tets.clone(),
+                k: (0..mesh.tets.len())
+                    .map(|t| {
+                        let e_mod = materials[mesh.labels[t] as usize].youngs_modulus;
+                        params.volume_stiffness * e_mod / mesh.volume(t)
+                    })
+                    .collect(),
+            }
+        } else {
+            VolumeSprings::default()
+        };
+        // Gershgorin: ω² ≤ max_i (row sum of |K| at node i) / m_i, with
+        // 2 k per spring, and per volume spring (`K = k_v g gᵀ` at rest, g
+        // = ∂V/∂x) `k_v |g_i|_∞ Σ_j |g_j|_1`.
         let mut ksum = vec![0.0; n];
         for ([a, b], k) in springs.ends.iter().zip(&springs.k) {
-            ksum[*a as usize] += k;
-            ksum[*b as usize] += k;
+            ksum[*a as usize] += 2.0 * k;
+            ksum[*b as usize] += 2.0 * k;
+        }
+        for (c, kv) in volumes.corners.iter().zip(&volumes.k) {
+            let g = volume_gradient(c.map(|i| mesh.nodes[i as usize]));
+            let total: f64 = g.iter().map(|v| v.abs().element_sum()).sum();
+            for (i, gi) in c.iter().zip(g) {
+                ksum[*i as usize] += kv * gi.abs().max_element() * total;
+            }
         }
         let omega2 = ksum
             .iter()
             .zip(&masses)
-            .map(|(k, m)| if *m > 0.0 { 2.0 * k / m } else { 0.0 })
+            .map(|(k, m)| if *m > 0.0 { k / m } else { 0.0 })
             .fold(0.0, f64::max);
         let stable_dt = if omega2 > 0.0 {
             0.9 * 2.0 / omega2.sqrt()
@@ -464,7 +574,8 @@ impl MeshSolver for MassSpring {
         let matrix =
             (params.integrator == Integrator::Implicit).then(|| BlockMatrix::on_mesh(mesh));
         Ok(Self {
-            kernel: SpringKernel::new(&springs, &mesh.nodes),
+            kernel: SpringKernel::new(&springs, &volumes, &mesh.nodes),
+            volumes,
             gpu: None,
             gpu_pcg: None,
             params,
@@ -478,6 +589,9 @@ impl MeshSolver for MassSpring {
     }
 
     const GPU: bool = true;
+
+    const INVERSION_HINT: &'static str = "; raise `volume_stiffness` (its volume springs push \
+        inverted tetrahedra back through; 0 turns them off)";
 
     fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
         match (&self.params.integrator, &self.matrix) {

@@ -19,12 +19,14 @@ pub mod cantilever;
 pub mod carve;
 pub mod cut;
 pub mod ichol;
+pub mod inversion;
 pub mod material;
 mod model;
 pub mod params;
 pub mod pcg;
 pub mod pcg_gpu;
 pub mod pieces;
+pub mod small_features;
 
 pub use block_matrix::BlockMatrix;
 pub use boundary::Boundary;
@@ -139,6 +141,11 @@ pub trait MeshSolver: Send + Sized + 'static {
 
     /// True when [`MeshSolver::use_gpu`] can move the solver onto a GPU.
     const GPU: bool = false;
+
+    /// Appended to the warning about tetrahedra that stay inverted
+    /// ([`inversion::InversionWatch`]): what in this solver's keys to
+    /// change (empty by default).
+    const INVERSION_HINT: &'static str = "";
 
     /// Moves the solver's steps onto `gpu` (its WGSL twins); the default
     /// refuses. Called again after a cut rebuilds the solver.

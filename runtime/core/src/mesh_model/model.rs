@@ -3,6 +3,7 @@
 use super::boundary::{Boundary, traction_forces};
 use super::carve::{GONE, carve_mesh, keep_nodes};
 use super::cut::cut_mesh;
+use super::inversion::{InversionWatch, inverted_tetrahedra};
 use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
 use super::pieces::unanchored_pieces;
@@ -19,7 +20,7 @@ use crate::gpu::{BufferId, GpuService};
 use crate::grid::Grid;
 use crate::interaction::{CarveRegion, GrabMotion, InteractionSpec};
 use crate::io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
-use crate::proxy::{HangingNode, octree_proxy, uniform_proxy};
+use crate::proxy::{HangingNode, octree_proxy, uniform_proxy_with_losses};
 use crate::resample::{tets_at_vertex, tets_cut_by};
 use crate::tet_mesh::TetMesh;
 use crate::volume::VolumeView;
@@ -65,6 +66,11 @@ pub struct MeshModel<S: MeshSolver> {
     /// On the GPU backend: the node displacements as `[x, y, z, 0]` and
     /// each binding on the device (re-uploaded after a cut).
     device: Option<DeviceMap>,
+    /// Labelled voxels no proxy cell of their material covers (proxies
+    /// built from the volume; `proxy::unrepresented_voxels`).
+    labelled_voxels_lost: usize,
+    /// Inverted tetrahedra after each frame.
+    inversions: InversionWatch,
 }
 
 /// Counts summed over a run's steps.
@@ -155,6 +161,8 @@ impl<S: MeshSolver> MeshModel<S> {
             totals: SolveTotals::default(),
             gpu: None,
             device: None,
+            labelled_voxels_lost: 0,
+            inversions: InversionWatch::default(),
         }
     }
 
@@ -261,6 +269,12 @@ impl<S: MeshSolver> MeshModel<S> {
         }
         b.state.u.copy_from_slice(u);
         b.state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
+        // `map` reads the f32 copy: keep it in step.
+        for (n, u) in u.iter().enumerate() {
+            for a in 0..3 {
+                b.u32[a][n] = u[a] as f32;
+            }
+        }
         self.unmapped = true;
         Ok(())
     }
@@ -284,7 +298,7 @@ impl<S: MeshSolver> MeshModel<S> {
     fn proxy(
         &self,
         volume: VolumeView<'_>,
-    ) -> Result<(TetMesh, Vec<ElasticMaterial>, Vec<HangingNode>), ModelError> {
+    ) -> Result<(TetMesh, Vec<ElasticMaterial>, Vec<HangingNode>, usize), ModelError> {
         let name = S::NAME;
         let specs = &self.params.materials;
         let materials: Vec<ElasticMaterial> =
@@ -317,7 +331,7 @@ impl<S: MeshSolver> MeshModel<S> {
                         })?;
                     *l = m as u16;
                 }
-                Ok((mesh, materials, Vec::new()))
+                Ok((mesh, materials, Vec::new(), 0))
             }
             proxy => {
                 let labels = voxel_materials(volume, specs);
@@ -326,17 +340,29 @@ impl<S: MeshSolver> MeshModel<S> {
                     let l = labels[g.linear(v[0], v[1], v[2])];
                     (l != u16::MAX).then_some(l)
                 };
-                match proxy {
+                let (mesh, hanging, lost) = match proxy {
                     ProxySpec::Uniform { step } => {
-                        let mesh = uniform_proxy(&g, *step, label).map_err(mesh_error)?;
-                        Ok((mesh, materials, Vec::new()))
+                        let (mesh, lost) =
+                            uniform_proxy_with_losses(&g, *step, label).map_err(mesh_error)?;
+                        (mesh, Vec::new(), lost)
                     }
                     ProxySpec::Octree { max_cell } => {
                         let p = octree_proxy(&g, *max_cell, label).map_err(mesh_error)?;
-                        Ok((p.mesh, materials, p.hanging))
+                        let lost = p.unrepresented_voxels(g.dims, &label);
+                        (p.mesh, p.hanging, lost)
                     }
                     ProxySpec::File { .. } => unreachable!("handled above"),
+                };
+                if lost > 0 {
+                    tracing::warn!(
+                        labelled_voxels_lost = lost,
+                        "{name}: {lost} labelled voxels lie in proxy cells of another material \
+                         (features smaller than a cell) and move with that material; lower \
+                         `proxy.step`, or use `proxy = {{ kind = \"octree\", max_cell = … }}`, \
+                         whose leaves follow material boundaries"
+                    );
                 }
+                Ok((mesh, materials, hanging, lost))
             }
         }
     }
@@ -760,6 +786,10 @@ impl<S: MeshSolver> MeshModel<S> {
                 n % b.state.u.len()
             )));
         }
+        let inverted = inverted_tetrahedra(&b.mesh, &b.state.u);
+        let grabbed = !self.grabs.is_empty();
+        self.inversions
+            .record(inverted, grabbed, S::NAME, S::INVERSION_HINT);
         let moved = b
             .state
             .u
@@ -902,7 +932,8 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         volume: VolumeView<'_>,
         backend: ExecutionBackend,
     ) -> Result<(), ModelError> {
-        let (mesh, materials, hanging) = self.proxy(volume)?;
+        let (mesh, materials, hanging, lost) = self.proxy(volume)?;
+        self.labelled_voxels_lost = lost;
         self.build(mesh, materials, hanging)?;
         if backend == ExecutionBackend::Gpu {
             self.use_gpu()?;
@@ -961,7 +992,9 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
     }
 
     /// `proxy_nodes`, `proxy_tetrahedra`, `bound_points`,
-    /// `bound_points_outside_proxy` (bound to the nearest tetrahedron with
+    /// `labelled_voxels_lost` (labelled voxels in proxy cells of another
+    /// material), `inverted_tetrahedra` (after the last frame) and
+    /// `inverted_tetrahedra_max` (over the run), `bound_points_outside_proxy` (bound to the nearest tetrahedron with
     /// clamped weights), `steps`, `substeps` and `solver_iterations` summed
     /// over the run, and `last_residual` (relative, of the last linear
     /// solve; 0 for explicit steps), `worst_residual` (the largest relative
@@ -978,8 +1011,14 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
             (p + b.binding.len(), o + b.binding.outside)
         });
         notes.insert("bound_points".into(), points as f64);
+        notes.insert(
+            "labelled_voxels_lost".into(),
+            self.labelled_voxels_lost as f64,
+        );
         notes.insert("bound_points_outside_proxy".into(), outside as f64);
         notes.insert("steps".into(), self.totals.steps as f64);
+        notes.insert("inverted_tetrahedra".into(), self.inversions.current as f64);
+        notes.insert("inverted_tetrahedra_max".into(), self.inversions.max as f64);
         notes.insert("substeps".into(), self.totals.substeps as f64);
         notes.insert("solver_iterations".into(), self.totals.iterations as f64);
         notes.insert("last_residual".into(), self.last.residual);

@@ -18,7 +18,7 @@
 //! `x .. x + s` along x (and so on), with corners on voxel centres; its
 //! label is the one label of the voxels it owns (`x ≤ i < x + s`).
 
-use super::CELL_TETS;
+use super::{CELL_TETS, cell_label};
 use crate::error::MeshError;
 use crate::grid::Grid;
 use crate::tet_mesh::TetMesh;
@@ -46,6 +46,22 @@ pub struct OctreeProxy {
 }
 
 impl OctreeProxy {
+    /// Labelled voxels of the volume (`dims` voxels, `label(voxel)` as the
+    /// proxy was built with) that no leaf of their label covers
+    /// ([`super::unrepresented_voxels`]; leaves hold `x ..= x + s`).
+    pub fn unrepresented_voxels(
+        &self,
+        dims: [usize; 3],
+        label: &impl Fn([usize; 3]) -> Option<u16>,
+    ) -> usize {
+        let cells = self
+            .leaves
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, s))| (x, x.map(|v| v + s), self.mesh.labels[5 * i]));
+        super::unrepresented_voxels(dims, cells, label)
+    }
+
     /// Sets every hanging node's value from its masters (`values` per node,
     /// one axis).
     pub fn constrain(&self, values: &mut [f32]) {
@@ -94,6 +110,17 @@ pub fn octree_proxy(
     let max_cell = 1usize << max_cell.ilog2();
     let cells = grid.dims.map(|d| d - 1);
     let root = cells.iter().copied().max().unwrap_or(1).next_power_of_two();
+    // The cell `(x, s)`'s voxels up to the volume's far faces where it
+    // touches them (voxel indices, inclusive), else its own `x + s − 1`.
+    let far = |x: [usize; 3], s: usize| {
+        std::array::from_fn(|a| {
+            if x[a] + s == cells[a] {
+                cells[a]
+            } else {
+                x[a] + s - 1
+            }
+        })
+    };
     // Leaves with their labels, from recursive splitting.
     let mut leaves: Vec<([usize; 3], usize, u16)> = Vec::new();
     let mut stack = vec![([0usize; 3], root)];
@@ -102,17 +129,26 @@ pub fn octree_proxy(
             continue;
         }
         let crosses = (0..3).any(|a| x[a] + s > cells[a]);
-        let purity = if crosses || s > max_cell {
+        let purity = match if crosses || s > max_cell {
             None
         } else {
             pure_label(x, s, &label)
+        } {
+            // Empty voxels it owns, but labelled ones on the volume's far
+            // faces, which it touches and no cell owns: split, so a
+            // one-voxel object there keeps its unit cells.
+            Some(None) if cell_label(x, far(x, s), &label).is_some() => None,
+            p => p,
         };
         match purity {
             Some(Some(l)) => leaves.push((x, s, l)),
             Some(None) => {}
             None if s == 1 => {
-                // A unit cell of mixed voxels keeps the label of its first.
-                if let Some(l) = label(x) {
+                // A unit cell of mixed voxels keeps the label of its first
+                // (the voxel it owns); on the volume's far faces it also
+                // owns the voxels there, and is kept when any is labelled,
+                // with their most frequent label (the uniform proxy's rule).
+                if let Some(l) = label(x).or_else(|| cell_label(x, far(x, 1), &label)) {
                     leaves.push((x, 1, l));
                 }
             }
