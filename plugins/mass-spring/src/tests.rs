@@ -283,6 +283,7 @@ fn a_released_100_mm_grab_untangles_with_volume_springs() {
         }
         let with_volume = SpringParams {
             integrator,
+            volume_stiffness: 1.0,
             ..SpringParams::default()
         };
         let (now, max, left) = grab_release(with_volume, 300);
@@ -306,7 +307,16 @@ fn volume_stiffness_is_checked_and_zero_means_no_volume_springs() {
     };
     let s = MassSpring::new(&mesh, &materials, off).unwrap();
     assert!(s.volume_springs().corners.is_empty());
-    let on = MassSpring::new(&mesh, &materials, SpringParams::default()).unwrap();
+    assert_eq!(
+        SpringParams::default().volume_stiffness,
+        0.0,
+        "off by default"
+    );
+    let on = SpringParams {
+        volume_stiffness: 1.0,
+        ..SpringParams::default()
+    };
+    let on = MassSpring::new(&mesh, &materials, on).unwrap();
     assert_eq!(on.volume_springs().corners.len(), mesh.tets.len());
     // k_v = κ E / V₀.
     let kv = on.volume_springs().k[0];
