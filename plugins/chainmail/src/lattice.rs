@@ -397,6 +397,11 @@ impl ElementLattice {
         &self.links[a as usize * self.materials.len() + b as usize]
     }
 
+    /// The smallest element spacing of the three axes, mm.
+    pub fn smallest_spacing(&self) -> f64 {
+        self.spacing.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+
     /// World position (mm) at rest of element `[i, j, k]`.
     pub fn world(&self, c: [usize; 3]) -> DVec3 {
         self.origin + DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * DVec3::from(self.spacing)

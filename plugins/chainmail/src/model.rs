@@ -636,12 +636,7 @@ impl ChainMail {
             return;
         }
         self.propagated_since_check = false;
-        let spacing = self
-            .lat
-            .spacing
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
+        let spacing = self.lat.smallest_spacing();
         let tol_mm = (conflicts::TOLERANCE * spacing) as f32;
         let mut v = self
             .conflicts
@@ -663,12 +658,7 @@ impl ChainMail {
 
     /// The warning about the worst conflict measured so far, if any.
     pub fn conflict_warning(&self) -> Option<String> {
-        let spacing = self
-            .lat
-            .spacing
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
+        let spacing = self.lat.smallest_spacing();
         let (v, _) = self.log.worst?;
         Some(self.conflict_message(v, spacing))
     }

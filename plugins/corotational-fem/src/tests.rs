@@ -5,6 +5,7 @@ use crate::solver::{CorotationalFem, FemParams, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::{DMat3, DQuat, DVec3};
 use voxflex_core::grid::Grid;
+use voxflex_core::mesh_model::inversion::{inverted_tetrahedra, largest_edge_change};
 use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
 use voxflex_core::proxy::uniform_proxy;
 use voxflex_core::tet_mesh::TetMesh;
@@ -205,27 +206,14 @@ fn inverted_elements_recover_without_nan() {
     }
     let u = &m.state().unwrap().u;
     assert!(u.iter().all(|v| v.is_finite()));
-    let still_inverted = (0..mesh.tets.len())
-        .filter(|&t| {
-            let x = mesh.tets[t].map(|n| mesh.nodes[n as usize] + u[n as usize]);
-            voxflex_core::tet_mesh::signed_volume(x) <= 0.0
-        })
-        .count();
+    let still_inverted = inverted_tetrahedra(&mesh, u);
     assert_eq!(still_inverted, 0, "elements still inverted");
     // Back at rest up to a rigid motion: every edge has its rest length.
-    for tet in &mesh.tets {
-        for a in 0..4 {
-            for b in a + 1..4 {
-                let (i, j) = (tet[a] as usize, tet[b] as usize);
-                let rest = (mesh.nodes[i] - mesh.nodes[j]).length();
-                let now = (mesh.nodes[i] + u[i] - mesh.nodes[j] - u[j]).length();
-                assert!(
-                    (now - rest).abs() < 0.02 * rest,
-                    "edge {i}-{j}: {now} vs {rest}"
-                );
-            }
-        }
-    }
+    let (edge, change) = largest_edge_change(&mesh, u).unwrap();
+    assert!(
+        change < 0.02,
+        "edge {edge:?} off its rest length by {change:.3}"
+    );
 }
 
 #[test]
@@ -539,27 +527,9 @@ fn notes_count_points_bound_outside_the_proxy_and_the_solver_work() {
 /// centre voxel's label) refused to build a proxy for all but offset 2.
 #[test]
 fn one_voxel_objects_and_slabs_survive_at_every_offset() {
-    use voxflex_core::mesh_model::small_features::object_survives;
     let params = "proxy = { kind = \"uniform\", step = 4 }\n\
                   materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n\
                   gravity = [0, 0, -9810]";
-    for axis in 0..3 {
-        for offset in 0..4 {
-            let mut v = [6usize; 3];
-            v[axis] = 4 + offset;
-            object_survives::<CorotationalFem>(params, [13, 13, 13], &[v], 3, [1, -2, 3])
-                .unwrap_or_else(|e| panic!("voxel {v:?}: {e}"));
-            let slab: Vec<[usize; 3]> = (0..13 * 13)
-                .map(|i| {
-                    let mut p = [0; 3];
-                    p[(axis + 1) % 3] = i % 13;
-                    p[(axis + 2) % 3] = i / 13;
-                    p[axis] = 4 + offset;
-                    p
-                })
-                .collect();
-            object_survives::<CorotationalFem>(params, [13, 13, 13], &slab, 3, [-1, 2, 1])
-                .unwrap_or_else(|e| panic!("slab at {axis} = {}: {e}", 4 + offset));
-        }
-    }
+    voxflex_core::mesh_model::small_features::every_offset::<CorotationalFem>(params)
+        .unwrap_or_else(|e| panic!("{e}"));
 }

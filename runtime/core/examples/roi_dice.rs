@@ -22,12 +22,7 @@ use voxflex_core::phantom::abdomen_labelled;
 fn dice(map: &OpacityMap, dims: [usize; 3], labels: &[u8], lab: u8) -> f64 {
     let mut inside = vec![false; labels.len()];
     for (l, &q) in map.values.iter().enumerate() {
-        let (x, r) = (l % map.dims[0], l / map.dims[0]);
-        let v = [
-            map.origin[0] + x,
-            map.origin[1] + r % map.dims[1],
-            map.origin[2] + r / map.dims[1],
-        ];
+        let v = map.voxel(l);
         inside[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = q >= 32768;
     }
     voxflex_core::phantom::abdomen::dice(inside, labels, lab)
@@ -38,12 +33,7 @@ fn covers(map: &OpacityMap, dims: [usize; 3], labels: &[u8]) -> String {
     let mut n = [0usize; 256];
     for (l, &q) in map.values.iter().enumerate() {
         if q >= 32768 {
-            let (x, r) = (l % map.dims[0], l / map.dims[0]);
-            let v = [
-                map.origin[0] + x,
-                map.origin[1] + r % map.dims[1],
-                map.origin[2] + r / map.dims[1],
-            ];
+            let v = map.voxel(l);
             n[labels[v[0] + dims[0] * (v[1] + dims[1] * v[2])] as usize] += 1;
         }
     }

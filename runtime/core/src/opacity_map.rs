@@ -48,6 +48,28 @@ impl OpacityMap {
         from_fixed(self.values[(i - ox) + nx * ((j - oy) + ny * (k - oz))])
     }
 
+    /// The volume voxel index `(i, j, k)` of the box's value `l` (`values[l]`).
+    #[inline]
+    pub fn voxel(&self, l: usize) -> [usize; 3] {
+        let (x, r) = (l % self.dims[0], l / self.dims[0]);
+        [
+            self.origin[0] + x,
+            self.origin[1] + r % self.dims[1],
+            self.origin[2] + r / self.dims[1],
+        ]
+    }
+
+    /// The fixed-point opacity of every voxel of a volume of `volume_dims`
+    /// voxels (x fastest; [`Self::outside`] beyond the box).
+    pub fn dense(&self, volume_dims: [usize; 3]) -> Vec<u16> {
+        let mut out = vec![self.outside; volume_dims.iter().product()];
+        for (l, &q) in self.values.iter().enumerate() {
+            let [i, j, k] = self.voxel(l);
+            out[i + volume_dims[0] * (j + volume_dims[1] * k)] = q;
+        }
+        out
+    }
+
     /// Bytes of storage (2 per voxel of the box).
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<u16>()

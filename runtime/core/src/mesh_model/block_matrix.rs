@@ -182,12 +182,11 @@ impl BlockMatrix {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    #[test]
-    fn assembly_matches_a_dense_sum() {
-        // Two tetrahedra sharing a face.
+    /// Two tetrahedra sharing a face (nodes 0 and 4 share none).
+    pub(crate) fn two_tetrahedra() -> TetMesh {
         let nodes = vec![
             DVec3::ZERO,
             DVec3::X,
@@ -195,7 +194,12 @@ mod tests {
             DVec3::Z,
             DVec3::new(1.0, 1.0, 1.0),
         ];
-        let mesh = TetMesh::new("t", nodes, vec![[0, 1, 2, 3], [1, 2, 3, 4]], vec![0, 0]).unwrap();
+        TetMesh::new("t", nodes, vec![[0, 1, 2, 3], [1, 2, 3, 4]], vec![0, 0]).unwrap()
+    }
+
+    #[test]
+    fn assembly_matches_a_dense_sum() {
+        let mesh = two_tetrahedra();
         let mut m = BlockMatrix::on_mesh(&mesh);
         assert_eq!(m.rows(), 5);
         // Node 0 and 4 share no tetrahedron.

@@ -183,20 +183,12 @@ fn factor(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tet_mesh::TetMesh;
 
     /// A small mesh whose assembled matrix is SPD and has every block of
     /// its pattern dense (so IC(0) is the exact Cholesky when the pattern
     /// is complete).
     fn matrix() -> (BlockMatrix, usize) {
-        let nodes = vec![
-            DVec3::ZERO,
-            DVec3::X,
-            DVec3::Y,
-            DVec3::Z,
-            DVec3::new(1.0, 1.0, 1.0),
-        ];
-        let mesh = TetMesh::new("t", nodes, vec![[0, 1, 2, 3], [1, 2, 3, 4]], vec![0, 0]).unwrap();
+        let mesh = super::super::block_matrix::tests::two_tetrahedra();
         let mut a = BlockMatrix::on_mesh(&mesh);
         let mut seed = 3u64;
         let mut rand = || {

@@ -32,6 +32,29 @@ pub fn inverted_tetrahedra(mesh: &TetMesh, u: &[DVec3]) -> usize {
         .count()
 }
 
+/// The edge of `mesh` whose length at displacements `u` (mm) differs most
+/// from its rest length, relative to it: `((i, j), |now − rest| / rest)`
+/// (`None` for a mesh without tetrahedra). A mesh back at rest up to a
+/// rigid motion has every edge at its rest length — what the inversion
+/// tests check after recovery.
+pub fn largest_edge_change(mesh: &TetMesh, u: &[DVec3]) -> Option<((usize, usize), f64)> {
+    let mut worst: Option<((usize, usize), f64)> = None;
+    for tet in &mesh.tets {
+        for a in 0..4 {
+            for b in a + 1..4 {
+                let (i, j) = (tet[a] as usize, tet[b] as usize);
+                let rest = (mesh.nodes[i] - mesh.nodes[j]).length();
+                let now = (mesh.nodes[i] - mesh.nodes[j] + (u[i] - u[j])).length();
+                let change = (now - rest).abs() / rest;
+                if worst.is_none_or(|(_, w)| change > w) {
+                    worst = Some(((i, j), change));
+                }
+            }
+        }
+    }
+    worst
+}
+
 /// The run's inverted-tetrahedron counts and its warning state.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct InversionWatch {

@@ -109,3 +109,31 @@ pub fn object_survives<S: MeshSolver>(
     }
     Ok(())
 }
+
+/// [`object_survives`] for a one-voxel object at every offset inside a
+/// proxy cell of 4 voxels (`params` must set `step = 4`), along each axis,
+/// and for a one-voxel slab at each of those offsets, in a 13³ volume; the
+/// object is shifted by `[1, −2, 3]` voxels, the slab by `[−1, 2, 1]`.
+pub fn every_offset<S: MeshSolver>(params: &str) -> Result<(), String> {
+    const N: usize = 13;
+    for axis in 0..3 {
+        for offset in 0..4 {
+            let mut v = [6usize; 3];
+            v[axis] = 4 + offset;
+            object_survives::<S>(params, [N; 3], &[v], 3, [1, -2, 3])
+                .map_err(|e| format!("voxel {v:?}: {e}"))?;
+            let slab: Vec<[usize; 3]> = (0..N * N)
+                .map(|i| {
+                    let mut p = [0; 3];
+                    p[(axis + 1) % 3] = i % N;
+                    p[(axis + 2) % 3] = i / N;
+                    p[axis] = 4 + offset;
+                    p
+                })
+                .collect();
+            object_survives::<S>(params, [N; 3], &slab, 3, [-1, 2, 1])
+                .map_err(|e| format!("slab at {axis} = {}: {e}", 4 + offset))?;
+        }
+    }
+    Ok(())
+}

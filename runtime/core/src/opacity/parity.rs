@@ -242,12 +242,7 @@ fn same(
             .zip(&gpu.values)
             .filter(|(a, b)| a != b)
             .count();
-        let (x, r) = (i % cpu.dims[0], i / cpu.dims[0]);
-        let v = [
-            cpu.origin[0] + x,
-            cpu.origin[1] + r % cpu.dims[1],
-            cpu.origin[2] + r / cpu.dims[1],
-        ];
+        let v = cpu.voxel(i);
         return Err(format!(
             "{what}: {n} voxels differ; first at voxel {v:?}: GPU {} CPU {}",
             gpu.values[i], cpu.values[i]

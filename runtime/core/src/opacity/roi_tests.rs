@@ -37,24 +37,9 @@ fn request(seed: glam::DVec3, lambda: LambdaChoice, limits: GrowthLimits) -> Roi
     }
 }
 
-/// Opacity (fixed point) of every voxel of the volume.
-fn dense(map: &OpacityMap, dims: [usize; 3]) -> Vec<u16> {
-    let mut out = vec![map.outside; dims.iter().product()];
-    for (l, &q) in map.values.iter().enumerate() {
-        let (x, r) = (l % map.dims[0], l / map.dims[0]);
-        let v = [
-            map.origin[0] + x,
-            map.origin[1] + r % map.dims[1],
-            map.origin[2] + r / map.dims[1],
-        ];
-        out[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = q;
-    }
-    out
-}
-
 fn organ_dice(out: &RoiOutcome, lab: u8) -> f64 {
     let ph = phantom();
-    let d = dense(&out.grown.map, DIMS);
+    let d = out.grown.map.dense(DIMS);
     dice(d.iter().map(|&q| q >= 32768), &ph.labels, lab)
 }
 
@@ -201,7 +186,7 @@ fn intensity_window_blocks_every_voxel_outside_it() {
     };
     let out = grow_roi(v, &request(p, LambdaChoice::Fixed(30.0), lim), None).unwrap();
     let q_min = out.grown.ext.q_min;
-    let d = dense(&out.grown.map, DIMS);
+    let d = out.grown.map.dense(DIMS);
     let values = v.data.to_f32_vec();
     let mut raised = 0;
     for (l, &q) in d.iter().enumerate() {
@@ -243,7 +228,7 @@ fn max_distance_bounds_the_region_euclidean_from_the_seed() {
         max_distance_mm: Some(dist),
     };
     let out = grow_roi(v, &request(p, LambdaChoice::Fixed(30.0), lim), None).unwrap();
-    let d = dense(&out.grown.map, DIMS);
+    let d = out.grown.map.dense(DIMS);
     let q_min = out.grown.ext.q_min;
     let mut far = 0.0f64;
     for (l, &q) in d.iter().enumerate() {

@@ -9,21 +9,6 @@ use crate::io::png::{SliceAxis, Window, render_slice};
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
 
-/// The whole-volume fixed-point field of a map.
-fn full(map: &OpacityMap, dims: [usize; 3]) -> Vec<u16> {
-    let mut out = vec![map.outside; dims.iter().product()];
-    for z in 0..map.dims[2] {
-        for y in 0..map.dims[1] {
-            for x in 0..map.dims[0] {
-                let [i, j, k] = [map.origin[0] + x, map.origin[1] + y, map.origin[2] + z];
-                out[i + dims[0] * (j + dims[1] * k)] =
-                    map.values[x + map.dims[0] * (y + map.dims[1] * z)];
-            }
-        }
-    }
-    out
-}
-
 /// The thesis's kernel: Jacobi sweeps of the update rule over every voxel
 /// of the volume, propagating from reached voxels (above `o_min`) only;
 /// with `pump`, the pump shortcut of [`Extinction::pumps`] too.
@@ -252,11 +237,11 @@ fn opacity_never_decreases_and_stays_in_range() {
     let dims = p.volume.grid.dims;
     let mut g = CpuGrowth::new(p.volume.view(), &Seed::Voxel(p.a.centre_voxel()), params).unwrap();
     let (qmin, qmax) = (g.extinction().q_min, g.extinction().q_max);
-    let mut prev = full(&g.map(), dims);
+    let mut prev = g.map().dense(dims);
     let mut steps = 0;
     while !g.is_converged() {
         g.step(p.volume.view(), 1).unwrap();
-        let now = full(&g.map(), dims);
+        let now = g.map().dense(dims);
         assert!(
             now.iter().zip(&prev).all(|(n, o)| n >= o),
             "opacity decreased at step {steps}"
@@ -282,7 +267,7 @@ fn sparse_equals_dense_at_convergence() {
         while dense.sweep() > 0 {}
         let mut sparse = CpuGrowth::new(p.volume.view(), &Seed::Voxel(seed), params).unwrap();
         let r = sparse.run(p.volume.view()).unwrap();
-        let s = full(&sparse.map(), dims);
+        let s = sparse.map().dense(dims);
         let differ = s.iter().zip(&dense.field).filter(|(a, b)| a != b).count();
         assert_eq!(
             differ, 0,
@@ -316,7 +301,7 @@ fn sparse_equals_dense_step_by_step() {
         let before = dense.field.clone();
         let changed = dense.sweep();
         let r = sparse.step(p.volume.view(), 1).unwrap();
-        let sm = full(&sparse.map(), dims);
+        let sm = sparse.map().dense(dims);
         if let Some(l) = (0..sm.len()).find(|&l| sm[l] != dense.field[l]) {
             let g = p.volume.grid;
             let [i, j, k] = g.unlinear(l);
@@ -451,7 +436,7 @@ fn several_maps_combine_by_max() {
     }
     let all = set.combined().unwrap();
     let dims = p.volume.grid.dims;
-    let (fa, fc, fall) = (full(&maps[0], dims), full(&maps[1], dims), full(&all, dims));
+    let (fa, fc, fall) = (maps[0].dense(dims), maps[1].dense(dims), all.dense(dims));
     assert!(
         fall.iter()
             .zip(fa.iter().zip(&fc))

@@ -419,22 +419,29 @@ fn deformed_matches_cpu(gpu: &dyn GpuService, interpolation: Interpolation) -> R
 /// tissue — every case of the owner-key rule, `sampling_mesh::WEAK_OWNER`):
 /// the GPU's owners are the CPU's, so the outputs are bit-identical.
 pub fn check_folds_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    for mode in Interpolation::ALL {
+        folds_match_cpu(gpu, mode).map_err(|m| format!("{mode}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn folds_match_cpu(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
     let params = ResampleParams {
         background: -3000.0,
+        interpolation,
         ..Default::default()
     };
     let vol = head_i16(&grid);
+    let d = grid.dims;
     for axis in 0..3 {
         for sign in [-1.0f32, 1.0] {
+            let by = sign * 4.5 * grid.spacing[axis] as f32;
             let mut f = Field::zero(&grid);
-            let d = grid.dims;
             for k in d[2] / 3..d[2] / 2 {
                 for j in d[1] / 3..d[1] / 2 {
                     for i in d[0] / 3..d[0] / 2 {
-                        let l = grid.linear(i, j, k);
-                        let by = sign * 4.5 * grid.spacing[axis] as f32;
-                        [&mut f.x, &mut f.y, &mut f.z][axis][l] = by;
+                        [&mut f.x, &mut f.y, &mut f.z][axis][grid.linear(i, j, k)] = by;
                     }
                 }
             }
