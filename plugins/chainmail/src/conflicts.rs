@@ -11,6 +11,15 @@
 //! reports the largest (`max_constraint_violation_mm` in `metrics.json`)
 //! and warns when it exceeds [`TOLERANCE`].
 //!
+//! Violations between two free elements are not conflicts: arrival times
+//! are whole ticks, so in a heterogeneous lattice two paths can tie or
+//! swap order against their exact slacks, and a wave can settle with an
+//! element that took its move from one neighbour still outside the box of
+//! another reached as early. [`Conflicts::repair_seeds`] names, for each
+//! such link, the end reached first; the model starts a repair wave from
+//! them (see `ChainMail::start_repair_wave`) so that every link that can
+//! hold does.
+//!
 //! The measure is incremental: each block owns the +x, +y and +z links of
 //! its elements and keeps its largest violation; a check recomputes only
 //! the blocks changed since the last one (and their −x, −y, −z neighbours,
@@ -145,6 +154,79 @@ impl Conflicts {
     }
 }
 
+impl Conflicts {
+    /// After [`Conflicts::check`]: for every violated link (more than
+    /// `tol_mm`) whose two ends are free (neither fixed nor held), the end
+    /// with the earlier arrival key (the older wave, or the earlier time in
+    /// one wave) — the one the other end should have followed. Storage
+    /// indices, ascending, no repeats.
+    pub fn repair_seeds(
+        &self,
+        lat: &ElementLattice,
+        state: &State,
+        blocks: &Blocks,
+        tol_mm: f32,
+    ) -> Vec<u32> {
+        let violated: Vec<usize> = (0..self.per_block.len())
+            .filter(|&b| self.per_block[b].count > 0)
+            .collect();
+        let mut seeds: Vec<u32> = violated
+            .par_iter()
+            .flat_map_iter(|&b| block_repair_seeds(lat, state, blocks, b, tol_mm))
+            .collect();
+        seeds.sort_unstable();
+        seeds.dedup();
+        seeds
+    }
+}
+
+/// The links block `b` owns (its elements' +x, +y, +z links between
+/// present elements) on the current copy, with their violation:
+/// `(n, e, largest |u_n − u_e|_a − D_a over the axes, mm)`.
+fn owned_links<'a>(
+    lat: &'a ElementLattice,
+    state: &'a State,
+    blocks: &Blocks,
+    b: usize,
+) -> impl Iterator<Item = (usize, usize, f32)> + 'a {
+    let cur = state.cur;
+    let (lo, hi) = blocks.range(b);
+    (lo[2]..hi[2])
+        .flat_map(move |k| (lo[1]..hi[1]).flat_map(move |j| (lo[0]..hi[0]).map(move |i| [i, j, k])))
+        .filter_map(move |c| {
+            let n = lat.linear(c);
+            lat.present(n).then_some((n, c))
+        })
+        .flat_map(move |(n, c)| {
+            let un = state.get(cur, n);
+            [0, 2, 4].into_iter().filter_map(move |l| {
+                let e = lat.neighbour(n, c, l).filter(|&e| lat.present(e))?;
+                let (link, ue) = (lat.link(n, e), state.get(cur, e));
+                let worst = (0..3)
+                    .map(|a| (un[a] - ue[a]).abs() - link.d[a])
+                    .fold(f32::NEG_INFINITY, f32::max);
+                Some((n, e, worst))
+            })
+        })
+}
+
+/// [`Conflicts::repair_seeds`] of block `b`.
+fn block_repair_seeds(
+    lat: &ElementLattice,
+    state: &State,
+    blocks: &Blocks,
+    b: usize,
+    tol_mm: f32,
+) -> Vec<u32> {
+    let free = |n: usize| lat.cells[n] & (FIXED | HELD) == 0;
+    let cur = state.cur;
+    owned_links(lat, state, blocks, b)
+        .filter(|&(n, e, worst)| worst > tol_mm && free(n) && free(e))
+        // Keys order by wave, then time: the smaller was reached first.
+        .map(|(n, e, _)| if state.key(cur, e) < state.key(cur, n) { e } else { n } as u32)
+        .collect()
+}
+
 /// The violation of the links block `b` owns (its elements' +x, +y, +z
 /// links), on the current copy.
 fn block_violation(
@@ -154,38 +236,15 @@ fn block_violation(
     b: usize,
     tol_mm: f32,
 ) -> Violation {
-    let cur = state.cur;
-    let (lo, hi) = blocks.range(b);
     let mut v = Violation::default();
-    for k in lo[2]..hi[2] {
-        for j in lo[1]..hi[1] {
-            for i in lo[0]..hi[0] {
-                let c = [i, j, k];
-                let n = lat.linear(c);
-                if !lat.present(n) {
-                    continue;
-                }
-                let un = state.get(cur, n);
-                for l in [0, 2, 4] {
-                    let Some(e) = lat.neighbour(n, c, l).filter(|&e| lat.present(e)) else {
-                        continue;
-                    };
-                    let link = lat.link(n, e);
-                    let ue = state.get(cur, e);
-                    let mut worst = f32::NEG_INFINITY;
-                    for a in 0..3 {
-                        worst = worst.max((un[a] - ue[a]).abs() - link.d[a]);
-                    }
-                    if worst > v.mm {
-                        v.mm = worst;
-                        v.link = (n as u32, e as u32);
-                    }
-                    if worst > tol_mm {
-                        v.count += 1;
-                        v.kinds |= kinds_of(lat, n) | kinds_of(lat, e);
-                    }
-                }
-            }
+    for (n, e, worst) in owned_links(lat, state, blocks, b) {
+        if worst > v.mm {
+            v.mm = worst;
+            v.link = (n as u32, e as u32);
+        }
+        if worst > tol_mm {
+            v.count += 1;
+            v.kinds |= kinds_of(lat, n) | kinds_of(lat, e);
         }
     }
     v

