@@ -62,6 +62,11 @@ fn stage_fixture(name: &str) -> PathBuf {
          scripts/test.sh)",
         built.display()
     );
+    // A build from before the fixtures were renamed left them where the
+    // plugin search finds them; such a stale copy must not be listed or win.
+    let _ = std::fs::remove_file(
+        target_dir().join(voxflex_runtime::plugin_loader::library_file_name(name)),
+    );
     let dir = fixture_dir();
     std::fs::create_dir_all(&dir).expect("create target/<profile>/test-plugins");
     let staged = dir.join(voxflex_runtime::plugin_loader::library_file_name(name));
@@ -101,10 +106,10 @@ pub fn fixture_plugin_dir(names: &[&str]) -> PathBuf {
     fixture_dir()
 }
 
-/// `VOXFLEX_PLUGIN_PATH` of the tests: the built plugins, then the staged
-/// fixtures.
+/// `VOXFLEX_PLUGIN_PATH` of the tests: the staged fixtures, then the built
+/// plugins.
 pub fn test_plugin_path() -> std::ffi::OsString {
-    std::env::join_paths([target_dir(), fixture_dir()]).expect("plugin path")
+    std::env::join_paths([fixture_dir(), target_dir()]).expect("plugin path")
 }
 
 /// Runs `voxflex args…` in `cwd` with the built plugins and the test

@@ -15,9 +15,9 @@
 //!
 //! Content hashes, not size and modification time: a same-size file copied
 //! over the source with its mtime kept (`cp -p`) changes the fingerprint.
-//! XXH3 reads at memory speed (a 37 MB debug `voxflex` binary and a 64 MiB
-//! source hash in tens of milliseconds); the cost is one read of the inputs
-//! per run, up to date or not.
+//! XXH3 hashes at memory speed; the cost is one read of the inputs per
+//! run, up to date or not (README, *Runs and the output directory*, has the
+//! measured time of an up-to-date run).
 //!
 //! The [`Stamp`] records the fingerprint and the size of every file the run
 //! wrote (`metrics.json` included). A later run is up to date only when the

@@ -21,7 +21,7 @@ use voxflex_abi::ffi::{
 pub enum PluginError {
     /// No file for the named plugin in any search directory.
     #[error(
-        "plugin `{name}` not found: looked for {file} in {searched}; build it (`cargo build --release --workspace`) or add its directory to `plugin_dirs` / VOXFLEX_PLUGIN_PATH"
+        "plugin `{name}` not found: looked for {file} in {searched}; build it (`cargo build --release`) or add its directory to `plugin_dirs` / VOXFLEX_PLUGIN_PATH"
     )]
     NotFound {
         /// Plugin name.
