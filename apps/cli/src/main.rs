@@ -197,7 +197,11 @@ fn main() {
 fn may_open_a_gpu(command: &Command) -> bool {
     use voxflex_runtime::backend::BackendChoice;
     match command {
-        Command::Run { .. } | Command::Bench(_) => true,
+        // A scene that cannot be read fails later with the full message.
+        Command::Run { scene, .. } => {
+            Scene::load(scene).map_or(true, |s| s.settings.backend != BackendChoice::Cpu)
+        }
+        Command::Bench(_) => true,
         Command::Render { backend, .. } => *backend != BackendChoice::Cpu,
         _ => false,
     }
@@ -638,6 +642,38 @@ fn restore_sigpipe() {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn only_commands_that_may_probe_a_gpu_get_a_runtime_dir() {
+        use clap::Parser as _;
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("s.toml");
+        let may = |args: &[&str]| {
+            let cli = super::Cli::try_parse_from(args).unwrap();
+            super::may_open_a_gpu(&cli.command)
+        };
+        let s = scene.to_str().unwrap();
+        for (backend, expect) in [("cpu", false), ("auto", true), ("gpu", true)] {
+            std::fs::write(
+                &scene,
+                format!("[scene]\nbackend = \"{backend}\"\n[volume]\nsource = \"phantom:cube\"\n"),
+            )
+            .unwrap();
+            assert_eq!(may(&["voxflex", "run", s]), expect, "{backend}");
+            let r = [
+                "voxflex",
+                "render",
+                "phantom:cube",
+                "--out",
+                "r.png",
+                "--backend",
+                backend,
+            ];
+            assert_eq!(may(&r), expect, "render {backend}");
+        }
+        assert!(!may(&["voxflex", "plugins"]));
+        assert!(may(&["voxflex", "run", "missing.toml"]));
+    }
+
     #[cfg(unix)]
     #[test]
     fn runtime_dirs_are_private_unpredictable_and_removed() {
