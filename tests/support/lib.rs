@@ -35,10 +35,59 @@ pub fn voxflex_bin() -> PathBuf {
     p
 }
 
-/// The directory of the built plugins, checking that `names` are there.
+/// The test-only plugins (`tests/fixtures/*-plugin`).
+pub const FIXTURES: [&str; 2] = ["ripple", "mismatched"];
+
+/// `target/<profile>/test-plugins`: the test fixtures under their plugin
+/// file names. Cargo builds a fixture as `libfixture_voxflex_<name>.so`,
+/// which the plugin search never matches, so `voxflex plugins` run from
+/// `target/<profile>/` never lists one; the tests put this directory on
+/// `VOXFLEX_PLUGIN_PATH`.
+pub fn fixture_dir() -> PathBuf {
+    target_dir().join("test-plugins")
+}
+
+/// Copies the built fixture `name` into [`fixture_dir`] under its plugin
+/// file name (atomically: concurrent tests may load it meanwhile).
+fn stage_fixture(name: &str) -> PathBuf {
+    let built = target_dir().join(format!(
+        "{}fixture_voxflex_{}{}",
+        std::env::consts::DLL_PREFIX,
+        name.replace('-', "_"),
+        std::env::consts::DLL_SUFFIX
+    ));
+    assert!(
+        built.is_file(),
+        "{} is missing: build the test fixtures first (`cargo build --workspace`, or \
+         scripts/test.sh)",
+        built.display()
+    );
+    // A build from before the fixtures were renamed left them where the
+    // plugin search finds them; such a stale copy must not be listed or win.
+    let _ = std::fs::remove_file(
+        target_dir().join(voxflex_runtime::plugin_loader::library_file_name(name)),
+    );
+    let dir = fixture_dir();
+    std::fs::create_dir_all(&dir).expect("create target/<profile>/test-plugins");
+    let staged = dir.join(voxflex_runtime::plugin_loader::library_file_name(name));
+    let same = |a: &Path, b: &Path| std::fs::read(a).ok() == std::fs::read(b).ok();
+    if !staged.is_file() || !same(&built, &staged) {
+        let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+        std::fs::copy(&built, &tmp).expect("copy a fixture");
+        std::fs::rename(&tmp, &staged).expect("stage a fixture");
+    }
+    dir
+}
+
+/// The directory of the built plugins, checking that `names` are there
+/// (test fixtures among `names` are staged into [`fixture_dir`]).
 pub fn plugin_dir(names: &[&str]) -> PathBuf {
     let dir = target_dir();
     for n in names {
+        if FIXTURES.contains(n) {
+            stage_fixture(n);
+            continue;
+        }
         let f = dir.join(voxflex_runtime::plugin_loader::library_file_name(n));
         assert!(
             f.is_file(),
@@ -49,12 +98,27 @@ pub fn plugin_dir(names: &[&str]) -> PathBuf {
     dir
 }
 
-/// Runs `voxflex args…` in `cwd` with the built plugins on the search path.
+/// The directory holding the staged test fixtures `names`.
+pub fn fixture_plugin_dir(names: &[&str]) -> PathBuf {
+    for n in names {
+        stage_fixture(n);
+    }
+    fixture_dir()
+}
+
+/// `VOXFLEX_PLUGIN_PATH` of the tests: the staged fixtures, then the built
+/// plugins.
+pub fn test_plugin_path() -> std::ffi::OsString {
+    std::env::join_paths([fixture_dir(), target_dir()]).expect("plugin path")
+}
+
+/// Runs `voxflex args…` in `cwd` with the built plugins and the test
+/// fixtures on the search path.
 pub fn voxflex(args: &[&str], cwd: &Path) -> Output {
     Command::new(voxflex_bin())
         .args(args)
         .current_dir(cwd)
-        .env("VOXFLEX_PLUGIN_PATH", target_dir())
+        .env("VOXFLEX_PLUGIN_PATH", test_plugin_path())
         .env_remove("RUST_LOG")
         .output()
         .expect("run voxflex")

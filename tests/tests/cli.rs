@@ -73,11 +73,8 @@ fn converged_frames_skip_downstream_stages_and_a_second_run_reruns_nothing() {
         "{}",
         text(&o)
     );
-    let m = metrics(&out);
-    assert_eq!(m["up_to_date"], true);
-    for stage in ["source", "model", "map", "resample", "output"] {
-        assert_eq!(m["stages"][stage]["runs"], 0, "{stage} re-ran: {m}");
-    }
+    // metrics.json still reports the run that made the outputs.
+    assert_eq!(metrics(&out), m);
 
     // Touching the scene makes it stale again.
     let text2 = std::fs::read_to_string(tmp.path().join("s.toml"))
@@ -326,7 +323,7 @@ fn plugin_errors_are_one_clear_line() {
 
 #[test]
 fn abi_mismatch_is_refused_naming_the_file_and_both_versions() {
-    let built = plugin_dir(&["mismatched"]);
+    let built = fixture_plugin_dir(&["mismatched"]);
     let tmp = tempfile::tempdir().unwrap();
     let lib = voxflex_runtime::plugin_loader::library_file_name("mismatched");
     std::fs::copy(built.join(&lib), tmp.path().join(&lib)).unwrap();

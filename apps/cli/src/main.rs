@@ -17,6 +17,18 @@ use voxflex_runtime::pipeline::{RunOptions, run_scene};
 use voxflex_runtime::scene::Scene;
 use voxflex_runtime::{bench, plugin_loader};
 
+/// `println!` that fails instead of panicking when standard output cannot
+/// be written (`voxflex plugins > /dev/full`, a full disk): the caller's `?`
+/// turns it into the one-line `error:` and exit code 1. It shadows std's
+/// macro in this file, so every command's output goes through it; use it
+/// only in functions that return `anyhow::Result`.
+macro_rules! println {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout(), $($arg)*).context("writing to standard output")?
+    }};
+}
+
 #[derive(Parser)]
 #[command(
     name = "voxflex",
@@ -137,7 +149,12 @@ enum Command {
 fn main() {
     restore_sigpipe();
     let cli = Cli::parse();
-    quiet_window_system_probes();
+    // Removed when main returns or before it exits with an error.
+    let runtime_dir = if may_open_a_gpu(&cli.command) {
+        quiet_window_system_probes()
+    } else {
+        None
+    };
     // wgpu's GL backend reports a missing EGL display as an error while it
     // probes adapters; that is not the user's problem unless they ask.
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| format!("{},wgpu_hal=off", cli.log));
@@ -169,24 +186,50 @@ fn main() {
             }
         }
         eprintln!("error: {line}");
+        drop(runtime_dir);
         std::process::exit(1);
+    }
+    drop(runtime_dir);
+}
+
+/// Whether `command` may probe GPU adapters (only then is a runtime
+/// directory for the window-system probes needed).
+fn may_open_a_gpu(command: &Command) -> bool {
+    use voxflex_runtime::backend::BackendChoice;
+    match command {
+        // A scene that cannot be read fails later with the full message.
+        Command::Run { scene, .. } => {
+            Scene::load(scene).map_or(true, |s| s.settings.backend != BackendChoice::Cpu)
+        }
+        Command::Bench(_) => true,
+        Command::Render { backend, .. } => *backend != BackendChoice::Cpu,
+        _ => false,
     }
 }
 
 /// Without `XDG_RUNTIME_DIR`, probing GPU adapters makes EGL/Wayland print
-/// warnings straight to stderr. Point it at a private directory when unset.
-fn quiet_window_system_probes() {
+/// warnings straight to stderr. Point it at a fresh private directory when
+/// unset: created with mode 0700 under a random name (`voxflex-xdg-XXXXXX`
+/// in the temp directory, never a predictable path another user could
+/// create first), and removed when the returned guard drops. A process
+/// killed by a signal leaves it behind.
+fn quiet_window_system_probes() -> Option<tempfile::TempDir> {
     if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
-        return;
+        return None;
     }
-    let dir = std::env::temp_dir().join(format!("voxflex-xdg-{}", std::process::id()));
-    let mut builder = std::fs::DirBuilder::new();
+    let dir = private_runtime_dir().ok()?;
+    // SAFETY: called first thing in main, before any other thread exists.
+    unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir.path()) };
+    Some(dir)
+}
+
+/// A new directory only this user can enter, with an unpredictable name.
+fn private_runtime_dir() -> std::io::Result<tempfile::TempDir> {
+    let mut b = tempfile::Builder::new();
+    b.prefix("voxflex-xdg-");
     #[cfg(unix)]
-    std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
-    if builder.recursive(true).create(&dir).is_ok() {
-        // SAFETY: called first thing in main, before any other thread exists.
-        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
-    }
+    b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o700));
+    b.tempdir()
 }
 
 fn dispatch(command: Command) -> Result<()> {
@@ -349,8 +392,8 @@ fn validate(path: PathBuf) -> Result<()> {
 
 fn plugins(dirs: Vec<PathBuf>) -> Result<()> {
     let search = plugin_loader::search_path(&dirs);
-    let found = plugin_loader::discover(&search);
-    if found.is_empty() {
+    let found = plugin_loader::list(&search);
+    if found.plugins.is_empty() && found.refused.is_empty() {
         println!(
             "no plugins found in: {}",
             search
@@ -365,19 +408,39 @@ fn plugins(dirs: Vec<PathBuf>) -> Result<()> {
         "{:<18} {:<12} {:<9} {:<4} {:<10} path",
         "name", "kind", "version", "abi", "backends"
     );
-    for p in found {
-        match p {
-            Ok(p) => println!(
-                "{:<18} {:<12} {:<9} v{:<3} {:<10} {}",
+    for l in &found.plugins {
+        let p = &l.plugin;
+        println!(
+            "{:<18} {:<12} {:<9} v{:<3} {:<10} {}",
+            p.name,
+            p.kind_name(),
+            p.version,
+            p.abi_version,
+            p.capability_names(),
+            p.path.display()
+        );
+        if !l.loads {
+            println!(
+                "  (not loadable as `{}`: scenes look for the file name {})",
                 p.name,
-                p.kind_name(),
-                p.version,
-                p.abi_version,
-                p.capability_names(),
-                p.path.display()
-            ),
-            Err(e) => println!("(refused) {e}"),
+                plugin_loader::library_file_name(&p.name)
+            );
         }
+        for s in &l.shadowed {
+            if l.loads {
+                println!(
+                    "  (shadowed) {} also declares `{}`; scenes get {}",
+                    s.display(),
+                    p.name,
+                    p.path.display()
+                );
+            } else {
+                println!("  (also) {} declares `{}`", s.display(), p.name);
+            }
+        }
+    }
+    for e in &found.refused {
+        println!("(refused) {e}");
     }
     Ok(())
 }
@@ -507,8 +570,12 @@ fn render(
     if !name.ends_with(".png") {
         bail!("--out `{name}` must end in .png");
     }
-    if width == 0 || height == 0 || width > 16384 || height > 16384 {
-        bail!("--size {width}x{height} is out of range; use 1 to 16384 pixels per side");
+    use voxflex_runtime::scene::{MAX_IMAGE_SIDE, MAX_TURNTABLE_FRAMES};
+    if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        bail!("--size {width}x{height} is out of range; use 1 to {MAX_IMAGE_SIDE} pixels per side");
+    }
+    if turntable > MAX_TURNTABLE_FRAMES {
+        bail!("--turntable {turntable} frames is absurd; use 0 to {MAX_TURNTABLE_FRAMES}");
     }
     let volume = load_volume(&source, dims)?;
     let resolved = voxflex_runtime::backend::resolve(backend)?;
@@ -570,5 +637,57 @@ fn restore_sigpipe() {
     // async-signal-safe and affects nothing else.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn only_commands_that_may_probe_a_gpu_get_a_runtime_dir() {
+        use clap::Parser as _;
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("s.toml");
+        let may = |args: &[&str]| {
+            let cli = super::Cli::try_parse_from(args).unwrap();
+            super::may_open_a_gpu(&cli.command)
+        };
+        let s = scene.to_str().unwrap();
+        for (backend, expect) in [("cpu", false), ("auto", true), ("gpu", true)] {
+            std::fs::write(
+                &scene,
+                format!("[scene]\nbackend = \"{backend}\"\n[volume]\nsource = \"phantom:cube\"\n"),
+            )
+            .unwrap();
+            assert_eq!(may(&["voxflex", "run", s]), expect, "{backend}");
+            let r = [
+                "voxflex",
+                "render",
+                "phantom:cube",
+                "--out",
+                "r.png",
+                "--backend",
+                backend,
+            ];
+            assert_eq!(may(&r), expect, "render {backend}");
+        }
+        assert!(!may(&["voxflex", "plugins"]));
+        assert!(may(&["voxflex", "run", "missing.toml"]));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn runtime_dirs_are_private_unpredictable_and_removed() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let a = super::private_runtime_dir().unwrap();
+        let b = super::private_runtime_dir().unwrap();
+        let path = a.path().to_path_buf();
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o700, "{mode:o}");
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(name.starts_with("voxflex-xdg-"), "{name}");
+        assert!(!name.contains(&std::process::id().to_string()), "{name}");
+        assert_ne!(a.path(), b.path());
+        drop(a);
+        assert!(!path.exists());
     }
 }

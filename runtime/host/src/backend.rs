@@ -18,7 +18,7 @@ use std::sync::Arc;
 use voxflex_core::deformation::ExecutionBackend;
 use voxflex_core::gpu::GpuService;
 
-use crate::gpu_context::{AdapterPolicy, GpuContextError, WgpuService};
+use crate::gpu_context::{AdapterPolicy, AdapterSummary, GpuContextError, WgpuService};
 
 /// The scene file's `backend` key.
 #[derive(
@@ -103,6 +103,20 @@ impl ResolvedBackend {
     }
 }
 
+/// The warning `backend = "gpu"` gives when the only adapter it found is a
+/// software rasteriser (llvmpipe, lavapipe, SwiftShader): the WGSL kernels
+/// then run on the CPU through an emulated GPU, many times slower than
+/// voxflex's own rayon path.
+pub fn software_adapter_warning(info: &AdapterSummary) -> Option<String> {
+    info.software.then(|| {
+        format!(
+            "backend = \"gpu\" runs on {info}, a software rasteriser: the results are correct \
+             but it is much slower than backend = \"cpu\" (rayon); use backend = \"cpu\" or \
+             \"auto\" (which skips software adapters) unless you are testing the GPU path"
+        )
+    })
+}
+
 /// Resolves the scene's backend choice (see the module docs).
 pub fn resolve(choice: BackendChoice) -> Result<ResolvedBackend, BackendError> {
     let resolved = match choice {
@@ -119,6 +133,9 @@ pub fn resolve(choice: BackendChoice) -> Result<ResolvedBackend, BackendError> {
                 } else {
                     ""
                 };
+                if let Some(w) = software_adapter_warning(&info) {
+                    tracing::warn!(target: "voxflex::backend", "{w}");
+                }
                 ResolvedBackend {
                     backend: ExecutionBackend::Gpu,
                     reason: format!("backend = \"gpu\": {info}{note}"),
@@ -211,6 +228,29 @@ mod tests {
         let gpu = r.gpu_service().unwrap();
         assert!(r.reason.contains(&r.gpu.as_ref().unwrap().info().name));
         assert!(gpu.limits().max_buffer_size > 0);
+    }
+
+    #[test]
+    fn software_adapters_are_warned_about() {
+        let lavapipe = AdapterSummary {
+            name: "llvmpipe (LLVM 15.0.6, 256 bits)".into(),
+            backend: "vulkan".into(),
+            device_type: "Cpu".into(),
+            driver: "llvmpipe (Mesa 22.3.6)".into(),
+            software: true,
+        };
+        let w = software_adapter_warning(&lavapipe).unwrap();
+        assert!(
+            w.contains("llvmpipe") && w.contains("software rasteriser"),
+            "{w}"
+        );
+        let hw = AdapterSummary {
+            name: "NVIDIA H200".into(),
+            device_type: "DiscreteGpu".into(),
+            software: false,
+            ..lavapipe
+        };
+        assert_eq!(software_adapter_warning(&hw), None);
     }
 
     #[test]

@@ -1049,26 +1049,48 @@ pub mod testing {
         test_gpu().map(|g| Arc::new(g.with_binding_limit_override(bytes)))
     }
 
-    /// Points `XDG_RUNTIME_DIR` at a private 0700 temporary directory when it
-    /// is unset.
+    /// The directory [`ensure_xdg_runtime_dir`] made, removed at exit.
+    static XDG_DIR: OnceLock<std::path::PathBuf> = OnceLock::new();
+
+    #[cfg(unix)]
+    extern "C" fn remove_xdg_dir() {
+        if let Some(d) = XDG_DIR.get() {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+
+    /// Points `XDG_RUNTIME_DIR` at a new private 0700 directory with an
+    /// unpredictable name when it is unset; the directory is removed when
+    /// the process exits normally.
     pub fn ensure_xdg_runtime_dir() {
         static DONE: OnceLock<()> = OnceLock::new();
         DONE.get_or_init(|| {
             if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
                 return;
             }
-            let dir = std::env::temp_dir().join(format!("voxflex-xdg-{}", std::process::id()));
+            use std::hash::BuildHasher as _;
+            let random =
+                std::collections::hash_map::RandomState::new().hash_one(std::process::id());
+            let dir = std::env::temp_dir().join(format!("voxflex-xdg-test-{random:016x}"));
+            // Not recursive: creating fails if the name exists, so nobody
+            // can have prepared it.
             let mut builder = std::fs::DirBuilder::new();
-            builder.recursive(true);
             #[cfg(unix)]
             std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
             if builder.create(&dir).is_ok() {
+                let dir = XDG_DIR.get_or_init(|| dir);
+                // SAFETY: registers a plain function that only removes the
+                // directory; atexit handlers run once at normal exit.
+                #[cfg(unix)]
+                unsafe {
+                    libc::atexit(remove_xdg_dir);
+                }
                 // SAFETY: test-only; runs once, before any wgpu instance of
                 // this process exists, while the other GPU tests wait on the
                 // `OnceLock` in `test_gpu`. Rust's own env accesses are
                 // serialised by std; no C library of ours reads the
                 // environment concurrently at this point.
-                unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+                unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
             }
         });
     }

@@ -4,12 +4,16 @@
 //! ([`scene`]), backend selection ([`backend`]) and the wgpu GPU context
 //! ([`gpu_context`], the only place voxflex links wgpu), the scene pipeline
 //! with versioned, dirty-region stages ([`pipeline`]), run reports
-//! ([`metrics`]) and the `voxflex bench` measurements ([`mod@bench`]).
+//! ([`metrics`]), the up-to-date check ([`fingerprint`]), the output
+//! directory's path rules and lock ([`out_dir`]) and the `voxflex bench`
+//! measurements ([`mod@bench`]).
 
 pub mod backend;
 pub mod bench;
+pub mod fingerprint;
 pub mod gpu_context;
 pub mod metrics;
+pub mod out_dir;
 pub mod pipeline;
 pub mod plugin_loader;
 pub mod scene;

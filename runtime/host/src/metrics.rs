@@ -43,7 +43,9 @@ pub struct RunMetrics {
     pub backend_reason: String,
     /// Frames simulated.
     pub frames: u64,
-    /// True when the outputs were already up to date and nothing ran.
+    /// True when the outputs were already up to date and nothing ran. Only
+    /// the caller sees it true: an up-to-date run writes no `metrics.json`
+    /// (the file keeps the report of the run that made the outputs).
     pub up_to_date: bool,
     /// Deformation plugin name, version and file, if any.
     #[serde(skip_serializing_if = "Option::is_none")]

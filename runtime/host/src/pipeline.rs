@@ -10,11 +10,17 @@
 //! does not ask for are never built, plugins it does not name are never
 //! loaded, and the GPU is never initialised for a CPU scene.
 //!
-//! Across runs, a stamp file in the output directory fingerprints the scene
-//! text, the plugin library and the source file: a second run of an
-//! unchanged, converged scene re-runs no stage (unless `force`).
+//! Across runs, a stamp file in the output directory fingerprints what the
+//! outputs depend on (the scene text, the bytes of the source and its
+//! detached data file, of the plugin libraries and of voxflex itself) and
+//! records the size of every file written ([`crate::fingerprint`]): a
+//! second run of an unchanged scene whose outputs are all still there
+//! re-runs no stage and writes nothing, `metrics.json` included (unless
+//! `force`). Runs into one directory take turns under an advisory lock
+//! ([`crate::out_dir`]).
 
 use crate::backend::{self, BackendChoice, BackendError, ResolvedBackend};
+use crate::fingerprint::{Inputs, Stamp};
 use crate::metrics::{PluginReport, RunMetrics};
 use crate::plugin_loader::{self, PluginError};
 use crate::scene::{Scene, SceneError, SliceName};
@@ -41,8 +47,7 @@ use voxflex_core::resample::{
 };
 use voxflex_core::volume::{Volume, VoxelData};
 
-/// Name of the fingerprint file in the output directory.
-pub const STAMP_FILE: &str = ".voxflex-stamp";
+pub use crate::fingerprint::STAMP_FILE;
 /// Name of the run report in the output directory.
 pub const METRICS_FILE: &str = "metrics.json";
 
@@ -175,10 +180,23 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     let started = Instant::now();
     let out_cfg = scene.output.clone().unwrap_or_default();
     let out_dir = opts.out_dir.clone().unwrap_or_else(|| out_cfg.dir.clone());
+    crate::out_dir::check_dir(&out_dir).map_err(|m| {
+        RunError::Other(format!(
+            "{}: output directory ([output] dir or --out) {m}",
+            scene.path.display()
+        ))
+    })?;
     std::fs::create_dir_all(&out_dir).map_err(|source| IoError::Io {
         path: out_dir.clone(),
         source,
     })?;
+    // Held until this function returns: a second run into the same
+    // directory waits, then finds the outputs up to date.
+    let _lock = crate::out_dir::lock(&out_dir).map_err(|source| IoError::Io {
+        path: out_dir.join(crate::out_dir::LOCK_FILE),
+        source,
+    })?;
+    crate::out_dir::remove_stale_temp_files(&out_dir);
     let plugin_dirs = plugin_loader::search_path(&scene.plugin_dirs());
     let plugin = match &scene.model {
         Some(m) => Some(plugin_loader::load_by_name(&m.plugin, &plugin_dirs)?),
@@ -208,18 +226,26 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
         .map(|p| p.path.as_path())
         .collect();
     let fingerprint = fingerprint(scene, &plugin_files, &out_dir);
-    if !opts.force && stamp_matches(&out_dir, &fingerprint) {
-        metrics.up_to_date = true;
-        metrics.backend = "none".into();
-        metrics.backend_reason = "outputs up to date".into();
-        for stage in [
-            "source", "model", "map", "resample", "output", "roi", "render",
-        ] {
-            metrics.stage(stage).skipped = 1;
+    let current = Stamp::read(&out_dir)
+        .ok_or_else(|| "no stamp of a completed run".to_string())
+        .and_then(|s| s.check(&out_dir, &fingerprint));
+    match current {
+        Ok(()) if !opts.force => {
+            // Nothing runs and nothing is written: metrics.json stays the
+            // report of the run that made the outputs.
+            metrics.up_to_date = true;
+            metrics.backend = "none".into();
+            metrics.backend_reason = "outputs up to date".into();
+            for stage in [
+                "source", "model", "map", "resample", "output", "roi", "render",
+            ] {
+                metrics.stage(stage).skipped = 1;
+            }
+            metrics.total_wall_ms = started.elapsed().as_secs_f64() * 1e3;
+            return Ok(metrics);
         }
-        metrics.total_wall_ms = started.elapsed().as_secs_f64() * 1e3;
-        write_text(&out_dir.join(METRICS_FILE), &metrics.to_json())?;
-        return Ok(metrics);
+        Ok(()) => tracing::debug!("{}: outputs up to date; --force", out_dir.display()),
+        Err(why) => tracing::debug!("{}: running: {why}", out_dir.display()),
     }
     // A partial run must never look up to date.
     let _ = std::fs::remove_file(out_dir.join(STAMP_FILE));
@@ -518,7 +544,10 @@ pub fn run_scene(scene: &Scene, mut opts: RunOptions) -> Result<RunMetrics, RunE
     metrics.warnings = warnings.finish();
     metrics.total_wall_ms = started.elapsed().as_secs_f64() * 1e3;
     write_text(&out_dir.join(METRICS_FILE), &metrics.to_json())?;
-    write_text(&out_dir.join(STAMP_FILE), &fingerprint)?;
+    let mut written = metrics.outputs.clone();
+    written.push(METRICS_FILE.into());
+    let stamp = Stamp::record(fingerprint, &out_dir, &written);
+    write_text(&out_dir.join(STAMP_FILE), &stamp.to_json())?;
     Ok(metrics)
 }
 
@@ -628,65 +657,18 @@ fn write_text(path: &Path, text: &str) -> Result<(), RunError> {
     Ok(())
 }
 
-fn file_identity(path: &Path) -> String {
-    match std::fs::metadata(path) {
-        Ok(m) => {
-            let mtime = m
-                .modified()
-                .ok()
-                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                .map_or(0, |d| d.as_nanos());
-            format!("{}:{}:{mtime}", path.display(), m.len())
-        }
-        Err(_) => format!("{}:missing", path.display()),
-    }
-}
-
 /// Fingerprint of everything a run's outputs depend on.
 fn fingerprint(scene: &Scene, plugins: &[&Path], out_dir: &Path) -> String {
-    let mut parts = vec![
-        format!("voxflex {}", env!("CARGO_PKG_VERSION")),
-        format!(
-            "abi {} {:016x}",
-            voxflex_abi::ABI_VERSION,
-            voxflex_abi::LAYOUT_HASH
-        ),
-        format!("out {}", out_dir.display()),
-        format!("scene {}", scene.text),
-    ];
-    for p in plugins {
-        parts.push(format!("plugin {}", file_identity(p)));
-    }
-    if let VolumeSource::File(p) = parse_source(&scene.volume.source) {
-        let path = if p.is_absolute() {
-            p
-        } else {
-            scene.base_dir().join(p)
-        };
-        parts.push(format!("source {}", file_identity(&path)));
-    }
-    let text = parts.join("\n");
-    let hash = voxflex_abi::layout::fnv1a(0xcbf2_9ce4_8422_2325, text.as_bytes());
-    format!("{hash:016x}\n")
-}
-
-fn stamp_matches(out_dir: &Path, fingerprint: &str) -> bool {
-    let Ok(old) = std::fs::read_to_string(out_dir.join(STAMP_FILE)) else {
-        return false;
+    let source = match parse_source(&scene.volume.source) {
+        VolumeSource::File(p) if p.is_absolute() => Some(p),
+        VolumeSource::File(p) => Some(scene.base_dir().join(p)),
+        VolumeSource::Phantom(_) => None,
     };
-    if old != fingerprint {
-        return false;
-    }
-    // Every output the last run listed must still exist.
-    let Ok(metrics) = std::fs::read_to_string(out_dir.join(METRICS_FILE)) else {
-        return false;
-    };
-    let Ok(json) = serde_json::from_str::<serde_json::Value>(&metrics) else {
-        return false;
-    };
-    json["outputs"].as_array().is_some_and(|files| {
-        files
-            .iter()
-            .all(|f| f.as_str().is_some_and(|f| out_dir.join(f).is_file()))
+    crate::fingerprint::fingerprint(&Inputs {
+        scene_text: &scene.text,
+        out_dir,
+        plugins,
+        source,
+        host: crate::fingerprint::host_identity(),
     })
 }

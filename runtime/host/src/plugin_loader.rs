@@ -21,7 +21,7 @@ use voxflex_abi::ffi::{
 pub enum PluginError {
     /// No file for the named plugin in any search directory.
     #[error(
-        "plugin `{name}` not found: looked for {file} in {searched}; build it (`cargo build --release --workspace`) or add its directory to `plugin_dirs` / VOXFLEX_PLUGIN_PATH"
+        "plugin `{name}` not found: looked for {file} in {searched}; build it (`cargo build --release`) or add its directory to `plugin_dirs` / VOXFLEX_PLUGIN_PATH"
     )]
     NotFound {
         /// Plugin name.
@@ -164,10 +164,10 @@ pub fn load_by_name(name: &str, dirs: &[PathBuf]) -> Result<LoadedPlugin, Plugin
     Ok(plugin)
 }
 
-/// Every plugin library in `dirs` (first occurrence of each file name wins),
-/// loaded and checked. Files that fail to load are returned as errors beside
-/// the good ones.
-pub fn discover(dirs: &[PathBuf]) -> Vec<Result<LoadedPlugin, PluginError>> {
+/// Every plugin library file (`libvoxflex_*.so`) in `dirs`, in search
+/// order (sorted by name within a directory), each file once even when a
+/// directory appears twice in the search path.
+fn library_files(dirs: &[PathBuf]) -> Vec<PathBuf> {
     let prefix = format!("{}voxflex_", std::env::consts::DLL_PREFIX);
     let suffix = std::env::consts::DLL_SUFFIX;
     let mut seen = std::collections::BTreeSet::new();
@@ -186,14 +186,73 @@ pub fn discover(dirs: &[PathBuf]) -> Vec<Result<LoadedPlugin, PluginError>> {
             .collect();
         files.sort();
         for f in files {
-            if let Some(n) = f.file_name()
-                && seen.insert(n.to_owned())
-            {
-                out.push(load_file(&f));
+            let key = std::fs::canonicalize(&f).unwrap_or_else(|_| f.clone());
+            if seen.insert(key) {
+                out.push(f);
             }
         }
     }
     out
+}
+
+/// One plugin name of a [`PluginListing`].
+#[derive(Debug)]
+pub struct ListedPlugin {
+    /// The library [`load_by_name`] opens for this name, or, when none
+    /// would (`loads` false), the first library that declares the name.
+    pub plugin: LoadedPlugin,
+    /// Whether `plugin` is what a scene naming this plugin gets.
+    pub loads: bool,
+    /// Other libraries on the search path that declare the same name; a
+    /// scene never gets them while `plugin.path` is there.
+    pub shadowed: Vec<PathBuf>,
+}
+
+/// What `voxflex plugins` shows: every library on the search path, loaded
+/// and checked, one entry per declared plugin name.
+#[derive(Debug, Default)]
+pub struct PluginListing {
+    /// Plugins by declared name, in search order.
+    pub plugins: Vec<ListedPlugin>,
+    /// Libraries that could not be loaded, with why.
+    pub refused: Vec<PluginError>,
+}
+
+/// Loads every plugin library in `dirs` (see [`PluginListing`]). A copy of
+/// a plugin — under another file name, or in a later directory — is listed
+/// once under its declared name with the path that wins and the paths it
+/// shadows, never as a second plugin.
+pub fn list(dirs: &[PathBuf]) -> PluginListing {
+    let mut listing = PluginListing::default();
+    let mut by_name: Vec<(String, Vec<LoadedPlugin>)> = vec![];
+    for f in library_files(dirs) {
+        match load_file(&f) {
+            Ok(p) => match by_name.iter_mut().find(|(n, _)| *n == p.name) {
+                Some((_, v)) => v.push(p),
+                None => by_name.push((p.name.clone(), vec![p])),
+            },
+            Err(e) => listing.refused.push(e),
+        }
+    }
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    for (name, mut found) in by_name {
+        let file = library_file_name(&name);
+        let winner = dirs
+            .iter()
+            .map(|d| d.join(&file))
+            .find(|p| p.is_file())
+            .map(|p| canonical(&p));
+        let pos = found
+            .iter()
+            .position(|p| Some(canonical(&p.path)) == winner);
+        let plugin = found.remove(pos.unwrap_or(0));
+        listing.plugins.push(ListedPlugin {
+            plugin,
+            loads: pos.is_some(),
+            shadowed: found.into_iter().map(|p| p.path).collect(),
+        });
+    }
+    listing
 }
 
 /// Opens one library, checks its header and reads its declaration.
@@ -308,6 +367,29 @@ mod tests {
         assert!(
             msg.contains("plugin `nope` not found") && msg.contains("/definitely/missing"),
             "{msg}"
+        );
+    }
+
+    #[test]
+    fn library_files_are_listed_once_in_search_order() {
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        for (d, n) in [(&a, "x"), (&a, "w"), (&b, "x")] {
+            std::fs::write(d.path().join(library_file_name(n)), b"").unwrap();
+        }
+        std::fs::write(a.path().join("libother.so"), b"").unwrap();
+        let dirs = [
+            a.path().to_path_buf(),
+            b.path().to_path_buf(),
+            a.path().to_path_buf(),
+        ];
+        let files = library_files(&dirs);
+        assert_eq!(
+            files,
+            vec![
+                a.path().join(library_file_name("w")),
+                a.path().join(library_file_name("x")),
+                b.path().join(library_file_name("x")),
+            ]
         );
     }
 

@@ -38,6 +38,13 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use voxflex_core::resample::{Interpolation, ResampleParams};
 
+/// Largest scene file read (1 MiB): scene files are a few kilobytes.
+pub const MAX_SCENE_BYTES: u64 = 1 << 20;
+/// Largest `[render] turntable` (and `voxflex render --turntable`), frames.
+pub const MAX_TURNTABLE_FRAMES: u32 = 3600;
+/// Largest `[render] width` / `height` (and `voxflex render --size`), pixels.
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
 /// A scene file could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -453,11 +460,31 @@ pub struct Scene {
 
 impl Scene {
     /// Reads and validates a scene file.
+    /// A path that is not a regular file (`/dev/zero`, a FIFO) or a file
+    /// over [`MAX_SCENE_BYTES`] is refused before it is read.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+        let read_err = |source| SceneError::Read {
             path: path.to_path_buf(),
             source,
-        })?;
+        };
+        let meta = std::fs::metadata(path).map_err(read_err)?;
+        if !meta.is_file() || meta.len() > MAX_SCENE_BYTES {
+            return Err(SceneError::Invalid {
+                location: path.display().to_string(),
+                message: if meta.is_file() {
+                    format!(
+                        "{} bytes is not a scene file: scenes are at most {MAX_SCENE_BYTES} bytes",
+                        meta.len()
+                    )
+                } else {
+                    format!(
+                        "is {}, not a scene file; give the path of a .toml file",
+                        voxflex_core::io::file_kind(&meta)
+                    )
+                },
+            });
+        }
+        let text = std::fs::read_to_string(path).map_err(read_err)?;
         Self::parse(&text, path)
     }
 
@@ -535,13 +562,21 @@ impl Scene {
                     format!("`{n}` must end in .nii or .nii.gz"),
                 ));
             }
+            if let Some(n) = &o.nifti {
+                crate::out_dir::check_file_name(n).map_err(|m| invalid("nifti", m))?;
+            }
+            crate::out_dir::check_dir(&o.dir).map_err(|m| invalid("dir", m))?;
         }
         if let Some(r) = &file.render {
-            if r.width == 0 || r.height == 0 || r.width > 16384 || r.height > 16384 {
+            if r.width == 0
+                || r.height == 0
+                || r.width > MAX_IMAGE_SIDE
+                || r.height > MAX_IMAGE_SIDE
+            {
                 return Err(invalid(
                     "width",
                     format!(
-                        "{}×{} pixels is out of range; use 1 to 16384",
+                        "{}×{} pixels is out of range; use 1 to {MAX_IMAGE_SIDE}",
                         r.width, r.height
                     ),
                 ));
@@ -558,17 +593,24 @@ impl Scene {
                     "needs finite angles, |elevation_deg| < 90, 0 < fov_deg < 180, and positive distance_mm / height_mm".into(),
                 ));
             }
-            if r.turntable > 3600 {
+            if r.turntable > MAX_TURNTABLE_FRAMES {
                 return Err(invalid(
                     "turntable",
-                    format!("{} frames is absurd; use 0 to 3600", r.turntable),
+                    format!(
+                        "{} frames is absurd; use 0 to {MAX_TURNTABLE_FRAMES}",
+                        r.turntable
+                    ),
                 ));
             }
             if !r.file.ends_with(".png") {
                 return Err(invalid("file", format!("`{}` must end in .png", r.file)));
             }
+            crate::out_dir::check_file_name(&r.file).map_err(|m| invalid("file", m))?;
         }
         for roi in &file.roi {
+            if let Some(n) = &roi.name {
+                crate::out_dir::check_file_name(n).map_err(|m| invalid("name", m))?;
+            }
             if roi.seed.is_some() == roi.seed_slice.is_some() {
                 return Err(SceneError::Invalid {
                     location: locate_key(text, path, "[[roi]]"),
@@ -833,6 +875,59 @@ kind = "grab"
             }]
         );
         assert!(s.resample.is_some(), "a model implies the resample stage");
+    }
+
+    #[test]
+    fn outputs_stay_inside_the_output_directory() {
+        let cases = [
+            ("[output]\ndir = \"/\"", "`dir`"),
+            ("[output]\ndir = \"\"", "`dir`"),
+            ("[output]\nnifti = \"../up.nii.gz\"", "`nifti`"),
+            ("[output]\nnifti = \"/tmp/abs.nii\"", "`nifti`"),
+            ("[render]\nfile = \"../r.png\"", "`file`"),
+            ("[render]\nfile = \"/r.png\"", "`file`"),
+            (
+                "[[roi]]\nname = \"../../x\"\nseed = [0.0, 0.0, 0.0]",
+                "`name`",
+            ),
+            (
+                "[[roi]]\nname = \"/etc/x\"\nseed = [0.0, 0.0, 0.0]",
+                "`name`",
+            ),
+        ];
+        for (table, key) in cases {
+            let e = Scene::parse(&format!("{GOOD}\n{table}\n"), Path::new("t.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(key) && e.contains("output directory"),
+                "{table}: {e}"
+            );
+        }
+        let ok = "[output]\ndir = \"out/a\"\nnifti = \"d.nii.gz\"\n[render]\nfile = \"r.png\"";
+        Scene::parse(&format!("{GOOD}\n{ok}\n"), Path::new("t.toml")).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn devices_fifos_and_huge_files_are_not_scenes() {
+        let e = Scene::load(Path::new("/dev/zero")).unwrap_err().to_string();
+        assert!(e.contains("/dev/zero") && e.contains("a device"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("s.toml");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.unwrap().success());
+        // Before the check this read blocked until a writer appeared.
+        let e = Scene::load(&fifo).unwrap_err().to_string();
+        assert!(e.contains("a FIFO"), "{e}");
+        let big = dir.path().join("big.toml");
+        let mut text = GOOD.to_string();
+        text.push_str(&"# padding\n".repeat((MAX_SCENE_BYTES as usize) / 10));
+        std::fs::write(&big, &text).unwrap();
+        let e = Scene::load(&big).unwrap_err().to_string();
+        assert!(e.contains("at most 1048576 bytes"), "{e}");
+        std::fs::write(&big, GOOD).unwrap();
+        Scene::load(&big).unwrap();
     }
 
     #[test]

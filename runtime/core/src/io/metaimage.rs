@@ -201,6 +201,18 @@ fn per_axis<T: Copy + std::fmt::Debug>(
     Ok(out)
 }
 
+/// The data file a MetaImage header names (`ElementDataFile`, resolved
+/// relative to the header's folder), or `None` for `LOCAL` data. Only the
+/// header is read.
+pub(crate) fn detached_data_file(path: &Path) -> Result<Option<PathBuf>, IoError> {
+    let mut reader = BufReader::new(open(path)?);
+    let h = parse_header(path, &mut reader)?;
+    Ok(h.get(&["ElementDataFile"])
+        .map(|(_, v)| v.trim())
+        .filter(|v| !v.eq_ignore_ascii_case("LOCAL"))
+        .map(|v| path.parent().unwrap_or(Path::new("")).join(v)))
+}
+
 /// Reads a MetaImage `.mhd` (+ data file) or `.mha` volume. See the module
 /// docs for the keys understood; rotations are not applied.
 pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
@@ -387,6 +399,7 @@ pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError
     } else {
         let base = path.parent().unwrap_or(Path::new(""));
         data_path = base.join(file_value);
+        super::refuse_non_regular(&data_path)?;
         let f = match std::fs::File::open(&data_path) {
             Ok(f) => f,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -499,6 +512,22 @@ mod tests {
         fn read(&self, p: &Path) -> Result<Volume, IoError> {
             read_metaimage(p, &ReadOptions::default())
         }
+    }
+
+    #[test]
+    fn volume_files_name_the_detached_data_file() {
+        let d = Dir::new();
+        let p = d.write(
+            "v.mhd",
+            b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_UCHAR\nElementDataFile = v.raw\n",
+        );
+        let files = super::super::volume_files(&p).unwrap();
+        assert_eq!(files, vec![p.clone(), d.0.path().join("v.raw")]);
+        let p = d.write(
+            "l.mha",
+            b"NDims = 3\nDimSize = 2 1 1\nElementType = MET_UCHAR\nElementDataFile = LOCAL\nab",
+        );
+        assert_eq!(super::super::volume_files(&p).unwrap(), vec![p.clone()]);
     }
 
     const HDR: &str = "ObjectType = Image\nNDims = 3\nBinaryData = True\n\

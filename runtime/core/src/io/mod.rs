@@ -215,8 +215,66 @@ pub(crate) fn header_err(path: &Path, field: &str, message: impl Into<String>) -
     }
 }
 
+/// Refuses a path that exists but is not a regular file (a FIFO, a device
+/// such as `/dev/zero`, a directory) before it is opened: opening a FIFO
+/// blocks until a writer appears, and a device never ends. A missing path
+/// passes, so the caller's open names it.
+pub(crate) fn refuse_non_regular(path: &Path) -> Result<(), IoError> {
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => Err(IoError::InvalidRequest {
+            path: path.to_path_buf(),
+            message: format!(
+                "is not a regular file (it is {}); voxflex reads volumes from regular files only",
+                file_kind(&m)
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// `a directory`, `a FIFO`, … for messages.
+pub fn file_kind(m: &std::fs::Metadata) -> &'static str {
+    let t = m.file_type();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt as _;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// The files a volume's voxels come from: the file itself and, for a
+/// MetaImage `.mhd` or NRRD `.nhdr` header with detached data, the data file
+/// it names (resolved relative to the header). The header is parsed, the
+/// data is not read. Used to fingerprint a run's inputs.
+pub fn volume_files(path: &Path) -> Result<Vec<PathBuf>, IoError> {
+    let mut files = vec![path.to_path_buf()];
+    let detached = match VolumeFormat::from_path(path) {
+        Some(VolumeFormat::MetaImage) => metaimage::detached_data_file(path)?,
+        Some(VolumeFormat::Nrrd) => nrrd::detached_data_file(path)?,
+        _ => None,
+    };
+    files.extend(detached);
+    Ok(files)
+}
+
 /// Opens a file for reading, naming it in the error.
 pub(crate) fn open(path: &Path) -> Result<File, IoError> {
+    refuse_non_regular(path)?;
     File::open(path).map_err(|source| IoError::Io {
         path: path.to_path_buf(),
         source: if source.kind() == std::io::ErrorKind::NotFound {

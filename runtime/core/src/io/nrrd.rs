@@ -220,6 +220,16 @@ enum Encoding {
     Ascii,
 }
 
+/// The detached data file a NRRD header names (`data file:`, resolved
+/// relative to the header's folder), or `None` for attached data. Only the
+/// header is read.
+pub(crate) fn detached_data_file(path: &Path) -> Result<Option<PathBuf>, IoError> {
+    let mut reader = BufReader::new(open(path)?);
+    let h = parse_header(path, &mut reader)?;
+    Ok(h.get(&["data file", "datafile"])
+        .map(|name| path.parent().unwrap_or(Path::new("")).join(name.trim())))
+}
+
 /// Reads a NRRD `.nrrd` (attached or detached data) or `.nhdr` volume. See
 /// the module docs for the fields understood; rotations are not applied.
 pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
@@ -449,6 +459,7 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
             }
             let base = path.parent().unwrap_or(Path::new(""));
             data_path = base.join(name);
+            super::refuse_non_regular(&data_path)?;
             let f = match std::fs::File::open(&data_path) {
                 Ok(f) => f,
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -675,6 +686,53 @@ mod tests {
         let mut b = hdr.as_bytes().to_vec();
         b.extend_from_slice(data);
         b
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_data_file_is_refused_without_blocking() {
+        let d = Dir::new();
+        let fifo = d.0.path().join("pipe.raw");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        let p = d.write(
+            "fifo.nhdr",
+            HDR.replace("encoding: raw\n", "encoding: raw\ndata file: pipe.raw\n")
+                .as_bytes(),
+        );
+        // Before the check, this open blocked forever waiting for a writer.
+        let e = d.read(&p).unwrap_err().to_string();
+        assert!(e.contains("pipe.raw") && e.contains("a FIFO"), "{e}");
+        // The source itself as a FIFO is refused the same way.
+        let fifo_src = d.0.path().join("src.nrrd");
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(&fifo_src)
+                .status()
+                .unwrap()
+                .success()
+        );
+        let e = d.read(&fifo_src).unwrap_err().to_string();
+        assert!(e.contains("src.nrrd") && e.contains("a FIFO"), "{e}");
+    }
+
+    #[test]
+    fn volume_files_name_the_detached_data_file() {
+        let d = Dir::new();
+        let p = d.write(
+            "v.nhdr",
+            HDR.replace("encoding: raw\n", "encoding: raw\ndata file: sub/v.raw\n")
+                .as_bytes(),
+        );
+        assert_eq!(
+            super::super::volume_files(&p).unwrap(),
+            vec![p.clone(), d.0.path().join("sub/v.raw")]
+        );
+        let p = d.write("a.nrrd", &attached(HDR, &le(&vals())));
+        assert_eq!(super::super::volume_files(&p).unwrap(), vec![p.clone()]);
     }
 
     #[test]
