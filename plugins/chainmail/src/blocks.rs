@@ -79,6 +79,30 @@ impl Blocks {
         m
     }
 
+    /// Where propagation from a move imposed on element `c` (a grab) must
+    /// start: its block and the blocks across the block borders `c` lies
+    /// on. A block whose only moved elements are held never reports a
+    /// change of its own, so seeding it alone would leave the neighbours
+    /// that the held element pulls idle.
+    pub fn seeds(&self, c: [usize; 3]) -> Vec<usize> {
+        let b = self.of(c);
+        let (lo, hi) = self.range(b);
+        let m = Self::border(c, lo, hi);
+        let [cx, cy, cz] = self.count;
+        let bc = [b % cx, (b / cx) % cy, b / (cx * cy)];
+        let mut out = vec![b];
+        for a in 0..3 {
+            let stride = [1, cx, cx * cy][a];
+            if m & (1 << (2 * a)) != 0 && bc[a] > 0 {
+                out.push(b - stride);
+            }
+            if m & (1 << (2 * a + 1)) != 0 && bc[a] + 1 < [cx, cy, cz][a] {
+                out.push(b + stride);
+            }
+        }
+        out
+    }
+
     /// The next active list from this iteration's `(block, mask)` results:
     /// changed blocks and their neighbours across changed borders, each
     /// once, in ascending order. `seen` is scratch of [`Self::len`] flags.

@@ -568,9 +568,15 @@ impl ChainMail {
         for (e, u) in targets {
             self.state.set_both(e, u, k);
             self.on_device(|g, _| g.write_element(e, u, k));
-            let b = self.blocks.of(self.lat.coords(e));
+            let c = self.lat.coords(e);
+            let b = self.blocks.of(c);
             if parallel && self.params.schedule == Schedule::Blocks {
-                insert_sorted(&mut self.active, b as u32);
+                // The held element's block may hold nothing else that
+                // moves (a grabbed face in a block of its own): seed the
+                // blocks across its borders too.
+                for s in self.blocks.seeds(c) {
+                    insert_sorted(&mut self.active, s as u32);
+                }
             }
             insert_sorted(&mut self.relax, b as u32);
             self.mark_changed(b);
