@@ -342,7 +342,7 @@ fn markdown(fronts: &[Front], quick: bool) -> String {
         let _ = write!(
             s,
             "| series | config | time ms | {} | Pareto |",
-            f.error_label
+            f.error_label.replace('|', "\\|")
         );
         for k in &keys {
             let _ = write!(s, " {k} |");
