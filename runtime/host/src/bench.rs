@@ -13,9 +13,11 @@
 //!
 //! `--accuracy` reports instead, per interpolation mode, resampling time and
 //! error against an f64 reference under affine, twist and bend (see
-//! [`accuracy`]).
+//! [`accuracy`]). `--fronts` runs every model's run-time/error front and
+//! writes tables and plots (see [`fronts`]).
 
 mod accuracy;
+mod fronts;
 
 use crate::backend::{self, BackendChoice};
 use crate::plugin_loader;
@@ -60,8 +62,24 @@ pub struct BenchArgs {
     pub interpolation: Option<Interpolation>,
     /// Measure both interpolation modes instead: resample time and error
     /// (HU) against an f64 reference under affine, twist and bend.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "fronts")]
     pub accuracy: bool,
+    /// Measure the run-time/error front of every model instead (FEM
+    /// cantilever and elastica, the same grab across models, resampling,
+    /// ROI maps) and write `<front>.csv`, `<front>.svg` and `front.md`
+    /// into `--out`.
+    #[arg(long)]
+    pub fronts: bool,
+    /// With `--fronts`: tiny sizes (seconds; what the tests run).
+    #[arg(long, requires = "fronts")]
+    pub quick: bool,
+    /// With `--fronts`: only these fronts (fem_cantilever, fem_elastica,
+    /// grab, resample, roi; repeatable).
+    #[arg(long, requires = "fronts")]
+    pub only: Vec<String>,
+    /// With `--fronts`: the output directory.
+    #[arg(long, default_value = "docs/fronts")]
+    pub out: PathBuf,
 }
 
 /// Running the benchmark failed.
@@ -124,6 +142,9 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     }
     if args.accuracy {
         return accuracy::run(args);
+    }
+    if args.fronts {
+        return fronts::run(args);
     }
     let repeat = args.repeat.max(1);
     let resolved = backend::resolve(args.backend).map_err(err)?;

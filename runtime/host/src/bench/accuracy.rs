@@ -24,7 +24,7 @@ use voxflex_core::volume::Volume;
 
 /// One resample of `field` in `params`' mode, `repeat` times after a warm-up:
 /// the median time (ms) and the output.
-fn time_mode(
+pub(super) fn time_mode(
     volume: &Volume,
     field: &Field,
     params: ResampleParams,

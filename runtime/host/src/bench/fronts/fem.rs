@@ -1,0 +1,278 @@
+//! The corotational FEM fronts, through the `corotational-fem` plugin on a
+//! block volume whose voxel centres are the proxy's nodes (`proxy = {
+//! kind = "uniform", step }`, so `step` sets the resolution):
+//!
+//! - `fem_cantilever`: the 10 × 1 × 1 mm cantilever of
+//!   `tests/reference/cantilever.json` (E = 1000 Pa, ν = 0.3, clamped at
+//!   x = 0, tip traction in −z, small load so the answer is linear) — the
+//!   tip's `u / P` against Timoshenko beam theory and against the finest,
+//!   tightest solve, per proxy step × CG tolerance, static Newton;
+//! - `fem_elastica`: the slender 8 × 1 × 0.5 mm beam loaded to
+//!   PL²/EI = 3, 10, 30 from rest (large rotation), static Newton, tip
+//!   position against the Euler elastica ([`super::elastica`]) with the
+//!   beam's EI, per proxy step.
+//!
+//! The element families measured are [`ELEMENTS`]; each is one series per
+//! tolerance (or load), so another element order is one more entry there.
+
+use super::runner::{self, Plugins, Scene};
+use super::{Front, Point};
+use crate::bench::BenchError;
+use voxflex_core::glam::DVec3;
+
+/// The element families of the FEM fronts: the series label and the
+/// `[model.params]` lines that select it. The last entry, the most
+/// accurate, also gives the cantilever's "finest solve" reference.
+pub(super) const ELEMENTS: &[(&str, &str)] = &[("P1", "")];
+
+/// Young's modulus (Pa) and Poisson ratio of both beams.
+const E: f64 = 1000.0;
+const NU: f64 = 0.3;
+/// The default CG tolerance and proxy step of `corotational-fem`.
+const DEFAULT_TOL: f64 = 1e-6;
+const DEFAULT_STEP: usize = 4;
+
+fn params(element: &str, step: usize, tol: f64, tight: bool) -> String {
+    let mut p = format!(
+        "proxy = {{ kind = \"uniform\", step = {step} }}\n\
+         materials = [{{ range = [50, 200], youngs_modulus = {E}, poisson_ratio = {NU} }}]\n\
+         solver = \"static\"\ncg_tolerance = {tol:e}\n"
+    );
+    if tight {
+        p += "static_tolerance = 1e-8\ncg_max_iterations = 100000\npreconditioner = \"block-jacobi\"\n";
+    }
+    if !element.is_empty() {
+        p += element;
+        p.push('\n');
+    }
+    p
+}
+
+/// Clamp at x = 0 and a traction `t` (Pa, −z) on the face x = `l` of a
+/// beam `w` × `h` (mm).
+fn beam_interactions(l: f64, w: f64, h: f64, t: f64) -> Vec<(u64, String)> {
+    vec![
+        (
+            0,
+            format!(
+                "kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, {}, {}]",
+                w + 0.01,
+                h + 0.01
+            ),
+        ),
+        (
+            0,
+            format!(
+                "kind = \"load\"\nmin = [{}, -0.01, -0.01]\nmax = [{}, {}, {}]\ntraction = [0, 0, {}]",
+                l - 0.01,
+                l + 0.01,
+                w + 0.01,
+                h + 0.01,
+                -t
+            ),
+        ),
+    ]
+}
+
+/// Timoshenko's tip deflection per unit tip force (mm/µN) of a cantilever
+/// of length `l`, width `w`, height `h` (mm): bending `L³/3EI` plus shear
+/// `L/κGA` with Cowper's κ = 10(1+ν)/(12+11ν) for a rectangle.
+pub(super) fn timoshenko(l: f64, w: f64, h: f64) -> f64 {
+    let i = w * h.powi(3) / 12.0;
+    let g = E / (2.0 * (1.0 + NU));
+    let kappa = 10.0 * (1.0 + NU) / (12.0 + 11.0 * NU);
+    l.powi(3) / (3.0 * E * i) + l / (kappa * g * w * h)
+}
+
+/// One static solve of a beam: the mean displacement of its tip face's
+/// points and the run.
+fn solve(
+    plugins: &Plugins,
+    volume: &voxflex_core::volume::Volume,
+    params: String,
+    l: f64,
+    w: f64,
+    h: f64,
+    traction: f64,
+) -> Result<(DVec3, DVec3, runner::Outcome), BenchError> {
+    let tip = runner::lattice_points(volume, |p| (p.x - l).abs() < 1e-6);
+    let run = runner::run(
+        plugins,
+        &Scene {
+            plugin: "corotational-fem",
+            params,
+            volume,
+            points: &tip,
+            interactions: beam_interactions(l, w, h, traction),
+            frames: 1,
+            dt_s: 1.0 / 30.0,
+            settle: None,
+        },
+    )?;
+    let n = tip.len() as f64;
+    let rest = tip
+        .iter()
+        .map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        .sum::<DVec3>()
+        / n;
+    let mean = run.u.iter().copied().sum::<DVec3>() / n;
+    Ok((rest, mean, run))
+}
+
+fn fem_notes(run: &runner::Outcome) -> Vec<(&'static str, String)> {
+    vec![
+        ("tetrahedra", runner::note(&run.notes, "proxy_tetrahedra")),
+        (
+            "newton_iterations",
+            runner::note(&run.notes, "newton_iterations"),
+        ),
+        (
+            "cg_iterations",
+            runner::note(&run.notes, "solver_iterations"),
+        ),
+        (
+            "unconverged_solves",
+            runner::note(&run.notes, "unconverged_solves"),
+        ),
+    ]
+}
+
+/// The cantilever front.
+pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
+    let (l, w, h): (f64, f64, f64) = (10.0, 1.0, 1.0);
+    // Voxels per mm; a proxy step of s voxels makes n / s cells per mm.
+    let n: usize = if quick { 4 } else { 12 };
+    let steps: &[usize] = if quick {
+        &[4, 2, 1]
+    } else {
+        &[12, 6, 4, 3, 2, 1]
+    };
+    let tols: &[f64] = if quick {
+        &[1e-3, 1e-6]
+    } else {
+        &[1e-2, 1e-4, 1e-6, 1e-8]
+    };
+    let volume = runner::block([10 * n + 1, n + 1, n + 1], 1.0 / n as f64, 100);
+    // A small load: the linear regime, where beam theory holds (u/P).
+    let p = 1e-3;
+    let theory = timoshenko(l, w, h);
+    let (last, extra) = ELEMENTS[ELEMENTS.len() - 1];
+    let (_, finest, _) = solve(plugins, &volume, params(extra, 1, 1e-10, true), l, w, h, p)?;
+    let finest = -finest.z / p;
+    let mut points = vec![];
+    for &(name, extra) in ELEMENTS {
+        for &tol in tols {
+            for &step in steps {
+                let (_, u, run) = solve(
+                    plugins,
+                    &volume,
+                    params(extra, step, tol, false),
+                    l,
+                    w,
+                    h,
+                    p,
+                )?;
+                let got = -u.z / p;
+                let mut ex = vec![
+                    ("step", step.to_string()),
+                    ("cells_per_mm", format!("{}", n / step)),
+                    ("cg_tolerance", format!("{tol:e}")),
+                    ("tip_u_per_p", format!("{got:.6}")),
+                    (
+                        "error_vs_finest",
+                        format!("{:.3e}", (got - finest).abs() / finest),
+                    ),
+                ];
+                ex.extend(fem_notes(&run));
+                points.push(Point {
+                    series: format!("{name} cg {tol:e}"),
+                    config: format!("step {step}"),
+                    time_ms: run.time_ms,
+                    error: (got - theory).abs() / theory,
+                    is_default: name == "P1" && tol == DEFAULT_TOL && step == DEFAULT_STEP,
+                    group: String::new(),
+                    extra: ex,
+                });
+            }
+        }
+    }
+    Ok(Front {
+        key: "fem_cantilever",
+        title: "corotational FEM: cantilever tip vs Timoshenko".into(),
+        error_label: "|tip u/P − Timoshenko| / Timoshenko".into(),
+        description: format!(
+            "The 10 × 1 × 1 mm cantilever (E = {E} Pa, ν = {NU}), clamped at x = 0, tip traction \
+             {p} Pa in −z (linear regime), static Newton through the `corotational-fem` plugin, \
+             on a block of {n} voxels per mm; `step` is the proxy step in voxels (cells per mm = \
+             {n}/step). Error: tip `u/P` (mean over the tip face's voxel centres) against \
+             Timoshenko beam theory {theory:.4} mm/µN (bending + shear, Cowper's κ); \
+             `error_vs_finest` against the {last} solve at step 1 with CG 1e-10 and static \
+             tolerance 1e-8, block Jacobi (`u/P` = {finest:.6}). The default (proxy step {DEFAULT_STEP}, CG \
+             {DEFAULT_TOL:e}) is relative to the voxel size: here {} cells per mm.",
+            n / DEFAULT_STEP
+        ),
+        points,
+    })
+}
+
+/// The elastica front.
+pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
+    let (l, w, h): (f64, f64, f64) = (8.0, 1.0, 0.5);
+    let n: usize = if quick { 4 } else { 8 };
+    let steps: &[usize] = if quick { &[2, 1] } else { &[4, 2, 1] };
+    let volume = runner::block([8 * n + 1, n + 1, n / 2 + 1], 1.0 / n as f64, 100);
+    let ei = E * w * h.powi(3) / 12.0;
+    let mut points = vec![];
+    for &(name, extra) in ELEMENTS {
+        for alpha in [3.0, 10.0, 30.0] {
+            let (ex, ez) = super::elastica::tip(alpha);
+            let p = alpha * ei / (l * l);
+            for &step in steps {
+                let (rest, u, run) = solve(
+                    plugins,
+                    &volume,
+                    params(extra, step, DEFAULT_TOL, false),
+                    l,
+                    w,
+                    h,
+                    p / (w * h),
+                )?;
+                let tip = rest + u;
+                let (gx, gz) = (tip.x / l, (tip.z - h / 2.0) / l);
+                let error = ((gx - ex).powi(2) + (gz - ez).powi(2)).sqrt();
+                let mut extra = vec![
+                    ("step", step.to_string()),
+                    ("cell_mm", format!("{}", step as f64 / n as f64)),
+                    ("pl2_over_ei", format!("{alpha}")),
+                    ("tip_x_over_l", format!("{gx:.5}")),
+                    ("tip_z_over_l", format!("{gz:.5}")),
+                    ("elastica_x_over_l", format!("{ex:.5}")),
+                    ("elastica_z_over_l", format!("{ez:.5}")),
+                ];
+                extra.extend(fem_notes(&run));
+                points.push(Point {
+                    series: format!("{name} PL²/EI = {alpha}"),
+                    config: format!("step {step}"),
+                    time_ms: run.time_ms,
+                    error,
+                    is_default: name == "P1" && step == DEFAULT_STEP,
+                    group: format!("PL²/EI = {alpha}"),
+                    extra,
+                });
+            }
+        }
+    }
+    Ok(Front {
+        key: "fem_elastica",
+        title: "corotational FEM: large deflection vs the elastica".into(),
+        error_label: "|tip − elastica| / L".into(),
+        description: format!(
+            "The slender 8 × 1 × 0.5 mm beam (E = {E} Pa, ν = {NU}), clamped at x = 0, loaded \
+             from rest to PL²/EI = 3, 10, 30 (EI = E w h³/12 = {ei:.4} µN·mm², the beam's, not \
+             the mesh's) by a tip traction, static Newton with the default tolerances, on a \
+             block of {n} voxels per mm (cell = step/{n} mm). Error: distance of the tip face's \
+             mean position from the Euler elastica's tip, over the length."
+        ),
+        points,
+    })
+}

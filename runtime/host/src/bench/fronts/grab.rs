@@ -1,0 +1,241 @@
+//! The `grab` front: corotational FEM, mass-spring and ChainMail on the
+//! same grab of the same soft beam, against a fine FEM solve.
+//!
+//! The beam is a block of 4m × m × m voxels of 1 mm (m = 12; 4 in
+//! `--quick`), E = 3000 Pa, ν = 0.3, 1000 kg/m³, clamped at x = 0; every
+//! voxel centre of the face x = 4m is grabbed and moved by `m/2` mm in −z
+//! over 10 frames and held. The reference is `corotational-fem`'s static
+//! solve on the proxy of step 1 (a node at every voxel centre) with tight
+//! tolerances (CG 1e-10, static 1e-8). Error: the RMS (and max) over every voxel centre of the
+//! distance between a model's displacement and the reference's, mm. The
+//! dynamic models (FEM `solver = "dynamic"`, both mass-spring
+//! integrators, ChainMail's relaxation) run on after the grab until no
+//! point moves more than 1e-3 mm over 10 frames (capped; `settled` says
+//! whether they got there); their time is the whole run to rest.
+
+use super::runner::{self, Plugins, Scene, Settle};
+use super::{Front, Point};
+use crate::bench::BenchError;
+use voxflex_core::glam::DVec3;
+
+/// Frames over which the grab moves.
+const GRAB_FRAMES: u64 = 10;
+
+fn material_fem() -> &'static str {
+    "materials = [{ range = [50, 200], youngs_modulus = 3000, poisson_ratio = 0.3, density = 1000 }]"
+}
+
+/// The models of the front: series label, plugin, params (given the
+/// resolution) and whether they need to settle.
+struct ModelSpec {
+    series: &'static str,
+    plugin: &'static str,
+    /// Extra params lines (after proxy / materials).
+    params: &'static str,
+    dynamic: bool,
+    /// The default configuration at this resolution.
+    default_at: usize,
+}
+
+const MESH_MODELS: &[ModelSpec] = &[
+    ModelSpec {
+        series: "FEM static",
+        plugin: "corotational-fem",
+        params: "solver = \"static\"",
+        dynamic: false,
+        default_at: 0,
+    },
+    ModelSpec {
+        series: "FEM dynamic",
+        plugin: "corotational-fem",
+        params: "",
+        dynamic: true,
+        default_at: 4,
+    },
+    ModelSpec {
+        series: "mass-spring explicit",
+        plugin: "mass-spring",
+        params: "",
+        dynamic: true,
+        default_at: 4,
+    },
+    ModelSpec {
+        series: "mass-spring implicit",
+        plugin: "mass-spring",
+        params: "integrator = \"implicit\"",
+        dynamic: true,
+        default_at: 0,
+    },
+];
+
+fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
+    let (mut sum, mut max) = (0.0, 0.0f64);
+    for (a, b) in u.iter().zip(reference) {
+        let d = (*a - *b).length();
+        sum += d * d;
+        max = max.max(d);
+    }
+    ((sum / u.len().max(1) as f64).sqrt(), max)
+}
+
+/// The grab front.
+pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
+    let m: usize = if quick { 4 } else { 12 };
+    let steps: &[usize] = if quick { &[4, 2] } else { &[6, 4, 3, 2] };
+    let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
+    let settle = if quick {
+        Settle {
+            max_frames: 150,
+            tolerance_mm: 1e-2,
+            check_every: 10,
+        }
+    } else {
+        Settle {
+            max_frames: 600,
+            tolerance_mm: 1e-3,
+            check_every: 10,
+        }
+    };
+    let (l, w) = (4.0 * m as f64, m as f64);
+    let by = 0.5 * m as f64;
+    let volume = runner::block([4 * m + 1, m + 1, m + 1], 1.0, 100);
+    let points = runner::lattice_points(&volume, |_| true);
+    let mut interactions = vec![(
+        0,
+        format!(
+            "kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, {0}, {0}]",
+            w + 0.01
+        ),
+    )];
+    for p in runner::lattice_points(&volume, |p| (p.x - l).abs() < 1e-6) {
+        interactions.push((
+            0,
+            format!(
+                "kind = \"grab\"\npoint = [{}, {}, {}]\nby = [0, 0, {}]\nframes = {GRAB_FRAMES}",
+                p[0], p[1], p[2], -by
+            ),
+        ));
+    }
+    let scene = |plugin, params: String, settle: Option<Settle>| Scene {
+        plugin,
+        params,
+        volume: &volume,
+        points: &points,
+        interactions: interactions.clone(),
+        frames: GRAB_FRAMES,
+        dt_s: 1.0 / 30.0,
+        settle,
+    };
+    let reference = runner::run(
+        plugins,
+        &scene(
+            "corotational-fem",
+            format!(
+                "proxy = {{ kind = \"uniform\", step = 1 }}\n{}\nsolver = \"static\"\n\
+                 cg_tolerance = 1e-10\nstatic_tolerance = 1e-8\ncg_max_iterations = 100000",
+                material_fem()
+            ),
+            None,
+        ),
+    )?;
+    let ref_max = reference.u.iter().map(|d| d.length()).fold(0.0, f64::max);
+    let mut out = vec![];
+    let mut push = |series: &str,
+                    config: String,
+                    run: &runner::Outcome,
+                    is_default: bool,
+                    mut extra: Vec<(&'static str, String)>| {
+        let (rms, max) = errors(&run.u, &reference.u);
+        let mut ex = vec![
+            ("max_mm", format!("{max:.4}")),
+            ("frames", run.frames.to_string()),
+            ("settled", run.settled.to_string()),
+            (
+                "ms_per_frame",
+                format!("{:.3}", run.time_ms / run.frames.max(1) as f64),
+            ),
+        ];
+        ex.append(&mut extra);
+        out.push(Point {
+            series: series.to_string(),
+            config,
+            time_ms: run.time_ms,
+            error: rms,
+            is_default,
+            group: String::new(),
+            extra: ex,
+        });
+    };
+    for spec in MESH_MODELS {
+        for &step in steps {
+            let params = format!(
+                "proxy = {{ kind = \"uniform\", step = {step} }}\n{}\n{}",
+                material_fem(),
+                spec.params
+            );
+            let run = runner::run(
+                plugins,
+                &scene(spec.plugin, params, spec.dynamic.then_some(settle)),
+            )?;
+            let extra = vec![
+                ("step", step.to_string()),
+                ("tetrahedra", runner::note(&run.notes, "proxy_tetrahedra")),
+                ("substeps", runner::note(&run.notes, "substeps")),
+                (
+                    "unconverged_solves",
+                    runner::note(&run.notes, "unconverged_solves"),
+                ),
+            ];
+            push(
+                spec.series,
+                format!("step {step}"),
+                &run,
+                spec.default_at == step,
+                extra,
+            );
+        }
+    }
+    for &d in downsamples {
+        let params =
+            format!("materials = [{{ range = [50, 200], constraint = 0.3 }}]\ndownsample = {d}");
+        let run = runner::run(plugins, &scene("chainmail", params, Some(settle)))?;
+        let extra = vec![
+            ("downsample", d.to_string()),
+            (
+                "relaxation_sweeps",
+                runner::note(&run.notes, "relaxation_sweeps"),
+            ),
+        ];
+        push(
+            "ChainMail c = 0.3",
+            format!("downsample {d}"),
+            &run,
+            d == 1,
+            extra,
+        );
+    }
+    Ok(Front {
+        key: "grab",
+        title: "the same grab: FEM, mass-spring, ChainMail vs fine FEM".into(),
+        error_label: "RMS |u − u_ref|, mm".into(),
+        description: format!(
+            "A {l} × {w} × {w} mm beam (voxels of 1 mm, E = 3000 Pa, ν = 0.3, 1000 kg/m³; ChainMail \
+             constraint 0.3 of the spacing), clamped at x = 0; each of the {} voxel centres of \
+             the face x = {l} grabbed and moved {by} mm in −z over {GRAB_FRAMES} frames of 1/30 s \
+             and held. Reference: `corotational-fem` static on the step-1 proxy (a node at every \
+             voxel centre), CG tolerance 1e-10, static tolerance 1e-8; its largest displacement is \
+             {ref_max:.3} mm, its run {:.0} ms. Error: RMS over all {} voxel centres of \
+             |u − u_ref| (mm; `max_mm` the largest). Dynamic models run on until no point moves \
+             more than {} mm in {} frames (at most {} frames after the grab); their time is the \
+             whole run. `step` is the proxy step in voxels (mm here); the mesh models' default \
+             is dynamic at step 4, ChainMail's one element per voxel.",
+            (m + 1) * (m + 1),
+            reference.time_ms,
+            points.len(),
+            settle.tolerance_mm,
+            settle.check_every,
+            settle.max_frames
+        ),
+        points: out,
+    })
+}

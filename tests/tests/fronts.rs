@@ -1,0 +1,154 @@
+//! `voxflex bench --fronts --quick` through the CLI: every front's CSV,
+//! SVG and the summary are written, every error is finite, and the errors
+//! fall with resolution where theory says they must — the corotational
+//! FEM cantilever against Timoshenko beam theory and against its finest
+//! solve, the large deflection against the elastica, the grab against the
+//! fine FEM solve — and trilinear resampling beats tetrahedral against the
+//! f64 reference under every field.
+
+use std::collections::BTreeMap;
+use voxflex_integration_tests::*;
+
+/// A front's CSV as rows of column → value.
+fn rows(dir: &std::path::Path, front: &str) -> Vec<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(dir.join(format!("{front}.csv")))
+        .unwrap_or_else(|e| panic!("{front}.csv: {e}"));
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            assert_eq!(cells.len(), header.len(), "{front}.csv row {l}");
+            header
+                .iter()
+                .cloned()
+                .zip(cells.iter().map(|c| c.to_string()))
+                .collect()
+        })
+        .collect()
+}
+
+fn num(r: &BTreeMap<String, String>, k: &str) -> f64 {
+    r[k].parse()
+        .unwrap_or_else(|_| panic!("{k} = {:?} is not a number in {r:?}", r[k]))
+}
+
+/// The errors of `series`, ordered by the numeric column `by`, ascending.
+fn series(rows: &[BTreeMap<String, String>], name: &str, by: &str, err: &str) -> Vec<(f64, f64)> {
+    let mut v: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r["series"] == name)
+        .map(|r| (num(r, by), num(r, err)))
+        .collect();
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    assert!(v.len() >= 2, "series {name}: {v:?}");
+    v
+}
+
+fn falls(what: &str, v: &[(f64, f64)]) {
+    for w in v.windows(2) {
+        assert!(
+            w[1].1 < w[0].1,
+            "{what}: error {} at {} does not fall below {} at {} ({v:?})",
+            w[1].1,
+            w[1].0,
+            w[0].1,
+            w[0].0
+        );
+    }
+}
+
+#[test]
+fn quick_fronts_are_written_finite_and_converge() {
+    plugin_dir(&["corotational-fem", "mass-spring", "chainmail"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("fronts");
+    let o = voxflex(
+        &[
+            "bench",
+            "--fronts",
+            "--quick",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let md = std::fs::read_to_string(out.join("front.md")).expect("front.md");
+    for front in ["fem_cantilever", "fem_elastica", "grab", "resample", "roi"] {
+        let svg = std::fs::read_to_string(out.join(format!("{front}.svg"))).expect("svg");
+        assert!(
+            svg.starts_with("<svg") && svg.contains("run time, ms"),
+            "{front}.svg"
+        );
+        assert!(
+            md.contains(&format!("(`{front}`)")),
+            "front.md lacks {front}"
+        );
+        let rows = rows(&out, front);
+        assert!(rows.len() >= 4, "{front}: {} rows", rows.len());
+        for r in &rows {
+            let (e, t) = (num(r, "error"), num(r, "time_ms"));
+            assert!(e.is_finite() && e >= 0.0 && t > 0.0, "{front}: {r:?}");
+        }
+    }
+
+    // P1 cantilever at CG 1e-6: refining the proxy approaches beam theory
+    // and the finest solve (linear tetrahedra lock; they converge from
+    // the stiff side).
+    let c = rows(&out, "fem_cantilever");
+    falls(
+        "cantilever vs Timoshenko",
+        &series(&c, "P1 cg 1e-6", "cells_per_mm", "error"),
+    );
+    falls(
+        "cantilever vs finest",
+        &series(&c, "P1 cg 1e-6", "cells_per_mm", "error_vs_finest"),
+    );
+    for r in c.iter().filter(|r| r["series"] == "P1 cg 1e-6") {
+        let u = num(r, "tip_u_per_p");
+        assert!(u > 0.0 && u < 4.0306, "P1 is stiffer than the beam: {r:?}");
+    }
+    // Large deflection: halving the cell halves the distance to the
+    // elastica, at every load.
+    let e = rows(&out, "fem_elastica");
+    for alpha in ["3", "10", "30"] {
+        let mut v = series(&e, &format!("P1 PL²/EI = {alpha}"), "cell_mm", "error");
+        v.reverse(); // coarse to fine
+        let v: Vec<(f64, f64)> = v.into_iter().map(|(h, e)| (-h, e)).collect();
+        falls(&format!("elastica at PL²/EI = {alpha}"), &v);
+    }
+    // The grab: the static FEM approaches the fine FEM solve.
+    let g = rows(&out, "grab");
+    let mut v = series(&g, "FEM static", "step", "error");
+    v.reverse();
+    falls("grab, FEM static", &v);
+    // ChainMail's kinematic answer follows the grab through the beam: its
+    // error stays below the grab's 2 mm (a torn beam moves only its face).
+    for r in g.iter().filter(|r| r["series"].starts_with("ChainMail")) {
+        assert!(num(r, "error") < 0.5, "ChainMail: {r:?}");
+    }
+    // Resampling: trilinear beats tetrahedral under every field and size.
+    let rs = rows(&out, "resample");
+    for field in ["affine", "twist", "bend"] {
+        let tet = series(&rs, &format!("tetrahedral {field}"), "size", "error");
+        let tri = series(&rs, &format!("trilinear {field}"), "size", "error");
+        for (a, b) in tet.iter().zip(&tri) {
+            assert!(
+                b.1 < a.1,
+                "{field} at {}³: trilinear {} vs tetrahedral {}",
+                a.0,
+                b.1,
+                a.1
+            );
+        }
+    }
+    // ROI: 1 − Dice lies in [0, 1].
+    for r in rows(&out, "roi") {
+        let d = num(&r, "dice");
+        assert!(
+            (0.0..=1.0).contains(&d) && (num(&r, "error") - (1.0 - d)).abs() < 1e-3,
+            "{r:?}"
+        );
+    }
+}
