@@ -28,14 +28,21 @@
 
 #[cfg(test)]
 mod convergence_tests;
+pub mod edge_nodes;
 pub mod element;
+pub mod front;
 #[cfg(test)]
 mod gpu_tests;
+#[cfg(test)]
+mod p2_tests;
 pub mod polar;
+pub mod quadratic;
 pub mod solver;
 #[cfg(test)]
 mod tests;
 
-pub use solver::{CorotationalFem, FemParams, PreconditionerKind, SolverKind, StaticStats};
+pub use solver::{
+    CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind, StaticStats,
+};
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);
