@@ -166,13 +166,18 @@ impl EdgeNodes {
             *f += *m * bc.gravity;
         }
         for (face, force) in &bc.faces {
+            // A face whose edges are not all edges of this proxy (none
+            // should be) keeps its linear load.
+            let edges = [[0, 1], [1, 2], [0, 2]]
+                .map(|[a, b]| self.lookup.get(&ordered(face[a], face[b])).copied());
+            if edges.iter().any(Option::is_none) || face.iter().any(|&c| c as usize >= nc) {
+                continue;
+            }
             for &c in face {
                 full.force[c as usize] -= *force / 3.0;
             }
-            for [a, b] in [[0, 1], [1, 2], [0, 2]] {
-                if let Some(&e) = self.lookup.get(&ordered(face[a], face[b])) {
-                    full.force[nc + e as usize] += *force / 3.0;
-                }
+            for e in edges.into_iter().flatten() {
+                full.force[nc + e as usize] += *force / 3.0;
             }
         }
         full

@@ -13,6 +13,10 @@
 //!   `D = α M + β K_rot`:
 //!   `(M + h D + h² K_rot) v⁺ = M v + h (f_ext − f_int(u))`, `u⁺ = u + h v⁺`.
 //!
+//! With `element = "p2"` both run on the corners and the mid-edge nodes
+//! ([`crate::edge_nodes`]) with quadratic elements ([`crate::quadratic`]),
+//! the rotation taken per Gauss point; the code below is the same.
+//!
 //! Both assemble the warped stiffness into a [`BlockMatrix`] and solve with
 //! PCG (incomplete Cholesky for the static solves, block Jacobi for the
 //! implicit steps and on the GPU, by default), warm-started from the last
