@@ -59,3 +59,31 @@ impl EdgeLayer<'_> {
             });
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_correction_is_the_edge_deviation_at_its_midpoint_and_zero_at_corners() {
+        let deviation: Vec<DVec3> = (0..6).map(|e| DVec3::splat(e as f64 + 1.0)).collect();
+        let tet_edges = [[0, 1, 2, 3, 4, 5]];
+        let layer = EdgeLayer {
+            tet_edges: &tet_edges,
+            deviation: &deviation,
+        };
+        for a in 0..4 {
+            let mut w = [0.0; 4];
+            w[a] = 1.0;
+            assert_eq!(layer.correction(0, w), DVec3::ZERO, "corner {a}");
+        }
+        for (k, [a, b]) in TET_EDGES.iter().enumerate() {
+            let mut w = [0.0; 4];
+            (w[*a], w[*b]) = (0.5, 0.5);
+            assert_eq!(layer.correction(0, w), deviation[k], "edge {k}");
+        }
+        // At the centroid each edge weighs 4/16.
+        let sum: DVec3 = deviation.iter().copied().sum();
+        assert!((layer.correction(0, [0.25; 4]) - sum * 0.25).length() < 1e-7);
+    }
+}
