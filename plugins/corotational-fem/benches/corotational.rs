@@ -12,7 +12,12 @@
 //! - the slender cantilever 8 × 1 × 0.5 of issue 12 at two mesh sizes,
 //!   the same figures per preconditioner, against block Jacobi at 1e-11.
 //!
-//! `-- step` or `-- cantilever` runs one part.
+//! - the run-time/error front of the element (issue 12 item 4): the slender
+//!   cantilever with P1 and P2 at several cube sizes, tetrahedra, nodes
+//!   solved for, static solve time (build included, median of 3) and tip
+//!   error against Timoshenko ([`voxflex_corotational_fem::front`]).
+//!
+//! `-- step`, `-- cantilever` or `-- front` runs one part.
 
 use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
@@ -241,7 +246,7 @@ fn slender_tip(m: &Fem) -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let only = |k: &str| args.iter().any(|a| a == k);
-    let all = !only("step") && !only("cantilever");
+    let all = !only("step") && !only("cantilever") && !only("front");
     println!(
         "voxflex-corotational-fem bench: threads {}",
         rayon::current_num_threads()
@@ -252,5 +257,36 @@ fn main() {
     if all || only("cantilever") {
         cantilever();
         slender();
+    }
+    if all || only("front") {
+        front();
+    }
+}
+
+fn front() {
+    use voxflex_corotational_fem::ElementKind;
+    use voxflex_corotational_fem::front::front_point;
+    println!("element  cube mm  tetrahedra  nodes  solve s  tip error vs Timoshenko");
+    let rows = [
+        (ElementKind::P1, [0.5, 0.25, 0.125, 0.0625].as_slice()),
+        (ElementKind::P2, [0.5, 0.25, 0.125].as_slice()),
+    ];
+    for (element, sizes) in rows {
+        for &h in sizes {
+            let runs: Vec<_> = (0..3)
+                .map(|_| front_point(element, h).expect("front point"))
+                .collect();
+            let p = runs[0];
+            let seconds = median(runs.iter().map(|r| r.seconds).collect());
+            println!(
+                "{:<8} {:>7} {:>11} {:>6} {:>8.3} {:>+8.2} %",
+                format!("{element:?}"),
+                h,
+                p.tetrahedra,
+                p.nodes,
+                seconds,
+                100.0 * p.error
+            );
+        }
     }
 }

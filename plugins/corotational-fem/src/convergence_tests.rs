@@ -208,6 +208,41 @@ fn the_static_solve_follows_the_elastica_under_large_rotation() {
 }
 
 #[test]
+fn p2_follows_the_elastica_with_the_beams_own_bending_stiffness() {
+    // Quadratic tetrahedra do not lock: no EI measured from the mesh, the
+    // beam's own EI = E W T³ / 12, under large rotation (static Newton
+    // with the per-Gauss-point twist tangent).
+    let h = 0.25;
+    let ei = 1000.0 * W * T.powi(3) / 12.0;
+    let params = FemParams {
+        element: crate::ElementKind::P2,
+        ..static_default()
+    };
+    for alpha in [3.0, 10.0] {
+        let p = alpha * ei / (L * L);
+        let mut m = beam(h, p, params.clone());
+        m.step(frame()).unwrap();
+        let (ex, ez) = elastica_tip(alpha);
+        let got = tip(&m);
+        let (dx, dz) = (got.x / L - ex, (got.z - T / 2.0) / L - ez);
+        let notes = m.notes().unwrap();
+        eprintln!(
+            "P2 α = {alpha}: tip ({:.4}, {:.4}) L vs elastica ({ex:.4}, {ez:.4}) L; {notes:?}",
+            got.x / L,
+            (got.z - T / 2.0) / L
+        );
+        assert!(
+            dx.abs() <= 0.01 && dz.abs() <= 0.01,
+            "α = {alpha}: tip ({:.4}, {:.4}) L, elastica ({ex:.4}, {ez:.4}) L",
+            got.x / L,
+            (got.z - T / 2.0) / L
+        );
+        assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
+        assert_eq!(notes["unconverged_solves"], 0.0, "{notes:?}");
+    }
+}
+
+#[test]
 fn loads_of_opposite_sign_give_mirrored_tips() {
     let h = 0.25;
     let p = 0.5;

@@ -55,12 +55,13 @@ impl Element {
     /// `V (λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a · g_b) I)`.
     #[inline]
     pub fn stiffness(&self, a: usize, b: usize) -> DMat3 {
-        let (ga, gb) = (self.grads[a], self.grads[b]);
-        let outer = |p: DVec3, q: DVec3| DMat3::from_cols(p * q.x, p * q.y, p * q.z);
-        (outer(ga, gb) * self.lambda
-            + outer(gb, ga) * self.mu
-            + DMat3::from_diagonal(DVec3::splat(self.mu * ga.dot(gb))))
-            * self.volume
+        stiffness_block(
+            self.grads[a],
+            self.grads[b],
+            self.lambda,
+            self.mu,
+            self.volume,
+        )
     }
 
     /// The deformation gradient at corner positions `x` (mm).
@@ -106,29 +107,15 @@ impl Element {
     /// keeps the tangent positive definite (projected Newton).
     pub fn add_twist_stiffness(&self, u: [DVec3; 4], k: &mut [DMat3], clamp: bool) {
         let x = [0, 1, 2, 3].map(|a| self.rest[a] + u[a]);
-        let (uu, sigma, vv) = signed_svd(self.deformation_gradient(x));
-        let s = sigma.to_array();
-        let stretch = s[0] + s[1] + s[2] - 3.0;
-        let psi = s.map(|si| 2.0 * self.mu * (si - 1.0) + self.lambda * stretch);
-        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-            let (ui, uj, vi, vj) = (uu.col(i), uu.col(j), vv.col(i), vv.col(j));
-            let denom = s[i] + s[j];
-            let eigen = (psi[i] + psi[j]) / denom;
-            if !(denom > 1e-9 && (eigen > 0.0 || !clamp)) {
-                continue;
-            }
-            // T g_a for each corner.
-            let tg = self
-                .grads
-                .map(|g| (ui * vj.dot(g) - uj * vi.dot(g)) * std::f64::consts::FRAC_1_SQRT_2);
-            let w = eigen * self.volume;
-            for a in 0..4 {
-                for b in 0..4 {
-                    let (p, q) = (tg[a], tg[b]);
-                    k[4 * a + b] += DMat3::from_cols(p * q.x, p * q.y, p * q.z) * w;
-                }
-            }
-        }
+        let f = self.deformation_gradient(x);
+        add_twist(
+            f,
+            &self.grads,
+            self.volume,
+            (self.lambda, self.mu),
+            k,
+            clamp,
+        );
     }
 
     /// The element's strain energy (µN·mm) at corner displacements `u`
@@ -139,13 +126,7 @@ impl Element {
     /// as a merit function.
     pub fn energy(&self, u: [DVec3; 4]) -> f64 {
         let x = [0, 1, 2, 3].map(|a| self.rest[a] + u[a]);
-        let f = self.deformation_gradient(x);
-        let d = rotation(f).transpose() * f - DMat3::IDENTITY;
-        let e = (d + d.transpose()) * 0.5;
-        let trace = e.x_axis.x + e.y_axis.y + e.z_axis.z;
-        let squares =
-            e.x_axis.length_squared() + e.y_axis.length_squared() + e.z_axis.length_squared();
-        self.volume * (self.mu * squares + 0.5 * self.lambda * trace * trace)
+        self.volume * energy_density(self.deformation_gradient(x), self.lambda, self.mu)
     }
 
     /// The elastic force on each corner (µN; the force the element resists
@@ -157,6 +138,67 @@ impl Element {
         let local = [0, 1, 2, 3].map(|b| rt * (self.rest[b] + u[b]) - self.rest[b]);
         [0, 1, 2, 3]
             .map(|a| r * (0..4).fold(DVec3::ZERO, |s, b| s + self.stiffness(a, b) * local[b]))
+    }
+}
+
+/// The stiffness block (µN/mm) of shape-function gradients `ga`, `gb`
+/// (1/mm) over volume `w` (mm³): `w (λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a · g_b) I)`.
+#[inline]
+pub fn stiffness_block(ga: DVec3, gb: DVec3, lambda: f64, mu: f64, w: f64) -> DMat3 {
+    let outer = |p: DVec3, q: DVec3| DMat3::from_cols(p * q.x, p * q.y, p * q.z);
+    (outer(ga, gb) * lambda
+        + outer(gb, ga) * mu
+        + DMat3::from_diagonal(DVec3::splat(mu * ga.dot(gb))))
+        * w
+}
+
+/// The corotated energy density (Pa = µN·mm/mm³) at deformation gradient
+/// `f`: `μ |ε|² + λ/2 (tr ε)²` with `ε = sym(Rᵀ F) − I`, `R` its rotation.
+#[inline]
+pub fn energy_density(f: DMat3, lambda: f64, mu: f64) -> f64 {
+    let d = rotation(f).transpose() * f - DMat3::IDENTITY;
+    let e = (d + d.transpose()) * 0.5;
+    let trace = e.x_axis.x + e.y_axis.y + e.z_axis.z;
+    let squares = e.x_axis.length_squared() + e.y_axis.length_squared() + e.z_axis.length_squared();
+    mu * squares + 0.5 * lambda * trace * trace
+}
+
+/// Adds to `k[n a + b]` (`n = grads.len()`) the rotation's own stiffness
+/// at deformation gradient `f` over volume `w` (mm³) with shape-function
+/// gradients `grads` (1/mm) and Lamé `(λ, μ)` (Pa): see
+/// [`Element::add_twist_stiffness`].
+pub fn add_twist(
+    f: DMat3,
+    grads: &[DVec3],
+    w: f64,
+    (lambda, mu): (f64, f64),
+    k: &mut [DMat3],
+    clamp: bool,
+) {
+    let n = grads.len();
+    let (uu, sigma, vv) = signed_svd(f);
+    let s = sigma.to_array();
+    let stretch = s[0] + s[1] + s[2] - 3.0;
+    let psi = s.map(|si| 2.0 * mu * (si - 1.0) + lambda * stretch);
+    let mut tg = [DVec3::ZERO; 10];
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let (ui, uj, vi, vj) = (uu.col(i), uu.col(j), vv.col(i), vv.col(j));
+        let denom = s[i] + s[j];
+        let eigen = (psi[i] + psi[j]) / denom;
+        if !(denom > 1e-9 && (eigen > 0.0 || !clamp)) {
+            continue;
+        }
+        // T g_a for each node.
+        for (t, g) in tg.iter_mut().zip(grads) {
+            *t = (ui * vj.dot(*g) - uj * vi.dot(*g)) * std::f64::consts::FRAC_1_SQRT_2;
+        }
+        let weight = eigen * w;
+        for a in 0..n {
+            for b in 0..n {
+                let (p, q) = (tg[a], tg[b]);
+                k[n * a + b] += DMat3::from_cols(p * q.x, p * q.y, p * q.z) * weight;
+            }
+        }
     }
 }
 

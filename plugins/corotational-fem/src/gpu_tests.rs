@@ -4,7 +4,7 @@
 //! these tests print SKIPPED, except under `CI=true`, where a missing
 //! adapter fails them.
 
-use crate::solver::{CorotationalFem, FemParams, SolverKind};
+use crate::solver::{CorotationalFem, ElementKind, FemParams, SolverKind};
 use std::sync::Arc;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
@@ -22,7 +22,7 @@ fn test_gpu() -> Option<Arc<dyn GpuService>> {
 }
 
 /// A clamped two-material bar under gravity with a grab on its tip.
-fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind) -> Fem {
+fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind, element: ElementKind) -> Fem {
     let grid = Grid::new([13, 4, 4], DVec3::splat(1.0), DVec3::new(-20.0, 5.0, 40.0));
     let mesh = uniform_proxy(&grid, 1, |v| Some(u16::from(v[0] >= 6))).unwrap();
     let materials = vec![
@@ -30,6 +30,7 @@ fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind) -> Fem {
         ElasticMaterial::new(30000.0, 0.3, 1e-3),
     ];
     let params = FemParams {
+        element,
         solver,
         cg_tolerance: 1e-6,
         cg_max_iterations: Some(400),
@@ -46,9 +47,13 @@ fn bar(gpu: Option<Arc<dyn GpuService>>, solver: SolverKind) -> Fem {
 }
 
 fn compare(solver: SolverKind, frames: usize) {
+    compare_elements(solver, ElementKind::P1, frames);
+}
+
+fn compare_elements(solver: SolverKind, element: ElementKind, frames: usize) {
     let Some(gpu) = test_gpu() else { return };
-    let mut cpu = bar(None, solver);
-    let mut dev = bar(Some(gpu), solver);
+    let mut cpu = bar(None, solver, element);
+    let mut dev = bar(Some(gpu), solver, element);
     dev.use_gpu().unwrap();
     let frame = FrameInfo {
         frame: 0,
@@ -65,8 +70,27 @@ fn compare(solver: SolverKind, frames: usize) {
     assert!(largest > 0.1, "the bar moves ({largest} mm)");
     assert!(
         worst <= 1e-4 * largest,
-        "{solver:?}: GPU differs by {worst:.3e} of {largest:.3e} mm"
+        "{solver:?} {element:?}: GPU differs by {worst:.3e} of {largest:.3e} mm"
     );
+    if element == ElementKind::P2 {
+        // The mid-edge nodes too.
+        let full = |m: &Fem| m.solver().unwrap().edge_nodes().unwrap().state.u.clone();
+        let (largest, worst) = largest_and_difference(&full(&cpu), &full(&dev));
+        assert!(
+            worst <= 1e-4 * largest,
+            "{solver:?} P2 edge nodes: GPU differs by {worst:.3e} of {largest:.3e} mm"
+        );
+    }
+}
+
+#[test]
+fn gpu_p2_implicit_steps_match_rayon() {
+    compare_elements(SolverKind::Dynamic, ElementKind::P2, 30);
+}
+
+#[test]
+fn gpu_p2_static_solves_match_rayon() {
+    compare_elements(SolverKind::Static, ElementKind::P2, 2);
 }
 
 #[test]
@@ -138,10 +162,21 @@ fn gpu_solves_on_an_octree_proxy_with_hanging_nodes_match_rayon() {
 /// mesh, and the device map still equals the rayon map afterwards.
 #[test]
 fn a_carve_on_the_gpu_backend_rebuilds_the_device_map() {
+    carve_on_the_gpu_backend(ElementKind::P1);
+}
+
+/// The same with quadratic elements, whose map (corners plus the mid-edge
+/// layer) runs on the CPU and goes up to the device buffers.
+#[test]
+fn a_carve_on_the_gpu_backend_with_p2_maps_like_rayon() {
+    carve_on_the_gpu_backend(ElementKind::P2);
+}
+
+fn carve_on_the_gpu_backend(element: ElementKind) {
     use voxflex_core::deformation::{DisplacementTarget, RestPoints};
     let Some(gpu) = test_gpu() else { return };
-    let mut cpu = bar(None, SolverKind::Dynamic);
-    let mut dev = bar(Some(gpu.clone()), SolverKind::Dynamic);
+    let mut cpu = bar(None, SolverKind::Dynamic, element);
+    let mut dev = bar(Some(gpu.clone()), SolverKind::Dynamic, element);
     dev.use_gpu().unwrap();
     let grid = Grid::new([25, 7, 7], DVec3::splat(0.5), DVec3::new(-20.0, 5.0, 40.0));
     let (ic, id) = (

@@ -8,6 +8,13 @@
 //! steps, both solved by block-Jacobi preconditioned conjugate gradients
 //! on an assembled block-sparse matrix, warm-started.
 //!
+//! `element = "p2"` runs 10-node quadratic tetrahedra instead
+//! ([`quadratic`]: a rotation per Gauss point, so the force stays an
+//! energy's gradient) on the proxy's corners plus one node per edge, which
+//! the solver owns ([`edge_nodes`]: boundary conditions, loads and masses
+//! moved onto them; the model's map adds their quadratic part). [`front`]
+//! measures P1 against P2 on issue 12's slender cantilever.
+//!
 //! Everything but the solver — the proxy, materials, boundary conditions,
 //! interactions, binding and map — is [`voxflex_core::mesh_model`]'s.
 //!
@@ -23,19 +30,27 @@
 //!   { name = "bone", range = [300, 4000], youngs_modulus = 1e7, poisson_ratio = 0.3, density = 1900 },
 //! ]
 //! solver = "dynamic"       # or "static"
+//! element = "p1"           # or "p2" (10-node quadratic tetrahedra)
 //! cg_tolerance = 1e-6
 //! ```
 
 #[cfg(test)]
 mod convergence_tests;
+pub mod edge_nodes;
 pub mod element;
+pub mod front;
 #[cfg(test)]
 mod gpu_tests;
+#[cfg(test)]
+mod p2_tests;
 pub mod polar;
+pub mod quadratic;
 pub mod solver;
 #[cfg(test)]
 mod tests;
 
-pub use solver::{CorotationalFem, FemParams, PreconditionerKind, SolverKind, StaticStats};
+pub use solver::{
+    CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind, StaticStats,
+};
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);

@@ -13,18 +13,24 @@
 //!   `D = α M + β K_rot`:
 //!   `(M + h D + h² K_rot) v⁺ = M v + h (f_ext − f_int(u))`, `u⁺ = u + h v⁺`.
 //!
+//! With `element = "p2"` both run on the corners and the mid-edge nodes
+//! ([`crate::edge_nodes`]) with quadratic elements ([`crate::quadratic`]),
+//! the rotation taken per Gauss point; the code below is the same.
+//!
 //! Both assemble the warped stiffness into a [`BlockMatrix`] and solve with
 //! PCG (incomplete Cholesky for the static solves, block Jacobi for the
 //! implicit steps and on the GPU, by default), warm-started from the last
 //! answer; a linear solve that stops above `cg_tolerance` warns and is
 //! counted in the model's notes.
 
+mod elements;
 mod newton;
 
 pub use newton::SMALLEST_LOAD_STEP;
 
+use crate::edge_nodes::EdgeNodes;
 use crate::element::Element;
-use rayon::prelude::*;
+use elements::Elements;
 use serde::Deserialize;
 use std::sync::Arc;
 use voxflex_core::deformation::ModelNotes;
@@ -34,7 +40,8 @@ use voxflex_core::gpu::GpuService;
 use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_core::mesh_model::{
-    BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
+    BlockMatrix, Boundary, EdgeLayer, ElasticMaterial, MeshSolver, NodeState, SolveReport,
+    lumped_masses,
 };
 use voxflex_core::tet_mesh::TetMesh;
 
@@ -47,6 +54,34 @@ pub enum SolverKind {
     /// Implicit backward-Euler time stepping.
     #[default]
     Dynamic,
+}
+
+/// The finite element (`element = "…"`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ElementKind {
+    /// 4-node linear tetrahedra on the proxy's nodes (`"p1"`), one
+    /// rotation per element.
+    #[default]
+    P1,
+    /// 10-node quadratic tetrahedra (`"p2"`): the proxy's nodes plus one
+    /// per edge ([`crate::edge_nodes`]), a rotation per Gauss point
+    /// ([`crate::quadratic`]). Far less stiff in bending than P1 on the
+    /// same proxy.
+    P2,
+}
+
+impl<'de> Deserialize<'de> for ElementKind {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        match s.as_str() {
+            "p1" => Ok(Self::P1),
+            "p2" => Ok(Self::P2),
+            _ => Err(serde::de::Error::custom(format!(
+                "element = \"{s}\" is not an element; use \"p1\" (linear tetrahedra) or \"p2\" \
+                 (10-node quadratic tetrahedra)"
+            ))),
+        }
+    }
 }
 
 /// The PCG's preconditioner (`preconditioner = "…"`).
@@ -69,6 +104,9 @@ pub enum PreconditionerKind {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FemParams {
+    /// `"p1"` (default) or `"p2"`.
+    #[serde(default)]
+    pub element: ElementKind,
     /// `"dynamic"` (default) or `"static"`.
     #[serde(default)]
     pub solver: SolverKind,
@@ -122,6 +160,7 @@ fn default_stiffness_damping() -> f64 {
 impl Default for FemParams {
     fn default() -> Self {
         Self {
+            element: ElementKind::default(),
             solver: SolverKind::default(),
             cg_tolerance: pcg::default_tolerance(),
             cg_max_iterations: None,
@@ -181,12 +220,15 @@ pub struct StaticStats {
 /// The corotational FEM solver.
 pub struct CorotationalFem {
     params: FemParams,
-    elements: Vec<Element>,
+    elements: Elements,
+    /// The mid-edge nodes (`element = "p2"`); the solves run on the
+    /// corners and these.
+    edge_nodes: Option<EdgeNodes>,
     masses: Vec<f64>,
     matrix: BlockMatrix,
-    /// Scratch: 16 warped blocks per element.
+    /// Scratch: 16 (P1) or 100 (P2) warped blocks per element.
     blocks: Vec<DMat3>,
-    /// Scratch: 4 force offsets per element, and summed per node.
+    /// Scratch: 4 (10) force offsets per element, and summed per node.
     corner_f0: Vec<DVec3>,
     f0: Vec<DVec3>,
     /// The PCG's WGSL twin, on the GPU backend.
@@ -197,7 +239,7 @@ pub struct CorotationalFem {
 
 /// Which part of the rotations' own stiffness the tangent carries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Twist {
+pub(crate) enum Twist {
     /// None: `R K Rᵀ` (the implicit steps).
     None,
     /// The exact Hessian (indefinite where elements are compressed).
@@ -212,26 +254,8 @@ impl CorotationalFem {
     /// with `twist`, each element's rotation stiffness too
     /// ([`Element::add_twist_stiffness`]; the static Newton tangent).
     fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>, twist: Twist) {
-        let elements = &self.elements;
-        self.blocks
-            .par_chunks_mut(16)
-            .zip(self.corner_f0.par_chunks_mut(4))
-            .zip(elements.par_iter())
-            .with_min_len(256)
-            .for_each(|((k, f0), e)| {
-                let ue = e.nodes.map(|n| u[n as usize]);
-                e.corotate(e.rotation(ue), k, f0);
-                match twist {
-                    Twist::None => {}
-                    Twist::Full => e.add_twist_stiffness(ue, k, false),
-                    Twist::Clamped => e.add_twist_stiffness(ue, k, true),
-                }
-                if k_scale != 1.0 {
-                    for b in k.iter_mut() {
-                        *b *= k_scale;
-                    }
-                }
-            });
+        self.elements
+            .linearise(u, k_scale, twist, &mut self.blocks, &mut self.corner_f0);
         self.matrix.assemble(&self.blocks, diagonal);
         self.matrix.sum_corners(&self.corner_f0, &mut self.f0);
     }
@@ -304,20 +328,54 @@ impl CorotationalFem {
         }
     }
 
+    /// The mid-edge node layer (`element = "p2"`), with the full state.
+    pub fn edge_nodes(&self) -> Option<&EdgeNodes> {
+        self.edge_nodes.as_ref()
+    }
+
+    /// The element kind the solver runs.
+    pub fn element(&self) -> ElementKind {
+        self.params.element
+    }
+
+    /// Tetrahedra (elements).
+    pub fn elements(&self) -> usize {
+        self.elements.len()
+    }
+
+    /// One step on the solver's own nodes (corners, then edge nodes for
+    /// P2).
+    pub(crate) fn step_nodes(
+        &mut self,
+        dt_s: f64,
+        bc: &Boundary,
+        state: &mut NodeState,
+    ) -> Result<SolveReport, ModelError> {
+        match self.params.solver {
+            SolverKind::Static => self.step_static(bc, state),
+            SolverKind::Dynamic => {
+                if !(dt_s > 0.0 && dt_s.is_finite()) {
+                    return Err(ModelError(format!(
+                        "corotational-fem: the dynamic solver needs a positive frame time step \
+                         (got {dt_s} s); set the scene's time step or use solver = \"static\""
+                    )));
+                }
+                self.step_dynamic(dt_s, bc, state)
+            }
+        }
+    }
+
     /// The figures of the static solves so far.
     pub fn static_stats(&self) -> StaticStats {
         self.stats
     }
 
     /// The elastic force on every node at displacements `u` (µN), each
-    /// element rotated by its own `R(u)`: `Σ R K (Rᵀ x − X)`.
+    /// element rotated by its own `R(u)`: `Σ R K (Rᵀ x − X)` (per Gauss
+    /// point for P2). With `element = "p2"` the nodes are the corners then
+    /// the edge nodes ([`CorotationalFem::edge_nodes`]).
     pub fn elastic_forces(&self, u: &[DVec3]) -> Vec<DVec3> {
-        let per_corner: Vec<DVec3> = self
-            .elements
-            .par_iter()
-            .with_min_len(256)
-            .flat_map_iter(|e| e.elastic_force(e.nodes.map(|n| u[n as usize])))
-            .collect();
+        let per_corner = self.elements.forces(u);
         let mut f = vec![DVec3::ZERO; u.len()];
         self.matrix.sum_corners(&per_corner, &mut f);
         f
@@ -406,16 +464,36 @@ impl MeshSolver for CorotationalFem {
         params: FemParams,
     ) -> Result<Self, ModelError> {
         params.validate()?;
-        let elements: Vec<Element> = (0..mesh.tets.len())
-            .map(|t| Element::new(mesh, t, &materials[mesh.labels[t] as usize]))
-            .collect();
-        let n = mesh.nodes.len();
+        let (elements, edge_nodes, matrix, masses) = match params.element {
+            ElementKind::P1 => {
+                let elements: Vec<Element> = (0..mesh.tets.len())
+                    .map(|t| Element::new(mesh, t, &materials[mesh.labels[t] as usize]))
+                    .collect();
+                (
+                    Elements::Linear(elements),
+                    None,
+                    BlockMatrix::on_mesh(mesh),
+                    lumped_masses(mesh, materials),
+                )
+            }
+            ElementKind::P2 => {
+                let layer = EdgeNodes::new(mesh, materials);
+                let elements = layer.elements(mesh, materials);
+                let nodes: Vec<[u32; 10]> = elements.iter().map(|e| e.nodes).collect();
+                let matrix = BlockMatrix::on_elements(layer.len(), &nodes);
+                let masses = layer.masses.clone();
+                (Elements::Quadratic(elements), Some(layer), matrix, masses)
+            }
+        };
+        let n = masses.len();
+        let per = elements.nodes_per_element();
         Ok(Self {
-            matrix: BlockMatrix::on_mesh(mesh),
-            masses: lumped_masses(mesh, materials),
-            blocks: vec![DMat3::ZERO; 16 * elements.len()],
-            corner_f0: vec![DVec3::ZERO; 4 * elements.len()],
+            matrix,
+            masses,
+            blocks: vec![DMat3::ZERO; per * per * elements.len()],
+            corner_f0: vec![DVec3::ZERO; per * elements.len()],
             f0: vec![DVec3::ZERO; n],
+            edge_nodes,
             gpu: None,
             stats: StaticStats::default(),
             elements,
@@ -443,17 +521,23 @@ impl MeshSolver for CorotationalFem {
         bc: &Boundary,
         state: &mut NodeState,
     ) -> Result<SolveReport, ModelError> {
-        match self.params.solver {
-            SolverKind::Static => self.step_static(bc, state),
-            SolverKind::Dynamic => {
-                if !(dt_s > 0.0 && dt_s.is_finite()) {
-                    return Err(ModelError(format!(
-                        "corotational-fem: the dynamic solver needs a positive frame time step \
-                         (got {dt_s} s); set the scene's time step or use solver = \"static\""
-                    )));
-                }
-                self.step_dynamic(dt_s, bc, state)
-            }
-        }
+        let Some(mut layer) = self.edge_nodes.take() else {
+            return self.step_nodes(dt_s, bc, state);
+        };
+        // P2: the step runs on corners and edge nodes; the corners go back
+        // to the model even when the step fails (a static solve keeps its
+        // last converged state).
+        layer.sync(state);
+        let full_bc = layer.boundary(bc);
+        let mut full = std::mem::take(&mut layer.state);
+        let out = self.step_nodes(dt_s, &full_bc, &mut full);
+        layer.state = full;
+        layer.finish(state);
+        self.edge_nodes = Some(layer);
+        out
+    }
+
+    fn edge_layer(&self) -> Option<EdgeLayer<'_>> {
+        self.edge_nodes.as_ref().map(EdgeNodes::layer)
     }
 }

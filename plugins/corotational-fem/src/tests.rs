@@ -1,7 +1,7 @@
 //! Accuracy and robustness tests of the corotational solver through the
 //! shared mesh model (the same path the plugin's scenes take).
 
-use crate::solver::{CorotationalFem, FemParams, SolverKind};
+use crate::solver::{CorotationalFem, ElementKind, FemParams, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::{DMat3, DQuat, DVec3};
 use voxflex_core::grid::Grid;
@@ -332,10 +332,28 @@ fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() 
 
 #[test]
 fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
+    a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh_with(ElementKind::P1);
+}
+
+/// The same with quadratic elements: the solver and its edge nodes are
+/// rebuilt on the changed mesh.
+#[test]
+fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh_with_p2() {
+    a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh_with(ElementKind::P2);
+}
+
+fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh_with(element: ElementKind) {
     use voxflex_core::deformation::RestPoints;
     // The cantilever, cut through at x = 5; a pull on the free half moves
     // it away while the clamped half stays.
-    let mut m = cantilever(2, 0.0, static_params(1e-10));
+    let mut m = cantilever(
+        2,
+        0.0,
+        FemParams {
+            element,
+            ..static_params(1e-10)
+        },
+    );
     let grid = Grid::new([21, 3, 3], DVec3::splat(0.5), DVec3::ZERO);
     let id = m.bind(RestPoints::Lattice(grid)).unwrap();
     assert!(
@@ -384,15 +402,42 @@ fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh() {
 
 #[test]
 fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh() {
+    a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh_with(ElementKind::P1);
+}
+
+/// The same with quadratic elements: the solver and its edge nodes are
+/// rebuilt on the changed mesh.
+#[test]
+fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh_with_p2() {
+    a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh_with(ElementKind::P2);
+}
+
+fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh_with(
+    element: ElementKind,
+) {
     use voxflex_core::deformation::RestPoints;
     use voxflex_core::mesh_model::cantilever::tip_deflection;
     let load = 1e-3;
     let tip = |m: &Fem| tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u);
-    let mut whole = cantilever(2, load, static_params(1e-10));
+    let mut whole = cantilever(
+        2,
+        load,
+        FemParams {
+            element,
+            ..static_params(1e-10)
+        },
+    );
     whole.step(frame(0.0)).unwrap();
     // The top half of the beam's middle carved away: thinner there, the
     // tip sags more under the same load.
-    let mut m = cantilever(2, load, static_params(1e-10));
+    let mut m = cantilever(
+        2,
+        load,
+        FemParams {
+            element,
+            ..static_params(1e-10)
+        },
+    );
     let grid = Grid::new([21, 3, 3], DVec3::splat(0.5), DVec3::ZERO);
     let id = m.bind(RestPoints::Lattice(grid)).unwrap();
     let outside = m.notes().unwrap()["bound_points_outside_proxy"];

@@ -3,7 +3,6 @@
 //! [`CorotationalFem::step_static`]).
 
 use super::{CorotationalFem, Twist};
-use rayon::prelude::*;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::mesh_model::{Boundary, NodeState, SolveReport};
@@ -52,12 +51,7 @@ impl CorotationalFem {
     /// The total potential `Σ_e E_e(u) − f_ext · u` (µN·mm): the static
     /// solve's merit function, whose gradient is `f_int − f_ext`.
     fn potential(&self, u: &[DVec3], f_ext: &[DVec3]) -> f64 {
-        let strain: f64 = self
-            .elements
-            .par_iter()
-            .with_min_len(256)
-            .map(|e| e.energy(e.nodes.map(|n| u[n as usize])))
-            .sum();
+        let strain = self.elements.energy(u);
         strain - f_ext.iter().zip(u).map(|(f, x)| f.dot(*x)).sum::<f64>()
     }
 

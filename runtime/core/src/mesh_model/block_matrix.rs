@@ -1,7 +1,9 @@
 //! A symmetric block-sparse matrix with 3 × 3 blocks on the node graph of
 //! a tetrahedral mesh (block `(i, j)` exists when nodes `i` and `j` share a
 //! tetrahedron), assembled from per-tetrahedron 4 × 4 block contributions
-//! without locks, and multiplied in parallel by rows.
+//! (or `K × K` for elements of `K` nodes, such as 10-node quadratic
+//! tetrahedra: [`BlockMatrix::on_elements`]) without locks, and multiplied
+//! in parallel by rows.
 //!
 //! Assembly: every tetrahedron writes its 16 blocks into its own slots of
 //! a scratch array, and each matrix block then sums the slots listed for it
@@ -23,7 +25,8 @@ pub struct BlockMatrix {
     pub blocks: Vec<DMat3>,
     /// Position of each row's diagonal block.
     diag: Vec<u32>,
-    /// For tetrahedron `t`, local block `4a + b` lands in `blocks[slot[16 t + 4a + b]]`.
+    /// For tetrahedron `t`, local block `4a + b` lands in `blocks[slot[16 t + 4a + b]]`
+    /// (`K a + b` and `K² t` for elements of `K` nodes).
     slot: Vec<u32>,
     /// Block `k`'s contributions are `scratch[gather[gather_start[k] .. gather_start[k + 1]]]`.
     gather_start: Vec<u32>,
@@ -37,9 +40,16 @@ pub struct BlockMatrix {
 impl BlockMatrix {
     /// The (zero) matrix on `mesh`'s node graph.
     pub fn on_mesh(mesh: &TetMesh) -> Self {
-        let n = mesh.nodes.len();
+        Self::on_elements(mesh.nodes.len(), &mesh.tets)
+    }
+
+    /// The (zero) matrix on the node graph of `elements` of `K` nodes each
+    /// over `n` nodes: per element, `K²` contributions to
+    /// [`BlockMatrix::assemble`] (`K a + b` for its nodes `a`, `b`) and `K`
+    /// per-corner values to [`BlockMatrix::sum_corners`].
+    pub fn on_elements<const K: usize>(n: usize, elements: &[[u32; K]]) -> Self {
         let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
-        for tet in &mesh.tets {
+        for tet in elements {
             for &a in tet {
                 nbrs[a as usize].extend_from_slice(tet);
             }
@@ -63,8 +73,8 @@ impl BlockMatrix {
             );
             a as u32 + col[a..b].binary_search(&j).expect("block of a tetrahedron") as u32
         };
-        let mut slot = Vec::with_capacity(16 * mesh.tets.len());
-        for tet in &mesh.tets {
+        let mut slot = Vec::with_capacity(K * K * elements.len());
+        for tet in elements {
             for &a in tet {
                 for &b in tet {
                     slot.push(find(a, b));
@@ -86,7 +96,7 @@ impl BlockMatrix {
             count[s as usize] += 1;
         }
         let mut corner_start = vec![0u32; n + 1];
-        for tet in &mesh.tets {
+        for tet in elements {
             for &a in tet {
                 corner_start[a as usize + 1] += 1;
             }
@@ -95,10 +105,10 @@ impl BlockMatrix {
             corner_start[i + 1] += corner_start[i];
         }
         let mut fill = corner_start.clone();
-        let mut corners = vec![0u32; 4 * mesh.tets.len()];
-        for (t, tet) in mesh.tets.iter().enumerate() {
+        let mut corners = vec![0u32; K * elements.len()];
+        for (t, tet) in elements.iter().enumerate() {
             for (a, &node) in tet.iter().enumerate() {
-                corners[fill[node as usize] as usize] = (4 * t + a) as u32;
+                corners[fill[node as usize] as usize] = (K * t + a) as u32;
                 fill[node as usize] += 1;
             }
         }
@@ -128,7 +138,7 @@ impl BlockMatrix {
         assert_eq!(
             contributions.len(),
             self.slot.len(),
-            "16 blocks per tetrahedron"
+            "K² blocks per element"
         );
         let (gs, g) = (&self.gather_start, &self.gather);
         self.blocks
@@ -162,7 +172,8 @@ impl BlockMatrix {
     }
 
     /// Sums per-corner values (`per_corner[4 t + a]` for corner `a` of
-    /// tetrahedron `t`) into their nodes: `out[n] = Σ` over `n`'s corners.
+    /// tetrahedron `t`; `K t + a` for elements of `K` nodes) into their
+    /// nodes: `out[n] = Σ` over `n`'s corners.
     pub fn sum_corners(&self, per_corner: &[DVec3], out: &mut [DVec3]) {
         let (cs, c) = (&self.corner_start, &self.corners);
         out.par_iter_mut()

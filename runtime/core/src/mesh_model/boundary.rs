@@ -18,6 +18,16 @@ pub struct Boundary {
     pub hanging: Vec<HangingNode>,
     /// External force per node (gravity, loads), µN.
     pub force: Vec<DVec3>,
+    /// Gravity's acceleration (mm/s²); `force` holds it as lumped masses
+    /// ([`super::lumped_masses`]) times this. Quadratic elements, whose
+    /// mass sits mostly on the mid-edge nodes, take it back out and spread
+    /// it their own way.
+    pub gravity: DVec3,
+    /// The boundary faces a traction loads (their corners) and the total
+    /// force on each (µN, area × traction, ramped), already in `force` as a
+    /// third on each corner (the consistent load of linear elements);
+    /// quadratic elements move it onto the faces' edges.
+    pub faces: Vec<([u32; 3], DVec3)>,
 }
 
 impl Boundary {
@@ -28,6 +38,8 @@ impl Boundary {
             driven: Vec::new(),
             hanging: Vec::new(),
             force: vec![DVec3::ZERO; nodes],
+            gravity: DVec3::ZERO,
+            faces: Vec::new(),
         }
     }
 
@@ -135,10 +147,23 @@ impl TieTables {
 /// area `A` gives `A t / 3` to each corner (the consistent load of linear
 /// elements). Returns the forces added and how many faces carried load.
 pub fn traction_forces(mesh: &TetMesh, lo: DVec3, hi: DVec3, t: DVec3, out: &mut [DVec3]) -> usize {
+    let faces = traction_faces(mesh, lo, hi, t);
+    for (f, force) in &faces {
+        for &n in f {
+            out[n as usize] += *force / 3.0;
+        }
+    }
+    faces.len()
+}
+
+/// The boundary faces of `mesh` whose centroids lie in the box `[lo, hi]`
+/// (mm) and the total force (µN) a uniform traction `t` (Pa) puts on each:
+/// area × `t` ([`Boundary::faces`]).
+pub fn traction_faces(mesh: &TetMesh, lo: DVec3, hi: DVec3, t: DVec3) -> Vec<([u32; 3], DVec3)> {
     let Ok(faces) = mesh.boundary_faces() else {
-        return 0;
+        return Vec::new();
     };
-    let mut loaded = 0;
+    let mut loaded = Vec::new();
     for f in faces {
         let p = f.map(|n| mesh.nodes[n as usize]);
         let c = (p[0] + p[1] + p[2]) / 3.0;
@@ -146,10 +171,7 @@ pub fn traction_forces(mesh: &TetMesh, lo: DVec3, hi: DVec3, t: DVec3, out: &mut
             continue;
         }
         let area = (p[1] - p[0]).cross(p[2] - p[0]).length() / 2.0;
-        for n in f {
-            out[n as usize] += t * (area / 3.0);
-        }
-        loaded += 1;
+        loaded.push((f, t * area));
     }
     loaded
 }

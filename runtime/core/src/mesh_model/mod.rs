@@ -18,6 +18,7 @@ pub mod boundary;
 pub mod cantilever;
 pub mod carve;
 pub mod cut;
+pub mod edge_layer;
 pub mod ichol;
 pub mod inversion;
 pub mod material;
@@ -30,6 +31,7 @@ pub mod small_features;
 
 pub use block_matrix::BlockMatrix;
 pub use boundary::Boundary;
+pub use edge_layer::EdgeLayer;
 pub use material::{ElasticMaterial, lumped_masses};
 pub use model::MeshModel;
 pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
@@ -155,6 +157,13 @@ pub trait MeshSolver: Send + Sized + 'static {
             "{}: no GPU path; use backend = \"cpu\" (or \"auto\")",
             Self::NAME
         )))
+    }
+
+    /// The mid-edge layer of a solver with quadratic elements, which `map`
+    /// adds to the corners' linear interpolation ([`EdgeLayer`]); `None`
+    /// (the default) for linear elements.
+    fn edge_layer(&self) -> Option<EdgeLayer<'_>> {
+        None
     }
 
     /// Adds the solver's own figures to the model's notes (→

@@ -1,6 +1,6 @@
 //! [`MeshModel`]: a [`MeshSolver`] wrapped into a whole deformation model.
 
-use super::boundary::{Boundary, traction_forces};
+use super::boundary::{Boundary, traction_faces};
 use super::carve::{GONE, carve_mesh, keep_nodes};
 use super::cut::cut_mesh;
 use super::inversion::{InversionWatch, inverted_tetrahedra};
@@ -35,6 +35,8 @@ const STILL_MM: f64 = 1e-6;
 struct Load {
     /// Full nodal forces, µN.
     forces: Vec<DVec3>,
+    /// A traction's faces and their full forces ([`Boundary::faces`]).
+    faces: Vec<([u32; 3], DVec3)>,
     frames: u64,
     done: u64,
 }
@@ -516,11 +518,16 @@ impl<S: MeshSolver> MeshModel<S> {
             } => {
                 let (lo, hi) = (DVec3::from_array(*min), DVec3::from_array(*max));
                 let mut forces = vec![DVec3::ZERO; b.mesh.nodes.len()];
+                let mut loaded = Vec::new();
                 match (traction, force) {
                     (Some(t), _) => {
-                        let faces =
-                            traction_forces(&b.mesh, lo, hi, DVec3::from_array(*t), &mut forces);
-                        if faces == 0 {
+                        loaded = traction_faces(&b.mesh, lo, hi, DVec3::from_array(*t));
+                        for (f, force) in &loaded {
+                            for &n in f {
+                                forces[n as usize] += *force / 3.0;
+                            }
+                        }
+                        if loaded.is_empty() {
                             return Err(ModelError(format!(
                                 "{name} load: no boundary face of the proxy has its centre in \
                                  the box {min:?}..{max:?} (mm)"
@@ -545,6 +552,7 @@ impl<S: MeshSolver> MeshModel<S> {
                 }
                 self.loads.push(Load {
                     forces,
+                    faces: loaded,
                     frames: *frames,
                     done: 0,
                 });
@@ -726,6 +734,10 @@ impl<S: MeshSolver> MeshModel<S> {
             .collect();
         for load in &mut self.loads {
             load.forces = keep_nodes(&load.forces, index);
+            load.faces.retain_mut(|(f, _)| {
+                *f = f.map(|n| index[n as usize]);
+                !f.contains(&GONE)
+            });
         }
         let grabs = self.grabs.len();
         self.grabs.retain_mut(|g| {
@@ -758,12 +770,16 @@ impl<S: MeshSolver> MeshModel<S> {
             b.bc.driven.push((g.node, g.held));
         }
         b.bc.force.clone_from(&b.gravity);
+        b.bc.gravity = DVec3::from_array(self.params.gravity);
+        b.bc.faces.clear();
         for load in &mut self.loads {
             load.done = (load.done + 1).min(load.frames);
             let ramp = load.done as f64 / load.frames as f64;
             for (f, l) in b.bc.force.iter_mut().zip(&load.forces) {
                 *f += ramp * *l;
             }
+            b.bc.faces
+                .extend(load.faces.iter().map(|&(f, force)| (f, ramp * force)));
         }
         let before = b.state.u.clone();
         self.last = b.solver.step(dt_s, &b.bc, &mut b.state)?;
@@ -1065,6 +1081,27 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
             .binding;
         let (x, y, z) = match out {
             DisplacementTarget::Cpu { x, y, z } => (x, y, z),
+            DisplacementTarget::Gpu { x, y, z } if b.solver.edge_layer().is_some() => {
+                // Quadratic elements: the map runs on the CPU and its
+                // result goes up (the device map is the linear one).
+                let n = bound.len();
+                let mut out = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+                let [ox, oy, oz] = &mut out;
+                let u = [&b.u32[0][..], &b.u32[1][..], &b.u32[2][..]];
+                bound.map(&b.mesh, u, [&mut *ox, &mut *oy, &mut *oz]);
+                if let Some(layer) = b.solver.edge_layer() {
+                    layer.add_to_map(bound, [ox, oy, oz]);
+                }
+                let gpu = self.gpu.clone().ok_or_else(|| {
+                    ModelError(format!("{}: a GPU target needs the GPU backend", S::NAME))
+                })?;
+                for (buf, values) in [x, y, z].into_iter().zip(&out) {
+                    gpu.write_buffer(buf, 0, bytemuck::cast_slice(values))
+                        .map_err(|e| ModelError(format!("{}: {e}", S::NAME)))?;
+                }
+                self.unmapped = false;
+                return Ok(());
+            }
             DisplacementTarget::Gpu { x, y, z } => {
                 self.map_on_device(binding.0 as usize, [x, y, z])?;
                 self.unmapped = false;
@@ -1082,7 +1119,10 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
             )));
         }
         let u = [&b.u32[0][..], &b.u32[1][..], &b.u32[2][..]];
-        bound.map(&b.mesh, u, [x, y, z]);
+        bound.map(&b.mesh, u, [&mut *x, &mut *y, &mut *z]);
+        if let Some(layer) = b.solver.edge_layer() {
+            layer.add_to_map(bound, [x, y, z]);
+        }
         self.unmapped = false;
         Ok(())
     }
