@@ -3,7 +3,8 @@
 //! Plugin discovery and checked loading ([`plugin_loader`]), scene files
 //! ([`scene`]), backend selection ([`backend`]) and the wgpu GPU context
 //! ([`gpu_context`], the only place voxflex links wgpu), the scene pipeline
-//! with versioned, dirty-region stages ([`pipeline`]), run reports
+//! with versioned, dirty-region stages ([`pipeline`]), the checks of
+//! `voxflex validate` ([`preflight`]), run reports
 //! ([`metrics`]) and the `voxflex bench` measurements ([`mod@bench`]).
 
 pub mod backend;
@@ -12,6 +13,7 @@ pub mod gpu_context;
 pub mod metrics;
 pub mod pipeline;
 pub mod plugin_loader;
+pub mod preflight;
 pub mod scene;
 pub mod visualise;
 pub mod warnings;

@@ -4,7 +4,10 @@
 //! Every table rejects unknown keys with `file:line:column`, the key, and the
 //! closest valid key. Plugin parameters (`[model.params]`) and interactions
 //! (`[[interaction]]`) are passed through as TOML text: the plugin validates
-//! them itself and names its own keys.
+//! them itself and names its own keys. Interactions are also parsed here,
+//! with the parser every model uses, so a bad one is refused when the
+//! scene loads, located in its own `[[interaction]]` table; the plugins'
+//! parameter tables are checked by [`crate::preflight`].
 //!
 //! ```toml
 //! [scene]
@@ -36,6 +39,8 @@
 use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+use voxflex_core::interaction::InteractionSpec;
+use voxflex_core::non_finite::NonFinitePolicy;
 use voxflex_core::resample::{Interpolation, ResampleParams};
 
 /// A scene file could not be used.
@@ -118,6 +123,11 @@ pub struct VolumeSettings {
     /// Refuse volumes with more voxels than this.
     #[serde(default = "default_max_voxels")]
     pub max_voxels: usize,
+    /// NaN and ±∞ voxels of a file: `"replace"` (default; warn with the
+    /// counts, NaN → background, ±∞ → the finite range's ends) or
+    /// `"refuse"`. See [`voxflex_core::non_finite`].
+    #[serde(default)]
+    pub non_finite: NonFinitePolicy,
 }
 
 fn default_max_voxels() -> usize {
@@ -620,30 +630,41 @@ impl Scene {
             ));
         }
         let mut interactions = vec![];
-        for mut table in file.interaction {
+        for (n, mut table) in file.interaction.into_iter().enumerate() {
+            // Errors point into this [[interaction]] table, not the first.
+            let here = |key: &str, message: String| SceneError::Invalid {
+                location: locate_in_array(text, path, "interaction", n, key),
+                message,
+            };
             let frame = match table.remove("frame") {
                 Some(toml::Value::Integer(f)) if f >= 0 => f as u64,
                 Some(v) => {
-                    return Err(invalid("frame", format!("{v} must be a frame number ≥ 0")));
+                    return Err(here(
+                        "frame",
+                        format!("`frame`: {v} must be a frame number ≥ 0"),
+                    ));
                 }
                 None => {
-                    return Err(SceneError::Invalid {
-                        location: locate_key(text, path, "[[interaction]]"),
-                        message: "every [[interaction]] needs `frame = <number>`".into(),
-                    });
+                    return Err(here(
+                        "",
+                        "every [[interaction]] needs `frame = <number>`".into(),
+                    ));
                 }
             };
             if frame >= s.frames {
-                return Err(invalid(
+                return Err(here(
                     "frame",
                     format!(
-                        "interaction at frame {frame} never happens: the scene has {} frames",
+                        "`frame`: interaction at frame {frame} never happens: the scene has {} frames",
                         s.frames
                     ),
                 ));
             }
-            let toml =
-                toml::to_string(&table).map_err(|e| invalid("interaction", e.to_string()))?;
+            let toml = toml::to_string(&table).map_err(|e| here("", e.to_string()))?;
+            // Every model parses its interactions with this: a typo, an
+            // unknown kind or a bad value is refused here, by `validate`
+            // as by `run`, before any frame is computed.
+            InteractionSpec::from_toml(&toml).map_err(|e| here("kind", e.0))?;
             interactions.push(Interaction { frame, toml });
         }
         interactions.sort_by_key(|i| i.frame);
@@ -731,6 +752,53 @@ fn locate_key(text: &str, path: &Path, key: &str) -> String {
     path.display().to_string()
 }
 
+/// `file:line:column` of `key` inside the `n`-th (from 0) `[[array]]`
+/// table, else of that table's header (else the file). An empty `key`
+/// gives the header.
+pub fn locate_in_array(text: &str, path: &Path, array: &str, n: usize, key: &str) -> String {
+    let header = format!("[[{array}]]");
+    let lines: Vec<&str> = text.lines().collect();
+    let is_header = |l: &str| {
+        let t = l.trim_start();
+        t.starts_with(&header) && t[header.len()..].trim_start().is_empty_or_comment()
+    };
+    let Some(start) = (0..lines.len()).filter(|&i| is_header(lines[i])).nth(n) else {
+        return path.display().to_string();
+    };
+    let at = |i: usize| {
+        let t = lines[i].trim_start();
+        format!(
+            "{}:{}:{}",
+            path.display(),
+            i + 1,
+            lines[i].len() - t.len() + 1
+        )
+    };
+    if !key.is_empty() {
+        for (i, line) in lines.iter().enumerate().skip(start + 1) {
+            let t = line.trim_start();
+            if t.starts_with('[') {
+                break;
+            }
+            if t.starts_with(key) && t[key.len()..].trim_start().starts_with('=') {
+                return at(i);
+            }
+        }
+    }
+    at(start)
+}
+
+/// `str::is_empty`, or a TOML comment.
+trait EmptyOrComment {
+    fn is_empty_or_comment(&self) -> bool;
+}
+
+impl EmptyOrComment for str {
+    fn is_empty_or_comment(&self) -> bool {
+        self.is_empty() || self.starts_with('#')
+    }
+}
+
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
     let line = before.matches('\n').count() + 1;
@@ -816,7 +884,7 @@ angle_deg = 10
 
 [[interaction]]
 frame = 1
-kind = "grab"
+kind = "release"
 "#;
 
     #[test]
@@ -829,7 +897,7 @@ kind = "grab"
             s.interactions,
             vec![Interaction {
                 frame: 1,
-                toml: "kind = \"grab\"\n".into()
+                toml: "kind = \"release\"\n".into()
             }]
         );
         assert!(s.resample.is_some(), "a model implies the resample stage");
@@ -899,6 +967,86 @@ kind = "grab"
             .unwrap_err()
             .to_string();
         assert!(e.contains("never happens"), "{e}");
+    }
+
+    /// An error in the second [[interaction]] points at that table's line,
+    /// not at the first table's `frame =`; bad interactions are refused
+    /// when the scene loads.
+    #[test]
+    fn interaction_errors_point_into_their_own_table() {
+        let line_of =
+            |t: &str, needle: &str| t.lines().position(|l| l.starts_with(needle)).unwrap() + 1;
+        // A bare grab (no point) is refused at its own table's `kind`.
+        let text = format!("{GOOD}\n[[interaction]]\nframe = 2\nkind = \"grab\"\n");
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with(&format!("t.toml:{}:1:", line_of(&text, "kind = \"grab\"")))
+                && e.contains("missing field `point`"),
+            "{e}"
+        );
+        let fixed = GOOD;
+        let text = format!(
+            "{fixed}\n[[interaction]]\nframe = 2\nkind = \"grab\"\npont = [0, 0, 0]\nby = [1, 0, 0]\n"
+        );
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let second_kind = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| l.starts_with("kind ="))
+            .nth(1)
+            .unwrap()
+            .0
+            + 1;
+        assert!(
+            e.starts_with(&format!("t.toml:{second_kind}:1:")) && e.contains("pont"),
+            "{e}"
+        );
+        let text = format!("{fixed}\n[[interaction]]\nframe = 7\nkind = \"release\"\n");
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let frame7 = line_of(&text, "frame = 7");
+        assert!(
+            e.starts_with(&format!("t.toml:{frame7}:1: `frame`")) && e.contains("never happens"),
+            "{e}"
+        );
+        for (kind, needle) in [
+            ("kind = \"poke\"", "poke"),
+            (
+                "kind = \"cut\"\npolygon = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]",
+                "spans no area",
+            ),
+        ] {
+            let text = format!("{fixed}\n[[interaction]]\nframe = 1\n{kind}\n");
+            let e = Scene::parse(&text, Path::new("t.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+    }
+
+    #[test]
+    fn non_finite_policy_defaults_to_replace_and_takes_refuse() {
+        let s = Scene::parse(GOOD, Path::new("t.toml")).unwrap();
+        assert_eq!(s.volume.non_finite, NonFinitePolicy::Replace);
+        let text = GOOD.replace(
+            "dims = [8, 8, 8]",
+            "dims = [8, 8, 8]\nnon_finite = \"refuse\"",
+        );
+        let s = Scene::parse(&text, Path::new("t.toml")).unwrap();
+        assert_eq!(s.volume.non_finite, NonFinitePolicy::Refuse);
+        let text = GOOD.replace(
+            "dims = [8, 8, 8]",
+            "dims = [8, 8, 8]\nnon_finite = \"ignore\"",
+        );
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ignore") && e.contains("refuse"), "{e}");
     }
 
     #[test]
