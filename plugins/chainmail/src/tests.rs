@@ -451,6 +451,29 @@ fn carving_removes_elements_from_the_model() {
     assert!(InteractionSpec::from_toml("kind = \"carve\"\ncentre = [5, 5, 5]").is_err());
 }
 
+/// Before `init`, `interact` is a dry run (what `voxflex validate` uses):
+/// a bad interaction is refused with the parser's message, a good one is
+/// accepted, and nothing is built.
+#[test]
+fn interact_before_init_only_validates() {
+    use voxflex_core::deformation::DeformationModel;
+    let mut p =
+        crate::ChainMailPlugin::new(params("", "{ range = [0, 256], constraint = 0.1 }"), None);
+    let e = p
+        .interact("kind = \"grab\"\npont = [0, 0, 0]\nby = [1, 0, 0]")
+        .unwrap_err()
+        .0;
+    assert!(e.contains("pont"), "{e}");
+    let e = p
+        .interact("kind = \"cut\"\npolygon = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]")
+        .unwrap_err()
+        .0;
+    assert!(e.contains("spans no area"), "{e}");
+    p.interact("kind = \"grab\"\npoint = [0, 0, 0]\nby = [1, 0, 0]")
+        .unwrap();
+    assert!(p.model().is_none(), "nothing built, nothing applied");
+}
+
 /// As the mesh models do: a carve of every element is refused (and leaves
 /// the model whole), one that removes nothing warns and changes nothing.
 #[test]

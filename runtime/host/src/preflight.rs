@@ -2,22 +2,29 @@
 //! file, given first, without computing a frame.
 //!
 //! [`Scene::load`](crate::scene::Scene::load) already refuses bad keys and
-//! values and every malformed `[[interaction]]`. On top of it this loads
-//! the plugins the scene names and creates an instance of each with its
-//! parameter table — the ABI's `create`, which parses and validates the
-//! parameters, **without** `init` (no volume, no GPU) — so a typo in
-//! `[model.params]` or `[render.params]`, ν = 0.6 or E < 0 is refused with
-//! the plugin's own message; it loads the source (the same
+//! values. On top of it this loads the plugins the scene names and creates
+//! an instance of each with its parameter table — the ABI's `create`,
+//! which parses and validates the parameters, **without** `init` (no
+//! volume, no GPU) — so a typo in `[model.params]` or `[render.params]`,
+//! ν = 0.6 or E < 0 is refused with the plugin's own message; it hands
+//! every `[[interaction]]` to that uninitialised model, whose `interact` is
+//! then a dry run (parse and validate, apply nothing: the
+//! `DeformationModel::interact` contract), so a typo, an unknown kind or a
+//! cut polygon without area is refused as `run` refuses it, located in its
+//! own table — and a plugin with interactions of its own checks them with
+//! its own parser; it loads the source (the same
 //! [`load_source`] `run` uses: unknown phantom, unreadable or damaged
 //! file, refused non-finite voxels); and it checks each `[[roi]]`'s growth
 //! parameters and, when no model moves the volume, its seed (inside the
 //! volume, inside its intensity window).
 //!
 //! Each error reads as `run`'s, with the scene location in front where
-//! `run` has none. Not checked (they need a frame): an interaction a model
-//! refuses by kind once running (ChainMail has no `load`), a grab or fix
-//! that finds no element, and, with a model, ROI seeds (the deformed grid
-//! they are looked up in is only known after the run).
+//! `run` has none. Not checked (they need a frame or the volume in the
+//! model): an interaction a model refuses by kind once running (ChainMail
+//! has no `load`), a grab or fix that finds no element, parameters a model
+//! checks against the volume in `init` (a ChainMail `crop` beyond it, a
+//! mesh-file proxy), and, with a model, ROI seeds (the deformed grid they
+//! are looked up in is only known after the run).
 
 use crate::pipeline::{RunError, load_source};
 use crate::plugin_loader;
@@ -25,6 +32,7 @@ use crate::scene::{Scene, SceneError, locate_in_array};
 use crate::visualise::roi_request;
 use voxflex_abi::host_side::{DeformationProxy, HostServices};
 use voxflex_abi::renderer::RendererProxy;
+use voxflex_core::deformation::DeformationModel;
 use voxflex_core::opacity::{LambdaChoice, OpacityError};
 use voxflex_core::volume::Volume;
 
@@ -84,7 +92,7 @@ fn check_model(
         )));
     }
     // SAFETY: the vtable comes from a checked, never-unloaded library.
-    unsafe {
+    let mut model = unsafe {
         DeformationProxy::create(
             &p.name,
             vtable,
@@ -92,6 +100,16 @@ fn check_model(
             services.clone(),
         )
     }?;
+    // Before init, `interact` is a dry run: the model parses and validates
+    // each interaction with its own parser and applies nothing.
+    for i in &scene.interactions {
+        model.interact(&i.toml).map_err(|e| {
+            RunError::Scene(SceneError::Invalid {
+                location: locate_in_array(&scene.text, &scene.path, "interaction", i.index, "kind"),
+                message: e.0,
+            })
+        })?;
+    }
     Ok(())
 }
 

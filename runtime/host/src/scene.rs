@@ -4,10 +4,8 @@
 //! Every table rejects unknown keys with `file:line:column`, the key, and the
 //! closest valid key. Plugin parameters (`[model.params]`) and interactions
 //! (`[[interaction]]`) are passed through as TOML text: the plugin validates
-//! them itself and names its own keys. Interactions are also parsed here,
-//! with the parser every model uses, so a bad one is refused when the
-//! scene loads, located in its own `[[interaction]]` table; the plugins'
-//! parameter tables are checked by [`crate::preflight`].
+//! them itself and names its own keys; [`crate::preflight`] has the plugin
+//! check both without running (what `voxflex validate` does).
 //!
 //! ```toml
 //! [scene]
@@ -39,7 +37,6 @@
 use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
-use voxflex_core::interaction::InteractionSpec;
 use voxflex_core::non_finite::NonFinitePolicy;
 use voxflex_core::resample::{Interpolation, ResampleParams};
 
@@ -153,6 +150,9 @@ pub struct Interaction {
     pub frame: u64,
     /// The rest of the table, as the model receives it (TOML text).
     pub toml: String,
+    /// Its position among the file's `[[interaction]]` tables, from 0 (for
+    /// messages: see [`locate_in_array`]).
+    pub index: usize,
 }
 
 /// `[resample]`: the resampling stage.
@@ -578,10 +578,15 @@ impl Scene {
                 return Err(invalid("file", format!("`{}` must end in .png", r.file)));
             }
         }
-        for roi in &file.roi {
+        for (n, roi) in file.roi.iter().enumerate() {
+            // Errors point into this [[roi]] table, not the first one.
+            let invalid = |key: &str, message: String| SceneError::Invalid {
+                location: locate_in_array(text, path, "roi", n, key),
+                message: format!("`{key}`: {message}"),
+            };
             if roi.seed.is_some() == roi.seed_slice.is_some() {
                 return Err(SceneError::Invalid {
-                    location: locate_key(text, path, "[[roi]]"),
+                    location: locate_in_array(text, path, "roi", n, ""),
                     message: "every [[roi]] needs exactly one of `seed = [x, y, z]` (mm) or `seed_slice = { axis, index, pixel }`".into(),
                 });
             }
@@ -661,11 +666,11 @@ impl Scene {
                 ));
             }
             let toml = toml::to_string(&table).map_err(|e| here("", e.to_string()))?;
-            // Every model parses its interactions with this: a typo, an
-            // unknown kind or a bad value is refused here, by `validate`
-            // as by `run`, before any frame is computed.
-            InteractionSpec::from_toml(&toml).map_err(|e| here("kind", e.0))?;
-            interactions.push(Interaction { frame, toml });
+            interactions.push(Interaction {
+                frame,
+                toml,
+                index: n,
+            });
         }
         interactions.sort_by_key(|i| i.frame);
         let resample = match (&file.model, file.resample) {
@@ -897,7 +902,8 @@ kind = "release"
             s.interactions,
             vec![Interaction {
                 frame: 1,
-                toml: "kind = \"release\"\n".into()
+                toml: "kind = \"release\"\n".into(),
+                index: 0,
             }]
         );
         assert!(s.resample.is_some(), "a model implies the resample stage");
@@ -969,43 +975,13 @@ kind = "release"
         assert!(e.contains("never happens"), "{e}");
     }
 
-    /// An error in the second [[interaction]] points at that table's line,
-    /// not at the first table's `frame =`; bad interactions are refused
-    /// when the scene loads.
+    /// An error in a later [[interaction]] points at that table's lines,
+    /// not at the first table's `frame =`.
     #[test]
     fn interaction_errors_point_into_their_own_table() {
         let line_of =
             |t: &str, needle: &str| t.lines().position(|l| l.starts_with(needle)).unwrap() + 1;
-        // A bare grab (no point) is refused at its own table's `kind`.
-        let text = format!("{GOOD}\n[[interaction]]\nframe = 2\nkind = \"grab\"\n");
-        let e = Scene::parse(&text, Path::new("t.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.starts_with(&format!("t.toml:{}:1:", line_of(&text, "kind = \"grab\"")))
-                && e.contains("missing field `point`"),
-            "{e}"
-        );
-        let fixed = GOOD;
-        let text = format!(
-            "{fixed}\n[[interaction]]\nframe = 2\nkind = \"grab\"\npont = [0, 0, 0]\nby = [1, 0, 0]\n"
-        );
-        let e = Scene::parse(&text, Path::new("t.toml"))
-            .unwrap_err()
-            .to_string();
-        let second_kind = text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| l.starts_with("kind ="))
-            .nth(1)
-            .unwrap()
-            .0
-            + 1;
-        assert!(
-            e.starts_with(&format!("t.toml:{second_kind}:1:")) && e.contains("pont"),
-            "{e}"
-        );
-        let text = format!("{fixed}\n[[interaction]]\nframe = 7\nkind = \"release\"\n");
+        let text = format!("{GOOD}\n[[interaction]]\nframe = 7\nkind = \"release\"\n");
         let e = Scene::parse(&text, Path::new("t.toml"))
             .unwrap_err()
             .to_string();
@@ -1014,19 +990,37 @@ kind = "release"
             e.starts_with(&format!("t.toml:{frame7}:1: `frame`")) && e.contains("never happens"),
             "{e}"
         );
-        for (kind, needle) in [
-            ("kind = \"poke\"", "poke"),
-            (
-                "kind = \"cut\"\npolygon = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]",
-                "spans no area",
-            ),
-        ] {
-            let text = format!("{fixed}\n[[interaction]]\nframe = 1\n{kind}\n");
-            let e = Scene::parse(&text, Path::new("t.toml"))
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains(needle), "{e}");
-        }
+        let text = format!("{GOOD}\n[[interaction]]\nkind = \"release\"\n");
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let second = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| *l == "[[interaction]]")
+            .nth(1)
+            .unwrap()
+            .0
+            + 1;
+        assert!(
+            e.starts_with(&format!("t.toml:{second}:1:")) && e.contains("needs `frame"),
+            "{e}"
+        );
+        let s = Scene::parse(
+            &format!("{GOOD}\n[[interaction]]\nframe = 0\nkind = \"release\"\n"),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        let order: Vec<(u64, usize)> = s.interactions.iter().map(|i| (i.frame, i.index)).collect();
+        assert_eq!(
+            order,
+            vec![(0, 1), (1, 0)],
+            "sorted by frame, each knows its table"
+        );
+        assert_eq!(
+            locate_in_array(&text, Path::new("t.toml"), "interaction", 1, "kind"),
+            format!("t.toml:{}:1", line_of(&text, "kind = \"release\"") + 3)
+        );
     }
 
     #[test]
@@ -1066,6 +1060,16 @@ kind = "release"
         assert_eq!(s.rois[0].intensity, None);
         let s = Scene::parse(&roi(""), Path::new("t.toml")).unwrap();
         assert_eq!(s.rois[0].lambda, LambdaSetting::Value(30.0));
+        // An error in the second [[roi]] points at its own line.
+        let two = format!(
+            "{}[[roi]]\nseed = [1.0, 0.0, 0.0]\nlambda = -3\n",
+            roi("lambda = 4")
+        );
+        let e = Scene::parse(&two, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let line = two.lines().position(|l| l == "lambda = -3").unwrap() + 1;
+        assert!(e.starts_with(&format!("t.toml:{line}:1: `lambda`")), "{e}");
         for (extra, key) in [
             ("lambda = \"automatic\"", "`lambda`"),
             ("lambda = -3", "`lambda`"),

@@ -980,6 +980,10 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
 
     fn interact(&mut self, interaction_toml: &str) -> Result<(), ModelError> {
         let spec = InteractionSpec::from_toml(interaction_toml)?;
+        if self.built.is_none() {
+            // Before init: a dry run (parsed and validated, nothing applied).
+            return Ok(());
+        }
         self.apply(&spec)
     }
 
