@@ -102,8 +102,10 @@ fn one_frame() -> u64 {
 /// The kinds, for messages.
 const KINDS: &str = "grab, fix, release, cut, carve, load";
 
+/// Finite as the f32 every model's displacements are narrowed to (a
+/// finite f64 beyond ±3.4e38 becomes ±∞ there, then NaN).
 fn finite(v: &[f64; 3]) -> bool {
-    v.iter().all(|x| x.is_finite())
+    v.iter().all(|x| x.is_finite() && (*x as f32).is_finite())
 }
 
 /// The region a `carve` removes, world mm.
@@ -485,6 +487,19 @@ mod tests {
             )
             .is_ok()
         );
+    }
+
+    #[test]
+    fn coordinates_beyond_f32_are_refused() {
+        for text in [
+            "kind = \"grab\"\npoint = [0, 0, 0]\nby = [1e39, 0, 0]",
+            "kind = \"grab\"\npoint = [0, -1e300, 0]\nto = [0, 0, 0]",
+            "kind = \"cut\"\npolygon = [[0, 0, 0], [0, 1, 0], [0, 1, 1e39]]",
+            "kind = \"load\"\nmin = [0, 0, 0]\nmax = [1, 1, 1]\nforce = [0, 0, 1e39]",
+        ] {
+            let e = InteractionSpec::from_toml(text).unwrap_err().0;
+            assert!(e.contains("finite"), "{text}: {e}");
+        }
     }
 
     #[test]
