@@ -56,7 +56,8 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
-    /// Check a scene file (keys, values, plugin and source presence) without running it.
+    /// Check a scene file without running it: every error `run` would give about it
+    /// (keys, values, interactions, plugin parameters, source, ROI seeds).
     Validate {
         /// Scene file (TOML).
         scene: PathBuf,
@@ -355,37 +356,12 @@ fn run(path: PathBuf, out: Option<PathBuf>, force: bool) -> Result<()> {
     Ok(())
 }
 
+/// Everything `run` would refuse about the scene file, without running it
+/// (see `voxflex_runtime::preflight`): keys and values, every interaction,
+/// the plugins' own parameter tables, the source, and the ROI seeds.
 fn validate(path: PathBuf) -> Result<()> {
     let scene = Scene::load(&path)?;
-    if let Some(m) = &scene.model {
-        let dirs = plugin_loader::search_path(&scene.plugin_dirs());
-        let p = plugin_loader::load_by_name(&m.plugin, &dirs)
-            .with_context(|| format!("{}: [model] plugin", path.display()))?;
-        if p.deformation.is_none() {
-            bail!(
-                "{}: [model] plugin `{}` is a {} plugin, not a deformation plugin",
-                path.display(),
-                p.name,
-                p.kind_name()
-            );
-        }
-    }
-    if let voxflex_core::phantom::VolumeSource::File(f) =
-        voxflex_core::phantom::parse_source(&scene.volume.source)
-    {
-        let f = if f.is_absolute() {
-            f
-        } else {
-            scene.base_dir().join(f)
-        };
-        if !f.is_file() {
-            bail!(
-                "{}: [volume] source `{}` does not exist",
-                path.display(),
-                f.display()
-            );
-        }
-    }
+    voxflex_runtime::preflight::check(&scene)?;
     println!("{}: ok", path.display());
     Ok(())
 }

@@ -98,6 +98,28 @@ impl AffineParams {
 
     fn validate(&self) -> Result<(), ModelError> {
         let bad = |key: &str, why: &str| Err(ModelError(format!("[model.params] {key}: {why}")));
+        // The field is evaluated in f32 (both paths): a finite f64 beyond
+        // ±3.4e38 would become ±∞ there, and NaN displacements after.
+        let f32_finite = |v: &f64| v.is_finite() && (*v as f32).is_finite();
+        let region = self.region.map(|r| r.centre.into_iter().chain([r.radius]));
+        if let Some(key) = [
+            ("angle_deg", vec![self.angle_deg]),
+            ("matrix", self.matrix.iter().flatten().copied().collect()),
+            ("centre", self.centre.map(Vec::from).unwrap_or_default()),
+            ("region", region.map(Iterator::collect).unwrap_or_default()),
+        ]
+        .into_iter()
+        .find(|(_, vs)| vs.iter().any(|v| v.is_finite() && !f32_finite(v)))
+        .map(|(k, _)| k)
+        {
+            return bad(
+                key,
+                &format!(
+                    "every value must lie within ±{:e} (the field is computed in f32)",
+                    f32::MAX
+                ),
+            );
+        }
         if !self.angle_deg.is_finite() {
             return bad("angle_deg", "must be a finite number of degrees");
         }
@@ -146,6 +168,25 @@ mod tests {
     fn rejects_unknown_key_naming_it() {
         let e = AffineParams::from_toml("field = \"twist\"\nangel_deg = 30").unwrap_err();
         assert!(e.0.contains("angel_deg"), "{e}");
+    }
+
+    #[test]
+    fn rejects_values_beyond_f32_naming_the_key() {
+        for (text, key) in [
+            ("field = \"twist\"\nangle_deg = 1e39", "angle_deg"),
+            (
+                "field = \"affine\"\nmatrix = [[1, 0, 0, 1e39], [0, 1, 0, 0], [0, 0, 1, 0]]",
+                "matrix",
+            ),
+            ("field = \"twist\"\ncentre = [0, -1e39, 0]", "centre"),
+            (
+                "field = \"twist\"\nregion = { centre = [0, 0, 0], radius = 1e300 }",
+                "region",
+            ),
+        ] {
+            let e = AffineParams::from_toml(text).unwrap_err().0;
+            assert!(e.contains(key) && e.contains("f32"), "{text}: {e}");
+        }
     }
 
     #[test]

@@ -150,7 +150,11 @@ impl DeformationModel for ChainMailPlugin {
 
     fn interact(&mut self, interaction_toml: &str) -> Result<(), ModelError> {
         let spec = InteractionSpec::from_toml(interaction_toml)?;
-        self.model_mut()?.interact(&spec)
+        match self.model.as_mut() {
+            Some(model) => model.interact(&spec),
+            // Before init: a dry run (parsed and validated, nothing applied).
+            None => Ok(()),
+        }
     }
 
     fn step(&mut self, frame: FrameInfo) -> Result<StepOutcome, ModelError> {

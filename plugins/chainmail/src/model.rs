@@ -20,7 +20,7 @@ use voxflex_core::cut_polygon::CutPolygon;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferId, GpuService};
-use voxflex_core::interaction::{CarveRegion, GrabMotion};
+use voxflex_core::interaction::{CarveRegion, FarGrabs, GrabMotion};
 use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
 use voxflex_core::volume::VolumeView;
 
@@ -116,6 +116,8 @@ pub struct ChainMail {
     /// Frames so far, for the notes.
     log: RunLog,
     grabs: Vec<Grab>,
+    /// Grabs whose point lay beyond one cell from every element.
+    far_grabs: FarGrabs,
     counts: Counts,
     /// Sampling-mesh tetrahedra the cuts and carving removed (one byte per
     /// cell of the source volume's mesh, 5 bits); empty until the first.
@@ -166,6 +168,7 @@ impl ChainMail {
             propagated_since_check: false,
             log: RunLog::default(),
             grabs: Vec::new(),
+            far_grabs: FarGrabs::default(),
             counts: Counts::default(),
             removed_tets: Vec::new(),
             removed_unreported: false,
@@ -329,6 +332,10 @@ impl ChainMail {
                     ModelError::new("chainmail grab: the model has no element to grab")
                 })?;
                 let rest = self.lat.world(self.lat.coords(element));
+                // `nearest` measures rest positions: one cell's diagonal is
+                // as far as a point inside the body can be from its element.
+                let reach = DVec3::from(self.lat.spacing).length();
+                self.far_grabs.check("chainmail", p, rest, reach);
                 let u = self.displacement(element).map(f64::from);
                 let motion = GrabMotion::new(spec, rest + DVec3::from_array(u))
                     .expect("a grab has a motion");
@@ -379,16 +386,35 @@ impl ChainMail {
             }
             InteractionSpec::Cut { ref polygon } => {
                 let cut = self.cut(polygon);
+                if cut == 0 {
+                    tracing::warn!("chainmail cut: the polygon crosses no link of the lattice");
+                }
                 self.topology_changed |= cut > 0;
                 tracing::debug!(links = cut, "chainmail: links cut");
             }
             InteractionSpec::Carve { .. } => {
                 let region = CarveRegion::of(spec).expect("a carve validated on parsing");
                 let inside = |p: DVec3| region.contains(p);
+                let (mut present, mut hit) = (0usize, 0usize);
+                for n in (0..self.lat.len()).filter(|&n| self.lat.present(n)) {
+                    present += 1;
+                    hit += inside(self.position(n)) as usize;
+                }
+                if hit > 0 && hit == present {
+                    return Err(ModelError(format!(
+                        "chainmail carve: {region:?} (mm) holds every element of the model; \
+                         carve a smaller region"
+                    )));
+                }
+                let mut source_tets = 0;
                 if !self.elements_are_voxels() {
                     let region = region.bounds();
                     let tets = carve_tets(&self.lat, &self.state, region, inside);
+                    source_tets = tets.len();
                     self.remove_source_tets(tets);
+                }
+                if hit == 0 && source_tets == 0 {
+                    tracing::warn!("chainmail carve: no element lies in {region:?} (mm)");
                 }
                 let mut removed = 0usize;
                 for n in 0..self.lat.len() {
@@ -719,6 +745,7 @@ impl ChainMail {
         );
         notes.insert("relaxation_sweeps".into(), c.relaxation_iterations as f64);
         notes.insert("repair_waves".into(), c.repair_waves as f64);
+        self.far_grabs.add_notes(&mut notes);
         notes
     }
 

@@ -512,6 +512,71 @@ fn carving_removes_elements_from_the_model() {
     assert!(InteractionSpec::from_toml("kind = \"carve\"\ncentre = [5, 5, 5]").is_err());
 }
 
+/// Before `init`, `interact` is a dry run (what `voxflex validate` uses):
+/// a bad interaction is refused with the parser's message, a good one is
+/// accepted, and nothing is built.
+#[test]
+fn interact_before_init_only_validates() {
+    use voxflex_core::deformation::DeformationModel;
+    let mut p =
+        crate::ChainMailPlugin::new(params("", "{ range = [0, 256], constraint = 0.1 }"), None);
+    let e = p
+        .interact("kind = \"grab\"\npont = [0, 0, 0]\nby = [1, 0, 0]")
+        .unwrap_err()
+        .0;
+    assert!(e.contains("pont"), "{e}");
+    let e = p
+        .interact("kind = \"cut\"\npolygon = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]")
+        .unwrap_err()
+        .0;
+    assert!(e.contains("spans no area"), "{e}");
+    p.interact("kind = \"grab\"\npoint = [0, 0, 0]\nby = [1, 0, 0]")
+        .unwrap();
+    assert!(p.model().is_none(), "nothing built, nothing applied");
+}
+
+/// As the mesh models do: a carve of every element is refused (and leaves
+/// the model whole), one that removes nothing warns and changes nothing.
+#[test]
+fn carving_every_element_is_refused_like_the_mesh_models() {
+    let v = volume([6, 6, 6], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.1 }";
+    let mut m = ChainMail::new(v.view(), params("", mats)).unwrap();
+    let before = m.lattice().element_count();
+    let all = InteractionSpec::from_toml("kind = \"carve\"\nmin = [-1, -1, -1]\nmax = [9, 9, 9]")
+        .unwrap();
+    let e = m.interact(&all).unwrap_err().0;
+    assert!(
+        e.contains("chainmail carve") && e.contains("every element"),
+        "{e}"
+    );
+    assert_eq!(m.lattice().element_count(), before, "nothing removed");
+    let none =
+        InteractionSpec::from_toml("kind = \"carve\"\ncentre = [50, 50, 50]\nradius = 1").unwrap();
+    m.interact(&none).unwrap();
+    assert_eq!(m.lattice().element_count(), before);
+}
+
+/// A grab point far outside the body still takes the nearest element, but
+/// is counted (with its distance) in the notes; one inside is not.
+#[test]
+fn a_grab_far_from_the_body_is_reported_in_the_notes() {
+    let v = volume([6, 6, 6], |_, _, _| 1);
+    let mats = "{ range = [0, 256], constraint = 0.1 }";
+    let mut m = ChainMail::new(v.view(), params("", mats)).unwrap();
+    grab(&mut m, [2, 2, 2], [0.5, 0.0, 0.0]);
+    assert!(!m.notes().contains_key("grabs_far_from_body"));
+    m.interact(
+        &InteractionSpec::from_toml("kind = \"grab\"\npoint = [105, 2, 2]\nby = [1, 0, 0]")
+            .unwrap(),
+    )
+    .unwrap();
+    let notes = m.notes();
+    assert_eq!(notes["grabs_far_from_body"], 1.0);
+    // The nearest element is (5, 2, 2): 100 mm away.
+    assert!((notes["grab_far_max_mm"] - 100.0).abs() < 1e-9, "{notes:?}");
+}
+
 #[test]
 fn cuts_and_carves_of_a_down_sampled_model_reach_the_sampling_mesh() {
     let v = volume([21, 21, 21], |_, _, _| 1);

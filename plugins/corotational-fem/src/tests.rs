@@ -283,6 +283,31 @@ fn stiffness_ratios_slivers_and_random_grabs_stay_finite() {
     assert!(u.iter().all(|v| v.is_finite()));
 }
 
+/// Before `init`, `interact` is a dry run (what `voxflex validate` uses):
+/// the shared parser refuses a bad interaction, a good one is accepted
+/// and nothing is applied (a grab after `init` still finds no earlier one).
+#[test]
+fn interact_before_init_only_validates() {
+    let mut m = Fem::from_toml(
+        "materials = [{ range = [50, 150], youngs_modulus = 2000 }]\nsolver = \"static\"",
+    )
+    .unwrap();
+    let e = m.interact("kind = \"poke\"").unwrap_err().0;
+    assert!(e.contains("poke") && e.contains("grab"), "{e}");
+    m.interact("kind = \"carve\"\ncentre = [0, 0, 0]\nradius = 1000")
+        .unwrap();
+    let volume = voxflex_core::phantom::phantom("cube", [8, 8, 8]).unwrap();
+    m.init(
+        volume.view(),
+        voxflex_core::deformation::ExecutionBackend::Cpu,
+    )
+    .unwrap();
+    assert!(
+        m.notes().unwrap()["proxy_tetrahedra"] > 0.0,
+        "the dry-run carve of everything removed nothing"
+    );
+}
+
 #[test]
 fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() {
     use voxflex_core::deformation::ExecutionBackend;

@@ -213,11 +213,19 @@ fn toml_error(text: &str, e: &toml::de::Error) -> ModelError {
     }
 }
 
+/// `v` is finite **as the f32 the renderer computes with**: a finite f64
+/// beyond ±3.4e38 becomes ±∞ when narrowed, and NaN after arithmetic.
 fn finite(key: &str, v: f64) -> Result<(), ModelError> {
-    if v.is_finite() {
+    if v.is_finite() && (v as f32).is_finite() {
         Ok(())
     } else {
-        bad(key, format!("must be a finite number (got {v})"))
+        bad(
+            key,
+            format!(
+                "must be a finite number within ±{:e} (the renderer computes in f32; got {v})",
+                f32::MAX
+            ),
+        )
     }
 }
 
@@ -391,6 +399,19 @@ impl RaycastParams {
             }
         };
         let mut tf = tf.shifted(spec.shift as f32);
+        // Validated after narrowing and shifting: the lookup table spans
+        // the points' values in f32.
+        if let (Some(a), Some(b)) = (tf.points.first(), tf.points.last())
+            && !(a.value.is_finite() && b.value.is_finite() && (b.value - a.value).is_finite())
+        {
+            return bad(
+                "transfer_function.shift",
+                format!(
+                    "moves the points to [{}, {}], beyond what f32 holds; use a smaller shift",
+                    a.value, b.value
+                ),
+            );
+        }
         if let Some(g) = spec.gaussian {
             for (key, v) in [("mean", g.mean), ("sigma", g.sigma), ("a", g.a), ("b", g.b)] {
                 finite(&format!("transfer_function.gaussian.{key}"), v)?;
@@ -477,6 +498,24 @@ mod tests {
                 .contains("clip_planes[0].normal")
         );
         assert!(err("transfer_function = { preset = \"ct-bone\", shift = inf }").contains("shift"));
+        // Finite as f64, infinite as the f32 the renderer uses.
+        for text in [
+            "transfer_function = { preset = \"ct-bone\", shift = 1e39 }",
+            "transfer_function = { preset = \"ct-bone\", shift = -1e39 }",
+            "transfer_function = { points = [[-3e38, 0, 0, 0, 0], [3e38, 1, 1, 1, 1]] }",
+        ] {
+            assert!(err(text).contains("transfer_function"), "{text}");
+        }
+        for key in [
+            "sample_distance = 1e39",
+            "opacity_unit_distance = 1e300",
+            "shading = { shininess = 1e39 }",
+            "clip_planes = [{ point = [1e39, 0, 0], normal = [1, 0, 0] }]",
+            "crop_box = { min = [-1e39, 0, 0], max = [0, 1, 1] }",
+            "transfer_function = { preset = \"ct-bone\", gaussian = { mean = 1e39, sigma = 1, a = 0, b = 1 } }",
+        ] {
+            assert!(err(key).contains("f32"), "{key}: {}", err(key));
+        }
         assert!(err("background = [1, 1]").contains("background"));
         assert!(err("macro_cell = 1").contains("macro_cell"));
         // A type error points at its line.

@@ -145,7 +145,8 @@ impl TransferFunction {
         let Some(first) = pts.first() else {
             return [0.0; 4];
         };
-        if v < first.value {
+        // NaN (which no comparison holds for) takes the first point's.
+        if v.is_nan() || first.value.is_nan() || v < first.value {
             return first.rgba;
         }
         // First point with value > v.
@@ -235,7 +236,11 @@ impl Lut {
     /// Interpolated `[r, g, b, κ]` at data value `v`.
     #[inline(always)]
     pub fn lookup(&self, v: f32) -> [f32; 4] {
-        let x = ((v - self.lo) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
+        // `max` then `min`, not `clamp`: NaN becomes entry 0 instead of
+        // passing through.
+        let x = ((v - self.lo) * self.scale)
+            .max(0.0)
+            .min((LUT_SIZE - 1) as f32);
         let e0 = (x as usize).min(LUT_SIZE - 2);
         let f = x - e0 as f32;
         let (a, b) = (self.entries[e0], self.entries[e0 + 1]);
@@ -253,8 +258,9 @@ impl Lut {
     #[inline]
     pub fn range_is_empty(&self, min: f32, max: f32) -> bool {
         let top = (LUT_SIZE - 1) as f32;
-        let a = ((min - self.lo) * self.scale).floor().clamp(0.0, top) as usize;
-        let b = ((max - self.lo) * self.scale).floor().clamp(0.0, top) as usize;
+        // NaN-safe like `lookup`: NaN bounds become entry 0.
+        let a = ((min - self.lo) * self.scale).floor().max(0.0).min(top) as usize;
+        let b = ((max - self.lo) * self.scale).floor().max(0.0).min(top) as usize;
         let lo = a.saturating_sub(1);
         let hi = (b + 2).min(LUT_SIZE - 1);
         self.nonzero_prefix[hi + 1] == self.nonzero_prefix[lo]
@@ -349,6 +355,21 @@ mod tests {
             .shifted(-200.0)
             .lut((0.0, 0.0), 1.0);
         assert!(!shifted.range_is_empty(-1000.0, 40.0));
+    }
+
+    /// A NaN value (from a NaN voxel, or a NaN shift) takes the first
+    /// point's colour and table entry 0; it used to index point −1.
+    #[test]
+    fn nan_values_are_looked_up_safely() {
+        let t = TransferFunction::preset("ct-bone").unwrap();
+        assert_eq!(t.evaluate(f32::NAN), t.points[0].rgba);
+        let lut = t.lut((0.0, 0.0), 1.0);
+        assert_eq!(lut.lookup(f32::NAN), lut.entries[0]);
+        let _ = lut.range_is_empty(f32::NAN, f32::NAN); // no panic
+        let nan_shifted = t.shifted(f32::NAN);
+        assert_eq!(nan_shifted.evaluate(100.0), nan_shifted.points[0].rgba);
+        let lut = nan_shifted.lut((0.0, 0.0), 1.0);
+        let _ = lut.lookup(100.0);
     }
 
     #[test]

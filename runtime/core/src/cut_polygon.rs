@@ -28,6 +28,24 @@ impl CutPolygon {
         Self { triangles, lo, hi }
     }
 
+    /// True when the corners (world mm) span an area: some triangle of the
+    /// fan from the first corner is not degenerate (collinear or repeated
+    /// corners span none, and such a polygon cuts nothing). Relative to the
+    /// corners' extent, so it holds at any scale.
+    pub fn spans_area(corners: &[[f64; 3]]) -> bool {
+        let p: Vec<DVec3> = corners.iter().map(|c| DVec3::from_array(*c)).collect();
+        let Some(&first) = p.first() else {
+            return false;
+        };
+        let lo = p.iter().copied().fold(first, DVec3::min);
+        let hi = p.iter().copied().fold(first, DVec3::max);
+        let extent2 = (hi - lo).length_squared();
+        extent2 > 0.0
+            && p.windows(2)
+                .skip(1)
+                .any(|w| (w[0] - first).cross(w[1] - first).length() > 1e-9 * extent2)
+    }
+
     /// True when segment `a → b` crosses the polygon.
     pub fn crosses(&self, a: DVec3, b: DVec3) -> bool {
         if a.min(b).cmpgt(self.hi).any() || a.max(b).cmplt(self.lo).any() {
@@ -86,5 +104,29 @@ mod tests {
             !c.crosses(DVec3::new(-1.0, 0.0, 0.0), DVec3::new(-1.0, 0.5, 0.0)),
             "parallel"
         );
+    }
+
+    #[test]
+    fn collinear_or_repeated_corners_span_no_area() {
+        let square = [[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 1.0]];
+        assert!(CutPolygon::spans_area(&square));
+        assert!(CutPolygon::spans_area(&[
+            [0.0, 0.0, 0.0],
+            [0.0, 1e-6, 0.0],
+            [0.0, 1e-6, 1e-6]
+        ]));
+        let line = [
+            [0.0, 0.0, 0.0],
+            [1.0, 1.0, 1.0],
+            [2.0, 2.0, 2.0],
+            [5.0, 5.0, 5.0],
+        ];
+        assert!(!CutPolygon::spans_area(&line));
+        let repeated = [[1.0, 2.0, 3.0], [1.0, 2.0, 3.0], [4.0, 0.0, 0.0]];
+        assert!(!CutPolygon::spans_area(&repeated));
+        assert!(!CutPolygon::spans_area(&[[1.0, 2.0, 3.0]; 3]));
+        // The same line cuts nothing: no segment crosses it.
+        let c = CutPolygon::new(&line);
+        assert!(!c.crosses(DVec3::new(1.0, 0.0, 1.0), DVec3::new(1.0, 2.0, 1.0)));
     }
 }

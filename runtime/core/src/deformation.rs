@@ -180,6 +180,11 @@ pub trait DeformationModel: Send {
     fn bind(&mut self, rest: RestPoints<'_>) -> Result<BindingId, ModelError>;
     /// Applies one scripted interaction, given as the TOML text of its table
     /// (the model parses it and names the offending key on error).
+    ///
+    /// Called **before** `init` (on an instance only created), it is a dry
+    /// run: the model parses and validates the interaction and applies
+    /// nothing. `voxflex validate` checks a scene's interactions this way,
+    /// so every error `run` would give for one is given first.
     fn interact(&mut self, interaction_toml: &str) -> Result<(), ModelError>;
     /// Advances one frame.
     fn step(&mut self, frame: FrameInfo) -> Result<StepOutcome, ModelError>;

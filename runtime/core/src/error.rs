@@ -65,6 +65,15 @@ pub enum IoError {
         /// What is wrong and what to do.
         message: String,
     },
+    /// The volume holds NaN or ±∞ voxels that the non-finite policy refuses
+    /// (see [`crate::non_finite`]).
+    #[error("{path}: {message}")]
+    NonFinite {
+        /// File at fault.
+        path: PathBuf,
+        /// The counts and what to do.
+        message: String,
+    },
     /// A mesh file parsed, but its mesh cannot be used (the error names the
     /// file).
     #[error(transparent)]

@@ -6,6 +6,8 @@
 //! pascals; forces in newtons. A model that cannot apply a kind (ChainMail
 //! has no forces, the analytic fields no topology) refuses it by name.
 
+use crate::cut_polygon::CutPolygon;
+use crate::deformation::ModelNotes;
 use crate::error::ModelError;
 use glam::DVec3;
 use serde::Deserialize;
@@ -100,8 +102,10 @@ fn one_frame() -> u64 {
 /// The kinds, for messages.
 const KINDS: &str = "grab, fix, release, cut, carve, load";
 
+/// Finite as the f32 every model's displacements are narrowed to (a
+/// finite f64 beyond ±3.4e38 becomes ±∞ there, then NaN).
 fn finite(v: &[f64; 3]) -> bool {
-    v.iter().all(|x| x.is_finite())
+    v.iter().all(|x| x.is_finite() && (*x as f32).is_finite())
 }
 
 /// The region a `carve` removes, world mm.
@@ -246,6 +250,12 @@ impl InteractionSpec {
                 if polygon.len() < 3 || polygon.iter().any(|v| !finite(v)) {
                     return fail("`polygon` needs at least 3 finite corners [x, y, z] (mm)");
                 }
+                if !CutPolygon::spans_area(polygon) {
+                    return fail(
+                        "`polygon` spans no area (its corners are collinear or repeated), so it \
+                         would cut nothing; give at least 3 corners (mm) that span the cut's plane",
+                    );
+                }
             }
             InteractionSpec::Carve {
                 centre,
@@ -292,6 +302,56 @@ impl InteractionSpec {
             }
         }
         Ok(())
+    }
+}
+
+/// Grabs whose `point` lay far from the body: every model takes the
+/// element or node nearest the point, wherever it is, so a point in the
+/// wrong units or frame silently grabs the wrong tissue. Each such grab
+/// warns with the distance, and the model reports them in its notes
+/// ([`FarGrabs::add_notes`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FarGrabs {
+    /// Grabs farther than their element's reach from what they took.
+    pub count: u32,
+    /// The largest such distance, mm.
+    pub max_mm: f64,
+}
+
+impl FarGrabs {
+    /// Records a grab at `point` that took the element or node at `taken`
+    /// (both world mm). Farther than `reach_mm` (the size of one element
+    /// there, mm) it warns, naming `model`, the distance and the key, and
+    /// returns the distance.
+    pub fn check(&mut self, model: &str, point: DVec3, taken: DVec3, reach_mm: f64) -> Option<f64> {
+        let d = (point - taken).length();
+        // NaN (a NaN point is refused on parsing) counts as near.
+        if d.is_nan() || d <= reach_mm {
+            return None;
+        }
+        self.count += 1;
+        self.max_mm = self.max_mm.max(d);
+        tracing::warn!(
+            "{model} grab: `point` = [{}, {}, {}] mm lies {d:.1} mm from the body, beyond one \
+             element ({reach_mm:.1} mm); it takes the nearest one, at [{:.1}, {:.1}, {:.1}] mm. \
+             Check the [[interaction]]'s `point` (world mm, LPS)",
+            point.x,
+            point.y,
+            point.z,
+            taken.x,
+            taken.y,
+            taken.z
+        );
+        Some(d)
+    }
+
+    /// Adds `grabs_far_from_body` (count) and `grab_far_max_mm` to `notes`
+    /// when there was one.
+    pub fn add_notes(&self, notes: &mut ModelNotes) {
+        if self.count > 0 {
+            notes.insert("grabs_far_from_body".into(), self.count as f64);
+            notes.insert("grab_far_max_mm".into(), self.max_mm);
+        }
     }
 }
 
@@ -405,6 +465,68 @@ mod tests {
             .unwrap_err()
             .0;
         assert!(e.contains("maks"), "{e}");
+    }
+
+    #[test]
+    fn a_cut_polygon_without_area_is_refused() {
+        let e = InteractionSpec::from_toml(
+            "kind = \"cut\"\npolygon = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]",
+        )
+        .unwrap_err()
+        .0;
+        assert!(e.contains("cut") && e.contains("spans no area"), "{e}");
+        let e = InteractionSpec::from_toml(
+            "kind = \"cut\"\npolygon = [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]",
+        )
+        .unwrap_err()
+        .0;
+        assert!(e.contains("spans no area"), "{e}");
+        assert!(
+            InteractionSpec::from_toml(
+                "kind = \"cut\"\npolygon = [[0, 0, 0], [0, 1, 0], [0, 1, 1]]"
+            )
+            .is_ok()
+        );
+    }
+
+    #[test]
+    fn coordinates_beyond_f32_are_refused() {
+        for text in [
+            "kind = \"grab\"\npoint = [0, 0, 0]\nby = [1e39, 0, 0]",
+            "kind = \"grab\"\npoint = [0, -1e300, 0]\nto = [0, 0, 0]",
+            "kind = \"cut\"\npolygon = [[0, 0, 0], [0, 1, 0], [0, 1, 1e39]]",
+            "kind = \"load\"\nmin = [0, 0, 0]\nmax = [1, 1, 1]\nforce = [0, 0, 1e39]",
+        ] {
+            let e = InteractionSpec::from_toml(text).unwrap_err().0;
+            assert!(e.contains("finite"), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn far_grabs_are_counted_beyond_the_reach_only() {
+        let mut far = FarGrabs::default();
+        assert_eq!(
+            far.check("m", DVec3::ZERO, DVec3::new(0.9, 0.0, 0.0), 1.0),
+            None
+        );
+        assert_eq!(
+            far.check("m", DVec3::ZERO, DVec3::new(0.0, 30.0, 40.0), 1.0),
+            Some(50.0)
+        );
+        far.check("m", DVec3::ZERO, DVec3::new(0.0, 3.0, 4.0), 1.0);
+        assert_eq!(
+            far,
+            FarGrabs {
+                count: 2,
+                max_mm: 50.0
+            }
+        );
+        let mut notes = ModelNotes::new();
+        FarGrabs::default().add_notes(&mut notes);
+        assert!(notes.is_empty());
+        far.add_notes(&mut notes);
+        assert_eq!(notes["grabs_far_from_body"], 2.0);
+        assert_eq!(notes["grab_far_max_mm"], 50.0);
     }
 
     #[test]

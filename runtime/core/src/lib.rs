@@ -23,6 +23,7 @@ pub mod grid;
 pub mod interaction;
 pub mod io;
 pub mod mesh_model;
+pub mod non_finite;
 pub mod opacity;
 pub mod opacity_map;
 pub mod phantom;

@@ -250,23 +250,30 @@ impl Volume {
 }
 
 impl VolumeView<'_> {
-    /// Smallest and largest value (NaN ignored); `(0, 0)` for an empty volume.
+    /// Smallest and largest **finite** value (NaN and ±∞ ignored); `(0, 0)`
+    /// when no voxel is finite.
     pub fn value_range(&self) -> (f32, f32) {
-        use rayon::prelude::*;
-        let (lo, hi) = with_voxels!(self.data, |s| s
-            .par_chunks(1 << 16)
-            .map(|c| c
-                .iter()
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
-                    let v = v.to_f32();
-                    (lo.min(v), hi.max(v))
-                }))
-            .reduce(
-                || (f32::INFINITY, f32::NEG_INFINITY),
-                |a, b| (a.0.min(b.0), a.1.max(b.1))
-            ));
-        if lo > hi { (0.0, 0.0) } else { (lo, hi) }
+        finite_range(self.data).unwrap_or((0.0, 0.0))
     }
+}
+
+/// Smallest and largest finite value of `data`; `None` when none is finite.
+pub fn finite_range(data: VoxelSlice<'_>) -> Option<(f32, f32)> {
+    use rayon::prelude::*;
+    let (lo, hi) = with_voxels!(data, |s| s
+        .par_chunks(1 << 16)
+        .map(|c| c
+            .iter()
+            .map(|v| v.to_f32())
+            .filter(|v| v.is_finite())
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            }))
+        .reduce(
+            || (f32::INFINITY, f32::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1))
+        ));
+    (lo <= hi).then_some((lo, hi))
 }
 
 #[cfg(test)]
@@ -281,5 +288,18 @@ mod tests {
         let v = Volume::new(g, VoxelData::I16((0..8).map(|x| x - 3).collect())).unwrap();
         assert_eq!(v.value_range(), (-3.0, 4.0));
         assert_eq!(v.get_f32(1, 1, 1), 4.0);
+    }
+
+    #[test]
+    fn value_range_ignores_nan_and_infinities() {
+        let g = Grid::new([2, 2, 1], DVec3::ONE, DVec3::ZERO);
+        let v = Volume::new(
+            g,
+            VoxelData::F32(vec![f32::NAN, f32::INFINITY, -3.0, f32::NEG_INFINITY]),
+        )
+        .unwrap();
+        assert_eq!(v.value_range(), (-3.0, -3.0));
+        let none = Volume::new(g, VoxelData::F32(vec![f32::NAN; 4])).unwrap();
+        assert_eq!(none.value_range(), (0.0, 0.0));
     }
 }

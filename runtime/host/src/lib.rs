@@ -3,10 +3,11 @@
 //! Plugin discovery and checked loading ([`plugin_loader`]), scene files
 //! ([`scene`]), backend selection ([`backend`]) and the wgpu GPU context
 //! ([`gpu_context`], the only place voxflex links wgpu), the scene pipeline
-//! with versioned, dirty-region stages ([`pipeline`]), run reports
-//! ([`metrics`]), the up-to-date check ([`fingerprint`]), the output
-//! directory's path rules and lock ([`out_dir`]) and the `voxflex bench`
-//! measurements ([`mod@bench`]).
+//! with versioned, dirty-region stages ([`pipeline`]), the checks of
+//! `voxflex validate` ([`preflight`]), run reports ([`metrics`]), the
+//! up-to-date check ([`fingerprint`]), the output directory's path rules
+//! and lock ([`out_dir`]) and the `voxflex bench` measurements
+//! ([`mod@bench`]).
 
 pub mod backend;
 pub mod bench;
@@ -16,6 +17,7 @@ pub mod metrics;
 pub mod out_dir;
 pub mod pipeline;
 pub mod plugin_loader;
+pub mod preflight;
 pub mod scene;
 pub mod visualise;
 pub mod warnings;

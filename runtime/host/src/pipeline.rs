@@ -38,7 +38,7 @@ use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
 use voxflex_core::io::png::{SliceAxis, Window, write_slice_png};
-use voxflex_core::io::{ReadOptions, read_volume, write_atomically, write_volume};
+use voxflex_core::io::{ReadOptions, read_volume_with, write_atomically, write_volume};
 use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
 use voxflex_core::resample::gpu::GpuSource;
 use voxflex_core::resample::{
@@ -114,11 +114,15 @@ pub fn load_source(scene: &Scene) -> Result<Volume, RunError> {
             } else {
                 scene.base_dir().join(p)
             };
-            Ok(read_volume(
+            // NaN voxels become the background the resampler would use.
+            let background = scene.resample.as_ref().and_then(|r| r.background);
+            Ok(read_volume_with(
                 &path,
                 &ReadOptions {
                     max_voxels: v.max_voxels,
                 },
+                v.non_finite,
+                background,
             )?)
         }
     }

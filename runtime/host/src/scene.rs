@@ -4,7 +4,8 @@
 //! Every table rejects unknown keys with `file:line:column`, the key, and the
 //! closest valid key. Plugin parameters (`[model.params]`) and interactions
 //! (`[[interaction]]`) are passed through as TOML text: the plugin validates
-//! them itself and names its own keys.
+//! them itself and names its own keys; [`crate::preflight`] has the plugin
+//! check both without running (what `voxflex validate` does).
 //!
 //! ```toml
 //! [scene]
@@ -36,6 +37,7 @@
 use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+use voxflex_core::non_finite::NonFinitePolicy;
 use voxflex_core::resample::{Interpolation, ResampleParams};
 
 /// Largest scene file read (1 MiB): scene files are a few kilobytes.
@@ -125,6 +127,11 @@ pub struct VolumeSettings {
     /// Refuse volumes with more voxels than this.
     #[serde(default = "default_max_voxels")]
     pub max_voxels: usize,
+    /// NaN and ±∞ voxels of a file: `"replace"` (default; warn with the
+    /// counts, NaN → background, ±∞ → the finite range's ends) or
+    /// `"refuse"`. See [`voxflex_core::non_finite`].
+    #[serde(default)]
+    pub non_finite: NonFinitePolicy,
 }
 
 fn default_max_voxels() -> usize {
@@ -150,6 +157,9 @@ pub struct Interaction {
     pub frame: u64,
     /// The rest of the table, as the model receives it (TOML text).
     pub toml: String,
+    /// Its position among the file's `[[interaction]]` tables, from 0 (for
+    /// messages: see [`locate_in_array`]).
+    pub index: usize,
 }
 
 /// `[resample]`: the resampling stage.
@@ -607,13 +617,18 @@ impl Scene {
             }
             crate::out_dir::check_file_name(&r.file).map_err(|m| invalid("file", m))?;
         }
-        for roi in &file.roi {
-            if let Some(n) = &roi.name {
-                crate::out_dir::check_file_name(n).map_err(|m| invalid("name", m))?;
+        for (n, roi) in file.roi.iter().enumerate() {
+            // Errors point into this [[roi]] table, not the first one.
+            let invalid = |key: &str, message: String| SceneError::Invalid {
+                location: locate_in_array(text, path, "roi", n, key),
+                message: format!("`{key}`: {message}"),
+            };
+            if let Some(name) = &roi.name {
+                crate::out_dir::check_file_name(name).map_err(|m| invalid("name", m))?;
             }
             if roi.seed.is_some() == roi.seed_slice.is_some() {
                 return Err(SceneError::Invalid {
-                    location: locate_key(text, path, "[[roi]]"),
+                    location: locate_in_array(text, path, "roi", n, ""),
                     message: "every [[roi]] needs exactly one of `seed = [x, y, z]` (mm) or `seed_slice = { axis, index, pixel }`".into(),
                 });
             }
@@ -662,31 +677,42 @@ impl Scene {
             ));
         }
         let mut interactions = vec![];
-        for mut table in file.interaction {
+        for (n, mut table) in file.interaction.into_iter().enumerate() {
+            // Errors point into this [[interaction]] table, not the first.
+            let here = |key: &str, message: String| SceneError::Invalid {
+                location: locate_in_array(text, path, "interaction", n, key),
+                message,
+            };
             let frame = match table.remove("frame") {
                 Some(toml::Value::Integer(f)) if f >= 0 => f as u64,
                 Some(v) => {
-                    return Err(invalid("frame", format!("{v} must be a frame number ≥ 0")));
+                    return Err(here(
+                        "frame",
+                        format!("`frame`: {v} must be a frame number ≥ 0"),
+                    ));
                 }
                 None => {
-                    return Err(SceneError::Invalid {
-                        location: locate_key(text, path, "[[interaction]]"),
-                        message: "every [[interaction]] needs `frame = <number>`".into(),
-                    });
+                    return Err(here(
+                        "",
+                        "every [[interaction]] needs `frame = <number>`".into(),
+                    ));
                 }
             };
             if frame >= s.frames {
-                return Err(invalid(
+                return Err(here(
                     "frame",
                     format!(
-                        "interaction at frame {frame} never happens: the scene has {} frames",
+                        "`frame`: interaction at frame {frame} never happens: the scene has {} frames",
                         s.frames
                     ),
                 ));
             }
-            let toml =
-                toml::to_string(&table).map_err(|e| invalid("interaction", e.to_string()))?;
-            interactions.push(Interaction { frame, toml });
+            let toml = toml::to_string(&table).map_err(|e| here("", e.to_string()))?;
+            interactions.push(Interaction {
+                frame,
+                toml,
+                index: n,
+            });
         }
         interactions.sort_by_key(|i| i.frame);
         let resample = match (&file.model, file.resample) {
@@ -771,6 +797,53 @@ fn locate_key(text: &str, path: &Path, key: &str) -> String {
         }
     }
     path.display().to_string()
+}
+
+/// `file:line:column` of `key` inside the `n`-th (from 0) `[[array]]`
+/// table, else of that table's header (else the file). An empty `key`
+/// gives the header.
+pub fn locate_in_array(text: &str, path: &Path, array: &str, n: usize, key: &str) -> String {
+    let header = format!("[[{array}]]");
+    let lines: Vec<&str> = text.lines().collect();
+    let is_header = |l: &str| {
+        let t = l.trim_start();
+        t.starts_with(&header) && t[header.len()..].trim_start().is_empty_or_comment()
+    };
+    let Some(start) = (0..lines.len()).filter(|&i| is_header(lines[i])).nth(n) else {
+        return path.display().to_string();
+    };
+    let at = |i: usize| {
+        let t = lines[i].trim_start();
+        format!(
+            "{}:{}:{}",
+            path.display(),
+            i + 1,
+            lines[i].len() - t.len() + 1
+        )
+    };
+    if !key.is_empty() {
+        for (i, line) in lines.iter().enumerate().skip(start + 1) {
+            let t = line.trim_start();
+            if t.starts_with('[') {
+                break;
+            }
+            if t.starts_with(key) && t[key.len()..].trim_start().starts_with('=') {
+                return at(i);
+            }
+        }
+    }
+    at(start)
+}
+
+/// `str::is_empty`, or a TOML comment.
+trait EmptyOrComment {
+    fn is_empty_or_comment(&self) -> bool;
+}
+
+impl EmptyOrComment for str {
+    fn is_empty_or_comment(&self) -> bool {
+        self.is_empty() || self.starts_with('#')
+    }
 }
 
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
@@ -858,7 +931,7 @@ angle_deg = 10
 
 [[interaction]]
 frame = 1
-kind = "grab"
+kind = "release"
 "#;
 
     #[test]
@@ -871,7 +944,8 @@ kind = "grab"
             s.interactions,
             vec![Interaction {
                 frame: 1,
-                toml: "kind = \"grab\"\n".into()
+                toml: "kind = \"release\"\n".into(),
+                index: 0,
             }]
         );
         assert!(s.resample.is_some(), "a model implies the resample stage");
@@ -996,6 +1070,74 @@ kind = "grab"
         assert!(e.contains("never happens"), "{e}");
     }
 
+    /// An error in a later [[interaction]] points at that table's lines,
+    /// not at the first table's `frame =`.
+    #[test]
+    fn interaction_errors_point_into_their_own_table() {
+        let line_of =
+            |t: &str, needle: &str| t.lines().position(|l| l.starts_with(needle)).unwrap() + 1;
+        let text = format!("{GOOD}\n[[interaction]]\nframe = 7\nkind = \"release\"\n");
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let frame7 = line_of(&text, "frame = 7");
+        assert!(
+            e.starts_with(&format!("t.toml:{frame7}:1: `frame`")) && e.contains("never happens"),
+            "{e}"
+        );
+        let text = format!("{GOOD}\n[[interaction]]\nkind = \"release\"\n");
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let second = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| *l == "[[interaction]]")
+            .nth(1)
+            .unwrap()
+            .0
+            + 1;
+        assert!(
+            e.starts_with(&format!("t.toml:{second}:1:")) && e.contains("needs `frame"),
+            "{e}"
+        );
+        let s = Scene::parse(
+            &format!("{GOOD}\n[[interaction]]\nframe = 0\nkind = \"release\"\n"),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        let order: Vec<(u64, usize)> = s.interactions.iter().map(|i| (i.frame, i.index)).collect();
+        assert_eq!(
+            order,
+            vec![(0, 1), (1, 0)],
+            "sorted by frame, each knows its table"
+        );
+        assert_eq!(
+            locate_in_array(&text, Path::new("t.toml"), "interaction", 1, "kind"),
+            format!("t.toml:{}:1", line_of(&text, "kind = \"release\"") + 3)
+        );
+    }
+
+    #[test]
+    fn non_finite_policy_defaults_to_replace_and_takes_refuse() {
+        let s = Scene::parse(GOOD, Path::new("t.toml")).unwrap();
+        assert_eq!(s.volume.non_finite, NonFinitePolicy::Replace);
+        let text = GOOD.replace(
+            "dims = [8, 8, 8]",
+            "dims = [8, 8, 8]\nnon_finite = \"refuse\"",
+        );
+        let s = Scene::parse(&text, Path::new("t.toml")).unwrap();
+        assert_eq!(s.volume.non_finite, NonFinitePolicy::Refuse);
+        let text = GOOD.replace(
+            "dims = [8, 8, 8]",
+            "dims = [8, 8, 8]\nnon_finite = \"ignore\"",
+        );
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ignore") && e.contains("refuse"), "{e}");
+    }
+
     #[test]
     fn roi_lambda_auto_and_bounds_parse_and_bad_values_name_the_key() {
         let roi = |extra: &str| format!("{GOOD}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{extra}\n");
@@ -1013,6 +1155,16 @@ kind = "grab"
         assert_eq!(s.rois[0].intensity, None);
         let s = Scene::parse(&roi(""), Path::new("t.toml")).unwrap();
         assert_eq!(s.rois[0].lambda, LambdaSetting::Value(30.0));
+        // An error in the second [[roi]] points at its own line.
+        let two = format!(
+            "{}[[roi]]\nseed = [1.0, 0.0, 0.0]\nlambda = -3\n",
+            roi("lambda = 4")
+        );
+        let e = Scene::parse(&two, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        let line = two.lines().position(|l| l == "lambda = -3").unwrap() + 1;
+        assert!(e.starts_with(&format!("t.toml:{line}:1: `lambda`")), "{e}");
         for (extra, key) in [
             ("lambda = \"automatic\"", "`lambda`"),
             ("lambda = -3", "`lambda`"),

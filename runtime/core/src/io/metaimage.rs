@@ -213,6 +213,10 @@ pub(crate) fn detached_data_file(path: &Path) -> Result<Option<PathBuf>, IoError
         .map(|v| path.parent().unwrap_or(Path::new("")).join(v)))
 }
 
+/// How far a `TransformMatrix` row's length may differ from 1 (rounded
+/// direction cosines) before the header is refused.
+const DIRECTION_TOLERANCE: f64 = 1e-3;
+
 /// Reads a MetaImage `.mhd` (+ data file) or `.mha` volume. See the module
 /// docs for the keys understood; rotations are not applied.
 pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
@@ -336,6 +340,23 @@ pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError
                     )
                 })?,
             };
+            // Rows are direction cosines; the spacing is ElementSpacing. A
+            // row of another length would silently scale that axis (the
+            // NIfTI qform's bug class), so it is refused. Zero and
+            // dependent rows are left to the orientation check.
+            for a in 0..3 {
+                let len = DVec3::new(m[3 * a], m[3 * a + 1], m[3 * a + 2]).length();
+                if len > 0.0 && (len - 1.0).abs() > DIRECTION_TOLERANCE {
+                    return Err(header_err(
+                        path,
+                        k,
+                        format!(
+                            "row {a} has length {len:.4}, not 1: the matrix holds direction \
+                             cosines (the spacing is ElementSpacing); fix the header"
+                        ),
+                    ));
+                }
+            }
             HeaderGeometry {
                 directions: [0, 1, 2]
                     .map(|a| DVec3::new(m[3 * a], m[3 * a + 1], m[3 * a + 2]) * spacing[a]),
@@ -579,6 +600,25 @@ mod tests {
         let v = d.read(&p).unwrap();
         assert_eq!(v.data, VoxelData::I16(vals()));
         assert_eq!(v.grid.origin, DVec3::new(-1.5, 2.0, 30.0));
+    }
+
+    /// A matrix row longer or shorter than 1 would scale that axis's
+    /// spacing: refused naming the field and the row.
+    #[test]
+    fn a_transform_matrix_row_that_is_no_direction_is_refused() {
+        let d = Dir::new();
+        d.write("vol.raw", &i16_le(&vals()));
+        let scaled = HDR.replace("TransformMatrix = 1 0 0", "TransformMatrix = 12 0 0");
+        let p = d.write("scaled.mhd", scaled.as_bytes());
+        super::super::test_util::expect_err(
+            d.read(&p),
+            &p,
+            &["`TransformMatrix`", "row 0 has length 12", "direction"],
+        );
+        let rounded = HDR.replace("TransformMatrix = 1 0 0", "TransformMatrix = 0.9999 0 0");
+        let p = d.write("rounded.mhd", rounded.as_bytes());
+        let spacing = d.read(&p).unwrap().grid.spacing;
+        assert!((spacing - DVec3::new(0.5, 1.0, 2.5)).abs().max_element() < 1e-3);
     }
 
     #[test]

@@ -25,6 +25,10 @@
 //! `i8` → `i16` (exact); `i32`, `u32`, `i64`, `u64`, `f64` → `f32` (rounded
 //! to f32 precision, exact for integers up to 2²⁴).
 //!
+//! NaN and ±∞ voxels of f32 files are counted and, by default, replaced
+//! with a warning ([`crate::non_finite`] gives the policy);
+//! [`read_volume_with`] can refuse them instead.
+//!
 //! Writes go through [`write_atomically`]: a temporary file in the target's
 //! directory, renamed over the target only once it is complete.
 
@@ -38,6 +42,7 @@ pub mod tetgen;
 pub mod vtu;
 
 use crate::error::IoError;
+use crate::non_finite::{NonFinitePolicy, apply_policy};
 use crate::volume::{Volume, VolumeView, VoxelData};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
@@ -102,7 +107,44 @@ pub const READ_EXTENSIONS: &str = ".nii, .nii.gz, .mhd, .mha, .nrrd, .nhdr";
 ///
 /// Spacing and origin of the result are in millimetres; see the module docs
 /// for what is validated and how geometry is interpreted.
+///
+/// NaN and ±∞ voxels are replaced under the default
+/// [`NonFinitePolicy::Replace`](crate::non_finite::NonFinitePolicy) (with a
+/// warning giving the counts); [`read_volume_with`] chooses the policy.
 pub fn read_volume(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
+    read_volume_with(path, opts, NonFinitePolicy::Replace, None)
+}
+
+/// [`read_volume`] with the non-finite `policy` and the value NaN voxels
+/// become (`nan_to`, volume units; default the smallest finite value); see
+/// [`crate::non_finite`]. A refusal is [`IoError::NonFinite`].
+pub fn read_volume_with(
+    path: &Path,
+    opts: &ReadOptions,
+    policy: NonFinitePolicy,
+    nan_to: Option<f32>,
+) -> Result<Volume, IoError> {
+    let mut volume = read_volume_raw(path, opts)?;
+    let count =
+        apply_policy(&mut volume.data, policy, nan_to).map_err(|message| IoError::NonFinite {
+            path: path.to_path_buf(),
+            message,
+        })?;
+    if count.total() > 0 {
+        let (lo, hi) = count.finite_range.unwrap_or_default();
+        tracing::warn!(
+            "{}: {} replaced: NaN by {}, +inf by {hi}, -inf by {lo} (the finite range); set \
+             `[volume] non_finite = \"refuse\"` to refuse such a file",
+            path.display(),
+            count.describe(),
+            nan_to.filter(|v| v.is_finite()).unwrap_or(lo),
+        );
+    }
+    Ok(volume)
+}
+
+/// The reader's volume as the file holds it (non-finite voxels kept).
+fn read_volume_raw(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
     match VolumeFormat::from_path(path) {
         Some(VolumeFormat::Nifti) => nifti::read_nifti(path, opts),
         Some(VolumeFormat::MetaImage) => metaimage::read_metaimage(path, opts),
@@ -886,6 +928,45 @@ mod tests {
                 let _ = read_volume(&p, &ReadOptions { max_voxels: 1 << 16 });
             }
         }
+    }
+
+    /// NaN and ±∞ voxels never come out of `read_volume`: replaced by
+    /// default, refused on request, with the counts in the message.
+    #[test]
+    fn non_finite_voxels_are_replaced_or_refused_at_load() {
+        let dir = tempfile::tempdir().unwrap();
+        let g = crate::grid::Grid::new([3, 2, 1], glam::DVec3::ONE, glam::DVec3::ZERO);
+        let values = vec![1.0, f32::NAN, 4.0, f32::INFINITY, f32::NEG_INFINITY, -2.0];
+        let v = Volume::new(g, VoxelData::F32(values)).unwrap();
+        let p = dir.path().join("bad.nii");
+        nifti::write_nifti(&p, v.view()).unwrap();
+        let read = read_volume(&p, &ReadOptions::default()).unwrap();
+        let VoxelData::F32(got) = &read.data else {
+            panic!("f32 in, f32 out");
+        };
+        let mut got = got.clone();
+        got.sort_by(f32::total_cmp);
+        assert_eq!(got, vec![-2.0, -2.0, -2.0, 1.0, 4.0, 4.0]);
+        let read = read_volume_with(
+            &p,
+            &ReadOptions::default(),
+            NonFinitePolicy::Replace,
+            Some(-9.0),
+        )
+        .unwrap();
+        assert!(
+            read.data.as_slice().to_f32_vec().contains(&-9.0),
+            "NaN → the given background"
+        );
+        let e = read_volume_with(&p, &ReadOptions::default(), NonFinitePolicy::Refuse, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("bad.nii")
+                && e.contains("1 NaN, 1 +inf and 1 -inf")
+                && e.contains("non_finite"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -298,6 +298,22 @@ pub fn read_nifti(path: &Path, opts: &super::ReadOptions) -> Result<Volume, IoEr
             field,
             [h.quatern_x, h.quatern_y, h.quatern_z].map(|v| f64::from(v) * unit_mm),
         )?;
+        let (b, c, d) = (h.quatern_b, h.quatern_c, h.quatern_d);
+        let norm2 = [b, c, d].map(f64::from).iter().map(|v| v * v).sum::<f64>();
+        // A unit quaternion's vector part has length ≤ 1 (up to f32
+        // rounding); a longer one describes no rotation, and reading it
+        // anyway silently scales the axes.
+        if norm2.is_nan() || norm2 > 1.0 + QUATERNION_TOLERANCE {
+            return Err(header_err(
+                path,
+                "quatern_b/quatern_c/quatern_d",
+                format!(
+                    "({b}, {c}, {d}) has length {:.4} > 1, so it is no rotation; fix the \
+                     header's qform (or set an sform, or qform_code = 0 to use pixdim alone)",
+                    norm2.sqrt()
+                ),
+            ));
+        }
         let r = quaternion_matrix(&h);
         HeaderGeometry {
             directions: [0, 1, 2].map(|a| DVec3::from_array(r[a]) * spacing[a]),
@@ -382,6 +398,10 @@ pub fn read_nifti(path: &Path, opts: &super::ReadOptions) -> Result<Volume, IoEr
     }
     place(path, dims, data, geometry)
 }
+
+/// How far `quatern_b² + quatern_c² + quatern_d²` may exceed 1 (f32
+/// rounding of a unit quaternion) before the qform is refused.
+const QUATERNION_TOLERANCE: f64 = 1e-4;
 
 /// Rotation matrix (columns = axis directions) of a NIfTI quaternion, with
 /// `qfac` (`pixdim[0]`) applied to the third axis.
@@ -783,6 +803,33 @@ mod tests {
         assert_eq!((back.grid.dims, &back.data), (v.grid.dims, &v.data));
         assert!((back.grid.spacing - v.grid.spacing).abs().max_element() < 1e-6);
         assert!((back.grid.origin - v.grid.origin).abs().max_element() < 1e-4);
+    }
+
+    /// A qform quaternion whose vector part is longer than 1 is no
+    /// rotation: refused naming the fields, not read with scaled axes.
+    #[test]
+    fn an_invalid_qform_quaternion_is_refused() {
+        let c = Case::new();
+        let mut s = valid_bytes();
+        put_i16(&mut s, 254, 0); // sform_code: none, so the qform is used
+        for (at, v) in [(256, 1.0f32), (260, 1.0), (264, 1.0)] {
+            put_f32(&mut s, at, v);
+        }
+        let p = c.write("bad_quaternion.nii", &s);
+        expect_err(
+            c.read(&p),
+            &p,
+            &[
+                "`quatern_b/quatern_c/quatern_d`",
+                "(1, 1, 1)",
+                "no rotation",
+            ],
+        );
+        let mut s = valid_bytes();
+        put_i16(&mut s, 254, 0);
+        put_f32(&mut s, 256, f32::NAN);
+        let p = c.write("nan_quaternion.nii", &s);
+        expect_err(c.read(&p), &p, &["`quatern_b/quatern_c/quatern_d`"]);
     }
 
     /// The sform's axis order and directions are applied: a file whose

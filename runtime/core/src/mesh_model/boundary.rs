@@ -142,6 +142,21 @@ impl TieTables {
     }
 }
 
+/// The longest rest edge (mm) of the tetrahedra that use `node`: how far a
+/// point inside the mesh can lie from its nearest node there, the reach
+/// beyond which a grab's point is outside the body
+/// ([`crate::interaction::FarGrabs`]). 0 for a node no tetrahedron uses.
+pub fn reach_at(mesh: &TetMesh, node: u32) -> f64 {
+    mesh.tets
+        .iter()
+        .filter(|t| t.contains(&node))
+        .flat_map(|t| {
+            let p = t.map(|n| mesh.nodes[n as usize]);
+            [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)].map(|(a, b)| (p[a] - p[b]).length())
+        })
+        .fold(0.0, f64::max)
+}
+
 /// Nodal forces (µN) of a uniform traction `t` (Pa) on the boundary faces
 /// of `mesh` whose centroids lie in the box `[lo, hi]` (mm): each face of
 /// area `A` gives `A t / 3` to each corner (the consistent load of linear
@@ -179,6 +194,23 @@ pub fn traction_faces(mesh: &TetMesh, lo: DVec3, hi: DVec3, t: DVec3) -> Vec<([u
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reach_is_the_longest_edge_at_the_node() {
+        let mesh = TetMesh {
+            nodes: vec![
+                DVec3::ZERO,
+                DVec3::new(2.0, 0.0, 0.0),
+                DVec3::new(0.0, 1.0, 0.0),
+                DVec3::new(0.0, 0.0, 1.0),
+                DVec3::new(9.0, 9.0, 9.0),
+            ],
+            tets: vec![[0, 1, 2, 3]],
+            labels: vec![0],
+        };
+        assert!((reach_at(&mesh, 2) - 5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(reach_at(&mesh, 4), 0.0, "unused node");
+    }
 
     #[test]
     fn untie_is_the_transpose_of_tie() {

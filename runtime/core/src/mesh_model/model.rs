@@ -1,6 +1,6 @@
 //! [`MeshModel`]: a [`MeshSolver`] wrapped into a whole deformation model.
 
-use super::boundary::{Boundary, traction_faces};
+use super::boundary::{Boundary, reach_at, traction_faces};
 use super::carve::{GONE, carve_mesh, keep_nodes};
 use super::cut::cut_mesh;
 use super::inversion::{InversionWatch, inverted_tetrahedra};
@@ -18,7 +18,7 @@ use crate::deformation::{
 use crate::error::ModelError;
 use crate::gpu::{BufferId, GpuService};
 use crate::grid::Grid;
-use crate::interaction::{CarveRegion, GrabMotion, InteractionSpec};
+use crate::interaction::{CarveRegion, FarGrabs, GrabMotion, InteractionSpec};
 use crate::io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
 use crate::proxy::{HangingNode, octree_proxy, uniform_proxy_with_losses};
 use crate::resample::{tets_at_vertex, tets_cut_by};
@@ -73,6 +73,8 @@ pub struct MeshModel<S: MeshSolver> {
     labelled_voxels_lost: usize,
     /// Inverted tetrahedra after each frame.
     inversions: InversionWatch,
+    /// Grabs whose point lay beyond one element from the proxy.
+    far_grabs: FarGrabs,
 }
 
 /// Counts summed over a run's steps.
@@ -165,6 +167,7 @@ impl<S: MeshSolver> MeshModel<S> {
             device: None,
             labelled_voxels_lost: 0,
             inversions: InversionWatch::default(),
+            far_grabs: FarGrabs::default(),
         }
     }
 
@@ -457,6 +460,8 @@ impl<S: MeshSolver> MeshModel<S> {
                     })
                     .ok_or_else(|| ModelError(format!("{name} grab: the proxy has no node")))?;
                 let now = b.mesh.nodes[node] + b.state.u[node];
+                self.far_grabs
+                    .check(name, p, now, reach_at(&b.mesh, node as u32));
                 let motion = GrabMotion::new(spec, now).expect("a grab has a motion");
                 let held = b.state.u[node];
                 self.grabs.retain(|g| g.node != node as u32);
@@ -991,6 +996,10 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
 
     fn interact(&mut self, interaction_toml: &str) -> Result<(), ModelError> {
         let spec = InteractionSpec::from_toml(interaction_toml)?;
+        if self.built.is_none() {
+            // Before init: a dry run (parsed and validated, nothing applied).
+            return Ok(());
+        }
         self.apply(&spec)
     }
 
@@ -1040,6 +1049,7 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         notes.insert("last_residual".into(), self.last.residual);
         notes.insert("worst_residual".into(), self.totals.worst_residual);
         notes.insert("unconverged_solves".into(), self.totals.unconverged as f64);
+        self.far_grabs.add_notes(&mut notes);
         if let Some(b) = &self.built {
             b.solver.notes(&mut notes);
         }

@@ -136,14 +136,16 @@ pub fn solver_params<T: serde::de::DeserializeOwned>(
 impl MeshModelParams {
     fn validate(&self, plugin: &str) -> Result<(), ModelError> {
         let fail = |msg: String| Err(ModelError(format!("{plugin} params: {msg}")));
+        // Finite as the f32 the GPU paths narrow them to, not only as f64.
+        let f32_finite = |v: f64| v.is_finite() && (v as f32).is_finite();
         if self.materials.is_empty() {
             return fail("`materials` needs at least one material".into());
         }
         for (i, m) in self.materials.iter().enumerate() {
             let at = format!("materials[{i}]");
-            if !(m.youngs_modulus.is_finite() && m.youngs_modulus > 0.0) {
+            if !(f32_finite(m.youngs_modulus) && m.youngs_modulus > 0.0) {
                 return fail(format!(
-                    "{at}: youngs_modulus {} must be a positive number of pascals",
+                    "{at}: youngs_modulus {} must be a positive number of pascals (within f32)",
                     m.youngs_modulus
                 ));
             }
@@ -153,9 +155,9 @@ impl MeshModelParams {
                     m.poisson_ratio
                 ));
             }
-            if !(m.density.is_finite() && m.density > 0.0) {
+            if !(f32_finite(m.density) && m.density > 0.0) {
                 return fail(format!(
-                    "{at}: density {} must be positive (kg/m³)",
+                    "{at}: density {} must be positive (kg/m³, within f32)",
                     m.density
                 ));
             }
@@ -170,8 +172,11 @@ impl MeshModelParams {
                 ));
             }
         }
-        if self.gravity.iter().any(|g| !g.is_finite()) {
-            return fail(format!("gravity {:?} must be finite (mm/s²)", self.gravity));
+        if self.gravity.iter().any(|&g| !f32_finite(g)) {
+            return fail(format!(
+                "gravity {:?} must be finite (mm/s², within f32)",
+                self.gravity
+            ));
         }
         match self.proxy {
             ProxySpec::Uniform { step: 0 } => fail("proxy.step must be at least 1 voxel".into()),
@@ -186,6 +191,27 @@ impl MeshModelParams {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn values_beyond_f32_are_refused_naming_the_key() {
+        for (text, key) in [
+            (
+                "materials = [{ range = [0, 1], youngs_modulus = 1e39 }]",
+                "youngs_modulus",
+            ),
+            (
+                "materials = [{ range = [0, 1], youngs_modulus = 1, density = 1e300 }]",
+                "density",
+            ),
+            (
+                "materials = [{ range = [0, 1], youngs_modulus = 1 }]\ngravity = [0, 0, -1e39]",
+                "gravity",
+            ),
+        ] {
+            let e = split("fem", text).unwrap_err().0;
+            assert!(e.contains(key) && e.contains("f32"), "{text}: {e}");
+        }
+    }
 
     #[test]
     fn shared_and_solver_keys_are_split_and_named_in_errors() {
