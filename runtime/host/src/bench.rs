@@ -14,8 +14,12 @@
 //! `--accuracy` reports instead, per interpolation mode, resampling time and
 //! error against an f64 reference under affine, twist and bend (see
 //! [`accuracy`]).
+//!
+//! `--stress` runs instead the numerical stress suite of every deformation
+//! model on randomized scenes (see [`stress`]).
 
 mod accuracy;
+pub mod stress;
 
 use crate::backend::{self, BackendChoice};
 use crate::plugin_loader;
@@ -62,6 +66,19 @@ pub struct BenchArgs {
     /// (HU) against an f64 reference under affine, twist and bend.
     #[arg(long)]
     pub accuracy: bool,
+    /// Run the numerical stress suite instead: randomized scenes for every
+    /// deformation model (see `bench::stress`).
+    #[arg(long)]
+    pub stress: bool,
+    /// Stress: scenes per model.
+    #[arg(long, default_value_t = 200)]
+    pub stress_scenes: u64,
+    /// Stress: frames per scene.
+    #[arg(long, default_value_t = 13)]
+    pub stress_frames: u64,
+    /// Stress: the RNG seed that draws the scenes.
+    #[arg(long, default_value_t = 13)]
+    pub seed: u64,
 }
 
 /// Running the benchmark failed.
@@ -124,6 +141,9 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     }
     if args.accuracy {
         return accuracy::run(args);
+    }
+    if args.stress {
+        return stress::run(args);
     }
     let repeat = args.repeat.max(1);
     let resolved = backend::resolve(args.backend).map_err(err)?;
