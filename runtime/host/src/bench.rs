@@ -71,11 +71,14 @@ pub struct BenchArgs {
     #[arg(long)]
     pub stress: bool,
     /// Stress: scenes per model.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 250)]
     pub stress_scenes: u64,
     /// Stress: frames per scene.
     #[arg(long, default_value_t = 13)]
     pub stress_frames: u64,
+    /// Stress: only these models (repeatable; default: all four).
+    #[arg(long)]
+    pub stress_model: Vec<String>,
     /// Stress: the RNG seed that draws the scenes.
     #[arg(long, default_value_t = 13)]
     pub seed: u64,

@@ -362,13 +362,20 @@ pub struct ModelTally {
 }
 
 impl ModelTally {
-    fn fail(&mut self, scene: u64, what: &str, e: &dyn std::fmt::Display) -> bool {
+    fn fail(
+        &mut self,
+        sc: &StressScene,
+        scene: u64,
+        what: &str,
+        e: &dyn std::fmt::Display,
+    ) -> bool {
         let m = e.to_string();
         let panic = m.contains("panicked");
         if panic {
             self.panics += 1;
-        }
-        if self.examples.len() < 8 && (panic || self.examples.len() < 3) {
+            self.examples
+                .push(format!("scene {scene} {what}: {m}; {}", sc.describe()));
+        } else if self.examples.len() < 3 {
             self.examples.push(format!("scene {scene} {what}: {m}"));
         }
         panic
@@ -394,13 +401,13 @@ fn run_scene(
         Ok(m) => m,
         Err(e) => {
             t.refused += 1;
-            t.fail(id, "create", &e);
+            t.fail(sc, id, "create", &e);
             return;
         }
     };
     if let Err(e) = m.init(sc.volume.view(), ExecutionBackend::Cpu) {
         t.refused += 1;
-        t.fail(id, "init", &e);
+        t.fail(sc, id, "init", &e);
         return;
     }
     let grid = sc.volume.grid;
@@ -408,7 +415,7 @@ fn run_scene(
         Ok(b) => b,
         Err(e) => {
             t.refused += 1;
-            t.fail(id, "bind", &e);
+            t.fail(sc, id, "bind", &e);
             return;
         }
     };
@@ -424,7 +431,7 @@ fn run_scene(
             interacted = true;
             if let Err(e) = m.interact(text) {
                 t.refused += 1;
-                t.fail(id, "interact", &e);
+                t.fail(sc, id, "interact", &e);
             }
         }
         let info = FrameInfo {
@@ -455,7 +462,7 @@ fn run_scene(
         });
         if let Err(e) = stepped {
             t.errors += 1;
-            t.fail(id, &format!("frame {frame}"), &e);
+            t.fail(sc, id, &format!("frame {frame}"), &e);
             return;
         }
         t.frames += 1;
@@ -529,7 +536,13 @@ pub fn stress(
         "worst growth"
     );
     let mut tallies = vec![];
-    for (mi, &model) in models.iter().enumerate() {
+    for &model in models {
+        // Scenes are drawn per model from its place in MODELS, so a filtered
+        // run draws the same scenes.
+        let mi = MODELS
+            .iter()
+            .position(|m| *m == model)
+            .unwrap_or(MODELS.len());
         let plugin = plugin_loader::load_by_name(model, &dirs).map_err(err)?;
         let mut t = ModelTally::default();
         let capture = crate::warnings::capture();
@@ -578,7 +591,23 @@ pub fn stress(
 
 /// `voxflex bench --stress`: the report, and the JSON file when asked.
 pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
-    let (out, tallies) = stress(args, &MODELS)?;
+    let models: Vec<&str> = if args.stress_model.is_empty() {
+        MODELS.to_vec()
+    } else {
+        for m in &args.stress_model {
+            if !MODELS.contains(&m.as_str()) {
+                return Err(err(format!(
+                    "--stress-model {m}: unknown; use one of {}",
+                    MODELS.join(", ")
+                )));
+            }
+        }
+        MODELS
+            .into_iter()
+            .filter(|m| args.stress_model.iter().any(|a| a == m))
+            .collect()
+    };
+    let (out, tallies) = stress(args, &models)?;
     if let Some(p) = &args.json {
         let mut json = serde_json::Map::new();
         for (model, t) in &tallies {
