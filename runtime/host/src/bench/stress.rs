@@ -635,8 +635,11 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         .map(|(_, t)| t.panics + t.silent_non_finite)
         .sum();
     if failed > 0 {
+        // The table first, then the one-line error the CLI prints.
+        print!("{out}");
         return Err(err(format!(
-            "{out}{failed} frame(s) panicked or went non-finite without an error (see above)"
+            "{failed} call(s) panicked or frame(s) went non-finite without an error (see the \
+             table above)"
         )));
     }
     Ok(out)
