@@ -850,3 +850,19 @@ fn giga_dims_are_refused_without_allocating() {
         assert!(largest < 4 << 20, "{name}: allocated {largest} bytes");
     }
 }
+
+/// The accounting the fuzzers rely on sees a large allocation, and refuses
+/// one above the hard cap (so the bound checks above can fail).
+#[test]
+fn the_counting_allocator_records_and_caps() {
+    let (v, largest) = largest_allocation(|| vec![1u8; 10 << 20]);
+    assert_eq!(v.len(), 10 << 20);
+    assert!(largest >= 10 << 20, "recorded {largest}");
+    let (r, largest) = largest_allocation(|| {
+        let mut v: Vec<u8> = Vec::new();
+        v.try_reserve_exact(HARD_CAP + 1).map(|_| v.capacity())
+    });
+    assert!(r.is_err(), "an allocation above the cap went through");
+    assert!(largest > HARD_CAP);
+    assert!(volume_allocation_bound(0) < 10 << 20);
+}
