@@ -247,6 +247,24 @@ impl DeformationModel for AffineField {
         }
         self.backend = backend;
         let (lo, hi) = volume.grid.world_bounds();
+        // A twist or bend spreads its angle over the extent along its axis:
+        // a volume one voxel thick there has none (the rate would be ∞ and
+        // every displacement NaN; found by `voxflex bench --stress`).
+        let axis = self.params.axis as usize;
+        if self.params.field != params::FieldKind::Affine && hi[axis] - lo[axis] <= 0.0 {
+            return Err(ModelError(format!(
+                "field = \"{}\" spreads `angle_deg` over the volume's extent along `axis` = \"{}\", \
+                 but the volume is one voxel thick there ({:?} voxels); choose another `axis` or \
+                 use field = \"affine\"",
+                if self.params.field == params::FieldKind::Twist {
+                    "twist"
+                } else {
+                    "bend"
+                },
+                ["x", "y", "z"][axis],
+                volume.grid.dims
+            )));
+        }
         self.extent = (hi - lo).max(DVec3::splat(f64::MIN_POSITIVE));
         self.centre = self
             .params
@@ -343,6 +361,48 @@ mod tests {
         )
         .unwrap();
         (f, grid)
+    }
+
+    /// Regression (bench --stress, seed 13, affine scene 3): a twist about z
+    /// of a volume one voxel thick along z mapped every point to NaN.
+    #[test]
+    fn twist_across_a_single_slice_is_refused() {
+        let grid = Grid::centred([9, 4, 1], DVec3::new(1.2, 0.7, 0.5));
+        let data = vec![0u8; grid.len()];
+        let view = VolumeView {
+            grid,
+            data: VoxelSlice::U8(&data),
+        };
+        for field in ["twist", "bend"] {
+            let text = format!("field = \"{field}\"\naxis = \"z\"\nangle_deg = 237");
+            let mut f = AffineField::new(AffineParams::from_toml(&text).unwrap(), None);
+            let e = f.init(view, ExecutionBackend::Cpu).unwrap_err().0;
+            assert!(e.contains("one voxel thick") && e.contains("axis"), "{e}");
+        }
+        // Along an axis with an extent it runs, finite.
+        let text = "field = \"twist\"\naxis = \"x\"\nangle_deg = 237";
+        let mut f = AffineField::new(AffineParams::from_toml(text).unwrap(), None);
+        f.init(view, ExecutionBackend::Cpu).unwrap();
+        let b = f.bind(RestPoints::Lattice(grid)).unwrap();
+        f.step(FrameInfo {
+            frame: 0,
+            frames: 1,
+            dt_s: 0.1,
+        })
+        .unwrap();
+        let n = grid.len();
+        let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        f.map(
+            b,
+            DisplacementTarget::Cpu {
+                x: &mut x,
+                y: &mut y,
+                z: &mut z,
+            },
+        )
+        .unwrap();
+        assert!(x.iter().chain(&y).chain(&z).all(|v| v.is_finite()));
+        assert!(y.iter().any(|v| v.abs() > 0.01), "the twist moved nothing");
     }
 
     #[test]

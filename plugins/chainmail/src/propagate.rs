@@ -421,7 +421,10 @@ pub fn frontier_iteration(
             let mut out = Vec::new();
             for &n in chunk {
                 let n = n as usize;
-                if !pinned(lat.cells[n])
+                // A carve may have removed a listed element since the list
+                // was made: it has no links (and no material) any more.
+                if lat.present(n)
+                    && !pinned(lat.cells[n])
                     && let Some((e, a)) = sponsor(lat, st, rd, n, lat.coords(n))
                 {
                     let link = lat.link(n, e);

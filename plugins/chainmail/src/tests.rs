@@ -577,6 +577,43 @@ fn a_grab_far_from_the_body_is_reported_in_the_notes() {
     assert!((notes["grab_far_max_mm"] - 100.0).abs() < 1e-9, "{notes:?}");
 }
 
+/// Regression (`voxflex bench --stress`, seed 13, chainmail scene 101): with
+/// the frontier schedule, a carve that removed elements still on the
+/// work-list made the next iteration look up the link of an absent element
+/// (index out of bounds, a panic at the plugin boundary).
+#[test]
+fn carving_elements_on_the_frontier_work_list_is_safe() {
+    for schedule in ["frontier", "blocks"] {
+        let v = volume([12, 6, 6], |_, _, _| 1);
+        let mats = "{ range = [0, 256], constraint = 0.2, elastic = 0.3 }";
+        let extra = format!(
+            "schedule = \"{schedule}\"\npropagation_iterations = 1\nrelaxation_iterations = 1"
+        );
+        let mut m = ChainMail::new(v.view(), params(&extra, mats)).unwrap();
+        grab(&mut m, [0, 3, 3], [20.0, 0.0, 0.0]);
+        assert!(m.step(), "{schedule}");
+        let before = m.lattice().element_count();
+        // The wave has left the grab by one link: carve where it runs
+        // (elements whose current position is in the ball).
+        m.interact(
+            &InteractionSpec::from_toml("kind = \"carve\"\ncentre = [1, 3, 3]\nradius = 1.5")
+                .unwrap(),
+        )
+        .unwrap();
+        for _ in 0..20 {
+            m.step();
+        }
+        assert!(
+            m.lattice().element_count() < before,
+            "{schedule}: nothing carved"
+        );
+        for n in 0..v.grid.len() {
+            let u = m.displacement(n);
+            assert!(u.iter().all(|c| c.is_finite()), "{schedule}: {u:?}");
+        }
+    }
+}
+
 #[test]
 fn cuts_and_carves_of_a_down_sampled_model_reach_the_sampling_mesh() {
     let v = volume([21, 21, 21], |_, _, _| 1);

@@ -15,9 +15,13 @@
 //! error against an f64 reference under affine, twist and bend (see
 //! [`accuracy`]). `--fronts` runs every model's run-time/error front and
 //! writes tables and plots (see [`fronts`]).
+//!
+//! `--stress` runs instead the numerical stress suite of every deformation
+//! model on randomized scenes (see [`stress`]).
 
 mod accuracy;
 mod fronts;
+pub mod stress;
 
 use crate::backend::{self, BackendChoice};
 use crate::plugin_loader;
@@ -80,6 +84,22 @@ pub struct BenchArgs {
     /// With `--fronts`: the output directory.
     #[arg(long, default_value = "docs/fronts")]
     pub out: PathBuf,
+    /// Run the numerical stress suite instead: randomized scenes for every
+    /// deformation model (see `bench::stress`).
+    #[arg(long, conflicts_with_all = ["fronts", "accuracy"])]
+    pub stress: bool,
+    /// Stress: scenes per model.
+    #[arg(long, default_value_t = 250)]
+    pub stress_scenes: u64,
+    /// Stress: frames per scene.
+    #[arg(long, default_value_t = 13)]
+    pub stress_frames: u64,
+    /// Stress: only these models (repeatable; default: all four).
+    #[arg(long)]
+    pub stress_model: Vec<String>,
+    /// Stress: the RNG seed that draws the scenes.
+    #[arg(long, default_value_t = 13)]
+    pub seed: u64,
 }
 
 /// Running the benchmark failed.
@@ -145,6 +165,9 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     }
     if args.fronts {
         return fronts::run(args);
+    }
+    if args.stress {
+        return stress::run(args);
     }
     let repeat = args.repeat.max(1);
     let resolved = backend::resolve(args.backend).map_err(err)?;
