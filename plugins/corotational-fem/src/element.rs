@@ -205,16 +205,13 @@ pub fn add_twist(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::element_checks::{
+        assert_force_is_energy_gradient, large_rotation, skewed_tetrahedron,
+    };
     use voxflex_core::glam::DQuat;
 
     fn element() -> Element {
-        let nodes = vec![
-            DVec3::new(0.1, 0.0, 0.2),
-            DVec3::new(2.0, 0.3, 0.0),
-            DVec3::new(0.4, 1.7, 0.1),
-            DVec3::new(0.2, 0.5, 1.9),
-        ];
-        let mesh = TetMesh::new("one", nodes, vec![[0, 1, 2, 3]], vec![0]).unwrap();
+        let mesh = skewed_tetrahedron();
         Element::new(&mesh, 0, &ElasticMaterial::new(1000.0, 0.3, 1e-6))
     }
 
@@ -245,29 +242,11 @@ mod tests {
         // A large rotation and a stretch: central differences of the energy
         // against the force, component by component.
         let e = element();
-        let q = DMat3::from_quat(DQuat::from_axis_angle(
-            DVec3::new(0.3, -0.5, 1.0).normalize(),
-            1.1,
-        ));
+        let q = large_rotation();
         let u = e
             .rest
             .map(|x| q * DMat3::from_diagonal(DVec3::new(1.2, 0.9, 1.05)) * x - x);
-        let f = e.elastic_force(u);
-        let scale = f.iter().map(|v| v.length()).fold(0.0, f64::max);
-        let eps = 1e-6;
-        for a in 0..4 {
-            for c in 0..3 {
-                let (mut up, mut down) = (u, u);
-                up[a][c] += eps;
-                down[a][c] -= eps;
-                let grad = (e.energy(up) - e.energy(down)) / (2.0 * eps);
-                assert!(
-                    (grad - f[a][c]).abs() <= 1e-6 * scale,
-                    "corner {a} axis {c}: {grad} vs {}",
-                    f[a][c]
-                );
-            }
-        }
+        assert_force_is_energy_gradient(u, e.elastic_force(u), |u| e.energy(*u));
         assert!(e.energy(e.rest.map(|x| q * x - x)).abs() < 1e-9 * e.energy(u));
     }
 

@@ -38,6 +38,8 @@
 mod convergence_tests;
 pub mod edge_nodes;
 pub mod element;
+#[cfg(test)]
+mod element_checks;
 pub mod front;
 #[cfg(test)]
 mod gpu_tests;

@@ -211,16 +211,13 @@ impl Quadratic {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::element_checks::{
+        assert_force_is_energy_gradient, large_rotation, skewed_tetrahedron,
+    };
     use voxflex_core::glam::DQuat;
 
     fn element() -> Quadratic {
-        let nodes = vec![
-            DVec3::new(0.1, 0.0, 0.2),
-            DVec3::new(2.0, 0.3, 0.0),
-            DVec3::new(0.4, 1.7, 0.1),
-            DVec3::new(0.2, 0.5, 1.9),
-        ];
-        let mesh = TetMesh::new("one", nodes, vec![[0, 1, 2, 3]], vec![0]).unwrap();
+        let mesh = skewed_tetrahedron();
         Quadratic::new(
             &mesh,
             0,
@@ -276,10 +273,7 @@ mod tests {
     fn the_elastic_force_is_the_gradient_of_the_energy() {
         // A large rotation, a stretch and a bend (a quadratic field).
         let e = element();
-        let q = DMat3::from_quat(DQuat::from_axis_angle(
-            DVec3::new(0.3, -0.5, 1.0).normalize(),
-            1.1,
-        ));
+        let q = large_rotation();
         let u = e.rest.map(|x| {
             q * (DMat3::from_diagonal(DVec3::new(1.2, 0.9, 1.05)) * x
                 + DVec3::new(0.0, 0.0, 0.1 * x.x * x.x))
@@ -287,20 +281,7 @@ mod tests {
         });
         let f = e.elastic_force(&u);
         let scale = f.iter().map(|v| v.length()).fold(0.0, f64::max);
-        let eps = 1e-6;
-        for a in 0..NODES {
-            for c in 0..3 {
-                let (mut up, mut down) = (u, u);
-                up[a][c] += eps;
-                down[a][c] -= eps;
-                let grad = (e.energy(&up) - e.energy(&down)) / (2.0 * eps);
-                assert!(
-                    (grad - f[a][c]).abs() <= 1e-6 * scale,
-                    "node {a} axis {c}: {grad} vs {}",
-                    f[a][c]
-                );
-            }
-        }
+        assert_force_is_energy_gradient(u, f, |u| e.energy(u));
         // K_rot u − f0 is the same force.
         let mut k = vec![DMat3::ZERO; NODES * NODES];
         let mut f0 = [DVec3::ZERO; NODES];

@@ -15,18 +15,8 @@ use voxflex_core::opacity::auto_lambda::CANDIDATES;
 use voxflex_core::opacity::{
     GrowthLimits, GrowthParams, LambdaChoice, OpacityMap, RoiRequest, Seed, grow_roi,
 };
-use voxflex_core::phantom::abdomen::{SEEDS, label};
+use voxflex_core::phantom::abdomen::{SEEDS, label, map_dice};
 use voxflex_core::phantom::abdomen_labelled;
-
-/// Dice of `map ≥ 0.5` against `labels == lab` over the whole grid.
-fn dice(map: &OpacityMap, dims: [usize; 3], labels: &[u8], lab: u8) -> f64 {
-    let mut inside = vec![false; labels.len()];
-    for (l, &q) in map.values.iter().enumerate() {
-        let v = map.voxel(l);
-        inside[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = q >= 32768;
-    }
-    voxflex_core::phantom::abdomen::dice(inside, labels, lab)
-}
 
 /// Label histogram of `map ≥ 0.5`, largest first (diagnostics).
 fn covers(map: &OpacityMap, dims: [usize; 3], labels: &[u8]) -> String {
@@ -184,7 +174,7 @@ fn main() {
             };
             let t = Instant::now();
             let o = grow_roi(vol, &req, None).expect("grow");
-            let d = dice(&o.grown.map, dims, &ph.labels, lab);
+            let d = map_dice(&o.grown.map, dims, &ph.labels, lab);
             if std::env::var_os("ROI_DICE_LABELS").is_some() {
                 eprintln!("  covers: {}", covers(&o.grown.map, dims, &ph.labels));
             }
@@ -215,7 +205,7 @@ fn main() {
         };
         let t = Instant::now();
         let o = grow_roi(vol, &req, None).expect("grow auto");
-        let d = dice(&o.grown.map, dims, &ph.labels, lab);
+        let d = map_dice(&o.grown.map, dims, &ph.labels, lab);
         let trials = o.auto.as_ref().map(|a| a.trials.len()).unwrap_or(0);
         eprintln!(
             "{name} auto: λ={} ({trials} trials), {} voxels, Dice {d:.3}, {:.2?}",

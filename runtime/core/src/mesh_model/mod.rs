@@ -19,6 +19,7 @@ pub mod cantilever;
 pub mod carve;
 pub mod cut;
 pub mod edge_layer;
+pub mod elastica;
 pub mod ichol;
 pub mod inversion;
 pub mod material;

@@ -442,6 +442,23 @@ pub fn dice(a: impl IntoIterator<Item = bool>, labels: &[u8], label: u8) -> f64 
     }
 }
 
+/// [`dice`] of an ROI opacity map's `opacity ≥ 0.5` (voxels beyond its box
+/// at its `outside` value) against `labels == label`, over a volume of
+/// `dims` voxels (x fastest, like `labels`).
+pub fn map_dice(
+    map: &crate::opacity_map::OpacityMap,
+    dims: [usize; 3],
+    labels: &[u8],
+    label: u8,
+) -> f64 {
+    let half = crate::opacity_map::to_fixed(0.5);
+    dice(
+        map.dense(dims).into_iter().map(|q| q >= half),
+        labels,
+        label,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

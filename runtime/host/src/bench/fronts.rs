@@ -26,7 +26,6 @@
 //! a load, a field, a seed). `front.md` says for each whether the default
 //! configuration is the knee, Pareto-optimal, or dominated.
 
-mod elastica;
 mod fem;
 mod grab;
 mod plot;

@@ -10,24 +10,12 @@ use super::{Front, Point};
 use crate::bench::{BenchError, err};
 use std::time::Instant;
 use voxflex_core::opacity::auto_lambda::CANDIDATES;
-use voxflex_core::opacity::{
-    GrowthLimits, GrowthParams, LambdaChoice, OpacityMap, RoiRequest, Seed, grow_roi,
-};
-use voxflex_core::phantom::abdomen::SEEDS;
+use voxflex_core::opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi};
+use voxflex_core::phantom::abdomen::{SEEDS, map_dice};
 use voxflex_core::phantom::abdomen_labelled;
 
 /// The scene default, `[[roi]] lambda = 30` (the paper's).
 const DEFAULT_LAMBDA: f32 = 30.0;
-
-/// Dice of `map ≥ 0.5` against `labels == lab` over the whole grid.
-fn dice(map: &OpacityMap, dims: [usize; 3], labels: &[u8], lab: u8) -> f64 {
-    let mut inside = vec![false; labels.len()];
-    for (l, &q) in map.values.iter().enumerate() {
-        let v = map.voxel(l);
-        inside[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = q >= 32768;
-    }
-    voxflex_core::phantom::abdomen::dice(inside, labels, lab)
-}
 
 /// The ROI front.
 pub(super) fn front(quick: bool) -> Result<Front, BenchError> {
@@ -54,7 +42,7 @@ pub(super) fn front(quick: bool) -> Result<Front, BenchError> {
             let t = Instant::now();
             let o = grow_roi(vol, &req, None).map_err(err)?;
             let time_ms = t.elapsed().as_secs_f64() * 1e3;
-            let d = dice(&o.grown.map, dims, &ph.labels, lab);
+            let d = map_dice(&o.grown.map, dims, &ph.labels, lab);
             let (series, config) = match lambda {
                 LambdaChoice::Fixed(l) => (format!("{name} fixed λ"), format!("λ = {l}")),
                 LambdaChoice::Auto => {

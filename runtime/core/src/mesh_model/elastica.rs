@@ -1,11 +1,15 @@
-//! The tip-loaded cantilever's Euler elastica (inextensible, dead load in
-//! −z): `θ'' = −α cos θ` on `s ∈ [0, 1]` with `α = P L² / EI`, clamped
-//! (`θ(0) = 0`) and moment-free at the tip (`θ'(1) = 0`), solved by
-//! shooting on `θ'(0)` (bisection, RK4 with 4,000 steps) — the same
-//! reference as corotational-fem's convergence tests.
+//! The tip-loaded cantilever's Euler elastica: the large-deflection
+//! reference of corotational FEM's convergence tests and of the
+//! `fem_elastica` front of `voxflex bench --fronts`. Lengths are fractions
+//! of the beam's length; no frame beyond that (x along the beam from the
+//! clamp, z the load's axis, downward negative).
 
-/// The tip's `(x, z)` as fractions of the length (z downward negative).
-pub(super) fn tip(alpha: f64) -> (f64, f64) {
+/// The tip-loaded cantilever's Euler elastica (inextensible, dead load in
+/// −z): `θ'' = −α cos θ` on `s ∈ [0, 1]` with `α = P L² / EI`, clamped
+/// (`θ(0) = 0`) and moment-free at the tip (`θ'(1) = 0`), by shooting on
+/// `θ'(0)` (bisection, RK4 with 4,000 steps). Returns the tip's `(x, z)`
+/// as fractions of the length (z downward negative).
+pub fn tip(alpha: f64) -> (f64, f64) {
     let shoot = |k0: f64| {
         // State: θ, θ', x, z.
         let f = |y: [f64; 4]| [y[1], -alpha * y[0].cos(), y[0].cos(), -y[0].sin()];
@@ -39,15 +43,21 @@ pub(super) fn tip(alpha: f64) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     #[test]
-    fn matches_small_load_theory_and_bisshopp_drucker() {
+    fn the_elastica_reference_matches_its_small_and_known_values() {
         // Small load: the linear beam's tip deflection α/3.
         let (x, z) = super::tip(0.01);
-        assert!((z + 0.01 / 3.0).abs() < 1e-6 && (x - 1.0).abs() < 1e-4);
-        // Bisshopp & Drucker (1945): PL²/EI = 1 → (1 − 0.05643, −0.30172).
+        assert!(
+            (z + 0.01 / 3.0).abs() < 1e-6 && (x - 1.0).abs() < 1e-4,
+            "{x} {z}"
+        );
+        // Bisshopp & Drucker (1945): PL²/EI = 1 puts the tip at
+        // (1 − 0.05643, −0.30172) L, and PL²/EI = 10 at δ/L = 0.8106.
         let (x, z) = super::tip(1.0);
         assert!(
             (x - 0.94357).abs() < 2e-5 && (z + 0.30172).abs() < 2e-5,
             "{x} {z}"
         );
+        let (_, z) = super::tip(10.0);
+        assert!((z + 0.8106).abs() < 1e-4, "{z}");
     }
 }
