@@ -701,8 +701,8 @@ fn roi_auto_lambda_and_bounds_reach_the_notes_and_the_cli() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
     let s = format!(
-        "{}\n[[roi]]\nname = \"liver\"\nseed = [-95.0, -10.0, 30.0]\nlambda = \"auto\"\n\
-         [[roi]]\nname = \"near\"\nseed = [-95.0, -10.0, 30.0]\nmax_distance_mm = 25\n",
+        "{}\n[[roi]]\nname = \"liver\"\nseed = [-95.0, -10.0, 30.0]\n\
+         [[roi]]\nname = \"near\"\nseed = [-95.0, -10.0, 30.0]\nlambda = 30\nmax_distance_mm = 25\n",
         scene(
             "cpu",
             "abdomen",

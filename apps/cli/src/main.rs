@@ -86,8 +86,9 @@ enum Command {
         /// Output file (.nii or .nii.gz).
         #[arg(long)]
         out: PathBuf,
-        /// Extinction scale λ: a positive number, or `auto` (the plateau rule).
-        #[arg(long, default_value = "30")]
+        /// Extinction scale λ: `auto` (the plateau rule; default) or a
+        /// positive number (the paper's is 30).
+        #[arg(long, default_value = "auto")]
         lambda: String,
         /// Intensity window lo,hi (volume units): voxels outside never rise above o_min.
         #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]

@@ -371,8 +371,9 @@ pub struct RoiSettings {
     /// Seed as a slice click.
     #[serde(default)]
     pub seed_slice: Option<SliceSeed>,
-    /// Extinction scale λ: a number (default 30) or `"auto"` (the plateau
-    /// rule, `voxflex_core::opacity::auto_lambda`).
+    /// Extinction scale λ: `"auto"` (the default: the plateau rule,
+    /// `voxflex_core::opacity::auto_lambda`) or a number (the paper's is
+    /// 30, which leaks on contrast CT — see README "On contrast CT").
     #[serde(default = "default_lambda")]
     pub lambda: LambdaSetting,
     /// Intensity window `[lo, hi]` (volume units, HU for CT): voxels outside
@@ -402,8 +403,11 @@ pub struct RoiSettings {
     pub gaussian_tf: bool,
 }
 
+/// `"auto"`: on the labelled abdomen the paper's λ = 30 is off the
+/// run-time/error front for every seed, the plateau rule on it (README,
+/// "Run-time/error fronts").
 fn default_lambda() -> LambdaSetting {
-    LambdaSetting::Value(30.0)
+    LambdaSetting::Word("auto".into())
 }
 
 /// `[[roi]] lambda`: a number or a word (only `"auto"` is valid; checked
@@ -1154,7 +1158,7 @@ kind = "release"
         assert_eq!(s.rois[0].lambda, LambdaSetting::Value(12.0));
         assert_eq!(s.rois[0].intensity, None);
         let s = Scene::parse(&roi(""), Path::new("t.toml")).unwrap();
-        assert_eq!(s.rois[0].lambda, LambdaSetting::Value(30.0));
+        assert_eq!(s.rois[0].lambda, LambdaSetting::Word("auto".into()));
         // An error in the second [[roi]] points at its own line.
         let two = format!(
             "{}[[roi]]\nseed = [1.0, 0.0, 0.0]\nlambda = -3\n",
