@@ -35,6 +35,8 @@
 //! ```
 
 #[cfg(test)]
+mod amg_tests;
+#[cfg(test)]
 mod convergence_tests;
 pub mod edge_nodes;
 pub mod element;
@@ -50,7 +52,7 @@ pub mod solver;
 mod tests;
 
 pub use solver::{
-    CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind, StaticStats,
+    AmgStats, CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind, StaticStats,
 };
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);

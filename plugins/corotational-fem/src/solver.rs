@@ -37,6 +37,7 @@ use voxflex_core::deformation::ModelNotes;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
+use voxflex_core::mesh_model::amg::Amg;
 use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_core::mesh_model::{
@@ -98,6 +99,10 @@ pub enum PreconditionerKind {
     IncompleteCholesky,
     /// Each node's 3 × 3 diagonal block inverted (CPU and GPU).
     BlockJacobi,
+    /// Smoothed-aggregation algebraic multigrid, one V-cycle
+    /// ([`voxflex_core::mesh_model::amg`]; CPU only): iterations nearly
+    /// flat as the mesh is refined.
+    Amg,
 }
 
 /// The solver's keys of `[model.params.corotational-fem]`.
@@ -235,6 +240,25 @@ pub struct CorotationalFem {
     gpu: Option<GpuPcg>,
     /// The static solves' figures.
     stats: StaticStats,
+    /// Rest positions of the solver's nodes (corners, then edge nodes for
+    /// P2), mm: the rigid-body modes of `preconditioner = "amg"`.
+    positions: Vec<DVec3>,
+    /// The AMG hierarchy (`preconditioner = "amg"`), kept between solves
+    /// while the pattern and the free nodes stay, and its setup figures.
+    amg: std::sync::Mutex<(Option<Amg>, AmgStats)>,
+}
+
+/// Setup figures of `preconditioner = "amg"` (→ notes).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AmgStats {
+    /// Full setups (aggregation, prolongators, Galerkin products).
+    pub setups: u64,
+    /// Refreshes (Galerkin products only, prolongators kept).
+    pub refreshes: u64,
+    /// Seconds spent in both, summed.
+    pub setup_s: f64,
+    /// Levels of the last hierarchy.
+    pub levels: usize,
 }
 
 /// Which part of the rotations' own stiffness the tangent carries.
@@ -279,6 +303,9 @@ impl CorotationalFem {
         let keys = if self.gpu.is_some() {
             "raise cg_max_iterations (or run the static solver on the CPU backend, \
              whose default preconditioner is incomplete Cholesky)"
+        } else if self.params.preconditioner == PreconditionerKind::Amg {
+            "raise cg_max_iterations or loosen cg_tolerance (or try preconditioner = \
+             \"incomplete-cholesky\")"
         } else if self.params.cpu_preconditioner() == Preconditioner::BlockJacobi {
             "raise cg_max_iterations or set preconditioner = \"incomplete-cholesky\""
         } else {
@@ -304,6 +331,27 @@ impl CorotationalFem {
             Some(g) => g
                 .solve(&self.matrix, free, &bc.hanging, rhs, x, settings)
                 .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}")))?,
+            None if self.params.preconditioner == PreconditionerKind::Amg => {
+                let mut guard = self.amg.lock().unwrap_or_else(|e| e.into_inner());
+                let (cached, stats) = &mut *guard;
+                let mut ready = false;
+                pcg::solve_preconditioned(&self.matrix, bc, free, rhs, x, settings, &mut |r, z| {
+                    if !ready {
+                        let t = std::time::Instant::now();
+                        let refresh = cached.as_ref().is_some_and(|h| h.fits(&self.matrix, free));
+                        let h = Amg::prepare(cached, &self.matrix, free, &self.positions);
+                        stats.levels = h.level_sizes().len();
+                        if refresh {
+                            stats.refreshes += 1;
+                        } else {
+                            stats.setups += 1;
+                        }
+                        stats.setup_s += t.elapsed().as_secs_f64();
+                        ready = true;
+                    }
+                    cached.as_ref().expect("prepared").apply(r, z)
+                })
+            }
             None => pcg::solve_with(
                 &self.matrix,
                 bc,
@@ -368,6 +416,11 @@ impl CorotationalFem {
     /// The figures of the static solves so far.
     pub fn static_stats(&self) -> StaticStats {
         self.stats
+    }
+
+    /// The AMG setup figures (`preconditioner = "amg"`).
+    pub fn amg_stats(&self) -> AmgStats {
+        self.amg.lock().unwrap_or_else(|e| e.into_inner()).1
     }
 
     /// The elastic force on every node at displacements `u` (µN), each
@@ -443,6 +496,14 @@ impl MeshSolver for CorotationalFem {
     const GPU: bool = true;
 
     fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        if self.params.preconditioner == PreconditionerKind::Amg {
+            return Err(ModelError(
+                "corotational-fem: preconditioner = \"amg\" (algebraic multigrid) has no GPU \
+                 path; use preconditioner = \"block-jacobi\" or \"auto\" with backend = \"gpu\", \
+                 or backend = \"cpu\""
+                    .into(),
+            ));
+        }
         if self.params.preconditioner == PreconditionerKind::IncompleteCholesky {
             return Err(ModelError(
                 "corotational-fem: preconditioner = \"incomplete-cholesky\" has no GPU path; \
@@ -464,27 +525,43 @@ impl MeshSolver for CorotationalFem {
         params: FemParams,
     ) -> Result<Self, ModelError> {
         params.validate()?;
-        let (elements, edge_nodes, matrix, masses) = match params.element {
-            ElementKind::P1 => {
-                let elements: Vec<Element> = (0..mesh.tets.len())
-                    .map(|t| Element::new(mesh, t, &materials[mesh.labels[t] as usize]))
-                    .collect();
-                (
-                    Elements::Linear(elements),
-                    None,
-                    BlockMatrix::on_mesh(mesh),
-                    lumped_masses(mesh, materials),
-                )
-            }
-            ElementKind::P2 => {
-                let layer = EdgeNodes::new(mesh, materials);
-                let elements = layer.elements(mesh, materials);
-                let nodes: Vec<[u32; 10]> = elements.iter().map(|e| e.nodes).collect();
-                let matrix = BlockMatrix::on_elements(layer.len(), &nodes);
-                let masses = layer.masses.clone();
-                (Elements::Quadratic(elements), Some(layer), matrix, masses)
-            }
-        };
+        let (elements, edge_nodes, matrix, masses, positions) =
+            match params.element {
+                ElementKind::P1 => {
+                    let elements: Vec<Element> = (0..mesh.tets.len())
+                        .map(|t| Element::new(mesh, t, &materials[mesh.labels[t] as usize]))
+                        .collect();
+                    (
+                        Elements::Linear(elements),
+                        None,
+                        BlockMatrix::on_mesh(mesh),
+                        lumped_masses(mesh, materials),
+                        mesh.nodes.clone(),
+                    )
+                }
+                ElementKind::P2 => {
+                    let layer = EdgeNodes::new(mesh, materials);
+                    let elements = layer.elements(mesh, materials);
+                    let nodes: Vec<[u32; 10]> = elements.iter().map(|e| e.nodes).collect();
+                    let matrix = BlockMatrix::on_elements(layer.len(), &nodes);
+                    let masses = layer.masses.clone();
+                    let positions =
+                        mesh.nodes
+                            .iter()
+                            .copied()
+                            .chain(layer.edges.iter().map(|&[a, b]| {
+                                0.5 * (mesh.nodes[a as usize] + mesh.nodes[b as usize])
+                            }))
+                            .collect();
+                    (
+                        Elements::Quadratic(elements),
+                        Some(layer),
+                        matrix,
+                        masses,
+                        positions,
+                    )
+                }
+            };
         let n = masses.len();
         let per = elements.nodes_per_element();
         Ok(Self {
@@ -496,6 +573,8 @@ impl MeshSolver for CorotationalFem {
             edge_nodes,
             gpu: None,
             stats: StaticStats::default(),
+            positions,
+            amg: Default::default(),
             elements,
             params,
         })
@@ -512,6 +591,13 @@ impl MeshSolver for CorotationalFem {
             );
             notes.insert("load_steps".into(), self.stats.load_steps as f64);
             notes.insert("newton_force_residual".into(), self.stats.force_residual);
+        }
+        if self.params.preconditioner == PreconditionerKind::Amg {
+            let a = self.amg_stats();
+            notes.insert("amg_setups".into(), a.setups as f64);
+            notes.insert("amg_refreshes".into(), a.refreshes as f64);
+            notes.insert("amg_setup_s".into(), a.setup_s);
+            notes.insert("amg_levels".into(), a.levels as f64);
         }
     }
 
