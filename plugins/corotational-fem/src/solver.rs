@@ -245,8 +245,25 @@ pub struct CorotationalFem {
     positions: Vec<DVec3>,
     /// The AMG hierarchy (`preconditioner = "amg"`), kept between solves
     /// while the pattern and the free nodes stay, and its setup figures.
-    amg: std::sync::Mutex<(Option<Amg>, AmgStats)>,
+    amg: std::sync::Mutex<AmgState>,
 }
+
+/// The kept AMG hierarchy, its figures, and the CG iterations of the solve
+/// right after its last setup or refresh (`baseline`) and of the last
+/// solve: a hierarchy is reused unrefreshed (its V-cycle stays SPD; only
+/// its quality drifts as the corotational values change) while the last
+/// solve took at most [`AMG_STALE`] times the baseline's iterations.
+#[derive(Default)]
+struct AmgState {
+    hierarchy: Option<Amg>,
+    stats: AmgStats,
+    baseline: Option<u32>,
+    last: u32,
+}
+
+/// A kept hierarchy is refreshed when the last solve needed more than this
+/// many times the iterations of the solve right after its setup (plus 2).
+const AMG_STALE: f64 = 1.5;
 
 /// Setup figures of `preconditioner = "amg"` (→ notes).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -255,8 +272,12 @@ pub struct AmgStats {
     pub setups: u64,
     /// Refreshes (Galerkin products only, prolongators kept).
     pub refreshes: u64,
+    /// Solves that reused the kept hierarchy as it was.
+    pub reuses: u64,
     /// Seconds spent in both, summed.
     pub setup_s: f64,
+    /// Seconds spent in full setups alone, summed.
+    pub full_setup_s: f64,
     /// Levels of the last hierarchy.
     pub levels: usize,
 }
@@ -333,24 +354,55 @@ impl CorotationalFem {
                 .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}")))?,
             None if self.params.preconditioner == PreconditionerKind::Amg => {
                 let mut guard = self.amg.lock().unwrap_or_else(|e| e.into_inner());
-                let (cached, stats) = &mut *guard;
-                let mut ready = false;
-                pcg::solve_preconditioned(&self.matrix, bc, free, rhs, x, settings, &mut |r, z| {
-                    if !ready {
-                        let t = std::time::Instant::now();
-                        let refresh = cached.as_ref().is_some_and(|h| h.fits(&self.matrix, free));
-                        let h = Amg::prepare(cached, &self.matrix, free, &self.positions);
-                        stats.levels = h.level_sizes().len();
-                        if refresh {
-                            stats.refreshes += 1;
-                        } else {
-                            stats.setups += 1;
+                let AmgState {
+                    hierarchy,
+                    stats,
+                    baseline,
+                    last,
+                } = &mut *guard;
+                let (mut ready, mut fresh) = (false, false);
+                let out = pcg::solve_preconditioned(
+                    &self.matrix,
+                    bc,
+                    free,
+                    rhs,
+                    x,
+                    settings,
+                    &mut |r, z| {
+                        if !ready {
+                            let fits = hierarchy
+                                .as_ref()
+                                .is_some_and(|h| h.fits(&self.matrix, free));
+                            let stale =
+                                baseline.is_none_or(|b| *last as f64 > AMG_STALE * b as f64 + 2.0);
+                            if fits && !stale {
+                                stats.reuses += 1;
+                            } else {
+                                let t = std::time::Instant::now();
+                                let h =
+                                    Amg::prepare(hierarchy, &self.matrix, free, &self.positions);
+                                stats.levels = h.level_sizes().len();
+                                if fits {
+                                    stats.refreshes += 1;
+                                } else {
+                                    stats.setups += 1;
+                                    stats.full_setup_s += t.elapsed().as_secs_f64();
+                                }
+                                stats.setup_s += t.elapsed().as_secs_f64();
+                                fresh = true;
+                            }
+                            ready = true;
                         }
-                        stats.setup_s += t.elapsed().as_secs_f64();
-                        ready = true;
+                        hierarchy.as_ref().expect("prepared").apply(r, z)
+                    },
+                );
+                if ready {
+                    if fresh {
+                        *baseline = Some(out.iterations);
                     }
-                    cached.as_ref().expect("prepared").apply(r, z)
-                })
+                    *last = out.iterations;
+                }
+                out
             }
             None => pcg::solve_with(
                 &self.matrix,
@@ -420,7 +472,7 @@ impl CorotationalFem {
 
     /// The AMG setup figures (`preconditioner = "amg"`).
     pub fn amg_stats(&self) -> AmgStats {
-        self.amg.lock().unwrap_or_else(|e| e.into_inner()).1
+        self.amg.lock().unwrap_or_else(|e| e.into_inner()).stats
     }
 
     /// The elastic force on every node at displacements `u` (µN), each
@@ -596,7 +648,9 @@ impl MeshSolver for CorotationalFem {
             let a = self.amg_stats();
             notes.insert("amg_setups".into(), a.setups as f64);
             notes.insert("amg_refreshes".into(), a.refreshes as f64);
+            notes.insert("amg_reuses".into(), a.reuses as f64);
             notes.insert("amg_setup_s".into(), a.setup_s);
+            notes.insert("amg_full_setup_s".into(), a.full_setup_s);
             notes.insert("amg_levels".into(), a.levels as f64);
         }
     }

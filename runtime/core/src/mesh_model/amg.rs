@@ -122,43 +122,54 @@ impl Csr {
         }
     }
 
-    /// `self · b` (Gustavson's row-by-row product, rows on rayon threads).
+    /// `self · b` (Gustavson's row-by-row product, blocks of rows on
+    /// rayon threads, one dense accumulator per block).
     pub fn matmul(&self, b: &Csr) -> Csr {
-        let rows: Vec<(Vec<u32>, Vec<f64>)> = (0..self.rows())
+        let n = self.rows();
+        let chunk = n.div_ceil(4 * rayon::current_num_threads()).max(64);
+        let parts: Vec<Csr> = (0..n.div_ceil(chunk))
             .into_par_iter()
-            .with_min_len(64)
-            .map_init(
-                || (vec![u32::MAX; b.cols], vec![0.0f64; b.cols]),
-                |(mark, acc), i| {
-                    let mut cols = Vec::new();
+            .map(|c| {
+                let mut mark = vec![usize::MAX; b.cols];
+                let mut acc = vec![0.0f64; b.cols];
+                let mut part = Csr {
+                    cols: b.cols,
+                    start: vec![0],
+                    ..Default::default()
+                };
+                for i in c * chunk..((c + 1) * chunk).min(n) {
+                    let first = part.col.len();
                     for k in self.start[i]..self.start[i + 1] {
                         let (j, v) = (self.col[k] as usize, self.val[k]);
                         for q in b.start[j]..b.start[j + 1] {
-                            let c = b.col[q];
-                            if mark[c as usize] != i as u32 {
-                                mark[c as usize] = i as u32;
-                                acc[c as usize] = 0.0;
-                                cols.push(c);
+                            let col = b.col[q] as usize;
+                            if mark[col] != i {
+                                mark[col] = i;
+                                acc[col] = 0.0;
+                                part.col.push(col as u32);
                             }
-                            acc[c as usize] += v * b.val[q];
+                            acc[col] += v * b.val[q];
                         }
                     }
-                    cols.sort_unstable();
-                    let vals = cols.iter().map(|&c| acc[c as usize]).collect();
-                    (cols, vals)
-                },
-            )
+                    part.col[first..].sort_unstable();
+                    part.val
+                        .extend(part.col[first..].iter().map(|&c| acc[c as usize]));
+                    part.start.push(part.col.len());
+                }
+                part
+            })
             .collect();
         let mut out = Csr {
             cols: b.cols,
-            start: Vec::with_capacity(rows.len() + 1),
+            start: Vec::with_capacity(n + 1),
             ..Default::default()
         };
         out.start.push(0);
-        for (c, v) in rows {
-            out.col.extend(c);
-            out.val.extend(v);
-            out.start.push(out.col.len());
+        for part in parts {
+            let base = out.col.len();
+            out.start.extend(part.start[1..].iter().map(|s| s + base));
+            out.col.extend(part.col);
+            out.val.extend(part.val);
         }
         out
     }
@@ -689,7 +700,7 @@ impl Amg {
             self.coarse.solve(b, x);
             return;
         };
-        chebyshev(level, b, x);
+        chebyshev(level, b, x, true);
         let n = b.len();
         let mut r = vec![0.0; n];
         level.a.mul(x, &mut r);
@@ -700,13 +711,14 @@ impl Amg {
         self.cycle(l + 1, &bc, &mut xc);
         level.p.mul(&xc, &mut r);
         x.iter_mut().zip(&r).for_each(|(xi, ei)| *xi += ei);
-        chebyshev(level, b, x);
+        chebyshev(level, b, x, false);
     }
 }
 
 /// `CHEBYSHEV_DEGREE` Chebyshev steps on `D⁻¹ A x = D⁻¹ b` over
-/// [λ/30, 1.1 λ] (Saad's three-term recurrence), from `x`.
-fn chebyshev(level: &Level, b: &[f64], x: &mut [f64]) {
+/// [λ/30, 1.1 λ] (Saad's three-term recurrence), from `x` (taken as zero
+/// when `zero`, which saves a product).
+fn chebyshev(level: &Level, b: &[f64], x: &mut [f64], zero: bool) {
     let upper = 1.1 * level.lambda;
     let lower = upper / 30.0;
     let (theta, delta) = ((upper + lower) / 2.0, (upper - lower) / 2.0);
@@ -714,7 +726,11 @@ fn chebyshev(level: &Level, b: &[f64], x: &mut [f64]) {
     let mut rho = 1.0 / sigma;
     let n = b.len();
     let mut r = vec![0.0; n];
-    level.a.mul(x, &mut r);
+    if zero {
+        x.iter_mut().for_each(|v| *v = 0.0);
+    } else {
+        level.a.mul(x, &mut r);
+    }
     r.iter_mut()
         .zip(b)
         .zip(&level.dinv)
