@@ -52,7 +52,8 @@ pub mod solver;
 mod tests;
 
 pub use solver::{
-    AmgStats, CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind, StaticStats,
+    AMG_AUTO_NODES, AmgStats, CorotationalFem, ElementKind, FemParams, PreconditionerKind,
+    SolverKind, StaticStats,
 };
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);
