@@ -121,3 +121,48 @@ fn the_gpu_backend_refuses_amg_with_the_keys_to_change() {
         "{err}"
     );
 }
+
+/// Implicit steps of a grabbed cantilever: AMG (its hierarchy kept or
+/// refreshed across steps) and block Jacobi give the same motion.
+#[test]
+fn implicit_steps_with_amg_match_block_jacobi() {
+    let run = |preconditioner| {
+        let params = FemParams {
+            solver: SolverKind::Dynamic,
+            preconditioner,
+            cg_tolerance: 1e-11,
+            cg_max_iterations: Some(100_000),
+            ..FemParams::default()
+        };
+        let mut m = cantilever::model::<CorotationalFem>(2, 10.0, params);
+        let f = FrameInfo {
+            frame: 0,
+            frames: 8,
+            dt_s: 1.0 / 30.0,
+        };
+        for _ in 0..8 {
+            m.step(f).unwrap();
+        }
+        m
+    };
+    let (mut amg, bj) = (
+        run(PreconditionerKind::Amg),
+        run(PreconditionerKind::BlockJacobi),
+    );
+    let (ua, ub) = (&amg.state().unwrap().u, &bj.state().unwrap().u);
+    let diff: f64 = ua
+        .iter()
+        .zip(ub)
+        .map(|(a, b)| (*a - *b).length_squared())
+        .sum();
+    let norm: f64 = ub.iter().map(|b| b.length_squared()).sum();
+    assert!(norm > 1e-6, "the beam moved: {norm}");
+    assert!((diff / norm).sqrt() < 1e-7, "{:.2e}", (diff / norm).sqrt());
+    let notes = amg.notes().unwrap();
+    assert_eq!(notes["amg_setups"], 1.0, "{notes:?}");
+    assert_eq!(
+        notes["amg_refreshes"] + notes["amg_reuses"],
+        7.0,
+        "one setup, then kept: {notes:?}"
+    );
+}

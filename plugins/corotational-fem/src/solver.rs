@@ -18,8 +18,9 @@
 //! the rotation taken per Gauss point; the code below is the same.
 //!
 //! Both assemble the warped stiffness into a [`BlockMatrix`] and solve with
-//! PCG (incomplete Cholesky for the static solves, block Jacobi for the
-//! implicit steps and on the GPU, by default), warm-started from the last
+//! PCG (for the static solves AMG on P2 or from [`AMG_AUTO_NODES`] free
+//! nodes, else incomplete Cholesky; block Jacobi for the implicit steps
+//! and on the GPU, by default), warm-started from the last
 //! answer; a linear solve that stops above `cg_tolerance` warns and is
 //! counted in the model's notes.
 
