@@ -17,7 +17,10 @@
 //!   solved for, static solve time (build included, median of 3) and tip
 //!   error against Timoshenko ([`voxflex_corotational_fem::front`]).
 //!
-//! `-- step`, `-- cantilever` or `-- front` runs one part.
+//! - `-- amg`: block Jacobi, IC(0) and AMG on the slender cantilever, P1 at
+//!   1,280 / 10,240 / 81,920 and P2 at 1,280 / 10,240 tetrahedra.
+//!
+//! `-- step`, `-- cantilever`, `-- front` or `-- amg` runs one part.
 
 use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
@@ -246,7 +249,7 @@ fn slender_tip(m: &Fem) -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let only = |k: &str| args.iter().any(|a| a == k);
-    let all = !only("step") && !only("cantilever") && !only("front");
+    let all = !only("step") && !only("cantilever") && !only("front") && !only("amg");
     println!(
         "voxflex-corotational-fem bench: threads {}",
         rayon::current_num_threads()
@@ -260,6 +263,76 @@ fn main() {
     }
     if all || only("front") {
         front();
+    }
+    if all || only("amg") {
+        amg_table();
+    }
+}
+
+/// Block Jacobi, IC(0) and AMG on the slender cantilever (issue 12 item 2):
+/// static solve time (setup included), Newton and CG iterations, AMG's
+/// setup time (first full setup; refreshes summed) and levels, tip against
+/// the AMG solve.
+fn amg_table() {
+    use voxflex_corotational_fem::ElementKind;
+    println!(
+        "slender cantilever 8 × 1 × 0.5 (tip force 0.01, static, default settings but the preconditioner):"
+    );
+    println!(
+        "element  cell mm  tetrahedra  preconditioner      solve s  Newton  CG its  unconv  AMG setups s (n)  refreshes s (n; reused)  levels  tip vs AMG"
+    );
+    let rows = [
+        (ElementKind::P1, [0.25, 0.125, 0.0625].as_slice()),
+        (ElementKind::P2, [0.25, 0.125].as_slice()),
+    ];
+    for (element, sizes) in rows {
+        for &h in sizes {
+            let mut amg_tip = None;
+            for pre in [
+                PreconditionerKind::Amg,
+                PreconditionerKind::IncompleteCholesky,
+                PreconditionerKind::BlockJacobi,
+            ] {
+                let params = FemParams {
+                    element,
+                    solver: SolverKind::Static,
+                    preconditioner: pre,
+                    ..FemParams::default()
+                };
+                let mut m = slender_beam(h, params);
+                let t = Instant::now();
+                m.step(frame(0.0)).unwrap();
+                let s = t.elapsed().as_secs_f64();
+                let notes = m.notes().unwrap();
+                let tip = slender_tip(&m);
+                let reference = *amg_tip.get_or_insert(tip);
+                let (setup, refresh, levels) = if pre == PreconditionerKind::Amg {
+                    let full = notes["amg_full_setup_s"];
+                    (
+                        format!("{full:.3} ({})", notes["amg_setups"]),
+                        format!(
+                            "{:.3} ({}; {} reused)",
+                            notes["amg_setup_s"] - full,
+                            notes["amg_refreshes"],
+                            notes["amg_reuses"]
+                        ),
+                        format!("{}", notes["amg_levels"]),
+                    )
+                } else {
+                    ("-".into(), "-".into(), "-".into())
+                };
+                println!(
+                    "{:<8} {h:>7} {:>11} {:<18} {s:>8.3} {:>7} {:>7} {:>7} {setup:>16} {refresh:>24} {levels:>7} {:>10.1e}",
+                    format!("{element:?}"),
+                    notes["proxy_tetrahedra"],
+                    format!("{pre:?}"),
+                    notes["newton_iterations"],
+                    notes["solver_iterations"],
+                    notes["unconverged_solves"],
+                    (tip - reference).abs() / reference.abs(),
+                );
+            }
+        }
     }
 }
 

@@ -35,6 +35,8 @@
 //! ```
 
 #[cfg(test)]
+mod amg_tests;
+#[cfg(test)]
 mod convergence_tests;
 pub mod edge_nodes;
 pub mod element;
@@ -52,7 +54,8 @@ pub mod solver;
 mod tests;
 
 pub use solver::{
-    CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind, StaticStats,
+    AMG_AUTO_NODES, AmgStats, CorotationalFem, ElementKind, FemParams, PreconditionerKind,
+    SolverKind, StaticStats,
 };
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);

@@ -18,8 +18,9 @@
 //! the rotation taken per Gauss point; the code below is the same.
 //!
 //! Both assemble the warped stiffness into a [`BlockMatrix`] and solve with
-//! PCG (incomplete Cholesky for the static solves, block Jacobi for the
-//! implicit steps and on the GPU, by default), warm-started from the last
+//! PCG (for the static solves AMG on P2 or from [`AMG_AUTO_NODES`] free
+//! nodes, else incomplete Cholesky; block Jacobi for the implicit steps
+//! and on the GPU, by default), warm-started from the last
 //! answer; a linear solve that stops above `cg_tolerance` warns and is
 //! counted in the model's notes.
 
@@ -37,6 +38,7 @@ use voxflex_core::deformation::ModelNotes;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
+use voxflex_core::mesh_model::amg::Amg;
 use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_core::mesh_model::{
@@ -88,16 +90,21 @@ impl<'de> Deserialize<'de> for ElementKind {
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum PreconditionerKind {
-    /// Incomplete Cholesky for the static solver (bending-dominated, where
-    /// block Jacobi needs about twice the iterations), block Jacobi for the
-    /// implicit steps (mass-dominated, where it converges in tens and
-    /// costs no factorisation) and on the GPU.
+    /// For the static solver (bending-dominated) AMG on P2 elements or on
+    /// at least [`AMG_AUTO_NODES`] free nodes, else incomplete Cholesky
+    /// (block Jacobi needs about twice its iterations); block Jacobi for
+    /// the implicit steps (mass-dominated, where it converges in tens and
+    /// costs no setup) and on the GPU.
     #[default]
     Auto,
     /// IC(0) on the block pattern (CPU only).
     IncompleteCholesky,
     /// Each node's 3 × 3 diagonal block inverted (CPU and GPU).
     BlockJacobi,
+    /// Smoothed-aggregation algebraic multigrid, one V-cycle
+    /// ([`voxflex_core::mesh_model::amg`]; CPU only): iterations nearly
+    /// flat as the mesh is refined.
+    Amg,
 }
 
 /// The solver's keys of `[model.params.corotational-fem]`.
@@ -235,6 +242,51 @@ pub struct CorotationalFem {
     gpu: Option<GpuPcg>,
     /// The static solves' figures.
     stats: StaticStats,
+    /// Rest positions of the solver's nodes (corners, then edge nodes for
+    /// P2), mm: the rigid-body modes of `preconditioner = "amg"`.
+    positions: Vec<DVec3>,
+    /// The AMG hierarchy (`preconditioner = "amg"`), kept between solves
+    /// while the pattern and the free nodes stay, and its setup figures.
+    amg: std::sync::Mutex<AmgState>,
+}
+
+/// The kept AMG hierarchy, its figures, and the CG iterations of the solve
+/// right after its last setup or refresh (`baseline`) and of the last
+/// solve: a hierarchy is reused unrefreshed (its V-cycle stays SPD; only
+/// its quality drifts as the corotational values change) while the last
+/// solve took at most [`AMG_STALE`] times the baseline's iterations.
+#[derive(Default)]
+struct AmgState {
+    hierarchy: Option<Amg>,
+    stats: AmgStats,
+    baseline: Option<u32>,
+    last: u32,
+}
+
+/// From this many free nodes `preconditioner = "auto"` uses AMG for the
+/// static solver on P1 elements (measured: slower than block Jacobi and
+/// IC(0) at 2,925 nodes, faster at 19,737).
+pub const AMG_AUTO_NODES: usize = 10_000;
+
+/// A kept hierarchy is refreshed when the last solve needed more than this
+/// many times the iterations of the solve right after its setup (plus 2).
+const AMG_STALE: f64 = 1.5;
+
+/// Setup figures of `preconditioner = "amg"` (→ notes).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AmgStats {
+    /// Full setups (aggregation, prolongators, Galerkin products).
+    pub setups: u64,
+    /// Refreshes (Galerkin products only, prolongators kept).
+    pub refreshes: u64,
+    /// Solves that reused the kept hierarchy as it was.
+    pub reuses: u64,
+    /// Seconds spent in both, summed.
+    pub setup_s: f64,
+    /// Seconds spent in full setups alone, summed.
+    pub full_setup_s: f64,
+    /// Levels of the last hierarchy.
+    pub levels: usize,
 }
 
 /// Which part of the rotations' own stiffness the tangent carries.
@@ -279,6 +331,9 @@ impl CorotationalFem {
         let keys = if self.gpu.is_some() {
             "raise cg_max_iterations (or run the static solver on the CPU backend, \
              whose default preconditioner is incomplete Cholesky)"
+        } else if self.params.preconditioner == PreconditionerKind::Amg {
+            "raise cg_max_iterations or loosen cg_tolerance (or try preconditioner = \
+             \"incomplete-cholesky\")"
         } else if self.params.cpu_preconditioner() == Preconditioner::BlockJacobi {
             "raise cg_max_iterations or set preconditioner = \"incomplete-cholesky\""
         } else {
@@ -304,6 +359,58 @@ impl CorotationalFem {
             Some(g) => g
                 .solve(&self.matrix, free, &bc.hanging, rhs, x, settings)
                 .map_err(|e| ModelError(format!("corotational-fem (GPU): {e}")))?,
+            None if self.uses_amg(free) => {
+                let mut guard = self.amg.lock().unwrap_or_else(|e| e.into_inner());
+                let AmgState {
+                    hierarchy,
+                    stats,
+                    baseline,
+                    last,
+                } = &mut *guard;
+                let (mut ready, mut fresh) = (false, false);
+                let out = pcg::solve_preconditioned(
+                    &self.matrix,
+                    bc,
+                    free,
+                    rhs,
+                    x,
+                    settings,
+                    &mut |r, z| {
+                        if !ready {
+                            let fits = hierarchy
+                                .as_ref()
+                                .is_some_and(|h| h.fits(&self.matrix, free));
+                            let stale =
+                                baseline.is_none_or(|b| *last as f64 > AMG_STALE * b as f64 + 2.0);
+                            if fits && !stale {
+                                stats.reuses += 1;
+                            } else {
+                                let t = std::time::Instant::now();
+                                let h =
+                                    Amg::prepare(hierarchy, &self.matrix, free, &self.positions);
+                                stats.levels = h.level_sizes().len();
+                                if fits {
+                                    stats.refreshes += 1;
+                                } else {
+                                    stats.setups += 1;
+                                    stats.full_setup_s += t.elapsed().as_secs_f64();
+                                }
+                                stats.setup_s += t.elapsed().as_secs_f64();
+                                fresh = true;
+                            }
+                            ready = true;
+                        }
+                        hierarchy.as_ref().expect("prepared").apply(r, z)
+                    },
+                );
+                if ready {
+                    if fresh {
+                        *baseline = Some(out.iterations);
+                    }
+                    *last = out.iterations;
+                }
+                out
+            }
             None => pcg::solve_with(
                 &self.matrix,
                 bc,
@@ -314,6 +421,21 @@ impl CorotationalFem {
                 self.params.cpu_preconditioner(),
             ),
         })
+    }
+
+    /// True when the CPU PCG preconditions with AMG: `preconditioner =
+    /// "amg"`, or `"auto"` for the static solver on P2 elements or on at
+    /// least [`AMG_AUTO_NODES`] free nodes (where it was measured faster
+    /// than IC(0) and block Jacobi; README, corotational FEM benchmarks).
+    fn uses_amg(&self, free: &[bool]) -> bool {
+        match (self.params.preconditioner, self.params.solver) {
+            (PreconditionerKind::Amg, _) => true,
+            (PreconditionerKind::Auto, SolverKind::Static) => {
+                self.params.element == ElementKind::P2
+                    || free.iter().filter(|f| **f).count() >= AMG_AUTO_NODES
+            }
+            _ => false,
+        }
     }
 
     /// The PCG settings: the scene's cap, or one derived from the number
@@ -368,6 +490,11 @@ impl CorotationalFem {
     /// The figures of the static solves so far.
     pub fn static_stats(&self) -> StaticStats {
         self.stats
+    }
+
+    /// The AMG setup figures (`preconditioner = "amg"`).
+    pub fn amg_stats(&self) -> AmgStats {
+        self.amg.lock().unwrap_or_else(|e| e.into_inner()).stats
     }
 
     /// The elastic force on every node at displacements `u` (µN), each
@@ -443,6 +570,14 @@ impl MeshSolver for CorotationalFem {
     const GPU: bool = true;
 
     fn use_gpu(&mut self, gpu: Arc<dyn GpuService>) -> Result<(), ModelError> {
+        if self.params.preconditioner == PreconditionerKind::Amg {
+            return Err(ModelError(
+                "corotational-fem: preconditioner = \"amg\" (algebraic multigrid) has no GPU \
+                 path; use preconditioner = \"block-jacobi\" or \"auto\" with backend = \"gpu\", \
+                 or backend = \"cpu\""
+                    .into(),
+            ));
+        }
         if self.params.preconditioner == PreconditionerKind::IncompleteCholesky {
             return Err(ModelError(
                 "corotational-fem: preconditioner = \"incomplete-cholesky\" has no GPU path; \
@@ -464,27 +599,43 @@ impl MeshSolver for CorotationalFem {
         params: FemParams,
     ) -> Result<Self, ModelError> {
         params.validate()?;
-        let (elements, edge_nodes, matrix, masses) = match params.element {
-            ElementKind::P1 => {
-                let elements: Vec<Element> = (0..mesh.tets.len())
-                    .map(|t| Element::new(mesh, t, &materials[mesh.labels[t] as usize]))
-                    .collect();
-                (
-                    Elements::Linear(elements),
-                    None,
-                    BlockMatrix::on_mesh(mesh),
-                    lumped_masses(mesh, materials),
-                )
-            }
-            ElementKind::P2 => {
-                let layer = EdgeNodes::new(mesh, materials);
-                let elements = layer.elements(mesh, materials);
-                let nodes: Vec<[u32; 10]> = elements.iter().map(|e| e.nodes).collect();
-                let matrix = BlockMatrix::on_elements(layer.len(), &nodes);
-                let masses = layer.masses.clone();
-                (Elements::Quadratic(elements), Some(layer), matrix, masses)
-            }
-        };
+        let (elements, edge_nodes, matrix, masses, positions) =
+            match params.element {
+                ElementKind::P1 => {
+                    let elements: Vec<Element> = (0..mesh.tets.len())
+                        .map(|t| Element::new(mesh, t, &materials[mesh.labels[t] as usize]))
+                        .collect();
+                    (
+                        Elements::Linear(elements),
+                        None,
+                        BlockMatrix::on_mesh(mesh),
+                        lumped_masses(mesh, materials),
+                        mesh.nodes.clone(),
+                    )
+                }
+                ElementKind::P2 => {
+                    let layer = EdgeNodes::new(mesh, materials);
+                    let elements = layer.elements(mesh, materials);
+                    let nodes: Vec<[u32; 10]> = elements.iter().map(|e| e.nodes).collect();
+                    let matrix = BlockMatrix::on_elements(layer.len(), &nodes);
+                    let masses = layer.masses.clone();
+                    let positions =
+                        mesh.nodes
+                            .iter()
+                            .copied()
+                            .chain(layer.edges.iter().map(|&[a, b]| {
+                                0.5 * (mesh.nodes[a as usize] + mesh.nodes[b as usize])
+                            }))
+                            .collect();
+                    (
+                        Elements::Quadratic(elements),
+                        Some(layer),
+                        matrix,
+                        masses,
+                        positions,
+                    )
+                }
+            };
         let n = masses.len();
         let per = elements.nodes_per_element();
         Ok(Self {
@@ -496,6 +647,8 @@ impl MeshSolver for CorotationalFem {
             edge_nodes,
             gpu: None,
             stats: StaticStats::default(),
+            positions,
+            amg: Default::default(),
             elements,
             params,
         })
@@ -512,6 +665,15 @@ impl MeshSolver for CorotationalFem {
             );
             notes.insert("load_steps".into(), self.stats.load_steps as f64);
             notes.insert("newton_force_residual".into(), self.stats.force_residual);
+        }
+        let a = self.amg_stats();
+        if self.params.preconditioner == PreconditionerKind::Amg || a.setups > 0 {
+            notes.insert("amg_setups".into(), a.setups as f64);
+            notes.insert("amg_refreshes".into(), a.refreshes as f64);
+            notes.insert("amg_reuses".into(), a.reuses as f64);
+            notes.insert("amg_setup_s".into(), a.setup_s);
+            notes.insert("amg_full_setup_s".into(), a.full_setup_s);
+            notes.insert("amg_levels".into(), a.levels as f64);
         }
     }
 

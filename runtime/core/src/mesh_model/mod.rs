@@ -13,6 +13,7 @@
 //! Frames: node indices are the proxy's; positions and displacements in
 //! world millimetres; forces in µN (mm-g-s units; stresses in Pa).
 
+pub mod amg;
 pub mod block_matrix;
 pub mod boundary;
 pub mod cantilever;
