@@ -160,9 +160,5 @@ fn implicit_steps_with_amg_match_block_jacobi() {
     assert!((diff / norm).sqrt() < 1e-7, "{:.2e}", (diff / norm).sqrt());
     let notes = amg.notes().unwrap();
     assert_eq!(notes["amg_setups"], 1.0, "{notes:?}");
-    assert_eq!(
-        notes["amg_refreshes"] + notes["amg_reuses"],
-        7.0,
-        "one setup, then kept: {notes:?}"
-    );
+    assert_eq!(notes["amg_reuses"], 7.0, "one setup, then kept: {notes:?}");
 }

@@ -54,8 +54,8 @@ pub mod solver;
 mod tests;
 
 pub use solver::{
-    AMG_AUTO_NODES, AmgStats, CorotationalFem, ElementKind, FemParams, PreconditionerKind,
-    SolverKind, StaticStats,
+    AMG_AUTO_NODES, AMG_AUTO_NODES_P2, AmgStats, CorotationalFem, ElementKind, FemParams,
+    PreconditionerKind, SolverKind, StaticStats,
 };
 
 voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);

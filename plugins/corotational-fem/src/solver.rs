@@ -90,8 +90,8 @@ impl<'de> Deserialize<'de> for ElementKind {
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum PreconditionerKind {
-    /// For the static solver (bending-dominated) AMG on P2 elements or on
-    /// at least [`AMG_AUTO_NODES`] free nodes, else incomplete Cholesky
+    /// For the static solver (bending-dominated) AMG from
+    /// [`AMG_AUTO_NODES`] ([`AMG_AUTO_NODES_P2`] with P2) free nodes, else incomplete Cholesky
     /// (block Jacobi needs about twice its iterations); block Jacobi for
     /// the implicit steps (mass-dominated, where it converges in tens and
     /// costs no setup) and on the GPU.
@@ -243,8 +243,13 @@ pub struct CorotationalFem {
     /// The static solves' figures.
     stats: StaticStats,
     /// Rest positions of the solver's nodes (corners, then edge nodes for
-    /// P2), mm: the rigid-body modes of `preconditioner = "amg"`.
+    /// P2), mm.
     positions: Vec<DVec3>,
+    /// Their positions at the last linearisation, mm: the rigid-body modes
+    /// of `preconditioner = "amg"` are taken there, because the corotated
+    /// tangent's near-null space is the rigid motions of the deformed body
+    /// (modes of the rest body precondition a beam bent by 90° poorly).
+    deformed: Vec<DVec3>,
     /// The AMG hierarchy (`preconditioner = "amg"`), kept between solves
     /// while the pattern and the free nodes stay, and its setup figures.
     amg: std::sync::Mutex<AmgState>,
@@ -268,6 +273,12 @@ struct AmgState {
 /// IC(0) at 2,925 nodes, faster at 19,737).
 pub const AMG_AUTO_NODES: usize = 10_000;
 
+/// The same for P2 elements, whose nodes couple more (measured on the
+/// `fem_cantilever` and `fem_elastica` fronts: AMG slower than IC(0) up to
+/// 400 P2 tetrahedra, ~800 nodes — 86 against 65 ms, 264–393 against
+/// 130–185 ms —, faster from 1,280–1,350, ~2,300 nodes).
+pub const AMG_AUTO_NODES_P2: usize = 2_000;
+
 /// A kept hierarchy is refreshed when the last solve needed more than this
 /// many times the iterations of the solve right after its setup (plus 2).
 const AMG_STALE: f64 = 1.5;
@@ -277,8 +288,6 @@ const AMG_STALE: f64 = 1.5;
 pub struct AmgStats {
     /// Full setups (aggregation, prolongators, Galerkin products).
     pub setups: u64,
-    /// Refreshes (Galerkin products only, prolongators kept).
-    pub refreshes: u64,
     /// Solves that reused the kept hierarchy as it was.
     pub reuses: u64,
     /// Seconds spent in both, summed.
@@ -308,6 +317,9 @@ impl CorotationalFem {
     fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>, twist: Twist) {
         self.elements
             .linearise(u, k_scale, twist, &mut self.blocks, &mut self.corner_f0);
+        self.deformed.clear();
+        self.deformed
+            .extend(self.positions.iter().zip(u).map(|(p, u)| *p + *u));
         self.matrix.assemble(&self.blocks, diagonal);
         self.matrix.sum_corners(&self.corner_f0, &mut self.f0);
     }
@@ -385,16 +397,18 @@ impl CorotationalFem {
                             if fits && !stale {
                                 stats.reuses += 1;
                             } else {
+                                // A stale hierarchy is rebuilt, not only
+                                // refreshed: its rigid-body modes must follow
+                                // the body's rotation (measured on the
+                                // elastica front: refreshing alone left P2
+                                // large-deflection solves 2–4× slower than
+                                // incomplete Cholesky).
                                 let t = std::time::Instant::now();
-                                let h =
-                                    Amg::prepare(hierarchy, &self.matrix, free, &self.positions);
+                                *hierarchy = None;
+                                let h = Amg::prepare(hierarchy, &self.matrix, free, &self.deformed);
                                 stats.levels = h.level_sizes().len();
-                                if fits {
-                                    stats.refreshes += 1;
-                                } else {
-                                    stats.setups += 1;
-                                    stats.full_setup_s += t.elapsed().as_secs_f64();
-                                }
+                                stats.setups += 1;
+                                stats.full_setup_s += t.elapsed().as_secs_f64();
                                 stats.setup_s += t.elapsed().as_secs_f64();
                                 fresh = true;
                             }
@@ -424,15 +438,18 @@ impl CorotationalFem {
     }
 
     /// True when the CPU PCG preconditions with AMG: `preconditioner =
-    /// "amg"`, or `"auto"` for the static solver on P2 elements or on at
-    /// least [`AMG_AUTO_NODES`] free nodes (where it was measured faster
+    /// "amg"`, or `"auto"` for the static solver on at least
+    /// [`AMG_AUTO_NODES`] ([`AMG_AUTO_NODES_P2`] with P2) free nodes (where it was measured faster
     /// than IC(0) and block Jacobi; README, corotational FEM benchmarks).
     fn uses_amg(&self, free: &[bool]) -> bool {
         match (self.params.preconditioner, self.params.solver) {
             (PreconditionerKind::Amg, _) => true,
             (PreconditionerKind::Auto, SolverKind::Static) => {
-                self.params.element == ElementKind::P2
-                    || free.iter().filter(|f| **f).count() >= AMG_AUTO_NODES
+                let nodes = match self.params.element {
+                    ElementKind::P1 => AMG_AUTO_NODES,
+                    ElementKind::P2 => AMG_AUTO_NODES_P2,
+                };
+                free.iter().filter(|f| **f).count() >= nodes
             }
             _ => false,
         }
@@ -647,6 +664,7 @@ impl MeshSolver for CorotationalFem {
             edge_nodes,
             gpu: None,
             stats: StaticStats::default(),
+            deformed: positions.clone(),
             positions,
             amg: Default::default(),
             elements,
@@ -669,7 +687,6 @@ impl MeshSolver for CorotationalFem {
         let a = self.amg_stats();
         if self.params.preconditioner == PreconditionerKind::Amg || a.setups > 0 {
             notes.insert("amg_setups".into(), a.setups as f64);
-            notes.insert("amg_refreshes".into(), a.refreshes as f64);
             notes.insert("amg_reuses".into(), a.reuses as f64);
             notes.insert("amg_setup_s".into(), a.setup_s);
             notes.insert("amg_full_setup_s".into(), a.full_setup_s);
