@@ -123,7 +123,7 @@ fn the_gpu_backend_refuses_amg_with_the_keys_to_change() {
 }
 
 /// Implicit steps of a grabbed cantilever: AMG (its hierarchy kept or
-/// refreshed across steps) and block Jacobi give the same motion.
+/// rebuilt across steps) and block Jacobi give the same motion.
 #[test]
 fn implicit_steps_with_amg_match_block_jacobi() {
     let run = |preconditioner| {
@@ -159,6 +159,7 @@ fn implicit_steps_with_amg_match_block_jacobi() {
     assert!(norm > 1e-6, "the beam moved: {norm}");
     assert!((diff / norm).sqrt() < 1e-7, "{:.2e}", (diff / norm).sqrt());
     let notes = amg.notes().unwrap();
-    assert_eq!(notes["amg_setups"], 1.0, "{notes:?}");
-    assert_eq!(notes["amg_reuses"], 7.0, "one setup, then kept: {notes:?}");
+    // Every solve either reuses the kept hierarchy or rebuilds a stale one.
+    assert_eq!(notes["amg_setups"] + notes["amg_reuses"], 8.0, "{notes:?}");
+    assert!(notes["amg_reuses"] >= 1.0, "never kept: {notes:?}");
 }
