@@ -28,7 +28,7 @@
 //!   goes to the passing tetrahedron of the cell with the smallest *owner
 //!   key* — its id, with [`super::sampling_mesh::WEAK_OWNER`] set when none
 //!   of its corners moved, it is inverted (the sign of its `D` in
-//!   [`super::sampling_mesh::ORIENTATION`] differs from the rest sign) or the
+//!   `sampling_mesh::ORIENTATION` differs from the rest sign) or the
 //!   voxel centre is the rest position of one of its corners that did not
 //!   move; the output keeps the smallest key over all cells. Cells are about a
 //!   voxel across, so this is much cheaper than scanning the five
