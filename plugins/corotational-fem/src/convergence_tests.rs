@@ -130,27 +130,35 @@ fn the_static_solve_follows_the_elastica_under_large_rotation() {
         "EI of the mesh {ei} vs beam {beam_ei}"
     );
     for alpha in [3.0, 10.0, 30.0] {
-        let p = alpha * ei / (L * L);
-        let mut m = beam(h, p, static_default());
-        m.step(frame()).unwrap();
-        let (ex, ez) = elastica::tip(alpha);
-        let got = tip(&m);
-        let (dx, dz) = (got.x / L - ex, (got.z - T / 2.0) / L - ez);
-        let notes = m.notes().unwrap();
-        eprintln!(
-            "α = {alpha}: tip ({:.4}, {:.4}) L vs elastica ({ex:.4}, {ez:.4}) L; {notes:?}",
-            got.x / L,
-            (got.z - T / 2.0) / L
-        );
-        assert!(
-            dx.abs() <= 0.02 && dz.abs() <= 0.02,
-            "α = {alpha}: tip ({:.4}, {:.4}) L, elastica ({ex:.4}, {ez:.4}) L",
-            got.x / L,
-            (got.z - T / 2.0) / L
-        );
-        assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
-        assert_eq!(notes["unconverged_solves"], 0.0, "{notes:?}");
+        assert_follows_elastica("P1", h, ei, alpha, static_default(), 0.02);
     }
+}
+
+/// Loads the beam (cells `h` mm) to `P L² / EI = alpha` with bending
+/// stiffness `ei` (µN·mm²) and asserts its tip is within `tol` L of the
+/// elastica's on both axes, with the Newton loop and every linear solve
+/// converged.
+fn assert_follows_elastica(label: &str, h: f64, ei: f64, alpha: f64, params: FemParams, tol: f64) {
+    let p = alpha * ei / (L * L);
+    let mut m = beam(h, p, params);
+    m.step(frame()).unwrap();
+    let (ex, ez) = elastica::tip(alpha);
+    let got = tip(&m);
+    let (dx, dz) = (got.x / L - ex, (got.z - T / 2.0) / L - ez);
+    let notes = m.notes().unwrap();
+    eprintln!(
+        "{label} α = {alpha}: tip ({:.4}, {:.4}) L vs elastica ({ex:.4}, {ez:.4}) L; {notes:?}",
+        got.x / L,
+        (got.z - T / 2.0) / L
+    );
+    assert!(
+        dx.abs() <= tol && dz.abs() <= tol,
+        "{label} α = {alpha}: tip ({:.4}, {:.4}) L, elastica ({ex:.4}, {ez:.4}) L",
+        got.x / L,
+        (got.z - T / 2.0) / L
+    );
+    assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
+    assert_eq!(notes["unconverged_solves"], 0.0, "{notes:?}");
 }
 
 #[test]
@@ -165,26 +173,7 @@ fn p2_follows_the_elastica_with_the_beams_own_bending_stiffness() {
         ..static_default()
     };
     for alpha in [3.0, 10.0] {
-        let p = alpha * ei / (L * L);
-        let mut m = beam(h, p, params.clone());
-        m.step(frame()).unwrap();
-        let (ex, ez) = elastica::tip(alpha);
-        let got = tip(&m);
-        let (dx, dz) = (got.x / L - ex, (got.z - T / 2.0) / L - ez);
-        let notes = m.notes().unwrap();
-        eprintln!(
-            "P2 α = {alpha}: tip ({:.4}, {:.4}) L vs elastica ({ex:.4}, {ez:.4}) L; {notes:?}",
-            got.x / L,
-            (got.z - T / 2.0) / L
-        );
-        assert!(
-            dx.abs() <= 0.01 && dz.abs() <= 0.01,
-            "α = {alpha}: tip ({:.4}, {:.4}) L, elastica ({ex:.4}, {ez:.4}) L",
-            got.x / L,
-            (got.z - T / 2.0) / L
-        );
-        assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
-        assert_eq!(notes["unconverged_solves"], 0.0, "{notes:?}");
+        assert_follows_elastica("P2", h, ei, alpha, params.clone(), 0.01);
     }
 }
 

@@ -206,7 +206,8 @@ pub fn add_twist(
 mod tests {
     use super::*;
     use crate::element_checks::{
-        assert_force_is_energy_gradient, large_rotation, skewed_tetrahedron,
+        assert_force_is_energy_gradient, assert_tangent_is_jacobian, force_jacobian,
+        large_rotation, largest_entry, rotated_stretch, skewed_tetrahedron,
     };
     use voxflex_core::glam::DQuat;
 
@@ -256,41 +257,19 @@ mod tests {
         // positive, none left out): R K Rᵀ plus the twist part against
         // central differences of the force.
         let e = element();
-        let q = DMat3::from_quat(DQuat::from_axis_angle(
-            DVec3::new(-0.4, 0.2, 1.0).normalize(),
-            0.8,
-        ));
-        let stretch = DMat3::from_diagonal(DVec3::new(1.3, 1.1, 1.2));
-        let u = e.rest.map(|x| q * stretch * x - x);
+        let m = rotated_stretch();
+        let u = e.rest.map(|x| m * x - x);
         let x = [0, 1, 2, 3].map(|a| e.rest[a] + u[a]);
         let mut k = vec![DMat3::ZERO; 16];
         let mut f0 = [DVec3::ZERO; 4];
         e.corotate(rotation(e.deformation_gradient(x)), &mut k, &mut f0);
         let without = k.clone();
         e.add_twist_stiffness(u, &mut k, true);
-        let scale = k
-            .iter()
-            .map(|m| m.abs().to_cols_array().iter().copied().fold(0.0, f64::max))
-            .fold(0.0, f64::max);
-        let eps = 1e-6;
-        let mut missing = 0.0f64;
-        for b in 0..4 {
-            for c in 0..3 {
-                let (mut up, mut down) = (u, u);
-                up[b][c] += eps;
-                down[b][c] -= eps;
-                let (fu, fd) = (e.elastic_force(up), e.elastic_force(down));
-                for a in 0..4 {
-                    let column = (fu[a] - fd[a]) / (2.0 * eps);
-                    let got = k[4 * a + b].col(c);
-                    assert!(
-                        (column - got).abs().max_element() <= 1e-5 * scale,
-                        "block {a}{b} column {c}: {column} vs {got}"
-                    );
-                    missing = missing.max((column - without[4 * a + b].col(c)).abs().max_element());
-                }
-            }
-        }
+        let jac = force_jacobian(u, |u| e.elastic_force(*u));
+        assert_tangent_is_jacobian(&k, &jac, 4);
+        // How far the tangent without the twist part is from the Jacobian.
+        let gap: Vec<DMat3> = jac.iter().zip(&without).map(|(j, w)| *j - *w).collect();
+        let (scale, missing) = (largest_entry(&k), largest_entry(&gap));
         assert!(
             missing > 1e-2 * scale,
             "the twist part matters here ({missing} of {scale})"

@@ -212,7 +212,8 @@ impl Quadratic {
 mod tests {
     use super::*;
     use crate::element_checks::{
-        assert_force_is_energy_gradient, large_rotation, skewed_tetrahedron,
+        assert_force_is_energy_gradient, assert_tangent_is_jacobian, force_jacobian,
+        large_rotation, rotated_stretch, skewed_tetrahedron,
     };
     use voxflex_core::glam::DQuat;
 
@@ -295,37 +296,14 @@ mod tests {
     #[test]
     fn with_the_twist_part_the_tangent_is_the_forces_jacobian_in_tension() {
         let e = element();
-        let q = DMat3::from_quat(DQuat::from_axis_angle(
-            DVec3::new(-0.4, 0.2, 1.0).normalize(),
-            0.8,
-        ));
-        let stretch = DMat3::from_diagonal(DVec3::new(1.3, 1.1, 1.2));
-        let u = e.rest.map(|x| q * stretch * x - x);
+        let m = rotated_stretch();
+        let u = e.rest.map(|x| m * x - x);
         let mut k = vec![DMat3::ZERO; NODES * NODES];
         let mut f0 = [DVec3::ZERO; NODES];
         e.corotate(&u, &mut k, &mut f0);
         e.add_twist_stiffness(&u, &mut k, true);
-        let scale = k
-            .iter()
-            .map(|m| m.abs().to_cols_array().iter().copied().fold(0.0, f64::max))
-            .fold(0.0, f64::max);
-        let eps = 1e-6;
-        for b in 0..NODES {
-            for c in 0..3 {
-                let (mut up, mut down) = (u, u);
-                up[b][c] += eps;
-                down[b][c] -= eps;
-                let (fu, fd) = (e.elastic_force(&up), e.elastic_force(&down));
-                for a in 0..NODES {
-                    let column = (fu[a] - fd[a]) / (2.0 * eps);
-                    let got = k[NODES * a + b].col(c);
-                    assert!(
-                        (column - got).abs().max_element() <= 1e-5 * scale,
-                        "block {a}{b} column {c}: {column} vs {got}"
-                    );
-                }
-            }
-        }
+        let jac = force_jacobian(u, |u| e.elastic_force(u));
+        assert_tangent_is_jacobian(&k, &jac, NODES);
     }
 
     #[test]

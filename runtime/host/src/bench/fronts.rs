@@ -57,6 +57,16 @@ pub(crate) struct Point {
     pub extra: Vec<(&'static str, String)>,
 }
 
+impl Point {
+    /// The value of extra column `key` ("" when the point has none).
+    fn extra_value(&self, key: &str) -> &str {
+        self.extra
+            .iter()
+            .find(|(e, _)| *e == key)
+            .map_or("", |(_, v)| v.as_str())
+    }
+}
+
 /// One front: its points and how they were measured.
 #[derive(Clone, Debug)]
 pub(crate) struct Front {
@@ -178,12 +188,7 @@ fn csv(front: &Front) -> String {
             p.series, p.config, p.time_ms, p.error, p.is_default
         );
         for k in &keys {
-            let v = p
-                .extra
-                .iter()
-                .find(|(e, _)| e == k)
-                .map(|(_, v)| v.as_str());
-            let _ = write!(s, ",{}", v.unwrap_or(""));
+            let _ = write!(s, ",{}", p.extra_value(k));
         }
         s.push('\n');
     }
@@ -363,12 +368,7 @@ fn markdown(fronts: &[Front], quick: bool) -> String {
                 if on[i] { "yes" } else { "" }
             );
             for k in &keys {
-                let v = p
-                    .extra
-                    .iter()
-                    .find(|(e, _)| e == k)
-                    .map(|(_, v)| v.as_str());
-                let _ = write!(s, " {} |", v.unwrap_or(""));
+                let _ = write!(s, " {} |", p.extra_value(k));
             }
             s.push('\n');
         }
