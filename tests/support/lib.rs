@@ -193,7 +193,7 @@ pub fn run_parity(check: fn(&dyn voxflex_core::gpu::GpuService) -> Result<(), St
 /// The value of the run's f32 output volume `o/deformed.nii.gz` (in `dir`)
 /// at the voxel nearest each world point (mm).
 pub fn output_values(dir: &Path, points: &[[f64; 3]]) -> Vec<f32> {
-    let v = voxflex_core::io::read_volume(&dir.join("o/deformed.nii.gz"), &Default::default())
+    let v = voxflex_io::read_volume(&dir.join("o/deformed.nii.gz"), &Default::default())
         .expect("the run's output volume");
     let voxflex_core::volume::VoxelSlice::F32(s) = v.data.as_slice() else {
         panic!("unexpected output type {:?}", v.scalar_type());

@@ -44,7 +44,7 @@ fn non_finite_nifti(path: &Path) {
     values[90] = f32::NEG_INFINITY;
     let g = voxflex_core::grid::Grid::new([6, 5, 4], DVec3::ONE, DVec3::ZERO);
     let v = Volume::new(g, VoxelData::F32(values)).unwrap();
-    voxflex_core::io::nifti::write_nifti(path, v.view()).unwrap();
+    voxflex_io::nifti::write_nifti(path, v.view()).unwrap();
 }
 
 /// Table-driven: for each bad scene, `run` fails, and `validate` fails
@@ -266,9 +266,9 @@ fn non_finite_source_voxels_are_replaced_with_a_warning_or_refused() {
         assert!(warnings.contains("1 NaN, 1 +inf and 1 -inf"), "{warnings}");
         // Read the raw file back without the policy's help: every voxel
         // finite, within the source's finite range (or the background).
-        let written = voxflex_core::io::nifti::read_nifti(
+        let written = voxflex_io::nifti::read_nifti(
             &out.join("out.nii"),
-            &voxflex_core::io::ReadOptions::default(),
+            &voxflex_io::ReadOptions::default(),
         )
         .unwrap();
         let values = written.data.as_slice().to_f32_vec();

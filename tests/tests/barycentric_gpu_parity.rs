@@ -1,10 +1,10 @@
 //! The barycentric map's WGSL path against its rayon twin on a real device
 //! (lavapipe in CI), whole and in slabs. The checks live in
-//! `voxflex_core::barycentric::parity`; on a machine without an adapter
+//! `voxflex_mesh::barycentric::parity`; on a machine without an adapter
 //! these tests print SKIPPED, except under `CI=true`.
 
-use voxflex_core::barycentric::parity;
 use voxflex_integration_tests::run_parity as run;
+use voxflex_mesh::barycentric::parity;
 
 #[test]
 fn map_matches_cpu() {

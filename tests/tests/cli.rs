@@ -34,8 +34,7 @@ fn demo_scene_writes_slices_nifti_and_metrics() {
     assert!(m["stages"]["resample"]["wall_ms"].as_f64().unwrap() > 0.0);
     assert!(m["stages"]["resample"]["voxels_touched"].as_u64().unwrap() > 0);
     // The deformed volume reads back with the output grid of the metrics.
-    let v =
-        voxflex_core::io::read_volume(&out.join("deformed.nii.gz"), &Default::default()).unwrap();
+    let v = voxflex_io::read_volume(&out.join("deformed.nii.gz"), &Default::default()).unwrap();
     let dims: Vec<usize> = m["output_dims"]
         .as_array()
         .unwrap()
@@ -92,7 +91,7 @@ fn converged_frames_skip_downstream_stages_and_a_second_run_reruns_nothing() {
 /// that deform alike, so callers allow a few.
 fn differing_voxels(dir: &std::path::Path, a: &str, b: &str) -> (usize, usize) {
     let read = |out: &str| {
-        voxflex_core::io::read_volume(&dir.join(out).join("deformed.nii.gz"), &Default::default())
+        voxflex_io::read_volume(&dir.join(out).join("deformed.nii.gz"), &Default::default())
             .unwrap()
     };
     let (a, b) = (read(a), read(b));
@@ -390,9 +389,9 @@ fn info_describes_phantoms_and_refuses_hostile_headers() {
     assert!(out.contains("32") && out.contains("-1000"), "{out}");
 
     // A NIfTI file cut in half: one line naming the file.
-    let v = voxflex_core::phantom::phantom("cube", [16, 16, 16]).unwrap();
+    let v = voxflex_phantom::phantom("cube", [16, 16, 16]).unwrap();
     let p = tmp.path().join("v.nii.gz");
-    voxflex_core::io::write_volume(&p, v.view()).unwrap();
+    voxflex_io::write_volume(&p, v.view()).unwrap();
     let bytes = std::fs::read(&p).unwrap();
     std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
     let o = voxflex(&["info", p.to_str().unwrap()], tmp.path());
@@ -525,8 +524,7 @@ fn roi_maps_grow_from_a_seed_and_stages_nobody_asked_for_are_not_built() {
         .map(|v| v.as_str().unwrap())
         .collect();
     assert!(nb.contains(&"render") && !nb.contains(&"roi"), "{m}");
-    let map =
-        voxflex_core::io::read_volume(&out.join("roi_brain.nii.gz"), &Default::default()).unwrap();
+    let map = voxflex_io::read_volume(&out.join("roi_brain.nii.gz"), &Default::default()).unwrap();
     let v = map.data.as_slice().to_f32_vec();
     let inside = v.iter().filter(|&&q| q > 0.5 * 65535.0).count();
     assert!(
@@ -805,7 +803,7 @@ fn a_large_bend_needs_the_max_output_factor_key() {
         })
         .collect();
     let beam = Volume::new(grid, VoxelData::I16(values)).unwrap();
-    voxflex_core::io::write_volume(&tmp.path().join("beam.nii"), beam.view()).unwrap();
+    voxflex_io::write_volume(&tmp.path().join("beam.nii"), beam.view()).unwrap();
     let write = |name: &str, resample: &str| {
         let text = format!(
             r#"[scene]
@@ -871,7 +869,7 @@ nifti = "deformed.nii"
     let o = voxflex(&["run", "tetrahedral.toml"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let read = |name: &str| {
-        voxflex_core::io::read_volume(
+        voxflex_io::read_volume(
             &tmp.path().join(name).join("deformed.nii"),
             &Default::default(),
         )

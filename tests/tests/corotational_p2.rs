@@ -54,7 +54,7 @@ fn a_p2_scene_runs_through_the_cli_on_cpu_and_gpu_and_bends_unlike_p1() {
         let m = metrics(&tmp.path().join("g"));
         assert_eq!(m["backend"], "gpu", "{m}");
         let read = |d: &str| {
-            voxflex_core::io::read_volume(
+            voxflex_io::read_volume(
                 &tmp.path().join(d).join("deformed.nii.gz"),
                 &Default::default(),
             )

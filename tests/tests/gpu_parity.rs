@@ -106,7 +106,7 @@ fn run_scene_on(backend: &str, dir: &std::path::Path) -> voxflex_core::volume::V
     std::fs::write(dir.join(format!("{backend}.toml")), s).unwrap();
     let o = voxflex(&["run", &format!("{backend}.toml")], dir);
     assert!(o.status.success(), "{}", text(&o));
-    voxflex_core::io::read_volume(&out.join("deformed.nii.gz"), &Default::default()).unwrap()
+    voxflex_io::read_volume(&out.join("deformed.nii.gz"), &Default::default()).unwrap()
 }
 
 #[test]

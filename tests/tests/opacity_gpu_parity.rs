@@ -2,11 +2,11 @@
 //! (lavapipe in CI): identical maps and identical step / visit / useful
 //! counts after every step and at convergence, several growths sharing one
 //! uploaded volume, bounded and automatic-λ maps, and clean refusals. The checks live in
-//! `voxflex_core::opacity::parity`; on a machine without an adapter these
+//! `voxflex_opacity::parity`; on a machine without an adapter these
 //! tests print SKIPPED, except under `CI=true`.
 
-use voxflex_core::opacity::parity;
 use voxflex_integration_tests::run_parity as run;
+use voxflex_opacity::parity;
 
 #[test]
 fn converged_maps_are_identical() {

@@ -8,9 +8,9 @@ use voxflex_abi::renderer::RendererProxy;
 use voxflex_core::camera::{Camera, Projection};
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::gpu::{GpuService, GpuServiceExt};
-use voxflex_core::opacity::{CpuGrowth, GrowthParams, Seed};
 use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
 use voxflex_integration_tests::*;
+use voxflex_opacity::{CpuGrowth, GrowthParams, Seed};
 use voxflex_runtime::gpu_context::testing::test_gpu;
 
 fn raycast(
@@ -50,7 +50,7 @@ fn camera(grid: &voxflex_core::grid::Grid) -> Camera {
 fn cpu_and_gpu_images_agree_through_the_plugin() {
     let Some(gpu) = test_gpu() else { return };
     let gpu: Arc<dyn GpuService> = gpu;
-    let volume = voxflex_core::phantom::phantom("head", [48, 56, 52]).unwrap();
+    let volume = voxflex_phantom::phantom("head", [48, 56, 52]).unwrap();
     let mut growth = CpuGrowth::new(
         volume.view(),
         &Seed::World(volume.grid.centre()),

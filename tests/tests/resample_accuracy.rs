@@ -14,9 +14,9 @@ use voxflex_core::deformation::{
     DeformationModel, DisplacementTarget, ExecutionBackend, FrameInfo, RestPoints,
 };
 use voxflex_core::glam::{DMat3, DVec3};
-use voxflex_core::resample::{DisplacementsRef, Interpolation, ResampleParams, Resampler};
 use voxflex_core::volume::Volume;
 use voxflex_integration_tests::*;
+use voxflex_resample::{DisplacementsRef, Interpolation, ResampleParams, Resampler};
 
 /// Maps `volume` with the affine plugin's `params` and resamples it on the
 /// CPU (default interpolation).
@@ -124,8 +124,8 @@ fn compare(
 
 #[test]
 fn twist_and_affine_on_a_linear_ramp_are_exact() {
-    let volume = voxflex_core::phantom::ramp([40, 36, 32]);
-    let (a, b, c) = voxflex_core::phantom::RAMP_COEFFS.into();
+    let volume = voxflex_phantom::ramp([40, 36, 32]);
+    let (a, b, c) = voxflex_phantom::RAMP_COEFFS.into();
     let ramp = move |p: DVec3| a * p.x + b * p.y + c * p.z;
     let (lo, hi) = volume.value_range();
     let range = (hi - lo) as f64;
@@ -178,7 +178,7 @@ fn trilinear(volume: &Volume, p: DVec3) -> f64 {
 
 #[test]
 fn head_phantom_twist_error_against_direct_analytic_resampling() {
-    let volume = voxflex_core::phantom::phantom("head", [64, 64, 64]).unwrap();
+    let volume = voxflex_phantom::phantom("head", [64, 64, 64]).unwrap();
     let centre = volume.grid.centre();
     let extent_z = volume.grid.world_bounds().1.z - volume.grid.world_bounds().0.z;
     let rate = 40f64.to_radians() / extent_z;
@@ -219,8 +219,8 @@ fn head_phantom_twist_error_against_direct_analytic_resampling() {
 #[test]
 fn identity_field_reproduces_the_volume_exactly() {
     for volume in [
-        voxflex_core::phantom::phantom("head", [33, 40, 37]).unwrap(),
-        voxflex_core::phantom::ramp([20, 17, 9]),
+        voxflex_phantom::phantom("head", [33, 40, 37]).unwrap(),
+        voxflex_phantom::ramp([20, 17, 9]),
     ] {
         let (g, out) = deform(&volume, "field = \"affine\"");
         assert_eq!(g, volume.grid, "the identity must not grow the output grid");

@@ -3,11 +3,11 @@
 //! data range, folds (moved tissue over still and inverted cells) bit for
 //! bit, output split into z-slabs under a tiny storage-binding limit,
 //! removed tetrahedra, and dirty-region resampling equal to a full resample.
-//! The checks live in `voxflex_core::resample::parity`; on a machine without
+//! The checks live in `voxflex_resample::parity`; on a machine without
 //! an adapter these tests print SKIPPED, except under `CI=true`.
 
-use voxflex_core::resample::parity;
 use voxflex_integration_tests::run_parity as run;
+use voxflex_resample::parity;
 
 #[test]
 fn identity_is_bitwise() {

@@ -124,10 +124,9 @@ fn detached_data_and_same_size_copies_with_kept_mtimes_are_seen() {
     std::fs::write(tmp.path().join("n.toml"), copy_scene("src.nii", &out2)).unwrap();
     let copy = |seed: u8| {
         write_mhd(tmp.path(), seed);
-        let v = voxflex_core::io::read_volume(&tmp.path().join("vol.mhd"), &Default::default())
-            .unwrap();
+        let v = voxflex_io::read_volume(&tmp.path().join("vol.mhd"), &Default::default()).unwrap();
         let staged = tmp.path().join("staged.nii");
-        voxflex_core::io::write_volume(&staged, v.view()).unwrap();
+        voxflex_io::write_volume(&staged, v.view()).unwrap();
         std::fs::read(staged).unwrap()
     };
     std::fs::write(&nii, copy(5)).unwrap();

@@ -7,7 +7,7 @@
 //! pull showed a continuous tent. The cause was the resampler's fold rule
 //! (smallest tetrahedron id wins), which let the still air cells and the
 //! inverted cells under the stretched tissue win only on the low-index
-//! side; see `voxflex_core::resample::sampling_mesh::WEAK_OWNER`.
+//! side; see `voxflex_resample::sampling_mesh::WEAK_OWNER`.
 
 use std::path::Path;
 use voxflex_core::volume::Volume;
@@ -15,7 +15,7 @@ use voxflex_integration_tests::*;
 
 /// The deformed output volume of a run.
 fn output(dir: &Path) -> Volume {
-    voxflex_core::io::read_volume(&dir.join("deformed.nii.gz"), &Default::default())
+    voxflex_io::read_volume(&dir.join("deformed.nii.gz"), &Default::default())
         .expect("the run's output volume")
 }
 

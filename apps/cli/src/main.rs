@@ -423,7 +423,7 @@ fn plugins(dirs: Vec<PathBuf>) -> Result<()> {
 }
 
 fn load_volume(source: &str, dims: Option<Vec<usize>>) -> Result<voxflex_core::volume::Volume> {
-    use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
+    use voxflex_phantom::{VolumeSource, parse_source, phantom};
     Ok(match parse_source(source) {
         VolumeSource::Phantom(name) => {
             let d = match dims.as_deref() {
@@ -437,7 +437,7 @@ fn load_volume(source: &str, dims: Option<Vec<usize>>) -> Result<voxflex_core::v
             if dims.is_some() {
                 bail!("--dims applies to phantoms only");
             }
-            voxflex_core::io::read_volume(&p, &voxflex_core::io::ReadOptions::default())?
+            voxflex_io::read_volume(&p, &voxflex_io::ReadOptions::default())?
         }
     })
 }
@@ -469,9 +469,7 @@ fn roi(
     out: PathBuf,
     a: RoiArgs,
 ) -> Result<()> {
-    use voxflex_core::opacity::{
-        GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi,
-    };
+    use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi};
     let [x, y, z] = seed[..] else {
         bail!("--seed needs three millimetre coordinates: x,y,z");
     };
@@ -512,7 +510,7 @@ fn roi(
     }
     let (report, map) = (o.grown.report, &o.grown.map);
     let written = voxflex_runtime::visualise::map_volume(&volume.grid, map);
-    voxflex_core::io::write_volume(&out, written.view())?;
+    voxflex_io::write_volume(&out, written.view())?;
     println!(
         "{}: lambda {}{}, {} ({} steps), {} voxels ≥ 0.5, {} visits ({:.0}% useful), map box {:?} ({} bytes) → {}",
         source,

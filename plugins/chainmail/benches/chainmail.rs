@@ -18,7 +18,7 @@
 use std::time::Instant;
 use voxflex_chainmail::model::ChainMail;
 use voxflex_chainmail::params::{ChainMailParams, InteractionSpec};
-use voxflex_core::phantom::phantom;
+use voxflex_phantom::phantom;
 
 /// The papers' test parameters; plain relaxation (`over_relaxation = 1`),
 /// as the papers relax, so the figures compare like for like.

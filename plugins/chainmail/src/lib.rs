@@ -47,6 +47,7 @@ pub mod relax_passes;
 pub mod removal;
 pub mod row_moves;
 pub mod run_log;
+#[cfg(any(test, feature = "test-support"))]
 pub mod scenes;
 pub mod state;
 

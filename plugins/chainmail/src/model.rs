@@ -21,8 +21,8 @@ use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::interaction::{CarveRegion, FarGrabs, GrabMotion};
-use voxflex_core::resample::{tets_at_vertex, tets_on_edge};
 use voxflex_core::volume::VolumeView;
+use voxflex_resample::{tets_at_vertex, tets_on_edge};
 
 /// A grab in progress: an element moved along a straight path.
 #[derive(Clone, Debug)]

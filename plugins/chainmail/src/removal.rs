@@ -17,7 +17,7 @@ use crate::mapping;
 use crate::state::State;
 use voxflex_core::cut_polygon::CutPolygon;
 use voxflex_core::glam::DVec3;
-use voxflex_core::resample::{tets_at_vertex, tets_cut_by};
+use voxflex_resample::{tets_at_vertex, tets_cut_by};
 
 /// Source voxels (inclusive index box) whose rest position lies within the
 /// world box `[lo, hi]` grown by the model's largest displacement and two

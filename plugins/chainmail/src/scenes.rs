@@ -10,8 +10,8 @@
 
 use crate::model::ChainMail;
 use crate::params::{ChainMailParams, InteractionSpec};
-use voxflex_core::phantom::{HEAD_SIZE_MM, phantom};
 use voxflex_core::volume::Volume;
+use voxflex_phantom::{HEAD_SIZE_MM, phantom};
 
 /// The materials of `configs/chainmail-head.toml`.
 pub const HEAD_MATERIALS: &str = "materials = [\n\

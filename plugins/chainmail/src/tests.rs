@@ -8,8 +8,8 @@ use proptest::prelude::*;
 use std::collections::BinaryHeap;
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::phantom::phantom;
 use voxflex_core::volume::{Volume, VoxelData};
+use voxflex_phantom::phantom;
 
 /// A u8 volume of `dims` with 1 mm voxels, values from `f(i, j, k)`.
 pub(crate) fn volume(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {

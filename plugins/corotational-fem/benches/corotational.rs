@@ -26,9 +26,9 @@ use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
-use voxflex_core::proxy::uniform_proxy;
 use voxflex_corotational_fem::{CorotationalFem, FemParams, PreconditionerKind, SolverKind};
+use voxflex_mesh::mesh_model::{ElasticMaterial, MeshModel, cantilever};
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
 

@@ -6,7 +6,7 @@
 use crate::solver::{CorotationalFem, ElementKind, FemParams, PreconditionerKind, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
-use voxflex_core::mesh_model::{MeshModel, cantilever};
+use voxflex_mesh::mesh_model::{MeshModel, cantilever};
 
 type Fem = MeshModel<CorotationalFem>;
 

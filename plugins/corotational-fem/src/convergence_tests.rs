@@ -9,9 +9,9 @@ use crate::solver::{CorotationalFem, FemParams, PreconditionerKind, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::elastica;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
-use voxflex_core::proxy::uniform_proxy;
+use voxflex_mesh::mesh_model::elastica;
+use voxflex_mesh::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
 

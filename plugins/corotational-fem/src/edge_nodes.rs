@@ -1,5 +1,5 @@
 //! The mid-edge nodes of the quadratic elements (`element = "p2"`): the
-//! solver owns them, so the shared [`MeshModel`](voxflex_core::mesh_model::MeshModel)
+//! solver owns them, so the shared [`MeshModel`](voxflex_mesh::mesh_model::MeshModel)
 //! (proxy, boundary conditions, bindings, cuts) keeps working on the
 //! proxy's corners only.
 //!
@@ -28,10 +28,10 @@
 use crate::quadratic::Quadratic;
 use std::collections::HashMap;
 use voxflex_core::glam::DVec3;
-use voxflex_core::mesh_model::edge_layer::TET_EDGES;
-use voxflex_core::mesh_model::{Boundary, EdgeLayer, ElasticMaterial, NodeState, lumped_masses};
-use voxflex_core::proxy::HangingNode;
 use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::edge_layer::TET_EDGES;
+use voxflex_mesh::mesh_model::{Boundary, EdgeLayer, ElasticMaterial, NodeState, lumped_masses};
+use voxflex_mesh::proxy::HangingNode;
 
 /// The mid-edge node layer of a proxy.
 #[derive(Clone, Debug)]

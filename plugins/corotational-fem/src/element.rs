@@ -6,8 +6,8 @@
 
 use crate::polar::{rotation, signed_svd};
 use voxflex_core::glam::{DMat3, DVec3};
-use voxflex_core::mesh_model::ElasticMaterial;
 use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::ElasticMaterial;
 
 /// One tetrahedron's precomputed rest quantities.
 #[derive(Clone, Debug)]

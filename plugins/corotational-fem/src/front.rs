@@ -13,8 +13,8 @@ use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel};
-use voxflex_core::proxy::uniform_proxy;
+use voxflex_mesh::mesh_model::{ElasticMaterial, MeshModel};
+use voxflex_mesh::proxy::uniform_proxy;
 
 /// Beam length (x), width (y) and thickness (z), mm.
 pub const LENGTH: f64 = 8.0;

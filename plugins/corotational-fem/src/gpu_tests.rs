@@ -10,10 +10,10 @@ use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{
+use voxflex_mesh::mesh_model::{
     ElasticMaterial, MeshModel, device_difference, largest_and_difference,
 };
-use voxflex_core::proxy::uniform_proxy;
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
 
@@ -107,7 +107,7 @@ fn gpu_static_solves_match_rayon() {
 fn gpu_solves_on_an_octree_proxy_with_hanging_nodes_match_rayon() {
     use voxflex_core::deformation::ExecutionBackend;
     let Some(gpu) = test_gpu() else { return };
-    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
     let make = |gpu: Option<Arc<dyn GpuService>>, backend| {
         let mut m = Fem::from_toml(
             "proxy = { kind = \"octree\", max_cell = 8 }\n\

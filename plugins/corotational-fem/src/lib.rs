@@ -16,7 +16,7 @@
 //! measures P1 against P2 on issue 12's slender cantilever.
 //!
 //! Everything but the solver — the proxy, materials, boundary conditions,
-//! interactions, binding and map — is [`voxflex_core::mesh_model`]'s.
+//! interactions, binding and map — is [`voxflex_mesh::mesh_model`]'s.
 //!
 //! Scene usage:
 //!
@@ -58,4 +58,4 @@ pub use solver::{
     PreconditionerKind, SolverKind, StaticStats,
 };
 
-voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<CorotationalFem>);
+voxflex_abi::export_deformation_plugin!(voxflex_mesh::mesh_model::MeshModel<CorotationalFem>);

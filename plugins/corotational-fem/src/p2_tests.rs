@@ -11,11 +11,11 @@ use crate::solver::{CorotationalFem, ElementKind, FemParams, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo, RestPoints};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::edge_layer::TET_EDGES;
-use voxflex_core::mesh_model::{
+use voxflex_mesh::mesh_model::edge_layer::TET_EDGES;
+use voxflex_mesh::mesh_model::{
     Boundary, ElasticMaterial, MeshModel, MeshSolver, NodeState, largest_and_difference,
 };
-use voxflex_core::proxy::uniform_proxy;
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
 
@@ -203,12 +203,12 @@ fn loads_and_masses_move_onto_the_edge_nodes_conserving_their_totals() {
     // on the face x = 2.
     let g = DVec3::new(0.0, 0.0, -9810.0);
     let mut bc = Boundary::new(mesh.nodes.len());
-    let linear = voxflex_core::mesh_model::lumped_masses(&mesh, std::slice::from_ref(&material));
+    let linear = voxflex_mesh::mesh_model::lumped_masses(&mesh, std::slice::from_ref(&material));
     for (f, m) in bc.force.iter_mut().zip(&linear) {
         *f = *m * g;
     }
     bc.gravity = g;
-    bc.faces = voxflex_core::mesh_model::boundary::traction_faces(
+    bc.faces = voxflex_mesh::mesh_model::boundary::traction_faces(
         &mesh,
         DVec3::new(1.99, -1.0, -1.0),
         DVec3::new(2.01, 2.0, 2.0),
@@ -291,7 +291,7 @@ fn a_bent_p2_beam_maps_its_volume_quadratically() {
 #[test]
 fn an_octree_proxy_runs_p2_with_its_edge_nodes_tied() {
     use voxflex_core::deformation::ExecutionBackend;
-    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
     let toml = "proxy = { kind = \"octree\", max_cell = 8 }\n\
          materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 },\n\
                       { name = \"hard\", range = [150, 256], youngs_modulus = 200000 }]\n\

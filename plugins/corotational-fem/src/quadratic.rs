@@ -24,9 +24,9 @@
 use crate::element::{add_twist, energy_density, stiffness_block};
 use crate::polar::rotation;
 use voxflex_core::glam::{DMat3, DVec3};
-use voxflex_core::mesh_model::ElasticMaterial;
-use voxflex_core::mesh_model::edge_layer::TET_EDGES;
 use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::ElasticMaterial;
+use voxflex_mesh::mesh_model::edge_layer::TET_EDGES;
 
 /// Nodes of a quadratic tetrahedron.
 pub const NODES: usize = 10;

@@ -38,14 +38,14 @@ use voxflex_core::deformation::ModelNotes;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
-use voxflex_core::mesh_model::amg::Amg;
-use voxflex_core::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
-use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
-use voxflex_core::mesh_model::{
+use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::amg::Amg;
+use voxflex_mesh::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
+use voxflex_mesh::mesh_model::pcg_gpu::GpuPcg;
+use voxflex_mesh::mesh_model::{
     BlockMatrix, Boundary, EdgeLayer, ElasticMaterial, MeshSolver, NodeState, SolveReport,
     lumped_masses,
 };
-use voxflex_core::tet_mesh::TetMesh;
 
 /// Which solve runs each frame.
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
@@ -102,7 +102,7 @@ pub enum PreconditionerKind {
     /// Each node's 3 × 3 diagonal block inverted (CPU and GPU).
     BlockJacobi,
     /// Smoothed-aggregation algebraic multigrid, one V-cycle
-    /// ([`voxflex_core::mesh_model::amg`]; CPU only): iterations nearly
+    /// ([`voxflex_mesh::mesh_model::amg`]; CPU only): iterations nearly
     /// flat as the mesh is refined.
     Amg,
 }

@@ -5,16 +5,16 @@ use crate::solver::{CorotationalFem, ElementKind, FemParams, SolverKind};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::{DMat3, DQuat, DVec3};
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::inversion::{inverted_tetrahedra, largest_edge_change};
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
-use voxflex_core::proxy::uniform_proxy;
 use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::inversion::{inverted_tetrahedra, largest_edge_change};
+use voxflex_mesh::mesh_model::{ElasticMaterial, MeshModel, cantilever};
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Fem = MeshModel<CorotationalFem>;
 
 /// The cantilever (`mesh_model::cantilever`) on this solver.
 pub(crate) fn cantilever(r: usize, load: f64, params: FemParams) -> Fem {
-    voxflex_core::mesh_model::cantilever::model::<CorotationalFem>(r, load, params)
+    voxflex_mesh::mesh_model::cantilever::model::<CorotationalFem>(r, load, params)
 }
 
 /// Binding `id`'s displacements (mm) of its `n` points, mapped on the CPU.
@@ -242,7 +242,7 @@ fn stiffness_ratios_slivers_and_random_grabs_stay_finite() {
                         k + (c >> 2) as usize,
                     )
                 };
-                let pattern = voxflex_core::resample::sampling_mesh::CELL_TETS[(i + j + k) & 1];
+                let pattern = voxflex_resample::sampling_mesh::CELL_TETS[(i + j + k) & 1];
                 for t in pattern {
                     tets.push(t.map(corner));
                     labels.push(u16::from(i >= 2));
@@ -296,7 +296,7 @@ fn interact_before_init_only_validates() {
     assert!(e.contains("poke") && e.contains("grab"), "{e}");
     m.interact("kind = \"carve\"\ncentre = [0, 0, 0]\nradius = 1000")
         .unwrap();
-    let volume = voxflex_core::phantom::phantom("cube", [8, 8, 8]).unwrap();
+    let volume = voxflex_phantom::phantom("cube", [8, 8, 8]).unwrap();
     m.init(
         volume.view(),
         voxflex_core::deformation::ExecutionBackend::Cpu,
@@ -311,7 +311,7 @@ fn interact_before_init_only_validates() {
 #[test]
 fn an_octree_proxy_from_a_volume_runs_with_hanging_nodes_tied_and_exports_vtu() {
     use voxflex_core::deformation::ExecutionBackend;
-    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let vtu = dir.path().join("ring.vtu");
     let toml = format!(
@@ -441,7 +441,7 @@ fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh_with
     element: ElementKind,
 ) {
     use voxflex_core::deformation::RestPoints;
-    use voxflex_core::mesh_model::cantilever::tip_deflection;
+    use voxflex_mesh::mesh_model::cantilever::tip_deflection;
     let load = 1e-3;
     let tip = |m: &Fem| tip_deflection(m.mesh().unwrap(), &m.state().unwrap().u);
     let mut whole = cantilever(
@@ -530,7 +530,7 @@ fn a_mesh_file_proxy_maps_its_tags_to_materials_and_hostile_files_are_refused() 
     let ele = "2 4 1\n1 1 2 3 4 7\n2 2 3 4 5 9\n";
     std::fs::write(dir.path().join("m.node"), node).unwrap();
     std::fs::write(dir.path().join("m.ele"), ele).unwrap();
-    let volume = voxflex_core::phantom::phantom("cube", [8, 8, 8]).unwrap();
+    let volume = voxflex_phantom::phantom("cube", [8, 8, 8]).unwrap();
     let scene = |materials: &str| {
         format!(
             "proxy = {{ kind = \"file\", path = {:?} }}\nmaterials = [{materials}]\nsolver = \"static\"",
@@ -600,6 +600,6 @@ fn one_voxel_objects_and_slabs_survive_at_every_offset() {
     let params = "proxy = { kind = \"uniform\", step = 4 }\n\
                   materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n\
                   gravity = [0, 0, -9810]";
-    voxflex_core::mesh_model::small_features::every_offset::<CorotationalFem>(params)
+    voxflex_mesh::mesh_model::small_features::every_offset::<CorotationalFem>(params)
         .unwrap_or_else(|e| panic!("{e}"));
 }

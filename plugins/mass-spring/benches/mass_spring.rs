@@ -19,9 +19,9 @@ use std::time::Instant;
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, cantilever};
-use voxflex_core::proxy::uniform_proxy;
 use voxflex_mass_spring::{Integrator, MassSpring, SpringParams};
+use voxflex_mesh::mesh_model::{ElasticMaterial, MeshModel, cantilever};
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Springs = MeshModel<MassSpring>;
 
@@ -83,7 +83,7 @@ fn substep_with(volume_stiffness: f64) {
 /// and hard rings, the hard one fixed, under gravity.
 fn octree() {
     use voxflex_core::deformation::ExecutionBackend;
-    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).expect("phantom");
+    let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).expect("phantom");
     let mut m = Springs::from_toml(
         "proxy = { kind = \"octree\", max_cell = 8 }\n\
          materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 },\n\

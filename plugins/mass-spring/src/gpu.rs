@@ -14,8 +14,8 @@ use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
-use voxflex_core::mesh_model::boundary::TieTables;
-use voxflex_core::mesh_model::{Boundary, NodeState};
+use voxflex_mesh::mesh_model::boundary::TieTables;
+use voxflex_mesh::mesh_model::{Boundary, NodeState};
 
 /// The kernels.
 pub const SPRINGS_WGSL: &str = include_str!("../../../shaders/mass-spring/springs.wgsl");

@@ -10,10 +10,10 @@ use voxflex_core::deformation::{DeformationModel, DisplacementTarget, FrameInfo,
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::{
+use voxflex_mesh::mesh_model::{
     ElasticMaterial, MeshModel, device_difference, largest_and_difference,
 };
-use voxflex_core::proxy::uniform_proxy;
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Springs = MeshModel<MassSpring>;
 
@@ -164,7 +164,7 @@ fn gpu_implicit_steps_and_octree_proxies_match_rayon() {
     // An octree proxy: the explicit sub-steps tie the hanging nodes on the
     // device as the CPU does.
     use voxflex_core::deformation::ExecutionBackend;
-    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
     let make = |gpu: Option<Arc<dyn GpuService>>, backend| {
         let mut m = Springs::from_toml(
             "proxy = { kind = \"octree\", max_cell = 8 }\n\

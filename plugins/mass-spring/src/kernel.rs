@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use voxflex_core::glam::DVec3;
-use voxflex_core::proxy::HangingNode;
+use voxflex_mesh::proxy::HangingNode;
 use wide::{f32x4, f32x8};
 
 /// Springs per parallel task of [`SpringKernel::spring_pass`] (a multiple of 8).
@@ -908,7 +908,7 @@ fn store_rows(out: &mut [f32x4], [fx, fy, fz]: [f32x8; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voxflex_core::mesh_model::Boundary;
+    use voxflex_mesh::mesh_model::Boundary;
 
     /// Random springs between random nodes, and a random node state.
     struct Case {

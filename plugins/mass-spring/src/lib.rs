@@ -6,7 +6,7 @@
 //! backward-Euler step solved by PCG (see [`solver`]).
 //!
 //! Everything but the solver — the proxy, materials, boundary conditions,
-//! interactions, binding and map — is [`voxflex_core::mesh_model`]'s, so a
+//! interactions, binding and map — is [`voxflex_mesh::mesh_model`]'s, so a
 //! scene swaps between this plugin and `corotational-fem` with one line.
 //!
 //! Scene usage:
@@ -31,4 +31,4 @@ mod tests;
 
 pub use solver::{Integrator, MassSpring, SpringParams};
 
-voxflex_abi::export_deformation_plugin!(voxflex_core::mesh_model::MeshModel<MassSpring>);
+voxflex_abi::export_deformation_plugin!(voxflex_mesh::mesh_model::MeshModel<MassSpring>);

@@ -57,12 +57,12 @@ use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
-use voxflex_core::mesh_model::pcg::{self, CgSettings};
-use voxflex_core::mesh_model::pcg_gpu::GpuPcg;
-use voxflex_core::mesh_model::{
+use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::pcg::{self, CgSettings};
+use voxflex_mesh::mesh_model::pcg_gpu::GpuPcg;
+use voxflex_mesh::mesh_model::{
     BlockMatrix, Boundary, ElasticMaterial, MeshSolver, NodeState, SolveReport, lumped_masses,
 };
-use voxflex_core::tet_mesh::TetMesh;
 
 /// The time integrator.
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]

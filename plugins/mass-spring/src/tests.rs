@@ -5,10 +5,10 @@ use crate::solver::{Integrator, MassSpring, SpringParams};
 use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::mesh_model::inversion::largest_edge_change;
-use voxflex_core::mesh_model::{ElasticMaterial, MeshModel, MeshSolver};
-use voxflex_core::proxy::uniform_proxy;
 use voxflex_core::tet_mesh::TetMesh;
+use voxflex_mesh::mesh_model::inversion::largest_edge_change;
+use voxflex_mesh::mesh_model::{ElasticMaterial, MeshModel, MeshSolver};
+use voxflex_mesh::proxy::uniform_proxy;
 
 type Springs = MeshModel<MassSpring>;
 
@@ -155,7 +155,7 @@ fn stiffness_ratios_of_a_million_and_random_grabs_stay_finite() {
 #[test]
 fn an_octree_proxy_runs_explicit_and_implicit_with_hanging_nodes_tied() {
     use voxflex_core::deformation::ExecutionBackend;
-    let volume = voxflex_core::phantom::phantom("rings", [33, 33, 33]).unwrap();
+    let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
     for integrator in ["explicit", "implicit"] {
         let toml = format!(
             "proxy = {{ kind = \"octree\", max_cell = 8 }}\n\
@@ -201,7 +201,7 @@ fn one_voxel_objects_and_slabs_survive_at_every_offset() {
     let params = "proxy = { kind = \"uniform\", step = 4 }\n\
                   materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n\
                   gravity = [0, 0, -9810]";
-    voxflex_core::mesh_model::small_features::every_offset::<MassSpring>(params)
+    voxflex_mesh::mesh_model::small_features::every_offset::<MassSpring>(params)
         .unwrap_or_else(|e| panic!("{e}"));
 }
 

@@ -21,7 +21,7 @@ use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
 use voxflex_raycast::{RaycastRenderer, fit_camera};
 
 fn bench(c: &mut Criterion) {
-    let vol = voxflex_core::phantom::phantom("head", [256, 256, 256]).expect("head phantom");
+    let vol = voxflex_phantom::phantom("head", [256, 256, 256]).expect("head phantom");
     let cam = fit_camera(&vol.grid, 512, 512, 30.0, 15.0, Some(30.0));
     let mut out = vec![0u8; 512 * 512 * 4];
     let mut group = c.benchmark_group("raycast_cpu");

@@ -419,7 +419,7 @@ impl RaycastParams {
             if g.sigma <= 0.0 || g.a < 0.0 || g.b < 0.0 {
                 return bad("transfer_function.gaussian", "needs sigma > 0 and a, b ≥ 0");
             }
-            tf.gaussian = Some(voxflex_core::opacity::GaussianTf {
+            tf.gaussian = Some(voxflex_opacity::GaussianTf {
                 mean: g.mean as f32,
                 sigma: g.sigma as f32,
                 a: g.a as f32,

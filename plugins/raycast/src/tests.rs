@@ -8,7 +8,7 @@ use voxflex_core::opacity_map::to_fixed;
 use voxflex_core::volume::{Volume, VoxelData};
 
 fn head(n: usize) -> Volume {
-    voxflex_core::phantom::phantom("head", [n, n, n]).unwrap()
+    voxflex_phantom::phantom("head", [n, n, n]).unwrap()
 }
 
 fn cpu(toml: &str) -> RaycastRenderer {

@@ -54,7 +54,7 @@ pub struct TransferFunction {
     /// The automatic Gaussian transfer function of the opacity-map paper:
     /// when set, every opacity `t(x)` becomes `t(x) · (a + b · g(x))`, `g`
     /// a Gaussian at the ROI seed's mean and σ (data units).
-    pub gaussian: Option<voxflex_core::opacity::GaussianTf>,
+    pub gaussian: Option<voxflex_opacity::GaussianTf>,
 }
 
 const fn cp(value: f32, r: f32, g: f32, b: f32, a: f32) -> ControlPoint {
@@ -286,7 +286,7 @@ mod tests {
     fn gaussian_tf_weights_opacity_around_the_seed_mean() {
         let mut t = tf(&[[0.0, 1.0, 1.0, 1.0, 0.5], [100.0, 1.0, 1.0, 1.0, 0.5]]);
         let plain = t.lut((0.0, 0.0), 1.0);
-        t.gaussian = Some(voxflex_core::opacity::GaussianTf::new(50.0, 5.0));
+        t.gaussian = Some(voxflex_opacity::GaussianTf::new(50.0, 5.0));
         let weighted = t.lut((0.0, 0.0), 1.0);
         // At the mean the weight is a + b = 1; four σ away it is ≈ a = 0.01.
         assert!(

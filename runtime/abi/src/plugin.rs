@@ -565,23 +565,3 @@ macro_rules! __export_header {
         }
     };
 }
-
-/// Every mesh-based model is a plugin by its solver alone: a crate that
-/// implements [`voxflex_core::mesh_model::MeshSolver`] for `S` exports
-/// `MeshModel<S>` with [`export_deformation_plugin!`].
-impl<S: voxflex_core::mesh_model::MeshSolver> DeformationPlugin
-    for voxflex_core::mesh_model::MeshModel<S>
-{
-    const NAME: &'static str = S::NAME;
-    const DESCRIPTION: &'static str = S::DESCRIPTION;
-    const CAPABILITIES: u32 = crate::ffi::CAPABILITY_CPU
-        | if S::GPU {
-            crate::ffi::CAPABILITY_GPU
-        } else {
-            0
-        };
-
-    fn create(params_toml: &str, host: HostContext) -> Result<Self, ModelError> {
-        Ok(Self::from_toml(params_toml)?.with_gpu(host.gpu()))
-    }
-}

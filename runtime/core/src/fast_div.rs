@@ -2,18 +2,19 @@
 //! multiply (Lemire, Kaser & Kurz 2019), exact for every `u32` dividend.
 //! The hot loops that turn linear indices back into coordinates (the
 //! resampler's tetrahedron decoder, the opacity growth's lattice) use it
-//! instead of hardware division.
+//! instead of hardware division. It lives in core because both
+//! `voxflex-resample` and `voxflex-opacity` use it.
 
 /// Division by a fixed `u32` (a divisor of 0 is taken as 1).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct FastDiv {
+pub struct FastDiv {
     m: u64,
     d: u32,
 }
 
 impl FastDiv {
     /// A divider by `d` (0 → 1).
-    pub(crate) fn new(d: u32) -> Self {
+    pub fn new(d: u32) -> Self {
         let d = d.max(1);
         Self {
             m: if d == 1 { 0 } else { u64::MAX / d as u64 + 1 },
@@ -23,7 +24,7 @@ impl FastDiv {
 
     /// `n / d`.
     #[inline(always)]
-    pub(crate) fn div(&self, n: u32) -> u32 {
+    pub fn div(&self, n: u32) -> u32 {
         if self.d == 1 {
             n
         } else {
@@ -33,7 +34,7 @@ impl FastDiv {
 
     /// `(n / d, n % d)`.
     #[inline(always)]
-    pub(crate) fn div_rem(&self, n: u32) -> (u32, u32) {
+    pub fn div_rem(&self, n: u32) -> (u32, u32) {
         let q = self.div(n);
         (q, n - q * self.d)
     }

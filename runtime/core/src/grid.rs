@@ -7,7 +7,7 @@
 //!   patient's left, y posterior, z superior: DICOM's frame). The centre of voxel `(i, j, k)` sits at
 //!   `origin + (i, j, k) * spacing`: axis-aligned, spacing positive; the
 //!   readers reorder a file's voxels into this frame
-//!   ([`crate::io::orientation`]).
+//!   (`voxflex_io::orientation`).
 
 use glam::DVec3;
 

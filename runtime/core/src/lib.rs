@@ -1,36 +1,44 @@
 //! # voxflex-core
 //!
-//! The ground every other voxflex crate stands on: voxel geometry
-//! ([`grid::Grid`]), volumes ([`volume::Volume`]), file readers and writers,
-//! built-in phantoms, the deformation-field trait
-//! ([`deformation::DeformationModel`]), the GPU-service trait
-//! ([`gpu::GpuService`]) and the CPU + WGSL kernels of the shared services.
+//! The ground every other voxflex crate stands on, and only that: voxel
+//! geometry ([`grid::Grid`]), volumes ([`volume::Volume`]), errors, the
+//! deformation-field trait ([`deformation::DeformationModel`]), the
+//! GPU-service trait ([`gpu::GpuService`]), the renderer trait
+//! ([`render::Renderer`]), the camera, the interaction vocabulary, cut
+//! polygons, opacity maps as the renderer receives them, the plain
+//! tetrahedral mesh that readers and mesh models share, and volume
+//! statistics.
+//!
+//! Everything a plugin or the ABI needs lives here; everything only some
+//! crates need lives in its own crate above this one: file formats
+//! (`voxflex-io`), phantoms (`voxflex-phantom`), resampling
+//! (`voxflex-resample`), opacity-map growth (`voxflex-opacity`) and the
+//! mesh-model framework (`voxflex-mesh`). Touching one of those recompiles
+//! only its dependents, not every plugin.
 //!
 //! core knows nothing of wgpu, libloading or windows: GPU work goes through
 //! the [`gpu::GpuService`] trait that the host implements.
 //!
 //! Units: world coordinates are millimetres; voxel indices address voxel
 //! centres (see [`grid`]).
+//!
+//! Cargo feature `test-support`: `test_data` (where the real test volumes
+//! are), for the tests of the crates above; off in release builds.
 
-pub mod barycentric;
 pub mod camera;
 pub mod cut_polygon;
 pub mod deformation;
 pub mod error;
-mod fast_div;
+pub mod fast_div;
 pub mod gpu;
 pub mod grid;
 pub mod interaction;
-pub mod io;
-pub mod mesh_model;
 pub mod non_finite;
-pub mod opacity;
 pub mod opacity_map;
-pub mod phantom;
-pub mod proxy;
 pub mod render;
-pub mod resample;
+pub mod slice_axis;
 pub mod stats;
+#[cfg(any(test, feature = "test-support"))]
 pub mod test_data;
 pub mod tet_mesh;
 pub mod volume;

@@ -2,7 +2,7 @@
 //! them.
 //!
 //! **Policy.** A source volume's non-finite voxels are counted when it is
-//! loaded ([`crate::io::read_volume`]); under the default
+//! loaded (`voxflex_io::read_volume`); under the default
 //! [`NonFinitePolicy::Replace`] a warning gives the counts and they are
 //! replaced — NaN by the background (the scene's `[resample] background`,
 //! else the smallest finite value), +∞ by the largest and −∞ by the

@@ -492,15 +492,4 @@ mod tests {
         assert_eq!(num(1.23456), "1.2346");
         assert_eq!(num(-0.00001), "0");
     }
-
-    #[test]
-    fn head_phantom_summary() {
-        let v = crate::phantom::head([64, 64, 64]);
-        let s = VolumeStats::compute(v.view());
-        assert_eq!((s.min, s.max), (-1000.0, 1200.0));
-        assert_eq!(s.p1, -1000.0);
-        let text = s.to_string();
-        assert!(text.lines().count() == 6, "{text}");
-        eprintln!("{text}");
-    }
 }

@@ -1,7 +1,7 @@
 //! A tetrahedral mesh: nodes in world millimetres, tetrahedra as four node
 //! indices, a material label per tetrahedron. The proxy of the mesh-based
 //! deformation models (mass-spring, corotational FEM), generated from a
-//! volume ([`crate::proxy`]) or read from a file.
+//! volume (`voxflex_mesh::proxy`) or read from a file.
 //!
 //! Every tetrahedron is stored positively oriented:
 //! `(x1 − x0) · ((x2 − x0) × (x3 − x0)) > 0`; [`TetMesh::new`] swaps two

@@ -33,10 +33,10 @@ use voxflex_abi::host_side::{DeformationProxy, HostServices};
 use voxflex_core::deformation::{
     DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo, RestPoints,
 };
-use voxflex_core::phantom::phantom;
-use voxflex_core::resample::gpu::GpuSource;
-use voxflex_core::resample::{DisplacementsRef, Interpolation, ResampleParams, Resampler};
 use voxflex_core::volume::Volume;
+use voxflex_phantom::phantom;
+use voxflex_resample::gpu::GpuSource;
+use voxflex_resample::{DisplacementsRef, Interpolation, ResampleParams, Resampler};
 
 /// Arguments of `voxflex bench`.
 #[derive(Clone, Debug, clap::Args)]
@@ -337,7 +337,7 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     }
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&json).map_err(err)?;
-        voxflex_core::io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;
+        voxflex_io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;
     }
     Ok(out)
 }

@@ -10,7 +10,7 @@
 //! - the **bytes** of every plugin library the scene loads;
 //! - the **bytes** of the source volume file and, for a MetaImage `.mhd` or
 //!   NRRD `.nhdr` header, of the detached data file it names
-//!   ([`voxflex_core::io::volume_files`]). A phantom source is covered by
+//!   ([`voxflex_io::volume_files`]). A phantom source is covered by
 //!   the scene text.
 //!
 //! Content hashes, not size and modification time: a same-size file copied
@@ -28,7 +28,7 @@
 use serde::{Deserialize, Serialize};
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use voxflex_core::io::{file_kind, volume_files};
+use voxflex_io::{file_kind, volume_files};
 use xxhash_rust::xxh3::Xxh3;
 
 /// Name of the stamp file in the output directory.

@@ -15,7 +15,7 @@
 //! dies.
 //!
 //! Temporary files: writes go through
-//! [`voxflex_core::io::write_atomically`], which names its temporary
+//! [`voxflex_io::write_atomically`], which names its temporary
 //! `.<file>.voxflex-tmp-<pid>-<n>`. With the lock held, a run removes such
 //! files in its directory whose process no longer exists.
 
@@ -92,7 +92,7 @@ pub fn lock(dir: &Path) -> std::io::Result<OutDirLock> {
 }
 
 /// The process id in a temporary file name of
-/// [`voxflex_core::io::write_atomically`] (`.<file>.voxflex-tmp-<pid>-<n>`).
+/// [`voxflex_io::write_atomically`] (`.<file>.voxflex-tmp-<pid>-<n>`).
 pub fn temp_file_pid(name: &str) -> Option<u32> {
     let rest = name.strip_prefix('.')?;
     let (_, tail) = rest.rsplit_once(".voxflex-tmp-")?;

@@ -37,15 +37,15 @@ use voxflex_core::error::{GpuError, IoError, ModelError};
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::io::png::{SliceAxis, Window, write_slice_png};
-use voxflex_core::io::{ReadOptions, read_volume_with, write_atomically, write_volume};
-use voxflex_core::phantom::{VolumeSource, parse_source, phantom};
-use voxflex_core::resample::gpu::GpuSource;
-use voxflex_core::resample::{
+use voxflex_core::volume::{Volume, VoxelData};
+use voxflex_io::png::{SliceAxis, Window, write_slice_png};
+use voxflex_io::{ReadOptions, read_volume_with, write_atomically, write_volume};
+use voxflex_phantom::{VolumeSource, parse_source, phantom};
+use voxflex_resample::gpu::GpuSource;
+use voxflex_resample::{
     DisplacementsRef, ResampleError, ResampleOutput, ResampleParams, ResampleReport, Resampler,
     TetMask,
 };
-use voxflex_core::volume::{Volume, VoxelData};
 
 pub use crate::fingerprint::STAMP_FILE;
 /// Name of the run report in the output directory.

@@ -33,8 +33,8 @@ use crate::visualise::roi_request;
 use voxflex_abi::host_side::{DeformationProxy, HostServices};
 use voxflex_abi::renderer::RendererProxy;
 use voxflex_core::deformation::DeformationModel;
-use voxflex_core::opacity::{LambdaChoice, OpacityError};
 use voxflex_core::volume::Volume;
+use voxflex_opacity::{LambdaChoice, OpacityError};
 
 /// Checks `scene` as described in the module docs; returns the loaded
 /// source volume. Every error names the scene file, and where `run`'s
@@ -146,12 +146,12 @@ fn check_renderer(
 /// The growth parameters of one `[[roi]]`, and its seed and window on
 /// `volume` when the map is grown on it.
 fn check_roi(
-    req: &voxflex_core::opacity::RoiRequest,
+    req: &voxflex_opacity::RoiRequest,
     volume: Option<&Volume>,
 ) -> Result<(), OpacityError> {
     req.params.validate()?;
     if let LambdaChoice::Fixed(lambda) = req.lambda {
-        voxflex_core::opacity::GrowthParams {
+        voxflex_opacity::GrowthParams {
             lambda,
             ..req.params
         }

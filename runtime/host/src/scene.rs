@@ -38,7 +38,7 @@ use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use voxflex_core::non_finite::NonFinitePolicy;
-use voxflex_core::resample::{Interpolation, ResampleParams};
+use voxflex_resample::{Interpolation, ResampleParams};
 
 /// Largest scene file read (1 MiB): scene files are a few kilobytes.
 pub const MAX_SCENE_BYTES: u64 = 1 << 20;
@@ -372,7 +372,7 @@ pub struct RoiSettings {
     #[serde(default)]
     pub seed_slice: Option<SliceSeed>,
     /// Extinction scale λ: `"auto"` (the default: the plateau rule,
-    /// `voxflex_core::opacity::auto_lambda`) or a number (the paper's is
+    /// `voxflex_opacity::auto_lambda`) or a number (the paper's is
     /// 30, which leaks on contrast CT — see README "On contrast CT").
     #[serde(default = "default_lambda")]
     pub lambda: LambdaSetting,
@@ -493,7 +493,7 @@ impl Scene {
                 } else {
                     format!(
                         "is {}, not a scene file; give the path of a .toml file",
-                        voxflex_core::io::file_kind(&meta)
+                        voxflex_io::file_kind(&meta)
                     )
                 },
             });

@@ -17,14 +17,14 @@ use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::io::png::SliceAxis;
-use voxflex_core::io::{write_atomically, write_volume};
-use voxflex_core::opacity::{
+use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
+use voxflex_core::volume::{Volume, VoxelData};
+use voxflex_io::png::SliceAxis;
+use voxflex_io::{write_atomically, write_volume};
+use voxflex_opacity::{
     GpuOpacityVolume, GrowthLimits, GrowthParams, LambdaChoice, OpacityMap, RoiOutcome, RoiRequest,
     Seed, SeedStats, grow_roi,
 };
-use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
-use voxflex_core::volume::{Volume, VoxelData};
 
 /// The seed of a `[[roi]]` table.
 pub fn roi_seed(roi: &RoiSettings) -> Seed {

@@ -5,7 +5,7 @@
 use super::{CorotationalFem, Twist};
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
-use voxflex_core::mesh_model::{Boundary, NodeState, SolveReport};
+use voxflex_mesh::mesh_model::{Boundary, NodeState, SolveReport};
 
 /// Load steps are halved down to this fraction of a frame's load change
 /// before the static solve gives up.

@@ -1,7 +1,7 @@
 //! `voxflex bench --accuracy`: time and error of both resampler
 //! interpolation modes ([`Interpolation`]) under an affine map, a twist and a
 //! bend of the head phantom, against the f64 reference of
-//! [`voxflex_core::resample::accuracy`] (trilinear sampling, in f64, of the
+//! [`voxflex_resample::accuracy`] (trilinear sampling, in f64, of the
 //! source at the exact analytic preimage of each output voxel).
 //!
 //! The displacement fields come straight from the analytic maps (f64, stored
@@ -15,12 +15,12 @@ use std::fmt::Write as _;
 use std::time::Instant;
 use voxflex_core::deformation::DirtyRegion;
 use voxflex_core::gpu::{GpuService, GpuServiceExt};
-use voxflex_core::phantom::phantom;
-use voxflex_core::resample::accuracy::{ErrorStats, bench_fields, errors};
-use voxflex_core::resample::gpu::GpuSource;
-use voxflex_core::resample::parity::Field;
-use voxflex_core::resample::{Interpolation, ResampleOutput, ResampleParams, Resampler};
 use voxflex_core::volume::Volume;
+use voxflex_phantom::phantom;
+use voxflex_resample::accuracy::{ErrorStats, bench_fields, errors};
+use voxflex_resample::fields::Field;
+use voxflex_resample::gpu::GpuSource;
+use voxflex_resample::{Interpolation, ResampleOutput, ResampleParams, Resampler};
 
 /// One resample of `field` in `params`' mode, `repeat` times after a warm-up:
 /// the median time (ms) and the output.
@@ -156,7 +156,7 @@ pub(super) fn run(args: &BenchArgs) -> Result<String, BenchError> {
     );
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&json).map_err(err)?;
-        voxflex_core::io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;
+        voxflex_io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;
     }
     Ok(out)
 }

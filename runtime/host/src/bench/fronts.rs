@@ -151,7 +151,7 @@ fn check(front: &Front) -> Result<(), BenchError> {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), BenchError> {
-    voxflex_core::io::write_atomically(path, |w| w.write_all(text.as_bytes()))
+    voxflex_io::write_atomically(path, |w| w.write_all(text.as_bytes()))
         .map_err(|e| err(format!("writing {}: {e}", path.display())))
 }
 

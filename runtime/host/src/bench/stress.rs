@@ -44,8 +44,8 @@ use voxflex_core::deformation::{
 };
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
-use voxflex_core::resample::TetMask;
 use voxflex_core::volume::{Volume, VoxelData};
+use voxflex_resample::TetMask;
 
 /// The models stressed, in report order.
 pub const MODELS: [&str; 4] = ["chainmail", "mass-spring", "corotational-fem", "affine"];
@@ -628,7 +628,7 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
             );
         }
         let text = serde_json::to_string_pretty(&json).map_err(err)?;
-        voxflex_core::io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;
+        voxflex_io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;
     }
     let failed: u64 = tallies
         .iter()

@@ -280,7 +280,7 @@ pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchErr
     for family in ELEMENTS {
         let (name, extra) = (family.name, family.params);
         for alpha in [3.0, 10.0, 30.0] {
-            let (ex, ez) = voxflex_core::mesh_model::elastica::tip(alpha);
+            let (ex, ez) = voxflex_mesh::mesh_model::elastica::tip(alpha);
             let p = alpha * ei / (l * l);
             for step in family.steps(steps, dims, quick) {
                 let (rest, u, run) = solve(

@@ -1,5 +1,5 @@
 //! The `resample` front: both resampler interpolation modes under the
-//! affine map, twist and bend of [`voxflex_core::resample::accuracy`] at
+//! affine map, twist and bend of [`voxflex_resample::accuracy`] at
 //! several head-phantom sizes, against its f64 reference (trilinear
 //! sampling, in f64, of the source at each output voxel's exact preimage),
 //! timed like `voxflex bench --accuracy` (median of full CPU resamples).
@@ -7,9 +7,9 @@
 use super::{Front, Point};
 use crate::bench::accuracy::time_mode;
 use crate::bench::{BenchError, err};
-use voxflex_core::phantom::phantom;
-use voxflex_core::resample::accuracy::{bench_fields, errors};
-use voxflex_core::resample::{Interpolation, ResampleParams};
+use voxflex_phantom::phantom;
+use voxflex_resample::accuracy::{bench_fields, errors};
+use voxflex_resample::{Interpolation, ResampleParams};
 
 /// The resampling front.
 pub(super) fn front(quick: bool) -> Result<Front, BenchError> {

@@ -1,6 +1,6 @@
 //! The `roi` front: spatial opacity maps (`[[roi]]`) on the labelled
 //! abdomen phantom, seeds in the liver, the spleen and the right kidney
-//! (`voxflex_core::phantom::abdomen::SEEDS`), grown to convergence on the
+//! (`voxflex_phantom::abdomen::SEEDS`), grown to convergence on the
 //! CPU at every λ of the automatic rule's candidates and at the paper's
 //! λ = 30, and with `lambda = "auto"` (the default); error 1 − Dice of the map ≥ 0.5
 //! against the seed's organ label. (The Dice-against-λ figure is the
@@ -9,10 +9,10 @@
 use super::{Front, Point};
 use crate::bench::{BenchError, err};
 use std::time::Instant;
-use voxflex_core::opacity::auto_lambda::CANDIDATES;
-use voxflex_core::opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi};
-use voxflex_core::phantom::abdomen::{SEEDS, map_dice};
-use voxflex_core::phantom::abdomen_labelled;
+use voxflex_opacity::auto_lambda::CANDIDATES;
+use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi};
+use voxflex_phantom::abdomen::{SEEDS, map_dice};
+use voxflex_phantom::abdomen_labelled;
 
 /// The paper's λ (the scene default until this front showed it off the
 /// front for every seed; the default is now `"auto"`).

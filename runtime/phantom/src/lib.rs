@@ -1,0 +1,574 @@
+//! # voxflex-phantom
+//!
+//! Built-in volume sources. Its own crate, above voxflex-io (a scene's
+//! source is a phantom *or* a file, [`VolumeSource`]), so that the plugins'
+//! tests and benchmarks, the opacity tests (the labelled [`abdomen`] and its
+//! Dice scores) and the host share one set of phantoms without any of them
+//! pulling the phantoms into voxflex-core.
+//!
+//! Built-in phantoms: analytic volumes generated at any resolution, so demos,
+//! tests and benchmarks never need a data file.
+//!
+//! Every phantom has a fixed **physical** size; the requested dims only set
+//! the sampling: `spacing = size / dims` (mm) and the grid is centred on the
+//! world origin ([`Grid::centred`]). Structures are defined in world
+//! millimetres, so a phantom looks the same at 32³ and at 512³.
+//!
+//! | name | type | size (mm) | content |
+//! |---|---|---|---|
+//! | `head` | i16 (HU) | 200 × 240 × 220 | CT-like head of nested ellipsoids (see [`head`]) |
+//! | `cube` | u8 | 100 × 100 × 100 | homogeneous cube 100 in air 0 (see [`cube`]) |
+//! | `rings` | u8 | 100 × 100 × 100 | annulus, soft half 100 / hard half 200 (see [`rings`]) |
+//! | `ramp` | f32 | 100 × 100 × 100 | linear field `a·x + b·y + c·z` (see [`ramp`]) |
+//! | `abdomen` | i16 (HU) | 360 × 280 × 240 | labelled portal-venous contrast CT of the upper abdomen, with noise (see [`abdomen`]) |
+//!
+//! Axes follow DICOM/LPS: +x toward the patient's left, +y posterior, +z
+//! superior — what [`voxflex_io::png`] displays upright.
+//!
+//! [`parse_source`] turns a scene's `source` string into a
+//! [`VolumeSource`]: `"phantom:head"` or a file path.
+
+// The voxflex-core modules this crate builds on, imported at the root so
+// `crate::grid`, `crate::volume`, ... read as they did when the phantoms
+// were a module of voxflex-core.
+use voxflex_core::{error, grid, opacity_map, volume};
+
+use crate::error::IoError;
+use crate::grid::Grid;
+use crate::volume::{Volume, VoxelData};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::path::PathBuf;
+use voxflex_io::ReadOptions;
+
+pub mod abdomen;
+pub use abdomen::{LabelledVolume, abdomen_labelled};
+
+/// The built-in phantoms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PhantomKind {
+    /// CT-like head, i16 Hounsfield units ([`head`]).
+    Head,
+    /// Homogeneous cube, u8 ([`cube`]).
+    Cube,
+    /// Two-material annulus, u8 ([`rings`]).
+    Rings,
+    /// Linear f32 field ([`ramp`]).
+    Ramp,
+    /// Labelled abdominal contrast CT, i16 Hounsfield units ([`abdomen`]).
+    Abdomen,
+}
+
+impl PhantomKind {
+    /// Every phantom, in documentation order.
+    pub const ALL: [PhantomKind; 5] = [
+        PhantomKind::Head,
+        PhantomKind::Cube,
+        PhantomKind::Rings,
+        PhantomKind::Ramp,
+        PhantomKind::Abdomen,
+    ];
+
+    /// The name used in `phantom:<name>` sources.
+    pub fn name(self) -> &'static str {
+        match self {
+            PhantomKind::Head => "head",
+            PhantomKind::Cube => "cube",
+            PhantomKind::Rings => "rings",
+            PhantomKind::Ramp => "ramp",
+            PhantomKind::Abdomen => "abdomen",
+        }
+    }
+
+    /// Physical size (mm) of the whole field of view along x, y, z.
+    pub fn size_mm(self) -> DVec3 {
+        match self {
+            PhantomKind::Head => HEAD_SIZE_MM,
+            PhantomKind::Abdomen => abdomen::ABDOMEN_SIZE_MM,
+            PhantomKind::Cube | PhantomKind::Rings | PhantomKind::Ramp => DVec3::splat(100.0),
+        }
+    }
+
+    /// The phantom's grid at `dims`: spacing `size / dims` (mm), centred on
+    /// the world origin.
+    pub fn grid(self, dims: [usize; 3]) -> Grid {
+        let d = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64).max(DVec3::ONE);
+        Grid::centred(dims, self.size_mm() / d)
+    }
+
+    /// Generates the phantom at `dims` voxels.
+    pub fn generate(self, dims: [usize; 3]) -> Result<Volume, PhantomError> {
+        check_dims(dims)?;
+        Ok(match self {
+            PhantomKind::Head => head(dims),
+            PhantomKind::Cube => cube(dims),
+            PhantomKind::Rings => rings(dims),
+            PhantomKind::Ramp => ramp(dims),
+            PhantomKind::Abdomen => abdomen::abdomen(dims),
+        })
+    }
+}
+
+impl std::fmt::Display for PhantomKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for PhantomKind {
+    type Err = PhantomError;
+
+    /// Parses a phantom name (case-insensitive).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let lower = s.trim().to_ascii_lowercase();
+        PhantomKind::ALL
+            .into_iter()
+            .find(|k| k.name() == lower)
+            .ok_or_else(|| PhantomError::UnknownName {
+                name: s.to_string(),
+            })
+    }
+}
+
+/// A phantom could not be made.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PhantomError {
+    /// No built-in phantom has this name.
+    #[error(
+        "unknown phantom `{name}`; built-in phantoms: head, cube, rings, ramp, abdomen (e.g. `phantom:head`)"
+    )]
+    UnknownName {
+        /// The name asked for.
+        name: String,
+    },
+    /// Some dimension is zero.
+    #[error("phantom dims {dims:?} must all be at least 1 voxel")]
+    EmptyDims {
+        /// The dims asked for.
+        dims: [usize; 3],
+    },
+    /// The voxel count exceeds [`ReadOptions::DEFAULT_MAX_VOXELS`] (1024³).
+    #[error("phantom dims {dims:?} exceed the limit of 1024³ voxels; ask for a lower resolution")]
+    TooLarge {
+        /// The dims asked for.
+        dims: [usize; 3],
+    },
+}
+
+fn check_dims(dims: [usize; 3]) -> Result<(), PhantomError> {
+    if dims.contains(&0) {
+        return Err(PhantomError::EmptyDims { dims });
+    }
+    match dims[0]
+        .checked_mul(dims[1])
+        .and_then(|v| v.checked_mul(dims[2]))
+    {
+        Some(n) if n <= ReadOptions::DEFAULT_MAX_VOXELS => Ok(()),
+        _ => Err(PhantomError::TooLarge { dims }),
+    }
+}
+
+/// Generates the phantom named `name` (see [`PhantomKind`]) at `dims` voxels.
+pub fn phantom(name: &str, dims: [usize; 3]) -> Result<Volume, PhantomError> {
+    name.parse::<PhantomKind>()?.generate(dims)
+}
+
+/// Fills a volume by evaluating `f` at every voxel centre (world mm), in
+/// parallel over z slices.
+fn fill<T: Copy + Default + Send + Sync>(grid: &Grid, f: impl Fn(DVec3) -> T + Sync) -> Vec<T> {
+    let [nx, ny, _] = grid.dims;
+    let mut data = vec![T::default(); grid.len()];
+    data.par_chunks_mut((nx * ny).max(1))
+        .enumerate()
+        .for_each(|(k, slice)| {
+            let z = grid.origin.z + k as f64 * grid.spacing.z;
+            for j in 0..ny {
+                let y = grid.origin.y + j as f64 * grid.spacing.y;
+                let row = &mut slice[j * nx..(j + 1) * nx];
+                for (i, v) in row.iter_mut().enumerate() {
+                    let x = grid.origin.x + i as f64 * grid.spacing.x;
+                    *v = f(DVec3::new(x, y, z));
+                }
+            }
+        });
+    data
+}
+
+/// An axis-aligned ellipsoid (centre and semi-axes in mm).
+#[derive(Clone, Copy, Debug)]
+struct Ellipsoid {
+    centre: DVec3,
+    semi: DVec3,
+    inv_semi: DVec3,
+}
+
+impl Ellipsoid {
+    fn new(centre: DVec3, semi: DVec3) -> Self {
+        Self {
+            centre,
+            semi,
+            inv_semi: semi.recip(),
+        }
+    }
+    /// The same ellipsoid with every semi-axis shortened by `t` mm (an
+    /// approximately uniform inner shell).
+    fn shrunk(&self, t: f64) -> Self {
+        Self::new(self.centre, self.semi - DVec3::splat(t))
+    }
+    #[inline]
+    fn contains(&self, p: DVec3) -> bool {
+        let q = (p - self.centre) * self.inv_semi;
+        q.length_squared() <= 1.0
+    }
+}
+
+/// Physical size of the head phantom (mm).
+pub const HEAD_SIZE_MM: DVec3 = DVec3::new(200.0, 240.0, 220.0);
+
+/// Hounsfield values of the head phantom's materials.
+pub mod hu {
+    /// Air outside the head.
+    pub const AIR: i16 = -1000;
+    /// Skin / soft tissue.
+    pub const SKIN: i16 = 40;
+    /// Subcutaneous fat.
+    pub const FAT: i16 = -100;
+    /// Cortical bone (outer and inner tables of the skull).
+    pub const CORTICAL: i16 = 1200;
+    /// Diploë (spongy bone between the tables).
+    pub const DIPLOE: i16 = 1000;
+    /// Brain parenchyma.
+    pub const BRAIN: i16 = 30;
+    /// Cerebrospinal fluid in the ventricles.
+    pub const VENTRICLE: i16 = 5;
+    /// Vitreous humour of the eyes.
+    pub const EYE: i16 = 10;
+}
+
+/// The CT-like head phantom (i16, Hounsfield units), 200 × 240 × 220 mm.
+///
+/// Nested axis-aligned ellipsoids centred on the origin, outer semi-axes
+/// 92 × 112 × 102 mm (long axis anterior–posterior), from outside in:
+/// air −1000 outside; skin 40 (0–3 mm deep); subcutaneous fat −100 (3–7 mm);
+/// skull outer table 1200 (7–9.5 mm), diploë 1000 (9.5–12.5 mm), inner table
+/// 1200 (12.5–14 mm); brain 30 inside. Two lateral ventricles 5 (semi-axes
+/// 5 × 22 × 10 mm at x = ±10, y = −5, z = +15) and two eyes 10 (radius
+/// 12 mm at x = ±32, y = −86, z = −20, cutting the orbits through the
+/// skull; anterior is −y).
+///
+/// `dims` are not checked here (a zero-sized axis gives an empty volume);
+/// [`phantom`] and [`PhantomKind::generate`] refuse empty or oversized dims.
+pub fn head(dims: [usize; 3]) -> Volume {
+    let grid = PhantomKind::Head.grid(dims);
+    let outer = Ellipsoid::new(DVec3::ZERO, DVec3::new(92.0, 112.0, 102.0));
+    let fat = outer.shrunk(3.0);
+    let outer_table = outer.shrunk(7.0);
+    let diploe = outer.shrunk(9.5);
+    let inner_table = outer.shrunk(12.5);
+    let brain = outer.shrunk(14.0);
+    let ventricle_semi = DVec3::new(5.0, 22.0, 10.0);
+    let ventricles = [
+        Ellipsoid::new(DVec3::new(-10.0, -5.0, 15.0), ventricle_semi),
+        Ellipsoid::new(DVec3::new(10.0, -5.0, 15.0), ventricle_semi),
+    ];
+    let eyes = [
+        Ellipsoid::new(DVec3::new(-32.0, -86.0, -20.0), DVec3::splat(12.0)),
+        Ellipsoid::new(DVec3::new(32.0, -86.0, -20.0), DVec3::splat(12.0)),
+    ];
+    let data = fill(&grid, |p| {
+        if !outer.contains(p) {
+            return hu::AIR;
+        }
+        if eyes.iter().any(|e| e.contains(p)) {
+            return hu::EYE;
+        }
+        if !fat.contains(p) {
+            hu::SKIN
+        } else if !outer_table.contains(p) {
+            hu::FAT
+        } else if !diploe.contains(p) {
+            hu::CORTICAL
+        } else if !inner_table.contains(p) {
+            hu::DIPLOE
+        } else if !brain.contains(p) {
+            hu::CORTICAL
+        } else if ventricles.iter().any(|v| v.contains(p)) {
+            hu::VENTRICLE
+        } else {
+            hu::BRAIN
+        }
+    });
+    Volume {
+        grid,
+        data: VoxelData::I16(data),
+    }
+}
+
+/// Value inside the [`cube`] phantom.
+pub const CUBE_VALUE: u8 = 100;
+
+/// The cube phantom (u8), 100 mm field: value [`CUBE_VALUE`] (100) in every
+/// voxel whose index lies in `[⌊n/4⌋, n − ⌊n/4⌋)` on each axis (the central
+/// half, by voxel index so the boundary is exact at any resolution), air 0
+/// in the margin of `⌊n/4⌋` voxels on each side.
+///
+/// `dims` are not checked here (a zero-sized axis gives an empty volume);
+/// [`phantom`] and [`PhantomKind::generate`] refuse empty or oversized dims.
+pub fn cube(dims: [usize; 3]) -> Volume {
+    let grid = PhantomKind::Cube.grid(dims);
+    let [nx, ny, _] = dims;
+    let inside = |i: usize, n: usize| i >= n / 4 && i < n - n / 4;
+    let mut data = vec![0u8; grid.len()];
+    data.par_chunks_mut((nx * ny).max(1))
+        .enumerate()
+        .for_each(|(k, slice)| {
+            if !inside(k, dims[2]) {
+                return;
+            }
+            for (l, v) in slice.iter_mut().enumerate() {
+                if inside(l % nx, nx) && inside(l / nx, ny) {
+                    *v = CUBE_VALUE;
+                }
+            }
+        });
+    Volume {
+        grid,
+        data: VoxelData::U8(data),
+    }
+}
+
+/// Values of the [`rings`] phantom.
+pub mod rings_values {
+    /// Background.
+    pub const BACKGROUND: u8 = 0;
+    /// The soft half (x < 0).
+    pub const SOFT: u8 = 100;
+    /// The hard half (x ≥ 0).
+    pub const HARD: u8 = 200;
+}
+
+/// The two-material ring phantom (u8), 100 mm field, after Fig. 5 of
+/// "Parallel deformation of heterogeneous ChainMail models": an annulus
+/// around the z axis (inner radius 20 mm, outer radius 40 mm, |z| ≤ 10 mm)
+/// split by the plane x = 0 into a soft half (x < 0, value 100) and a hard
+/// half (x ≥ 0, value 200); background 0.
+///
+/// `dims` are not checked here (a zero-sized axis gives an empty volume);
+/// [`phantom`] and [`PhantomKind::generate`] refuse empty or oversized dims.
+pub fn rings(dims: [usize; 3]) -> Volume {
+    let grid = PhantomKind::Rings.grid(dims);
+    let data = fill(&grid, |p| {
+        let r = (p.x * p.x + p.y * p.y).sqrt();
+        if (20.0..=40.0).contains(&r) && p.z.abs() <= 10.0 {
+            if p.x < 0.0 {
+                rings_values::SOFT
+            } else {
+                rings_values::HARD
+            }
+        } else {
+            rings_values::BACKGROUND
+        }
+    });
+    Volume {
+        grid,
+        data: VoxelData::U8(data),
+    }
+}
+
+/// Coefficients `(a, b, c)` (value units per mm) of the [`ramp`] phantom.
+pub const RAMP_COEFFS: DVec3 = DVec3::new(1.0, 0.5, 0.25);
+
+/// The ramp phantom (f32), 100 mm field: value `a·x + b·y + c·z` at the
+/// voxel centre `(x, y, z)` in mm, with `(a, b, c)` = [`RAMP_COEFFS`]. A
+/// linear field, which trilinear and barycentric (piecewise-linear)
+/// interpolation reproduce exactly, up to f32 rounding.
+///
+/// `dims` are not checked here (a zero-sized axis gives an empty volume);
+/// [`phantom`] and [`PhantomKind::generate`] refuse empty or oversized dims.
+pub fn ramp(dims: [usize; 3]) -> Volume {
+    ramp_on(PhantomKind::Ramp.grid(dims), RAMP_COEFFS, 0.0)
+}
+
+/// A linear field `coeffs · p + offset` (f32) on any grid, `p` the voxel
+/// centre in world mm.
+pub fn ramp_on(grid: Grid, coeffs: DVec3, offset: f64) -> Volume {
+    let data = fill(&grid, |p| (coeffs.dot(p) + offset) as f32);
+    Volume {
+        grid,
+        data: VoxelData::F32(data),
+    }
+}
+
+/// Where a scene's volume comes from.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum VolumeSource {
+    /// A built-in phantom, by name (`phantom:<name>`; the name is checked
+    /// when loaded).
+    Phantom(String),
+    /// A volume file, read with [`voxflex_io::read_volume`].
+    File(PathBuf),
+}
+
+/// Parses a source string: `"phantom:<name>"` (e.g. `phantom:head`) is a
+/// built-in phantom; anything else is a file path.
+pub fn parse_source(s: &str) -> VolumeSource {
+    match s.trim().strip_prefix("phantom:") {
+        Some(name) => VolumeSource::Phantom(name.trim().to_string()),
+        None => VolumeSource::File(PathBuf::from(s)),
+    }
+}
+
+impl std::fmt::Display for VolumeSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            VolumeSource::Phantom(n) => write!(f, "phantom:{n}"),
+            VolumeSource::File(p) => write!(f, "{}", p.display()),
+        }
+    }
+}
+
+/// A [`VolumeSource`] could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// The phantom could not be generated.
+    #[error(transparent)]
+    Phantom(#[from] PhantomError),
+    /// The file could not be read.
+    #[error(transparent)]
+    Io(#[from] IoError),
+}
+
+impl VolumeSource {
+    /// Loads the volume: a phantom is generated at `phantom_dims` voxels; a
+    /// file is read with `opts` (its own dims win).
+    pub fn load(
+        &self,
+        phantom_dims: [usize; 3],
+        opts: &ReadOptions,
+    ) -> Result<Volume, SourceError> {
+        match self {
+            VolumeSource::Phantom(name) => Ok(phantom(name, phantom_dims)?),
+            VolumeSource::File(p) => Ok(voxflex_io::read_volume(p, opts)?),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(v: &Volume, p: DVec3) -> f32 {
+        let idx = v.grid.world_to_index(p).round();
+        v.get_f32(idx.x as usize, idx.y as usize, idx.z as usize)
+    }
+
+    #[test]
+    fn head_has_its_materials_where_documented() {
+        let v = phantom("head", [100, 120, 110]).unwrap();
+        assert_eq!(v.grid.spacing, DVec3::splat(2.0));
+        assert!(v.grid.centre().length() < 1e-9);
+        assert_eq!(at(&v, DVec3::new(0.0, 0.0, 0.0)), hu::BRAIN as f32);
+        assert_eq!(at(&v, DVec3::new(95.0, 0.0, 0.0)), hu::AIR as f32);
+        assert_eq!(at(&v, DVec3::new(91.0, 0.0, 0.0)), hu::SKIN as f32);
+        assert_eq!(at(&v, DVec3::new(87.0, 0.0, 0.0)), hu::FAT as f32);
+        assert_eq!(at(&v, DVec3::new(0.0, 0.0, 93.0)), hu::CORTICAL as f32);
+        assert_eq!(at(&v, DVec3::new(0.0, 0.0, 91.0)), hu::DIPLOE as f32);
+        assert_eq!(at(&v, DVec3::new(10.0, -5.0, 15.0)), hu::VENTRICLE as f32);
+        assert_eq!(at(&v, DVec3::new(-10.0, -5.0, 15.0)), hu::VENTRICLE as f32);
+        assert_eq!(at(&v, DVec3::new(32.0, -86.0, -20.0)), hu::EYE as f32);
+        let (lo, hi) = v.value_range();
+        assert_eq!((lo, hi), (-1000.0, 1200.0));
+        // Left–right symmetric.
+        let g = v.grid;
+        for (i, j, k) in [(10, 60, 55), (30, 20, 70), (45, 100, 30)] {
+            assert_eq!(v.get_f32(i, j, k), v.get_f32(g.dims[0] - 1 - i, j, k));
+        }
+    }
+
+    #[test]
+    fn cube_rings_ramp() {
+        let c = phantom("cube", [8, 8, 4]).unwrap();
+        assert_eq!(c.get_f32(2, 2, 1), 100.0);
+        assert_eq!(c.get_f32(5, 5, 2), 100.0);
+        assert_eq!(c.get_f32(1, 4, 2), 0.0);
+        assert_eq!(c.get_f32(6, 4, 2), 0.0);
+        assert_eq!(c.get_f32(4, 4, 0), 0.0);
+        let VoxelData::U8(d) = &c.data else { panic!() };
+        assert_eq!(d.iter().filter(|&&v| v == 100).count(), 4 * 4 * 2);
+
+        let r = phantom("Rings", [50, 50, 50]).unwrap();
+        assert_eq!(at(&r, DVec3::new(-30.0, 0.0, 0.0)), 100.0);
+        assert_eq!(at(&r, DVec3::new(30.0, 0.0, 0.0)), 200.0);
+        assert_eq!(at(&r, DVec3::new(0.0, 30.0, 0.0)), 200.0);
+        assert_eq!(at(&r, DVec3::new(0.0, 0.0, 0.0)), 0.0);
+        assert_eq!(at(&r, DVec3::new(-30.0, 0.0, 20.0)), 0.0);
+
+        let m = phantom("ramp", [10, 20, 5]).unwrap();
+        let g = m.grid;
+        for l in [0, 17, 503, g.len() - 1] {
+            let [i, j, k] = g.unlinear(l);
+            let p = g.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+            let want = RAMP_COEFFS.dot(p) as f32;
+            assert!((m.get_f32(i, j, k) - want).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn names_dims_and_sources() {
+        assert_eq!(
+            phantom("skull", [4, 4, 4]).unwrap_err().to_string(),
+            "unknown phantom `skull`; built-in phantoms: head, cube, rings, ramp, abdomen (e.g. `phantom:head`)"
+        );
+        assert_eq!(
+            phantom("head", [4, 0, 4]).unwrap_err(),
+            PhantomError::EmptyDims { dims: [4, 0, 4] }
+        );
+        assert!(matches!(
+            phantom("head", [usize::MAX, 2, 2]),
+            Err(PhantomError::TooLarge { .. })
+        ));
+        assert_eq!(
+            parse_source("phantom:head"),
+            VolumeSource::Phantom("head".into())
+        );
+        assert_eq!(
+            parse_source("data/ct.nii.gz"),
+            VolumeSource::File(PathBuf::from("data/ct.nii.gz"))
+        );
+        assert_eq!(parse_source(" phantom: cube ").to_string(), "phantom:cube");
+        let v = parse_source("phantom:cube")
+            .load([4, 4, 4], &ReadOptions::default())
+            .unwrap();
+        assert_eq!(v.grid.dims, [4, 4, 4]);
+        let e = parse_source("/nonexistent/x.nii")
+            .load([4, 4, 4], &ReadOptions::default())
+            .unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/x.nii"), "{e}");
+        for k in PhantomKind::ALL {
+            let v = k.generate([3, 1, 2]).unwrap();
+            assert_eq!(v.grid.dims, [3, 1, 2]);
+        }
+    }
+
+    #[test]
+    fn big_phantoms_are_fast() {
+        // Generous bound: debug-ish test profile on 2 shared cores.
+        let t = std::time::Instant::now();
+        let v = head([256, 256, 256]);
+        let dt = t.elapsed();
+        assert_eq!(v.grid.len(), 1 << 24);
+        assert!(dt.as_secs_f64() < 5.0, "head 256³ took {dt:?}");
+        eprintln!("head 256³: {dt:?}");
+    }
+
+    #[test]
+    fn head_phantom_summary() {
+        let v = head([64, 64, 64]);
+        let s = voxflex_core::stats::VolumeStats::compute(v.view());
+        assert_eq!((s.min, s.max), (-1000.0, 1200.0));
+        assert_eq!(s.p1, -1000.0);
+        let text = s.to_string();
+        assert!(text.lines().count() == 6, "{text}");
+        eprintln!("{text}");
+    }
+}

@@ -1,0 +1,684 @@
+//! The WGSL path of the resampler, written against [`GpuService`]
+//! (`shaders/resample/*.wgsl`; the CPU twin is [`super::cpu`]).
+//!
+//! Kernels, each a 3-D-folded dispatch (no dimension above the device's
+//! workgroup limit):
+//!
+//! - `block_bounds` — one workgroup of 64 per listed block; min/max of the
+//!   deformed vertices with workgroup atomics on order-preserving `u32`
+//!   encodings; the 24 bytes per block are read back so the shared planner
+//!   can size the output and pick the dirty region;
+//! - `clear` — `u32::MAX` ("no owner") over the clip box;
+//! - `raster` (pass 1) — one invocation per cell of the listed blocks,
+//!   `atomicMin(tet id)` into `array<atomic<u32>>`;
+//! - `fill` (pass 2) — one invocation per voxel of the clip box; the
+//!   interpolation mode is `Params.chi.w` (0 tetrahedral, 1 trilinear).
+//!
+//! Bindings (group 0): 0 parameters, 1–3 displacements x/y/z (f32, mm),
+//! 4 block list, 5 block bounds, 6 output (slab), 7 mask (u8 per cell packed
+//! in u32), 8 source values (f32).
+//!
+//! **Binding limit.** Source values and each displacement array must fit one
+//! storage binding (else [`ResampleError::BindingTooLarge`]). The output may
+//! not: it is then processed in z-slabs, each bound at an offset aligned
+//! down to `min_storage_buffer_offset_alignment` (the kernels subtract the
+//! slab's first element index), and pass 1 runs per slab on the blocks whose
+//! bounds meet the slab, writing only inside it.
+//!
+//! Each slab has its own parameter and block-list buffers, so the result is
+//! right even if the host batches `write_buffer` calls ahead of earlier
+//! dispatches.
+
+use super::blocks::{BlockBounds, CELLS_PER_BLOCK, decode_ordered};
+use super::{Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, VoxelBox};
+use crate::error::GpuError;
+use crate::grid::Grid;
+use crate::volume::VolumeView;
+use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+
+const COMMON: &str = include_str!("../../../shaders/resample/common.wgsl");
+const DISPLACEMENT: &str = include_str!("../../../shaders/resample/displacement.wgsl");
+const BOUNDS: &str = include_str!("../../../shaders/resample/bounds.wgsl");
+const CLEAR: &str = include_str!("../../../shaders/resample/clear.wgsl");
+const RASTER: &str = include_str!("../../../shaders/resample/raster.wgsl");
+const FILL: &str = include_str!("../../../shaders/resample/fill.wgsl");
+
+/// Threads per workgroup of every kernel (`WG` in `common.wgsl`).
+const WORKGROUP: u32 = 64;
+
+/// Binding numbers (see the module docs).
+mod bind {
+    pub const PARAMS: u32 = 0;
+    pub const DX: u32 = 1;
+    pub const DY: u32 = 2;
+    pub const DZ: u32 = 3;
+    pub const BLOCKS: u32 = 4;
+    pub const BOUNDS: u32 = 5;
+    pub const OUT: u32 = 6;
+    pub const MASK: u32 = 7;
+    pub const VALUES: u32 = 8;
+}
+
+/// The full WGSL source of each kernel (for tools that validate shaders).
+pub fn kernel_sources() -> [(&'static str, String); 4] {
+    [
+        (
+            "block_bounds",
+            format!("{COMMON}\n{DISPLACEMENT}\n{BOUNDS}"),
+        ),
+        ("clear", format!("{COMMON}\n{CLEAR}")),
+        ("raster", format!("{COMMON}\n{DISPLACEMENT}\n{RASTER}")),
+        ("fill", format!("{COMMON}\n{DISPLACEMENT}\n{FILL}")),
+    ]
+}
+
+/// `Params` of `common.wgsl` (all 16-byte vectors of 32-bit scalars).
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+struct Params {
+    vdim: [u32; 4],
+    cdim: [u32; 4],
+    bdim: [u32; 4],
+    inv: [f32; 4],
+    oorg: [i32; 4],
+    odim: [u32; 4],
+    clo: [i32; 4],
+    chi: [i32; 4],
+    misc: [f32; 4],
+}
+
+/// A source volume on the GPU: its grid and its values as f32 (one storage
+/// binding, x fastest).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuSource {
+    /// Geometry (mm).
+    pub grid: Grid,
+    /// `grid.len()` f32 values.
+    pub values: BufferId,
+}
+
+impl GpuSource {
+    /// Converts a volume to f32 and uploads it; fails when it does not fit
+    /// one storage binding.
+    pub fn upload(gpu: &dyn GpuService, volume: VolumeView<'_>) -> Result<Self, ResampleError> {
+        super::check_len("source volume", &volume.grid, volume.data.len())?;
+        check_binding(gpu, "source values (f32)", volume.grid.len() as u64 * 4)?;
+        let values = volume.data.to_f32_vec();
+        let id = gpu.upload(&values, "voxflex.resample.source")?;
+        Ok(Self {
+            grid: volume.grid,
+            values: id,
+        })
+    }
+
+    /// Frees the values buffer.
+    pub fn release(self, gpu: &dyn GpuService) {
+        gpu.destroy_buffer(self.values);
+    }
+}
+
+fn check_binding(
+    gpu: &dyn GpuService,
+    what: &'static str,
+    bytes: u64,
+) -> Result<(), ResampleError> {
+    let limit = gpu.limits().max_storage_buffer_binding_size;
+    if bytes > limit {
+        return Err(ResampleError::BindingTooLarge { what, bytes, limit });
+    }
+    Ok(())
+}
+
+/// Reads `out.len()` f32 from the start of a buffer in pieces of ≤ 64 MiB.
+pub(crate) fn read_f32(
+    gpu: &dyn GpuService,
+    buf: BufferId,
+    out: &mut [f32],
+) -> Result<(), GpuError> {
+    const CHUNK: usize = 16 << 20;
+    for (n, chunk) in out.chunks_mut(CHUNK).enumerate() {
+        gpu.read_buffer(buf, (n * CHUNK * 4) as u64, bytemuck::cast_slice_mut(chunk))?;
+    }
+    Ok(())
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Pipelines {
+    bounds: PipelineId,
+    clear: PipelineId,
+    raster: PipelineId,
+    fill: PipelineId,
+}
+
+/// A buffer this resampler owns, with its size in bytes.
+#[derive(Clone, Copy, Debug)]
+struct Owned {
+    id: BufferId,
+    bytes: u64,
+}
+
+/// Reuses `slot`'s buffer when it holds at least `bytes`, else replaces it.
+fn ensure(
+    gpu: &dyn GpuService,
+    slot: &mut Option<Owned>,
+    bytes: u64,
+    label: &str,
+) -> Result<BufferId, GpuError> {
+    let bytes = bytes.max(4).next_multiple_of(4);
+    if let Some(o) = slot
+        && o.bytes >= bytes
+    {
+        return Ok(o.id);
+    }
+    if let Some(o) = slot.take() {
+        gpu.destroy_buffer(o.id);
+    }
+    let id = gpu.create_buffer(bytes, label)?;
+    *slot = Some(Owned { id, bytes });
+    Ok(id)
+}
+
+/// GPU resources a [`super::Resampler`] keeps between calls (all created on
+/// one [`GpuService`]; freed by [`super::Resampler::release_gpu`]).
+#[derive(Debug, Default)]
+pub(crate) struct GpuState {
+    pipelines: Option<Pipelines>,
+    output: Option<Owned>,
+    bounds: Option<Owned>,
+    /// Parameters per slab (index 0 also serves the bounds kernel).
+    params: Vec<Option<Owned>>,
+    /// Block list per slab (index 0 also serves the bounds kernel).
+    lists: Vec<Option<Owned>>,
+    mask: Option<Owned>,
+    mask_generation: Option<u64>,
+    dummy: Option<Owned>,
+}
+
+impl GpuState {
+    /// Checks the inputs, compiles the kernels once and uploads a changed mask.
+    pub(crate) fn prepare(
+        &mut self,
+        gpu: &dyn GpuService,
+        source: &GpuSource,
+        disp: [BufferId; 3],
+        mask: Option<&TetMask>,
+    ) -> Result<(), ResampleError> {
+        let n = source.grid.len() as u64 * 4;
+        check_binding(gpu, "source values (f32)", n)?;
+        check_buffer(gpu, "source values buffer", source.values, n)?;
+        for (what, id) in [
+            ("x displacement buffer", disp[0]),
+            ("y displacement buffer", disp[1]),
+            ("z displacement buffer", disp[2]),
+        ] {
+            check_binding(gpu, what, n)?;
+            check_buffer(gpu, what, id, n)?;
+        }
+        if self.pipelines.is_none() {
+            let [b, c, r, f] = kernel_sources();
+            self.pipelines = Some(Pipelines {
+                bounds: gpu.compile(&b.1, b.0)?,
+                clear: gpu.compile(&c.1, c.0)?,
+                raster: gpu.compile(&r.1, r.0)?,
+                fill: gpu.compile(&f.1, f.0)?,
+            });
+        }
+        ensure(gpu, &mut self.dummy, 4, "voxflex.resample.dummy")?;
+        match mask.filter(|m| !m.is_empty()) {
+            None => self.mask_generation = None,
+            Some(m) if self.mask_generation != Some(m.generation()) => {
+                let bytes = m.bytes();
+                check_binding(gpu, "tetrahedron mask", bytes.len() as u64)?;
+                let mut padded = bytes.to_vec();
+                padded.resize(bytes.len().next_multiple_of(4), 0);
+                let id = ensure(
+                    gpu,
+                    &mut self.mask,
+                    padded.len() as u64,
+                    "voxflex.resample.mask",
+                )?;
+                gpu.write_buffer(id, 0, &padded)?;
+                self.mask_generation = Some(m.generation());
+            }
+            Some(_) => {}
+        }
+        Ok(())
+    }
+
+    pub(crate) fn kernels<'a>(
+        &'a mut self,
+        gpu: &'a dyn GpuService,
+        source: &'a GpuSource,
+        disp: [BufferId; 3],
+        has_mask: bool,
+    ) -> GpuKernels<'a> {
+        GpuKernels {
+            state: self,
+            gpu,
+            source,
+            disp,
+            has_mask,
+        }
+    }
+
+    pub(crate) fn output_buffer(&self) -> Option<BufferId> {
+        self.output.map(|o| o.id)
+    }
+
+    pub(crate) fn release(&mut self, gpu: &dyn GpuService) {
+        let mut all = vec![
+            self.output.take(),
+            self.bounds.take(),
+            self.mask.take(),
+            self.dummy.take(),
+        ];
+        all.append(&mut self.params);
+        all.append(&mut self.lists);
+        for o in all.into_iter().flatten() {
+            gpu.destroy_buffer(o.id);
+        }
+        *self = GpuState::default();
+    }
+
+    fn slot_buffers(
+        &mut self,
+        gpu: &dyn GpuService,
+        slot: usize,
+        list_bytes: u64,
+    ) -> Result<(BufferId, BufferId), GpuError> {
+        if self.params.len() <= slot {
+            self.params.resize(slot + 1, None);
+            self.lists.resize(slot + 1, None);
+        }
+        let p = ensure(
+            gpu,
+            &mut self.params[slot],
+            size_of::<Params>() as u64,
+            "voxflex.resample.params",
+        )?;
+        let l = ensure(
+            gpu,
+            &mut self.lists[slot],
+            list_bytes,
+            "voxflex.resample.blocks",
+        )?;
+        Ok((p, l))
+    }
+}
+
+fn check_buffer(
+    gpu: &dyn GpuService,
+    what: &'static str,
+    id: BufferId,
+    need: u64,
+) -> Result<(), ResampleError> {
+    let size = gpu.buffer_size(id)?;
+    if size < need {
+        return Err(ResampleError::Gpu(GpuError(format!(
+            "{what} {id:?} holds {size} bytes but the source grid needs {need}"
+        ))));
+    }
+    Ok(())
+}
+
+/// The GPU half of one resampling call.
+pub(crate) struct GpuKernels<'a> {
+    state: &'a mut GpuState,
+    gpu: &'a dyn GpuService,
+    source: &'a GpuSource,
+    disp: [BufferId; 3],
+    has_mask: bool,
+}
+
+impl GpuKernels<'_> {
+    fn base_params(&self, c: &KernelConsts) -> Params {
+        let v = c.mesh.vertex_dims();
+        let cd = c.mesh.cell_dims();
+        let bd = c.layout.block_dims();
+        Params {
+            vdim: [v[0] as u32, v[1] as u32, v[2] as u32, 0],
+            cdim: [cd[0] as u32, cd[1] as u32, cd[2] as u32, 0],
+            bdim: [bd[0] as u32, bd[1] as u32, bd[2] as u32, 0],
+            inv: [c.inv_spacing[0], c.inv_spacing[1], c.inv_spacing[2], c.eps],
+            oorg: [0, 0, 0, self.has_mask as i32],
+            chi: [0, 0, 0, c.interpolation.code()],
+            misc: [c.background, 0.0, 0.0, 0.0],
+            ..Default::default()
+        }
+    }
+
+    fn disp_bindings(&self) -> [BufferBinding; 3] {
+        let n = self.source.grid.len() as u64 * 4;
+        [bind::DX, bind::DY, bind::DZ].map(|b| BufferBinding {
+            binding: b,
+            buffer: self.disp[(b - bind::DX) as usize],
+            offset: 0,
+            size: n,
+        })
+    }
+
+    fn mask_binding(&self) -> BufferBinding {
+        let id = match (self.has_mask, self.state.mask, self.state.dummy) {
+            (true, Some(m), _) => m.id,
+            (_, _, Some(d)) => d.id,
+            _ => unreachable!("prepare() creates the dummy buffer"),
+        };
+        BufferBinding::whole(bind::MASK, id)
+    }
+}
+
+/// The z-slabs of the output: `(first z, last z, bound byte offset, bound
+/// bytes)` in output voxel indices, covering output planes `z0..=z1`.
+fn slabs(
+    output: &OutputGrid,
+    z0: usize,
+    z1: usize,
+    max_binding: u64,
+    align: u64,
+) -> Result<Vec<(usize, usize, u64, u64)>, ResampleError> {
+    let plane = (output.dims[0] * output.dims[1]) as u64 * 4;
+    let total = output.len() as u64 * 4;
+    if total <= max_binding {
+        return Ok(vec![(z0, z1, 0, total)]);
+    }
+    let align = align.max(4);
+    let planes = max_binding.saturating_sub(align) / plane;
+    if planes == 0 {
+        return Err(ResampleError::BindingTooLarge {
+            what: "one output z-plane (plus the offset alignment)",
+            bytes: plane + align,
+            limit: max_binding,
+        });
+    }
+    let mut out = Vec::new();
+    let mut z = z0;
+    while z <= z1 {
+        let e = (z + planes as usize - 1).min(z1);
+        let start = z as u64 * plane;
+        let off = start / align * align;
+        let end = (e as u64 + 1) * plane;
+        out.push((z, e, off, end - off));
+        z = e + 1;
+    }
+    Ok(out)
+}
+
+impl Kernels for GpuKernels<'_> {
+    fn block_bounds(
+        &mut self,
+        c: &KernelConsts,
+        blocks: &[u32],
+        out: &mut [BlockBounds],
+    ) -> Result<(), ResampleError> {
+        if blocks.is_empty() {
+            return Ok(());
+        }
+        let gpu = self.gpu;
+        let pl = self
+            .state
+            .pipelines
+            .expect("prepare() compiles the kernels");
+        let mut p = self.base_params(c);
+        p.bdim[3] = blocks.len() as u32;
+        let (pb, lb) = self.state.slot_buffers(gpu, 0, blocks.len() as u64 * 4)?;
+        let bb = ensure(
+            gpu,
+            &mut self.state.bounds,
+            blocks.len() as u64 * 24,
+            "voxflex.resample.bounds",
+        )?;
+        gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
+        gpu.write_buffer(lb, 0, bytemuck::cast_slice(blocks))?;
+        let mut b = vec![
+            BufferBinding::whole(bind::PARAMS, pb),
+            BufferBinding::whole(bind::BLOCKS, lb),
+            BufferBinding::whole(bind::BOUNDS, bb),
+        ];
+        b.extend(self.disp_bindings());
+        let groups = voxflex_core::gpu::workgroups_1d(
+            blocks.len() as u64,
+            1,
+            gpu.limits().max_compute_workgroups_per_dimension,
+        )?;
+        gpu.dispatch(pl.bounds, &b, groups)?;
+        let mut words = vec![0u32; blocks.len() * 6];
+        gpu.read_buffer(bb, 0, bytemuck::cast_slice_mut(&mut words))?;
+        for (o, w) in out.iter_mut().zip(words.chunks_exact(6)) {
+            *o = BlockBounds {
+                min: [
+                    decode_ordered(w[0]),
+                    decode_ordered(w[1]),
+                    decode_ordered(w[2]),
+                ],
+                max: [
+                    decode_ordered(w[3]),
+                    decode_ordered(w[4]),
+                    decode_ordered(w[5]),
+                ],
+            };
+        }
+        Ok(())
+    }
+
+    fn allocate_output(&mut self, output: &OutputGrid) -> Result<(), ResampleError> {
+        let bytes = output.len() as u64 * 4;
+        let limits = self.gpu.limits();
+        if bytes > limits.max_buffer_size {
+            return Err(ResampleError::Gpu(GpuError(format!(
+                "the output grid {:?} needs a {bytes}-byte buffer but the device allows {} (max_buffer_size)",
+                output.dims, limits.max_buffer_size
+            ))));
+        }
+        if self.state.output.is_some_and(|o| o.bytes == bytes.max(4)) {
+            return Ok(());
+        }
+        if let Some(o) = self.state.output.take() {
+            self.gpu.destroy_buffer(o.id);
+        }
+        ensure(
+            self.gpu,
+            &mut self.state.output,
+            bytes,
+            "voxflex.resample.output",
+        )?;
+        Ok(())
+    }
+
+    fn rasterise(&mut self, job: &Job<'_>) -> Result<(), ResampleError> {
+        let gpu = self.gpu;
+        let limits = gpu.limits();
+        let pl = self
+            .state
+            .pipelines
+            .expect("prepare() compiles the kernels");
+        let out_id = self.state.output.expect("allocate_output() ran").id;
+        let o = job.output;
+        let r = job.region;
+        let oz0 = (r.lo[2] - o.origin_index[2]) as usize;
+        let oz1 = (r.hi[2] - o.origin_index[2]) as usize;
+        let slabs = slabs(
+            o,
+            oz0,
+            oz1,
+            limits.max_storage_buffer_binding_size,
+            limits.min_storage_buffer_offset_alignment as u64,
+        )?;
+        let single = slabs.len() == 1;
+        let base = self.base_params(job.consts);
+        let mask = self.mask_binding();
+        let disp = self.disp_bindings();
+        for (s, &(z0, z1, off, bytes)) in slabs.iter().enumerate() {
+            let clip = VoxelBox {
+                lo: [r.lo[0], r.lo[1], z0 as i32 + o.origin_index[2]],
+                hi: [r.hi[0], r.hi[1], z1 as i32 + o.origin_index[2]],
+            };
+            let blocks: Vec<u32> = if single {
+                job.blocks.to_vec()
+            } else {
+                job.blocks
+                    .iter()
+                    .copied()
+                    .filter(|&b| job.bounds[b as usize].touches(clip.lo, clip.hi))
+                    .collect()
+            };
+            let mut p = base;
+            p.bdim[3] = blocks.len() as u32;
+            p.oorg[..3].copy_from_slice(&o.origin_index);
+            p.odim = [
+                o.dims[0] as u32,
+                o.dims[1] as u32,
+                o.dims[2] as u32,
+                (off / 4) as u32,
+            ];
+            p.clo[..3].copy_from_slice(&clip.lo);
+            p.chi[..3].copy_from_slice(&clip.hi);
+            let (pb, lb) = self.state.slot_buffers(gpu, s, blocks.len() as u64 * 4)?;
+            gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
+            if !blocks.is_empty() {
+                gpu.write_buffer(lb, 0, bytemuck::cast_slice(&blocks))?;
+            }
+            let params = BufferBinding::whole(bind::PARAMS, pb);
+            let out = BufferBinding {
+                binding: bind::OUT,
+                buffer: out_id,
+                offset: off,
+                size: bytes,
+            };
+            let voxels = clip.count();
+            let vgroups = gpu.workgroups_for(voxels, WORKGROUP)?;
+            gpu.dispatch(pl.clear, &[params, out], vgroups)?;
+            if !blocks.is_empty() {
+                let mut b = vec![params, out, BufferBinding::whole(bind::BLOCKS, lb), mask];
+                b.extend(disp);
+                let cells = blocks.len() as u64 * CELLS_PER_BLOCK as u64;
+                gpu.dispatch(pl.raster, &b, gpu.workgroups_for(cells, WORKGROUP)?)?;
+            }
+            let values = BufferBinding {
+                binding: bind::VALUES,
+                buffer: self.source.values,
+                offset: 0,
+                size: self.source.grid.len() as u64 * 4,
+            };
+            let mut b = vec![params, out, values];
+            b.extend(disp);
+            gpu.dispatch(pl.fill, &b, vgroups)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_layout_matches_wgsl() {
+        // 9 vec4 members of 16 bytes, no padding.
+        assert_eq!(size_of::<Params>(), 144);
+    }
+
+    #[test]
+    fn slabs_cover_the_region_within_the_binding() {
+        let o = OutputGrid {
+            origin_index: [0; 3],
+            dims: [10, 7, 50],
+        };
+        let plane = 10 * 7 * 4;
+        let s = slabs(&o, 3, 44, 5 * plane + 256, 256).unwrap();
+        assert!(s.len() > 1);
+        assert_eq!(s[0].0, 3);
+        assert_eq!(s.last().unwrap().1, 44);
+        for w in s.windows(2) {
+            assert_eq!(w[0].1 + 1, w[1].0);
+        }
+        for &(z0, z1, off, bytes) in &s {
+            assert_eq!(off % 256, 0);
+            assert!(bytes <= 5 * plane + 256);
+            assert!(off <= z0 as u64 * plane);
+            assert_eq!(off + bytes, (z1 as u64 + 1) * plane);
+        }
+        assert_eq!(
+            slabs(&o, 0, 49, 1 << 30, 256).unwrap(),
+            vec![(0, 49, 0, 50 * plane)]
+        );
+        assert!(slabs(&o, 0, 49, 100, 256).is_err());
+    }
+
+    /// The numbers of a `var<private> NAME: array<u32, N> = array<u32, N>(…);` table.
+    fn wgsl_table(src: &str, name: &str) -> Vec<u32> {
+        let start = src
+            .find(&format!("var<private> {name}:"))
+            .unwrap_or_else(|| panic!("{name} missing"));
+        let body = &src[start..];
+        let open = body.find(">(").expect("array literal") + 2;
+        let close = body[open..].find(");").expect("end of literal") + open;
+        body[open..close]
+            .split(',')
+            .map(|t| t.trim().trim_end_matches('u'))
+            .filter(|t| !t.is_empty())
+            .map(|t| t.parse().expect("u32 literal"))
+            .collect()
+    }
+
+    #[test]
+    fn wgsl_tables_match_rust() {
+        use super::super::sampling_mesh::{CELL_TETS, FACE_TABLES};
+        let tets: Vec<u32> = CELL_TETS
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|&v| v as u32)
+            .collect();
+        assert_eq!(wgsl_table(COMMON, "TETS"), tets);
+        let faces: Vec<u32> = FACE_TABLES
+            .faces
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|&v| v as u32)
+            .collect();
+        assert_eq!(wgsl_table(RASTER, "FACES"), faces);
+        let tf: Vec<u32> = FACE_TABLES
+            .tet_faces
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|&v| v as u32)
+            .collect();
+        assert_eq!(wgsl_table(RASTER, "TET_FACES"), tf);
+        let orient: Vec<u32> = super::super::sampling_mesh::ORIENTATION
+            .iter()
+            .flatten()
+            .map(|&(slot, positive)| slot as u32 | (positive as u32) << 2)
+            .collect();
+        assert_eq!(wgsl_table(RASTER, "ORIENT"), orient);
+        assert!(RASTER.contains(&format!(
+            "const WEAK_OWNER: u32 = 0x{:08x}u;",
+            super::super::sampling_mesh::WEAK_OWNER
+        )));
+        assert!(FILL.contains(&format!(
+            "owner & 0x{:08x}u",
+            super::super::sampling_mesh::OWNER_ID
+        )));
+        assert_eq!(
+            wgsl_table(COMMON, "OTHERS"),
+            vec![1, 2, 3, 0, 2, 3, 0, 1, 3, 0, 1, 2]
+        );
+        assert!(COMMON.contains(&format!(
+            "const BLOCK_EDGE: u32 = {}u;",
+            super::super::blocks::BLOCK_EDGE
+        )));
+        assert!(COMMON.contains(&format!(
+            "const CELLS_PER_BLOCK: u32 = {}u;",
+            CELLS_PER_BLOCK
+        )));
+    }
+
+    #[test]
+    fn kernels_are_assembled() {
+        for (entry, src) in kernel_sources() {
+            assert!(src.contains(&format!("fn {entry}(")), "{entry}");
+            assert!(src.contains("struct Params"));
+        }
+    }
+}
