@@ -10,6 +10,7 @@ use voxflex_core::deformation::{DeformationModel, FrameInfo};
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
+use voxflex_mesh::mesh_model::parity::octree_parity;
 use voxflex_mesh::mesh_model::{
     ElasticMaterial, MeshModel, device_difference, largest_and_difference,
 };
@@ -105,56 +106,45 @@ fn gpu_static_solves_match_rayon() {
 
 #[test]
 fn gpu_solves_on_an_octree_proxy_with_hanging_nodes_match_rayon() {
-    use voxflex_core::deformation::ExecutionBackend;
     let Some(gpu) = test_gpu() else { return };
     let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
-    let make = |gpu: Option<Arc<dyn GpuService>>, backend| {
-        let mut m = Fem::from_toml(
-            "proxy = { kind = \"octree\", max_cell = 8 }\n\
-             materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000, density = 1000 },\n\
-                          { name = \"hard\", range = [150, 256], youngs_modulus = 20000, density = 1000 }]\n\
-             solver = \"dynamic\"\ncg_tolerance = 1e-6\ncg_max_iterations = 400",
-        )
-        .unwrap()
-        .with_gpu(gpu);
-        m.init(volume.view(), backend).unwrap();
-        m.interact("kind = \"fix\"\nmaterial = \"hard\"").unwrap();
-        m.interact("kind = \"grab\"\npoint = [-40, 0, 0]\nby = [-4, 2, 1]\nframes = 10")
-            .unwrap();
-        m
-    };
-    let mut cpu = make(None, ExecutionBackend::Cpu);
-    let mut dev = make(Some(gpu), ExecutionBackend::Gpu);
-    assert!(!dev.hanging().is_empty(), "the test needs hanging nodes");
-    let frame = FrameInfo {
-        frame: 0,
-        frames: 10,
-        dt_s: 1.0 / 30.0,
-    };
-    for _ in 0..10 {
-        cpu.step(frame).unwrap();
-        dev.step(frame).unwrap();
-    }
-    let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
-    let (largest, worst) = largest_and_difference(a, b);
-    assert!(largest > 1.0, "the grab moves the soft half ({largest} mm)");
+    let p = octree_parity::<CorotationalFem>(
+        volume.view(),
+        gpu,
+        "proxy = { kind = \"octree\", max_cell = 8 }\n\
+         materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000, density = 1000 },\n\
+                      { name = \"hard\", range = [150, 256], youngs_modulus = 20000, density = 1000 }]\n\
+         solver = \"dynamic\"\ncg_tolerance = 1e-6\ncg_max_iterations = 400",
+        &[
+            "kind = \"fix\"\nmaterial = \"hard\"",
+            "kind = \"grab\"\npoint = [-40, 0, 0]\nby = [-4, 2, 1]\nframes = 10",
+        ],
+        FrameInfo {
+            frame: 0,
+            frames: 10,
+            dt_s: 1.0 / 30.0,
+        },
+        10,
+    )
+    .unwrap();
+    assert!(p.hanging > 0, "the test needs hanging nodes");
     assert!(
-        worst <= 1e-4 * largest,
-        "GPU differs by {worst:.3e} of {largest:.3e} mm"
+        p.largest > 1.0,
+        "the grab moves the soft half ({} mm)",
+        p.largest
+    );
+    assert!(
+        p.worst <= 1e-4 * p.largest,
+        "GPU differs by {:.3e} of {:.3e} mm",
+        p.worst,
+        p.largest
     );
     // The hanging nodes follow their masters on the GPU path too.
-    for h in dev.hanging() {
-        let tied: DVec3 = h
-            .masters
-            .iter()
-            .map(|&(n, w)| w as f64 * b[n as usize])
-            .sum();
-        assert!(
-            (b[h.node as usize] - tied).length() < 1e-9,
-            "node {}",
-            h.node
-        );
-    }
+    assert!(
+        p.worst_tie < 1e-9,
+        "hanging nodes off by {:.3e} mm",
+        p.worst_tie
+    );
 }
 
 /// A carve on the GPU backend: the solver is rebuilt on the device, the

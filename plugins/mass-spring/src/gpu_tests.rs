@@ -10,6 +10,7 @@ use voxflex_core::deformation::{DeformationModel, DisplacementTarget, FrameInfo,
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
+use voxflex_mesh::mesh_model::parity::octree_parity;
 use voxflex_mesh::mesh_model::{
     ElasticMaterial, MeshModel, device_difference, largest_and_difference,
 };
@@ -163,49 +164,36 @@ fn gpu_implicit_steps_and_octree_proxies_match_rayon() {
 
     // An octree proxy: the explicit sub-steps tie the hanging nodes on the
     // device as the CPU does.
-    use voxflex_core::deformation::ExecutionBackend;
     let volume = voxflex_phantom::phantom("rings", [33, 33, 33]).unwrap();
-    let make = |gpu: Option<Arc<dyn GpuService>>, backend| {
-        let mut m = Springs::from_toml(
-            "proxy = { kind = \"octree\", max_cell = 8 }\n\
-             materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 }, \
-                          { name = \"hard\", range = [150, 256], youngs_modulus = 20000 }]\n\
-             gravity = [0, 0, -9810]",
-        )
-        .unwrap()
-        .with_gpu(gpu);
-        m.init(volume.view(), backend).unwrap();
-        m.interact("kind = \"fix\"\nmaterial = \"hard\"").unwrap();
-        m
-    };
-    let (mut cpu, mut dev) = (
-        make(None, ExecutionBackend::Cpu),
-        make(Some(gpu), ExecutionBackend::Gpu),
-    );
-    assert!(!dev.hanging().is_empty(), "the test needs hanging nodes");
-    for _ in 0..10 {
-        cpu.step(frame).unwrap();
-        dev.step(frame).unwrap();
-    }
-    let (a, b) = (&cpu.state().unwrap().u, &dev.state().unwrap().u);
-    let (largest, worst) = largest_and_difference(a, b);
-    assert!(largest > 1e-3, "gravity moves the soft half ({largest} mm)");
+    let p = octree_parity::<MassSpring>(
+        volume.view(),
+        gpu,
+        "proxy = { kind = \"octree\", max_cell = 8 }\n\
+         materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 }, \
+                      { name = \"hard\", range = [150, 256], youngs_modulus = 20000 }]\n\
+         gravity = [0, 0, -9810]",
+        &["kind = \"fix\"\nmaterial = \"hard\""],
+        frame,
+        10,
+    )
+    .unwrap();
+    assert!(p.hanging > 0, "the test needs hanging nodes");
     assert!(
-        worst <= 1e-4 * largest,
-        "octree: GPU differs by {worst:.3e} of {largest:.3e} mm"
+        p.largest > 1e-3,
+        "gravity moves the soft half ({} mm)",
+        p.largest
     );
-    for h in dev.hanging() {
-        let tied: DVec3 = h
-            .masters
-            .iter()
-            .map(|&(n, w)| w as f64 * b[n as usize])
-            .sum();
-        assert!(
-            (b[h.node as usize] - tied).length() < 1e-6,
-            "node {}",
-            h.node
-        );
-    }
+    assert!(
+        p.worst <= 1e-4 * p.largest,
+        "octree: GPU differs by {:.3e} of {:.3e} mm",
+        p.worst,
+        p.largest
+    );
+    assert!(
+        p.worst_tie < 1e-6,
+        "hanging nodes off by {:.3e} mm",
+        p.worst_tie
+    );
 }
 
 /// The volume springs' WGSL twin (`tet_forces`): a block squashed through

@@ -27,6 +27,8 @@ pub mod inversion;
 pub mod material;
 mod model;
 pub mod params;
+#[cfg(any(test, feature = "test-support"))]
+pub mod parity;
 pub mod pcg;
 pub mod pcg_gpu;
 pub mod pieces;
