@@ -469,10 +469,11 @@ impl Session {
                 // Stage: model.
                 let t = Instant::now();
                 let outcome = m.model.step(FrameInfo {
-                    frame: self.frame,
+                    frame: m.frame,
                     frames: self.frames,
                     dt_s: self.dt_s,
                 })?;
+                m.frame += 1;
                 let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);
                 self.metrics.stage("model").record_run(wall, 0);
                 if outcome.changed {
@@ -591,7 +592,8 @@ impl Session {
     }
 
     /// Replaces the model with an instance of `plugin` (its parameters as
-    /// TOML text), initialised on the source volume at rest. The volume,
+    /// TOML text), initialised on the source volume at rest; its frames
+    /// count from 0 (`FrameInfo::frame` is the model's own clock). The volume,
     /// the resampled output, the ROI maps and the renderer are kept; the
     /// next [`Self::step`] maps and resamples in full. Under `auto` a
     /// CPU-only plugin moves a GPU session to the CPU (as
@@ -931,7 +933,7 @@ impl Session {
         let t = Instant::now();
         for i in 0..calls {
             let _ = m.model.step(FrameInfo {
-                frame: self.frame + i,
+                frame: m.frame + i,
                 frames: u64::MAX,
                 dt_s: 0.0,
             });

@@ -73,6 +73,8 @@ pub(crate) struct ModelStage {
     /// model first reports one, with the cell bytes it writes into.
     pub(crate) mask: Option<(TetMask, Vec<u8>)>,
     pub(crate) source_grid: Grid,
+    /// The model's own clock: frames it has stepped (0 when created).
+    pub(crate) frame: u64,
 }
 
 impl ModelStage {
@@ -104,6 +106,7 @@ impl ModelStage {
             binding,
             mask: None,
             source_grid: source.grid,
+            frame: 0,
         })
     }
 
