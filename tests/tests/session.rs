@@ -9,9 +9,7 @@ use voxflex_core::phantom::phantom;
 use voxflex_core::volume::{Volume, VoxelData};
 use voxflex_integration_tests::plugin_dir;
 use voxflex_runtime::backend::BackendChoice;
-use voxflex_runtime::session::{
-    Interaction, RenderParams, Session, SessionDefaults, StepReport,
-};
+use voxflex_runtime::session::{Interaction, RenderParams, Session, SessionDefaults, StepReport};
 use voxflex_runtime::visualise::RgbaImage;
 
 const CHAINMAIL: &str = "materials = [{ range = [50, 200], constraint = 0.01 }]\n\
@@ -191,14 +189,14 @@ fn a_worker_thread_drives_one_session_end_to_end() {
         assert_eq!(s.volume().unwrap(), &before_swap, "the output is kept");
         assert_eq!(s.rois().len(), 1, "the ROI map is kept");
         let r = s.step().unwrap();
-        assert!(
-            r.stage("map").unwrap().why.starts_with("first run"),
-            "{r}"
-        );
+        assert!(r.stage("map").unwrap().why.starts_with("first run"), "{r}");
         assert_eq!(ran(&r), ["model", "map", "resample", "roi"], "{r}");
         let m = s.metrics().unwrap();
         assert_eq!(m.plugin.as_ref().unwrap().name, "corotational-fem");
-        assert!(m.stages["model"].notes.contains_key("proxy_tetrahedra"), "{m:?}");
+        assert!(
+            m.stages["model"].notes.contains_key("proxy_tetrahedra"),
+            "{m:?}"
+        );
         // At rest, the new model shows the source again.
         let source = two_tone_cube();
         let v = s.volume().unwrap();
@@ -225,7 +223,10 @@ fn a_worker_thread_drives_one_session_end_to_end() {
             .count();
         assert!(differ > 20, "the ROI shows: {differ} pixels differ");
         let sum = |i: &RgbaImage| i.pixels.iter().map(|&c| c as u64).sum::<u64>();
-        assert!(sum(&with_roi) < sum(&without), "the ROI fades what is outside it");
+        assert!(
+            sum(&with_roi) < sum(&without),
+            "the ROI fades what is outside it"
+        );
         let m = s.metrics().unwrap();
         assert_eq!(m.stages["render"].runs, 2);
         assert!(m.stages_not_built.is_empty(), "{:?}", m.stages_not_built);
@@ -242,7 +243,10 @@ fn an_unmoved_model_reruns_nothing_downstream() {
     let mut s = Session::from_volume(two_tone_cube(), defaults(BackendChoice::Cpu)).unwrap();
     s.swap_model("chainmail", CHAINMAIL).unwrap();
     let roi = s
-        .add_roi(Seed::World(DVec3::new(-12.5, 2.5, 2.5)), GrowthParams::default())
+        .add_roi(
+            Seed::World(DVec3::new(-12.5, 2.5, 2.5)),
+            GrowthParams::default(),
+        )
         .unwrap();
     s.roi_step(roi, 3).unwrap();
     let first = s.step().unwrap();
@@ -254,7 +258,11 @@ fn an_unmoved_model_reruns_nothing_downstream() {
         assert!(r.stage("map").unwrap().why.contains("unchanged"), "{r}");
     }
     assert_eq!(s.versions(), v, "no version moved");
-    assert_eq!(s.rois()[0].steps, 3, "re-grown as far as before, no further");
+    assert_eq!(
+        s.rois()[0].steps,
+        3,
+        "re-grown as far as before, no further"
+    );
     let m = s.metrics().unwrap();
     assert_eq!((m.stages["map"].runs, m.stages["map"].skipped), (1, 3));
     assert_eq!(m.stages["resample"].skipped, 3);
@@ -303,7 +311,10 @@ fn the_gpu_session_agrees_with_the_cpu_session() {
     };
     let mut cpu = Session::from_volume(two_tone_cube(), defaults(BackendChoice::Cpu)).unwrap();
     let mut on_gpu = Session::from_volume(two_tone_cube(), defaults(BackendChoice::Cpu)).unwrap();
-    assert_eq!(on_gpu.set_backend(BackendChoice::Gpu).unwrap(), gpu.info().name);
+    assert_eq!(
+        on_gpu.set_backend(BackendChoice::Gpu).unwrap(),
+        gpu.info().name
+    );
     assert_eq!(on_gpu.metrics().unwrap().backend, "gpu");
     let a = drive(&mut cpu);
     let b = drive(&mut on_gpu);
@@ -315,7 +326,11 @@ fn the_gpu_session_agrees_with_the_cpu_session() {
     let (VoxelData::F32(x), VoxelData::F32(y)) = (&a.volume.data, &b.volume.data) else {
         panic!("resampled volumes are f32")
     };
-    let off = x.iter().zip(y).filter(|(p, q)| (*p - *q).abs() > 1.0).count();
+    let off = x
+        .iter()
+        .zip(y)
+        .filter(|(p, q)| (*p - *q).abs() > 1.0)
+        .count();
     assert!(
         off * 1000 <= x.len(),
         "{off} of {} voxels differ by more than 1",

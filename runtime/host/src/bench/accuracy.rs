@@ -9,7 +9,7 @@
 //! same deformation; the time is the median over `--repeat` full resamples
 //! (`DirtyRegion::All`, output already allocated), on the chosen backend.
 
-use super::{BenchOptions, BenchError, err, median, ms};
+use super::{BenchError, BenchOptions, err, median, ms};
 use crate::backend;
 use std::fmt::Write as _;
 use std::time::Instant;

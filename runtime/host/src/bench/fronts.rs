@@ -33,7 +33,7 @@ mod resample;
 mod roi;
 mod runner;
 
-use super::{BenchOptions, BenchError, err};
+use super::{BenchError, BenchOptions, err};
 use std::fmt::Write as _;
 use std::path::Path;
 

@@ -34,7 +34,7 @@
 //! - **blow-ups**: a finite frame whose `max |u|` exceeds 100× (body size +
 //!   grab length) — a silent blow-up, reported by scene number.
 
-use super::{BenchOptions, BenchError, err};
+use super::{BenchError, BenchOptions, err};
 use crate::plugin_loader;
 use std::fmt::Write as _;
 use std::sync::Arc;

@@ -290,7 +290,10 @@ impl Session {
         };
         match (&scene.model, &plugins.model) {
             (Some(_), Some(p)) => session.build_model(p, &scene.model_params_toml())?,
-            _ => session.metrics.stages_not_built = vec!["model".into(), "map".into(), "resample".into()],
+            _ => {
+                session.metrics.stages_not_built =
+                    vec!["model".into(), "map".into(), "resample".into()]
+            }
         }
         match (&scene.render, &plugins.renderer) {
             (Some(_), Some(p)) => session.build_renderer(p, &scene.render_params_toml())?,
@@ -772,15 +775,14 @@ impl Session {
         slot.stage.set_scene(volume, self.render_dirty, &maps)?;
         let (image, stats) = slot.stage.render_image(camera)?;
         self.render_dirty = DirtyRegion::None;
-        self.versions
-            .render
-            .ran_on(self.versions.resample.version);
+        self.versions.render.ran_on(self.versions.resample.version);
         let stage = self.metrics.stage("render");
         stage.record_run(t.elapsed(), stats.rays);
         let samples = stage.notes.get("samples").and_then(|v| v.as_u64());
-        stage
-            .notes
-            .insert("samples".into(), (samples.unwrap_or(0) + stats.samples).into());
+        stage.notes.insert(
+            "samples".into(),
+            (samples.unwrap_or(0) + stats.samples).into(),
+        );
         Ok(image)
     }
 

@@ -68,8 +68,14 @@ fn an_unknown_phantom_or_plugin_is_one_clear_error() {
     assert!(e.contains("nope"), "{e}");
     let mut s = cube_session(8);
     let e = s.swap_model("no-such-plugin", "").unwrap_err().to_string();
-    assert!(e.contains("no-such-plugin") && e.contains("not found"), "{e}");
-    assert!(s.metrics().unwrap().plugin.is_none(), "the failed swap left no model");
+    assert!(
+        e.contains("no-such-plugin") && e.contains("not found"),
+        "{e}"
+    );
+    assert!(
+        s.metrics().unwrap().plugin.is_none(),
+        "the failed swap left no model"
+    );
 }
 
 /// A click on a slice lands on the world point of the voxel shown there,
@@ -118,9 +124,11 @@ fn slice_pixels_map_to_world_points_and_back() {
         let mut other = elsewhere;
         let a = axis.fixed_axis();
         other[a] = if other[a] == 0 { 1 } else { 0 };
-        let p = volume
-            .grid
-            .index_to_world(DVec3::new(other[0] as f64, other[1] as f64, other[2] as f64));
+        let p = volume.grid.index_to_world(DVec3::new(
+            other[0] as f64,
+            other[1] as f64,
+            other[2] as f64,
+        ));
         assert_eq!(img.world_to_pixel(p), None);
     }
     assert!(s.slice(SliceAxis::Axial, 4, None).is_err(), "index 4 of 4");
