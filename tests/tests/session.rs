@@ -338,3 +338,62 @@ fn the_gpu_session_agrees_with_the_cpu_session() {
     );
     assert_eq!(on_gpu.set_backend(BackendChoice::Cpu).unwrap(), "cpu");
 }
+
+/// `Session::open` on a scene file: the scene's model and settings, and
+/// interactions at any time — here a carve and a load the scene never
+/// scripted — through the corotational-fem library.
+#[test]
+fn an_opened_scene_takes_unscripted_carves_and_loads() {
+    let dir = plugin_dir(&["corotational-fem"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("s.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "[scene]\nname = \"open\"\nbackend = \"cpu\"\nframes = 5\nplugin_dirs = [\"{}\"]\n\
+             [volume]\nsource = \"phantom:cube\"\ndims = [20, 20, 20]\n\
+             [model]\nplugin = \"corotational-fem\"\n[model.params]\n{FEM}\
+             [resample]\nbackground = 0\n",
+            dir.display()
+        ),
+    )
+    .unwrap();
+    let scene = voxflex_runtime::scene::Scene::load(&path).unwrap();
+    let mut s = Session::open(&scene).unwrap();
+    let m = s.metrics().unwrap();
+    assert_eq!(
+        (m.scene.as_str(), m.frames, m.backend.as_str()),
+        ("open", 5, "cpu")
+    );
+    assert_eq!(m.stages_not_built, ["render", "roi"]);
+    s.step().unwrap();
+    let centre = [2.5, 2.5, 2.5];
+    assert_eq!(value_at(s.volume().unwrap(), centre), 100.0);
+    s.interact(&Interaction::CarveBall {
+        centre,
+        radius: 11.0,
+    })
+    .unwrap();
+    let r = s.step().unwrap();
+    assert!(r.ran("resample"), "{r}");
+    assert_eq!(value_at(s.volume().unwrap(), centre), 0.0, "carved");
+    assert_eq!(value_at(s.volume().unwrap(), [17.5, 2.5, 2.5]), 100.0);
+    // A load on the +x face (the −x face fixed) sets the model moving.
+    let before = s.versions();
+    assert_eq!(before.model, 0, "the carve moved nothing: {before:?}");
+    s.interact(&Interaction::Fix {
+        min: [-30.0, -30.0, -30.0],
+        max: [-20.0, 30.0, 30.0],
+    })
+    .unwrap();
+    s.interact(&Interaction::Load {
+        min: [20.0, -30.0, -30.0],
+        max: [30.0, 30.0, 30.0],
+        force: [5.0, 0.0, 0.0],
+        frames: 1,
+    })
+    .unwrap();
+    let r = s.step().unwrap();
+    assert!(r.ran("map") && r.ran("resample"), "{r}");
+    assert_eq!(s.versions().model, 1, "{:?}", s.versions());
+}

@@ -49,6 +49,7 @@ use voxflex_abi::host_side::HostServices;
 use voxflex_core::camera::Camera;
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend, FrameInfo, ModelNotes};
 use voxflex_core::gpu::GpuService;
+use voxflex_core::interaction::InteractionSpec;
 use voxflex_core::io::png::{SliceAxis, Window, render_slice};
 use voxflex_core::opacity::{GrowthParams, GrowthReport, OpacityMap, Seed};
 use voxflex_core::phantom::phantom;
@@ -135,6 +136,9 @@ pub struct Session {
     resampled: Option<(u64, Volume)>,
     /// Interaction time not yet counted in the model stage.
     pending_interaction: Duration,
+    /// A cut or carve since the last map: the mask must be asked again
+    /// even when the model reports no motion.
+    topology_changed: bool,
     metrics: RunMetrics,
     opened: Instant,
 }
@@ -285,6 +289,7 @@ impl Session {
             render_dirty: DirtyRegion::All,
             resampled: None,
             pending_interaction: Duration::ZERO,
+            topology_changed: false,
             metrics,
             opened,
         };
@@ -372,6 +377,7 @@ impl Session {
             render_dirty: DirtyRegion::All,
             resampled: None,
             pending_interaction: Duration::ZERO,
+            topology_changed: false,
             metrics,
             opened,
         })
@@ -449,13 +455,17 @@ impl Session {
                 self.context
             ))
         })?;
-        m.model.interact(&interaction.to_toml())?;
+        let text = interaction.to_toml();
+        m.model.interact(&text)?;
+        let kind = InteractionSpec::from_toml(&text).map(|s| s.kind());
+        self.topology_changed |= matches!(kind, Ok("cut" | "carve"));
         self.pending_interaction += t.elapsed();
         Ok(())
     }
 
     /// Advances the model one frame and re-runs the stages whose input
-    /// moved: map when the model changed, resample when the map did, the
+    /// moved: map when the model changed (or a cut or carve changed its
+    /// topology, moved or not), resample when the map did, the
     /// session's ROI maps when the volume did. A model that did not move
     /// re-runs nothing downstream. Returns what ran and why.
     pub fn step(&mut self) -> Result<StepReport, RunError> {
@@ -491,13 +501,19 @@ impl Session {
 
                 // Stage: map.
                 let input = self.versions.model;
-                let why = self.versions.map.reason("model", input);
-                if self.versions.map.is_due(input) {
+                let due = self.versions.map.is_due(input);
+                let why = if !due && self.topology_changed {
+                    "a cut or carve changed the model's topology".to_string()
+                } else {
+                    self.versions.map.reason("model", input)
+                };
+                if due || std::mem::take(&mut self.topology_changed) {
                     let t = Instant::now();
                     self.dirty = self.dirty.union(m.model.dirty_region());
                     m.map(disp)?;
                     m.update_mask()?;
                     self.versions.map.ran_on(input);
+                    self.topology_changed = false;
                     let wall = t.elapsed();
                     self.metrics
                         .stage("map")
