@@ -16,6 +16,37 @@
 //! that writes files; `voxflex bench` times the same stages.
 //!
 //! A session is [`Send`]: one thread at a time drives it, any thread may.
+//!
+//! ```no_run
+//! use voxflex_core::glam::DVec3;
+//! use voxflex_core::io::png::SliceAxis;
+//! use voxflex_core::opacity::{GrowthParams, Seed};
+//! use voxflex_runtime::backend::BackendChoice;
+//! use voxflex_runtime::session::{
+//!     Interaction, RenderParams, Session, SessionDefaults, SessionSource,
+//! };
+//!
+//! // A 20³ cube phantom (100 mm field, the cube from −25 to 25 mm).
+//! let cube = SessionSource::Phantom { name: "cube".into(), dims: [20, 20, 20] };
+//! let cpu = SessionDefaults { backend: BackendChoice::Cpu, ..Default::default() };
+//! let mut s = Session::from_volume(cube, cpu)?;
+//! s.swap_model("chainmail", "materials = [{ range = [50, 200], constraint = 0.01 }]")?;
+//! let roi = s.add_roi(Seed::World(DVec3::new(-12.5, 2.5, 2.5)), GrowthParams::default())?;
+//! s.roi_run_to_end(roi)?;
+//! // Drag the +x face 15 mm out over 10 calls, the target moving each call.
+//! for k in 1..=10 {
+//!     let to = [22.5 + 1.5 * k as f64, 2.5, 2.5];
+//!     s.interact(&Interaction::Grab { point: [22.5, 2.5, 2.5], to, frames: 1 })?;
+//!     println!("{}", s.step()?); // what re-ran and why
+//! }
+//! let camera = s.default_camera(256, 256)?;
+//! let image = s.render(&camera, &RenderParams::default())?; // RGBA8, in memory
+//! let slice = s.slice(SliceAxis::Axial, 10, None)?;
+//! let click_mm = slice.pixel_to_world(5, 7);
+//! println!("{}×{} px, click at {click_mm:?}", image.width, image.height);
+//! println!("{}", s.metrics()?.to_json());
+//! # Ok::<(), voxflex_runtime::pipeline::RunError>(())
+//! ```
 
 mod defaults;
 mod interaction;
