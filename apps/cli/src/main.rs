@@ -4,6 +4,8 @@
 //! Exit code 0 on success; on failure, one line naming the cause on stderr
 //! and exit code 1 (2 for command-line usage errors, from clap).
 
+mod bench_args;
+
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -145,7 +147,7 @@ enum Command {
         dims: Option<Vec<usize>>,
     },
     /// Benchmark the resampling pipeline through the real plugin path.
-    Bench(bench::BenchArgs),
+    Bench(bench_args::BenchArgs),
 }
 
 fn main() {
@@ -302,7 +304,7 @@ fn dispatch(command: Command) -> Result<()> {
             )
         }
         Command::Bench(args) => {
-            let report = bench::run(&args)?;
+            let report = bench::run(&args.into())?;
             println!("{report}");
             Ok(())
         }

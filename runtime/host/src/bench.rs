@@ -23,83 +23,79 @@ mod accuracy;
 mod fronts;
 pub mod stress;
 
-use crate::backend::{self, BackendChoice};
-use crate::plugin_loader;
+use crate::backend::BackendChoice;
+use crate::session::{Session, SessionDefaults, SessionSource};
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::time::{Duration, Instant};
-use voxflex_abi::host_side::{DeformationProxy, HostServices};
-use voxflex_core::deformation::{
-    DeformationModel, DirtyRegion, DisplacementTarget, ExecutionBackend, FrameInfo, RestPoints,
-};
-use voxflex_core::volume::Volume;
-use voxflex_phantom::phantom;
-use voxflex_resample::gpu::GpuSource;
-use voxflex_resample::{DisplacementsRef, Interpolation, ResampleParams, Resampler};
+use std::time::Duration;
+use voxflex_resample::{Interpolation, ResampleParams};
 
-/// Arguments of `voxflex bench`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct BenchArgs {
+/// Options of `voxflex bench` (the CLI's `bench` arguments; the defaults
+/// are the command's).
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
     /// Phantom edge length, voxels (the volume is N³).
-    #[arg(long, default_value_t = 256)]
     pub size: usize,
     /// Backend: cpu, gpu or auto.
-    #[arg(long, default_value = "cpu")]
     pub backend: BackendChoice,
     /// Timed repetitions (the median is reported).
-    #[arg(long, default_value_t = 3)]
     pub repeat: usize,
     /// Fraction of the volume the local deformation is confined to (its
     /// ball's bounding box, the dirty region).
-    #[arg(long, default_value_t = 0.05)]
     pub local_fraction: f64,
     /// Extra plugin directories searched first.
-    #[arg(long = "plugin-dir")]
     pub plugin_dirs: Vec<PathBuf>,
     /// Also write the figures as JSON to this file.
-    #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Resampler interpolation (tetrahedral | trilinear; default: the
-    /// resampler's default, trilinear).
-    #[arg(long)]
+    /// Resampler interpolation (default: the resampler's default).
     pub interpolation: Option<Interpolation>,
-    /// Measure both interpolation modes instead: resample time and error
-    /// (HU) against an f64 reference under affine, twist and bend.
-    #[arg(long, conflicts_with = "fronts")]
+    /// Measure both interpolation modes instead (see [`accuracy`]).
     pub accuracy: bool,
-    /// Measure the run-time/error front of every model instead (FEM
-    /// cantilever and elastica, the same grab across models, resampling,
-    /// ROI maps) and write `<front>.csv`, `<front>.svg` and `front.md`
-    /// into `--out`.
-    #[arg(long)]
+    /// Measure the run-time/error front of every model instead and write
+    /// `<front>.csv`, `<front>.svg` and `front.md` into `out` (see
+    /// [`fronts`]).
     pub fronts: bool,
-    /// With `--fronts`: tiny sizes (seconds; what the tests run).
-    #[arg(long, requires = "fronts")]
+    /// With `fronts`: tiny sizes (seconds; what the tests run).
     pub quick: bool,
-    /// With `--fronts`: only these fronts (fem_cantilever, fem_elastica,
-    /// grab, resample, roi; repeatable).
-    #[arg(long, requires = "fronts")]
+    /// With `fronts`: only these fronts (fem_cantilever, fem_elastica,
+    /// grab, resample, roi).
     pub only: Vec<String>,
-    /// With `--fronts`: the output directory.
-    #[arg(long, default_value = "docs/fronts")]
+    /// With `fronts`: the output directory.
     pub out: PathBuf,
-    /// Run the numerical stress suite instead: randomized scenes for every
-    /// deformation model (see `bench::stress`).
-    #[arg(long, conflicts_with_all = ["fronts", "accuracy"])]
+    /// Run the numerical stress suite instead (see [`stress`]).
     pub stress: bool,
     /// Stress: scenes per model.
-    #[arg(long, default_value_t = 250)]
     pub stress_scenes: u64,
     /// Stress: frames per scene.
-    #[arg(long, default_value_t = 13)]
     pub stress_frames: u64,
-    /// Stress: only these models (repeatable; default: all four).
-    #[arg(long)]
+    /// Stress: only these models (default: all four).
     pub stress_model: Vec<String>,
     /// Stress: the RNG seed that draws the scenes.
-    #[arg(long, default_value_t = 13)]
     pub seed: u64,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            size: 256,
+            backend: BackendChoice::Cpu,
+            repeat: 3,
+            local_fraction: 0.05,
+            plugin_dirs: vec![],
+            json: None,
+            interpolation: None,
+            accuracy: false,
+            fronts: false,
+            quick: false,
+            only: vec![],
+            out: PathBuf::from("docs/fronts"),
+            stress: false,
+            stress_scenes: 250,
+            stress_frames: 13,
+            stress_model: vec![],
+            seed: 13,
+        }
+    }
 }
 
 /// Running the benchmark failed.
@@ -120,37 +116,8 @@ fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
-struct Case {
-    model: DeformationProxy,
-    binding: voxflex_core::deformation::BindingId,
-}
-
-fn make_case(
-    params: &str,
-    plugin: &plugin_loader::LoadedPlugin,
-    services: &Arc<HostServices>,
-    volume: &Volume,
-    backend: ExecutionBackend,
-) -> Result<Case, BenchError> {
-    let vtable = plugin
-        .deformation
-        .ok_or_else(|| err("affine is not a deformation plugin"))?;
-    // SAFETY: checked, never-unloaded library.
-    let mut model =
-        unsafe { DeformationProxy::create(&plugin.name, vtable, params, services.clone()) }
-            .map_err(err)?;
-    model.init(volume.view(), backend).map_err(err)?;
-    let binding = model.bind(RestPoints::Lattice(volume.grid)).map_err(err)?;
-    Ok(Case { model, binding })
-}
-
-enum Disp {
-    Cpu([Vec<f32>; 3]),
-    Gpu([voxflex_core::gpu::BufferId; 3], GpuSource),
-}
-
 /// Runs the benchmark and returns a human-readable report.
-pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
+pub fn run(args: &BenchOptions) -> Result<String, BenchError> {
     if args.size < 4 || args.size > 1024 {
         return Err(err(format!(
             "--size {} is out of range; use 4 to 1024",
@@ -170,14 +137,32 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         return stress::run(args);
     }
     let repeat = args.repeat.max(1);
-    let resolved = backend::resolve(args.backend).map_err(err)?;
-    let gpu = resolved.gpu_service();
-    let dirs = plugin_loader::search_path(&args.plugin_dirs);
-    let plugin = plugin_loader::load_by_name("affine", &dirs).map_err(err)?;
     let n = args.size;
-    let volume = phantom("head", [n, n, n]).map_err(err)?;
+    let defaults = ResampleParams::default();
+    // The session the scenes run: the affine plugin from its library, the
+    // resampler, the backend chosen like a scene's; each resample waits for
+    // the GPU so its time is the work's.
+    let mut session = Session::from_volume(
+        SessionSource::Phantom {
+            name: "head".into(),
+            dims: [n, n, n],
+        },
+        SessionDefaults {
+            backend: args.backend,
+            plugin_dirs: args.plugin_dirs.clone(),
+            frames: repeat as u64 + 1,
+            dt_s: 0.0,
+            resample: ResampleParams {
+                interpolation: args.interpolation.unwrap_or(defaults.interpolation),
+                ..defaults
+            },
+            wait_for_gpu: true,
+            ..SessionDefaults::default()
+        },
+    )
+    .map_err(err)?;
+    let volume = session.source();
     let voxels = volume.grid.len();
-    let services = HostServices::new(gpu.clone(), rayon::current_num_threads());
     let extent = volume.grid.world_bounds().1 - volume.grid.world_bounds().0;
     let centre = volume.grid.centre();
     // The deformation is confined to a ball whose bounding box — the dirty
@@ -193,23 +178,12 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         centre.x, centre.y, centre.z
     );
 
-    let mut disp = match &gpu {
-        Some(g) => {
-            let b = |l| g.create_buffer(voxels as u64 * 4, l).map_err(err);
-            Disp::Gpu(
-                [b("dx")?, b("dy")?, b("dz")?],
-                GpuSource::upload(g.as_ref(), volume.view()).map_err(err)?,
-            )
-        }
-        None => Disp::Cpu([vec![0.0; voxels], vec![0.0; voxels], vec![0.0; voxels]]),
-    };
-    let background = volume.value_range().0;
     let mut out = String::new();
     let mut json = serde_json::Map::new();
+    let reason = session.metrics().map_err(err)?.backend_reason;
     let _ = writeln!(
         out,
-        "voxflex bench: {n}³ head phantom ({voxels} voxels), {}",
-        resolved.reason
+        "voxflex bench: {n}³ head phantom ({voxels} voxels), {reason}"
     );
     let _ = writeln!(out, "threads: {}", rayon::current_num_threads());
     let interpolation = args
@@ -218,68 +192,25 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
     let _ = writeln!(out, "interpolation: {interpolation}");
 
     let mut results = vec![];
+    let mut idle = Duration::ZERO;
+    let calls = 10_000u64;
     for (label, params) in [("full", &full_params), ("local", &local_params)] {
-        let mut case = make_case(params, &plugin, &services, &volume, resolved.backend)?;
-        let defaults = ResampleParams::default();
-        let mut resampler = Resampler::new(ResampleParams {
-            background,
-            interpolation: args.interpolation.unwrap_or(defaults.interpolation),
-            ..defaults
-        });
+        // A new model maps and resamples in full at its first frame.
+        session.swap_model("affine", params).map_err(err)?;
         let (mut map_t, mut res_t, mut touched) = (vec![], vec![], 0u64);
         // Frame 0 brings the field in and resamples in full; frames 1..=repeat
         // each change it again (the ramp) and are timed.
-        for frame in 0..=repeat as u64 {
-            let step = case
-                .model
-                .step(FrameInfo {
-                    frame,
-                    frames: repeat as u64 + 1,
-                    dt_s: 0.0,
-                })
-                .map_err(err)?;
-            if !step.changed {
+        for frame in 0..=repeat {
+            let step = session.step().map_err(err)?;
+            let stage = |name: &str| step.stage(name).filter(|s| s.ran);
+            let (Some(map), Some(resample)) = (stage("map"), stage("resample")) else {
                 return Err(err("the benchmark field did not change"));
-            }
-            let dirty = case.model.dirty_region();
-            let t = Instant::now();
-            let target = match &mut disp {
-                Disp::Cpu([x, y, z]) => DisplacementTarget::Cpu { x, y, z },
-                Disp::Gpu([x, y, z], _) => DisplacementTarget::Gpu {
-                    x: *x,
-                    y: *y,
-                    z: *z,
-                },
             };
-            case.model.map(case.binding, target).map_err(err)?;
-            let mapped = t.elapsed();
-            let t = Instant::now();
-            let dirty = if frame == 0 { DirtyRegion::All } else { dirty };
-            let report = match (&disp, &gpu) {
-                (Disp::Cpu([x, y, z]), _) => {
-                    resampler.resample_cpu(volume.view(), DisplacementsRef { x, y, z }, None, dirty)
-                }
-                (Disp::Gpu(ids, src), Some(g)) => {
-                    let r = resampler.resample_gpu(g.as_ref(), src, *ids, None, dirty);
-                    // Wait for the GPU so the time is real.
-                    let mut probe = [0f32; 1];
-                    if let Some(b) = resampler.gpu_output_buffer() {
-                        g.read_buffer(b, 0, bytemuck::cast_slice_mut(&mut probe))
-                            .map_err(err)?;
-                    }
-                    r
-                }
-                _ => return Err(err("GPU displacements without a GPU")),
-            }
-            .map_err(err)?;
             if frame > 0 {
-                map_t.push(mapped);
-                res_t.push(t.elapsed());
-                touched = report.voxels_touched;
+                map_t.push(map.wall);
+                res_t.push(resample.wall);
+                touched = resample.voxels;
             }
-        }
-        if let (Some(g), Disp::Gpu(..)) = (&gpu, &disp) {
-            resampler.release_gpu(g.as_ref());
         }
         let (m, r) = (median(map_t), median(res_t));
         let _ = writeln!(
@@ -291,33 +222,27 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         json.insert(format!("{label}_map_ms"), ms(m).into());
         json.insert(format!("{label}_resample_ms"), ms(r).into());
         json.insert(format!("{label}_voxels_touched"), touched.into());
-        results.push((m, r, case, resampler.scratch_bytes()));
+        results.push((m, r, session.resample_scratch_bytes()));
+        if label == "full" {
+            // Boundary overhead: a converged step + dirty_region through the
+            // C ABI, which is all the boundary adds to a frame.
+            idle = session
+                .time_idle_frames(calls)
+                .ok_or_else(|| err("the session has no model"))?;
+        }
     }
     let speedup = ms(results[0].1) / ms(results[1].1).max(1e-9);
     let _ = writeln!(out, "local vs full resample: {speedup:.1}× faster");
     json.insert("local_speedup".into(), speedup.into());
 
-    let extra = 12.0 + results[0].3 as f64 / voxels as f64;
+    let extra = 12.0 + results[0].2 as f64 / voxels as f64;
     let _ = writeln!(
         out,
         "resample memory beyond input and output: {extra:.2} bytes/voxel (12 of them the displacement field)"
     );
     json.insert("extra_bytes_per_voxel".into(), extra.into());
 
-    // Boundary overhead: a converged step + dirty_region through the C ABI,
-    // which is all the boundary adds to a frame.
-    let case = &mut results[0].2;
-    let calls = 10_000u64;
-    let t = Instant::now();
-    for i in 0..calls {
-        let _ = case.model.step(FrameInfo {
-            frame: repeat as u64 + 1 + i,
-            frames: u64::MAX,
-            dt_s: 0.0,
-        });
-        let _ = case.model.dirty_region();
-    }
-    let per_frame = t.elapsed() / calls as u32;
+    let per_frame = idle / calls as u32;
     let frame = results[0].0 + results[0].1;
     let overhead = per_frame.as_secs_f64() / frame.as_secs_f64() * 100.0;
     let _ = writeln!(
@@ -331,10 +256,6 @@ pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
         (per_frame.as_secs_f64() * 1e6).into(),
     );
     json.insert("boundary_percent".into(), overhead.into());
-    if let (Some(g), Disp::Gpu(ids, src)) = (&gpu, &disp) {
-        ids.iter().for_each(|&b| g.destroy_buffer(b));
-        src.release(g.as_ref());
-    }
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&json).map_err(err)?;
         voxflex_io::write_atomically(p, |w| w.write_all(text.as_bytes())).map_err(err)?;

@@ -1,7 +1,7 @@
 //! # voxflex-runtime — the host
 //!
 //! Plugin discovery and checked loading ([`plugin_loader`]), scene files
-//! ([`scene`]), backend selection ([`backend`]) and the wgpu GPU context
+//! ([`scene`]), the interactive pipeline object ([`session`]), backend selection ([`backend`]) and the wgpu GPU context
 //! ([`gpu_context`], the only place voxflex links wgpu), the scene pipeline
 //! with versioned, dirty-region stages ([`pipeline`]), the checks of
 //! `voxflex validate` ([`preflight`]), run reports ([`metrics`]), the
@@ -19,5 +19,6 @@ pub mod pipeline;
 pub mod plugin_loader;
 pub mod preflight;
 pub mod scene;
+pub mod session;
 pub mod visualise;
 pub mod warnings;

@@ -17,7 +17,7 @@ use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
-use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
+use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
 use voxflex_core::volume::{Volume, VoxelData};
 use voxflex_io::png::SliceAxis;
 use voxflex_io::{write_atomically, write_volume};
@@ -260,6 +260,38 @@ impl RenderStage {
         Ok(self.renderer.configure(settings_toml)?)
     }
 
+    /// Hands the renderer `volume` (with `dirty`, the world box in mm that
+    /// changed since the last call) and the opacity `maps` (voxel boxes of
+    /// `volume`'s grid).
+    pub fn set_scene(
+        &mut self,
+        volume: &Volume,
+        dirty: DirtyRegion,
+        maps: &[OpacityMap],
+    ) -> Result<(), RunError> {
+        self.renderer
+            .set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
+        self.renderer.set_opacity_maps(maps)?;
+        Ok(())
+    }
+
+    /// Renders what [`Self::set_scene`] handed over through `camera` into
+    /// an RGBA8 image in memory (row-major, top row first).
+    pub fn render_image(&mut self, camera: &Camera) -> Result<(RgbaImage, RenderStats), RunError> {
+        let mut pixels = vec![0u8; camera.width as usize * camera.height as usize * 4];
+        let stats = self
+            .renderer
+            .render(camera, ImageTarget::Cpu(&mut pixels))?;
+        Ok((
+            RgbaImage {
+                width: camera.width,
+                height: camera.height,
+                pixels,
+            },
+            stats,
+        ))
+    }
+
     /// Renders `volume` with `maps` and writes the image(s); returns the files.
     pub fn render(
         &mut self,
@@ -271,18 +303,13 @@ impl RenderStage {
         metrics: &mut RunMetrics,
     ) -> Result<Vec<String>, RunError> {
         let t = Instant::now();
-        self.renderer
-            .set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
-        self.renderer.set_opacity_maps(maps)?;
+        self.set_scene(volume, dirty, maps)?;
         let frames = settings.turntable.max(1);
         let mut written = vec![];
         let (mut rays, mut samples) = (0u64, 0u64);
         for f in 0..frames {
             let camera = camera_for(settings, &volume.grid, 360.0 * f as f64 / frames as f64);
-            let mut pixels = vec![0u8; settings.width as usize * settings.height as usize * 4];
-            let stats = self
-                .renderer
-                .render(&camera, ImageTarget::Cpu(&mut pixels))?;
+            let (image, stats) = self.render_image(&camera)?;
             rays += stats.rays;
             samples += stats.samples;
             let file = if settings.turntable == 0 {
@@ -290,7 +317,7 @@ impl RenderStage {
             } else {
                 settings.file.replace(".png", &format!("_{f:03}.png"))
             };
-            write_rgba_png(&dir.join(&file), settings.width, settings.height, &pixels)?;
+            write_rgba_png(&dir.join(&file), &image)?;
             written.push(file);
         }
         let stage = metrics.stage("render");
@@ -300,8 +327,33 @@ impl RenderStage {
     }
 }
 
-fn write_rgba_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<(), RunError> {
-    let img = image::RgbaImage::from_raw(width, height, rgba.to_vec())
+/// An RGBA8 image in memory.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RgbaImage {
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// `width × height × 4` bytes (R, G, B, A), row-major, top row first.
+    pub pixels: Vec<u8>,
+}
+
+impl RgbaImage {
+    /// The (R, G, B, A) of pixel (`x`, `y`), from the top-left corner.
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        [
+            self.pixels[i],
+            self.pixels[i + 1],
+            self.pixels[i + 2],
+            self.pixels[i + 3],
+        ]
+    }
+}
+
+/// Writes an RGBA8 image as a PNG, atomically.
+pub fn write_rgba_png(path: &Path, image: &RgbaImage) -> Result<(), RunError> {
+    let img = image::RgbaImage::from_raw(image.width, image.height, image.pixels.clone())
         .ok_or_else(|| RunError::Other(format!("{}: image size mismatch", path.display())))?;
     write_atomically(path, |w| {
         let mut buf = std::io::Cursor::new(Vec::new());

@@ -9,7 +9,7 @@
 //! same deformation; the time is the median over `--repeat` full resamples
 //! (`DirtyRegion::All`, output already allocated), on the chosen backend.
 
-use super::{BenchArgs, BenchError, err, median, ms};
+use super::{BenchError, BenchOptions, err, median, ms};
 use crate::backend;
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -80,7 +80,7 @@ pub(super) fn time_mode(
 }
 
 /// Runs the accuracy benchmark and returns a human-readable report.
-pub(super) fn run(args: &BenchArgs) -> Result<String, BenchError> {
+pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
     let repeat = args.repeat.max(1);
     let resolved = backend::resolve(args.backend).map_err(err)?;
     let gpu = resolved.gpu_service();

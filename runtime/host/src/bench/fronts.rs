@@ -33,7 +33,7 @@ mod resample;
 mod roi;
 mod runner;
 
-use super::{BenchArgs, BenchError, err};
+use super::{BenchError, BenchOptions, err};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -86,7 +86,7 @@ pub(crate) struct Front {
 pub(crate) const NAMES: [&str; 5] = ["fem_cantilever", "fem_elastica", "grab", "resample", "roi"];
 
 /// Runs the fronts and writes their files; returns a human-readable report.
-pub(super) fn run(args: &BenchArgs) -> Result<String, BenchError> {
+pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
     for o in &args.only {
         if !NAMES.contains(&o.as_str()) {
             return Err(err(format!(

@@ -34,7 +34,7 @@
 //! - **blow-ups**: a finite frame whose `max |u|` exceeds 100× (body size +
 //!   grab length) — a silent blow-up, reported by scene number.
 
-use super::{BenchArgs, BenchError, err};
+use super::{BenchError, BenchOptions, err};
 use crate::plugin_loader;
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -508,7 +508,7 @@ fn run_scene(
 
 /// Runs the stress suite; returns the report and the tallies per model.
 pub fn stress(
-    args: &BenchArgs,
+    args: &BenchOptions,
     models: &[&str],
 ) -> Result<(String, Vec<(String, ModelTally)>), BenchError> {
     let scenes = args.stress_scenes;
@@ -590,7 +590,7 @@ pub fn stress(
 }
 
 /// `voxflex bench --stress`: the report, and the JSON file when asked.
-pub fn run(args: &BenchArgs) -> Result<String, BenchError> {
+pub fn run(args: &BenchOptions) -> Result<String, BenchError> {
     let models: Vec<&str> = if args.stress_model.is_empty() {
         MODELS.to_vec()
     } else {

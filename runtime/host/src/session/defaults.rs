@@ -1,0 +1,51 @@
+//! [`SessionDefaults`]: the settings of a session built from a volume
+//! rather than a scene file.
+
+use crate::backend::BackendChoice;
+use std::path::PathBuf;
+use voxflex_resample::ResampleParams;
+
+/// Settings of [`super::Session::from_volume`]; a scene file's `[scene]`
+/// and `[resample]` tables hold the same.
+#[derive(Clone, Debug)]
+pub struct SessionDefaults {
+    /// Where stages compute (`cpu`, `gpu` or `auto`; default `auto`).
+    pub backend: BackendChoice,
+    /// Plugin directories searched before `VOXFLEX_PLUGIN_PATH` and the
+    /// executable's directory.
+    pub plugin_dirs: Vec<PathBuf>,
+    /// rayon worker threads; 0 = one per core. Only the first session (or
+    /// scene) of a process sets it.
+    pub threads: usize,
+    /// Frames the model is told the run has (`FrameInfo::frames`); models
+    /// say whether they came to rest on the last one. Default: unbounded.
+    pub frames: u64,
+    /// Time step per frame, seconds.
+    pub dt_s: f64,
+    /// Resampler parameters; their `background` is replaced by
+    /// [`Self::background`].
+    pub resample: ResampleParams,
+    /// Background of the resampled volume (volume units); `None`: the
+    /// source's lowest value.
+    pub background: Option<f32>,
+    /// Wait for the GPU at the end of each resample, so the stage's wall
+    /// time is the work's (what `voxflex bench` measures); otherwise the
+    /// work may still be queued when the stage returns.
+    pub wait_for_gpu: bool,
+}
+
+impl Default for SessionDefaults {
+    fn default() -> Self {
+        let scene = crate::scene::SceneSettings::default();
+        Self {
+            backend: scene.backend,
+            plugin_dirs: vec![],
+            threads: scene.threads,
+            frames: u64::MAX,
+            dt_s: scene.dt_s,
+            resample: ResampleParams::default(),
+            background: None,
+            wait_for_gpu: false,
+        }
+    }
+}

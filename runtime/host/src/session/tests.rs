@@ -1,0 +1,181 @@
+//! Unit tests of the session without plugins (the model, renderer and
+//! GPU paths are driven through the real `.so` plugins in
+//! `tests/tests/session.rs`).
+
+use super::*;
+use voxflex_core::glam::DVec3;
+
+fn cpu() -> SessionDefaults {
+    SessionDefaults {
+        backend: BackendChoice::Cpu,
+        ..SessionDefaults::default()
+    }
+}
+
+fn cube_session(n: usize) -> Session {
+    Session::from_volume(
+        SessionSource::Phantom {
+            name: "cube".into(),
+            dims: [n, n, n],
+        },
+        cpu(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_session_without_a_model_steps_nothing_and_shows_its_source() {
+    let mut s = cube_session(12);
+    let r = s.step().unwrap();
+    assert_eq!(r.frame, 0);
+    for stage in ["model", "map", "resample"] {
+        let o = r.stage(stage).unwrap();
+        assert!(!o.ran && o.why.contains("no model"), "{o:?}");
+    }
+    assert_eq!(s.frame(), 1);
+    assert_eq!(s.versions(), Versions::default());
+    let source = s.source().clone();
+    assert_eq!(s.volume().unwrap(), &source);
+    let m = s.metrics().unwrap();
+    assert_eq!(m.frames, 1);
+    assert_eq!(m.backend, "cpu");
+    assert_eq!(m.stages["source"].runs, 1);
+    assert_eq!(m.source_dims, [12, 12, 12]);
+    for stage in ["model", "map", "resample", "render", "roi"] {
+        assert!(m.stages_not_built.iter().any(|s| s == stage), "{stage}");
+    }
+}
+
+#[test]
+fn interacting_without_a_model_says_what_to_do() {
+    let mut s = cube_session(8);
+    let e = s.interact(&Interaction::Release).unwrap_err().to_string();
+    assert!(e.contains("swap_model"), "{e}");
+}
+
+#[test]
+fn an_unknown_phantom_or_plugin_is_one_clear_error() {
+    let e = Session::from_volume(
+        SessionSource::Phantom {
+            name: "nope".into(),
+            dims: [4, 4, 4],
+        },
+        cpu(),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("nope"), "{e}");
+    let mut s = cube_session(8);
+    let e = s.swap_model("no-such-plugin", "").unwrap_err().to_string();
+    assert!(
+        e.contains("no-such-plugin") && e.contains("not found"),
+        "{e}"
+    );
+    assert!(
+        s.metrics().unwrap().plugin.is_none(),
+        "the failed swap left no model"
+    );
+}
+
+/// A click on a slice lands on the world point of the voxel shown there,
+/// and that point maps back to the same pixel, on every axis.
+#[test]
+fn slice_pixels_map_to_world_points_and_back() {
+    let volume = voxflex_phantom::phantom("ramp", [6, 5, 4]).unwrap();
+    let mut s = Session::from_volume(volume.clone(), cpu()).unwrap();
+    for (axis, index) in [
+        (SliceAxis::Axial, 2),
+        (SliceAxis::Coronal, 3),
+        (SliceAxis::Sagittal, 1),
+    ] {
+        let img = s.slice(axis, index, None).unwrap();
+        let (w, h) = axis.image_size(&volume.grid);
+        assert_eq!((img.image.width, img.image.height), (w, h));
+        for row in 0..h {
+            for col in 0..w {
+                let p = img.pixel_to_world(col, row).unwrap();
+                assert_eq!(img.world_to_pixel(p), Some([col, row]), "{axis:?}");
+                let v = volume.grid.world_to_index(p).round();
+                let voxel = [v.x as usize, v.y as usize, v.z as usize];
+                assert_eq!(img.pixel_to_voxel(col, row), Some(voxel));
+                // The same table as a seed click on that slice.
+                let seed = Seed::Slice {
+                    axis,
+                    index,
+                    pixel: [col, row],
+                };
+                assert_eq!(seed.resolve(&volume.grid).unwrap(), voxel);
+                // The pixel shows that voxel's value through the window.
+                let window = {
+                    let (lo, hi) = volume.value_range();
+                    Window {
+                        level: 0.5 * (lo + hi),
+                        width: (hi - lo).max(f32::MIN_POSITIVE),
+                    }
+                };
+                let value = volume.get_f32(voxel[0], voxel[1], voxel[2]);
+                assert_eq!(img.image.pixels[row * w + col], window.map(value));
+            }
+        }
+        assert_eq!(img.pixel_to_world(w, 0), None);
+        // A point on another slice has no pixel on this one.
+        let elsewhere = img.pixel_to_voxel(0, 0).unwrap();
+        let mut other = elsewhere;
+        let a = axis.fixed_axis();
+        other[a] = if other[a] == 0 { 1 } else { 0 };
+        let p = volume.grid.index_to_world(DVec3::new(
+            other[0] as f64,
+            other[1] as f64,
+            other[2] as f64,
+        ));
+        assert_eq!(img.world_to_pixel(p), None);
+    }
+    assert!(s.slice(SliceAxis::Axial, 4, None).is_err(), "index 4 of 4");
+}
+
+/// ROI maps step by step: `roi_step(a)` then `roi_step(b)` is the map of
+/// a + b steps; running to the end converges; remove and list.
+#[test]
+fn roi_maps_grow_stepwise_to_the_end_and_are_removed() {
+    let mut s = cube_session(16);
+    let centre = s.source().grid.centre();
+    let params = GrowthParams::default();
+    let a = s.add_roi(Seed::World(centre), params).unwrap();
+    let b = s.add_roi(Seed::World(centre), params).unwrap();
+    assert_ne!(a, b);
+    assert_eq!(s.rois().len(), 2);
+    assert_eq!(s.rois()[0].steps, 0);
+    s.roi_step(a, 2).unwrap();
+    s.roi_step(a, 3).unwrap();
+    s.roi_step(b, 5).unwrap();
+    assert_eq!(s.roi_map(a), s.roi_map(b), "2 + 3 steps = 5 steps");
+    assert_eq!(s.rois()[0].steps, 5);
+    let before = s.rois()[0].voxels_above_half;
+    let r = s.roi_run_to_end(a).unwrap();
+    assert!(r.converged);
+    let info = &s.rois()[0];
+    assert!(info.converged && info.voxels_above_half >= before);
+    // The cube's interior (value 100) is the region: n/2 voxels a side.
+    assert_eq!(info.voxels_above_half, 8 * 8 * 8);
+    assert!(s.remove_roi(b));
+    assert!(!s.remove_roi(b));
+    assert_eq!(s.rois().len(), 1);
+    assert!(s.roi_step(b, 1).is_err());
+    let m = s.metrics().unwrap();
+    assert_eq!(m.stages["roi"].runs, 4);
+    assert!(!m.stages_not_built.iter().any(|s| s == "roi"));
+}
+
+#[test]
+fn a_session_moves_to_another_thread() {
+    let s = cube_session(8);
+    let frame = std::thread::spawn(move || {
+        let mut s = s;
+        s.step().unwrap();
+        s.frame()
+    })
+    .join()
+    .unwrap();
+    assert_eq!(frame, 1);
+}
