@@ -35,6 +35,8 @@
 //! ramp_frames = 5
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod field;
 pub mod model;
 pub mod params;

@@ -12,6 +12,8 @@
 //! Units: world coordinates are millimetres; voxel indices address voxel
 //! centres (see [`grid`]).
 
+#![warn(missing_docs)]
+
 pub mod barycentric;
 pub mod camera;
 pub mod cut_polygon;
