@@ -6,6 +6,8 @@
 //! `cdylib` crates nothing depends on, so build the workspace first
 //! (`scripts/test.sh` does: `cargo build --workspace` then `cargo test`).
 
+#![warn(missing_docs)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

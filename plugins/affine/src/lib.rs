@@ -18,6 +18,8 @@
 //! ramp_frames = 10
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod field;
 pub mod params;
 

@@ -33,6 +33,8 @@
 //! order) and WGSL (`gpu.rs`, `shaders/chainmail/chainmail.wgsl`) over the
 //! same layout, chosen by the scene's `backend`.
 
+#![warn(missing_docs)]
+
 pub mod blocks;
 pub mod conflicts;
 pub mod gpu;

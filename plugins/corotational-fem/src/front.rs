@@ -3,7 +3,7 @@
 //! meshed with cubes of `h` mm (five tetrahedra each), clamped at x = 0
 //! and loaded by a total force `P` in −z spread over the face x = 8 as a
 //! traction, solved statically; its tip deflection against Timoshenko beam
-//! theory. [`front_point`] is one row of the table in README
+//! theory. [`front_point`] is one row of the table in docs/BENCHMARKS.md
 //! (`cargo bench -p voxflex-corotational-fem --bench corotational -- front`)
 //! and what `voxflex bench`'s fronts can call per element and resolution.
 

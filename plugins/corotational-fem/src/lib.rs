@@ -34,6 +34,8 @@
 //! cg_tolerance = 1e-6
 //! ```
 
+#![warn(missing_docs)]
+
 #[cfg(test)]
 mod amg_tests;
 #[cfg(test)]

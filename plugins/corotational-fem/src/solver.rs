@@ -440,7 +440,7 @@ impl CorotationalFem {
     /// True when the CPU PCG preconditions with AMG: `preconditioner =
     /// "amg"`, or `"auto"` for the static solver on at least
     /// [`AMG_AUTO_NODES`] ([`AMG_AUTO_NODES_P2`] with P2) free nodes (where it was measured faster
-    /// than IC(0) and block Jacobi; README, corotational FEM benchmarks).
+    /// than IC(0) and block Jacobi; docs/BENCHMARKS.md, "Corotational FEM").
     fn uses_amg(&self, free: &[bool]) -> bool {
         match (self.params.preconditioner, self.params.solver) {
             (PreconditionerKind::Amg, _) => true,

@@ -735,6 +735,8 @@ impl SpringKernel {
                 // are disjoint: `partition`); moving the hanging nodes'
                 // forces and the fix-up run on one thread while the others
                 // wait.
+                // SAFETY: spring phase (see above): `state` is read only and
+                // this thread writes only its own spring range of `f`.
                 unsafe {
                     springs.forces(
                         state.all(),
@@ -744,6 +746,8 @@ impl SpringKernel {
                 };
                 let tr = tet_part(ctx.index());
                 if !tr.is_empty() {
+                    // SAFETY: spring phase: `state` is read only and this
+                    // thread writes only its own tetrahedron range of `f`.
                     unsafe {
                         springs.tet_forces(
                             state.all(),
@@ -756,6 +760,8 @@ impl SpringKernel {
                 if tied {
                     // Total forces, the hanging nodes' moved onto their
                     // masters, then the update from them.
+                    // SAFETY: after the barrier `f` and `state` are read only
+                    // and this thread writes only its own node range of `totals`.
                     unsafe {
                         springs.totals(
                             f.all(),
@@ -767,10 +773,14 @@ impl SpringKernel {
                     };
                     barrier.wait();
                     if ctx.index() == 0 {
+                        // SAFETY: the other threads wait at the next barrier;
+                        // only this one touches `totals` now.
                         let t = unsafe { totals.part(0..nodes) };
                         untie_rows(step.hanging, t);
                     }
                     barrier.wait();
+                    // SAFETY: `totals` is read only after the barrier and this
+                    // thread writes only its own node range of `state`.
                     unsafe {
                         springs.apply_totals(
                             totals.all(),
@@ -780,6 +790,8 @@ impl SpringKernel {
                         )
                     };
                 } else {
+                    // SAFETY: node phase: `f` is read only after the barrier
+                    // and this thread writes only its own node range of `state`.
                     unsafe {
                         springs.integrate(
                             f.all(),
@@ -792,7 +804,10 @@ impl SpringKernel {
                 barrier.wait();
                 if let Some(fixup) = fixup {
                     if ctx.index() == 0 {
-                        fixup(s, &mut NodeRows(unsafe { state.part(0..nodes) }));
+                        // SAFETY: the other threads wait at the next barrier;
+                        // only this one touches `state` now.
+                        let rows = unsafe { state.part(0..nodes) };
+                        fixup(s, &mut NodeRows(rows));
                     }
                     barrier.wait();
                 }

@@ -21,6 +21,8 @@
 //! damping_ratio = 0.1
 //! ```
 
+#![warn(missing_docs)]
+
 mod gpu;
 #[cfg(test)]
 mod gpu_tests;

@@ -2,7 +2,7 @@
 //! two kernels `shaders/raycast/cells.wgsl` (macro-cell min/max over a box of
 //! cells) and `shaders/raycast/raycast.wgsl` (one invocation per pixel).
 //!
-//! Buffers (32-bit scalars only, see DESIGN.md "Backends"):
+//! Buffers (32-bit scalars only, see docs/DESIGN.md "Backends"):
 //! - the volume, f32 per voxel: the caller's own buffer for
 //!   `RenderVolume::Gpu` (bound as is, no copy), else ours, uploaded once per
 //!   version and only over the z-slab of planes the dirty region touches;

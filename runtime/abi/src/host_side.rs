@@ -262,10 +262,11 @@ unsafe extern "C" fn host_gpu_dispatch(
         if workgroups.is_null() || (count > 0 && bindings.is_null()) {
             return Err("null bindings or workgroups pointer".into());
         }
-        // SAFETY: plugin passes `count` bindings.
         let descs = if count == 0 {
             &[][..]
         } else {
+            // SAFETY: `bindings` is non-null (checked above) and the plugin
+            // passes `count` initialised descriptors that outlive this call.
             unsafe { std::slice::from_raw_parts(bindings, count) }
         };
         let bindings: Vec<BufferBinding> = descs.iter().map(|&b| b.into()).collect();

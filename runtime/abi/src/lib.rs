@@ -15,6 +15,8 @@
 //!   [`host_side::DeformationProxy`] turns a plugin back into a
 //!   `voxflex_core::deformation::DeformationModel`.
 
+#![warn(missing_docs)]
+
 pub mod convert;
 pub mod ffi;
 pub mod guard;

@@ -13,7 +13,7 @@
 //!    reports a change — [`DeformationModel::dirty_region`] and
 //!    [`DeformationModel::map`].
 //!
-//! **Decision (see README, architecture):** `map` writes *displacements*
+//! **Decision (see docs/DESIGN.md, "Decisions"):** `map` writes *displacements*
 //! `u = x − X` in millimetres, not absolute positions. The two carry the same
 //! information, but displacements are exactly zero where nothing moved, so
 //! the identity field resamples a volume bit-exactly and small motions keep

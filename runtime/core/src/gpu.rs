@@ -7,7 +7,7 @@
 //! opaque [`BufferId`]s, so data passes between plugins and host services
 //! without a trip through the CPU.
 //!
-//! Layout rule (see DESIGN.md, "Backends"): bind only 32-bit scalar
+//! Layout rule (see docs/DESIGN.md, "Backends"): bind only 32-bit scalar
 //! structure-of-arrays buffers and never bind more than
 //! [`GpuLimits::max_storage_buffer_binding_size`] bytes at once (128 MiB on
 //! lavapipe); larger data is split into slabs.

@@ -25,6 +25,8 @@
 //! Cargo feature `test-support`: `test_data` (where the real test volumes
 //! are), for the tests of the crates above; off in release builds.
 
+#![warn(missing_docs)]
+
 pub mod camera;
 pub mod cut_polygon;
 pub mod deformation;

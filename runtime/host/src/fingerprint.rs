@@ -16,7 +16,7 @@
 //! Content hashes, not size and modification time: a same-size file copied
 //! over the source with its mtime kept (`cp -p`) changes the fingerprint.
 //! XXH3 hashes at memory speed; the cost is one read of the inputs per
-//! run, up to date or not (README, *Runs and the output directory*, has the
+//! run, up to date or not (docs/GUIDE.md, *Up to date*, has the
 //! measured time of an up-to-date run).
 //!
 //! The [`Stamp`] records the fingerprint and the size of every file the run

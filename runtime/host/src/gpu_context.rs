@@ -3,7 +3,7 @@
 //! device and queue.
 //!
 //! Everything GPU in voxflex — host services and plugins alike — goes through
-//! this one device (DESIGN.md, "The plugin boundary"): buffers are named by
+//! this one device (docs/DESIGN.md, "The plugin boundary"): buffers are named by
 //! opaque [`BufferId`]s, WGSL compute pipelines are compiled once per
 //! `(source, entry point)` and named by [`PipelineId`]s, and every pipeline
 //! uses one bind group (group 0) whose layout wgpu derives from the shader.

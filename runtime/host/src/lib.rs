@@ -9,6 +9,8 @@
 //! and lock ([`out_dir`]) and the `voxflex bench` measurements
 //! ([`mod@bench`]).
 
+#![warn(missing_docs)]
+
 pub mod backend;
 pub mod bench;
 pub mod fingerprint;

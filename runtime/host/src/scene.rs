@@ -373,7 +373,7 @@ pub struct RoiSettings {
     pub seed_slice: Option<SliceSeed>,
     /// Extinction scale λ: `"auto"` (the default: the plateau rule,
     /// `voxflex_opacity::auto_lambda`) or a number (the paper's is
-    /// 30, which leaks on contrast CT — see README "On contrast CT").
+    /// 30, which leaks on contrast CT — see docs/GUIDE.md "On contrast CT").
     #[serde(default = "default_lambda")]
     pub lambda: LambdaSetting,
     /// Intensity window `[lo, hi]` (volume units, HU for CT): voxels outside
@@ -404,8 +404,8 @@ pub struct RoiSettings {
 }
 
 /// `"auto"`: on the labelled abdomen the paper's λ = 30 is off the
-/// run-time/error front for every seed, the plateau rule on it (README,
-/// "Run-time/error fronts").
+/// run-time/error front for every seed, the plateau rule just behind it
+/// (docs/BENCHMARKS.md, "ROI maps").
 fn default_lambda() -> LambdaSetting {
     LambdaSetting::Word("auto".into())
 }

@@ -44,6 +44,8 @@
 //! Writes go through [`write_atomically`]: a temporary file in the target's
 //! directory, renamed over the target only once it is complete.
 
+#![warn(missing_docs)]
+
 pub mod metaimage;
 pub mod msh;
 pub mod nifti;

@@ -1,4 +1,4 @@
-//! Barycentric binding benchmark (`cargo bench -p voxflex-core --bench
+//! Barycentric binding benchmark (`cargo bench -p voxflex-mesh --bench
 //! barycentric`): every voxel of a 256³ volume (the sampling mesh's
 //! vertices) bound to a uniform tetrahedral proxy of about 20 k
 //! tetrahedra, then mapped (CPU path). Prints bind time, map time per frame

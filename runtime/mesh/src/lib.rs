@@ -18,6 +18,8 @@
 //! and small-feature fixtures, the CPU/GPU parity checks of the binding,
 //! and the field comparisons the plugins' parity tests share.
 
+#![warn(missing_docs)]
+
 pub mod barycentric;
 pub mod mesh_model;
 mod plugin;

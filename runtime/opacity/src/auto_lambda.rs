@@ -24,7 +24,7 @@
 //!    already jumps) it is the last candidate before the jump.
 //!
 //! The map is then grown once more at that λ. Figures (Dice per organ for
-//! this rule and for fixed λ on `phantom:abdomen`) are in the README and in
+//! this rule and for fixed λ on `phantom:abdomen`) are in docs/BENCHMARKS.md and in
 //! `docs/roi_dice_vs_lambda.md`.
 
 use super::OpacityError;
@@ -53,7 +53,7 @@ pub const JUMP: f64 = 1.0;
 
 /// Steps whose growth `r − 1` is within `(1 + FLAT_TOL)` times the
 /// flattest step's count as equally flat (0.25: measured on
-/// `phantom:abdomen` at 3 and 2 mm, see the README).
+/// `phantom:abdomen` at 3 and 2 mm, see docs/BENCHMARKS.md).
 pub const FLAT_TOL: f64 = 0.25;
 
 /// Regions smaller than this (voxels at opacity ≥ 0.5) do not start a

@@ -117,6 +117,8 @@
 //! function `f(x) = t(x) · (a + b · g(x))`, `g` a Gaussian at `d_s` with
 //! standard deviation σ_s, `a = 0.01`, `b = 0.99`.
 
+#![warn(missing_docs)]
+
 pub mod auto_lambda;
 pub mod bounds;
 pub mod cpu;

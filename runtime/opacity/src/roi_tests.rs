@@ -13,7 +13,7 @@ use voxflex_phantom::{LabelledVolume, abdomen_labelled};
 const DIMS: [usize; 3] = [120, 94, 80];
 
 /// Dice the automatic λ must reach per seed (measured 0.905, 0.779, 0.972
-/// at these dims: see README).
+/// at these dims: see docs/BENCHMARKS.md).
 fn auto_dice_min(name: &str) -> f64 {
     match name {
         "liver" => 0.88,

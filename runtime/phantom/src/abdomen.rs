@@ -6,7 +6,7 @@
 //! Field of view 360 × 280 × 240 mm (x patient-left, y posterior, z
 //! superior, LPS; centred on the world origin). Structures (world mm) and
 //! their values, portal-venous phase (~70 s after injection); sources in the
-//! README's "Spatial opacity maps" section:
+//! "On contrast CT" section of docs/GUIDE.md:
 //!
 //! | label | structure | HU |
 //! |---|---|---|

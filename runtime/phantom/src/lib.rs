@@ -28,6 +28,8 @@
 //! [`parse_source`] turns a scene's `source` string into a
 //! [`VolumeSource`]: `"phantom:head"` or a file path.
 
+#![warn(missing_docs)]
+
 // The voxflex-core modules this crate builds on, imported at the root so
 // `crate::grid`, `crate::volume`, ... read as they did when the phantoms
 // were a module of voxflex-core.

@@ -36,7 +36,7 @@ pub enum Interpolation {
     /// (the paper's scheme).
     Tetrahedral,
     /// Trilinear sampling of the source at the owner's barycentric rest
-    /// position (the default; see README, Benchmarks, for its cost).
+    /// position (the default; see docs/BENCHMARKS.md, "Resampling accuracy", for its cost).
     #[default]
     Trilinear,
 }

@@ -71,6 +71,8 @@
 //! (24 bytes per 64 cells) so the CPU can size the output and plan the
 //! dirty region. See [`gpu`].
 
+#![warn(missing_docs)]
+
 pub mod accuracy;
 pub mod blocks;
 pub mod cpu;
