@@ -504,141 +504,151 @@ impl Session {
             frame: self.frame,
             stages: vec![],
         };
-        match (
-            self.model.as_mut(),
-            self.displacements.as_mut(),
-            self.resample.as_mut(),
-        ) {
-            (Some(m), Some(disp), Some(res)) => {
-                // Stage: model.
-                let t = Instant::now();
-                let outcome = m.model.step(FrameInfo {
-                    frame: m.frame,
-                    frames: self.frames,
-                    dt_s: self.dt_s,
-                })?;
-                m.frame += 1;
-                let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);
-                self.metrics.stage("model").record_run(wall, 0);
-                if outcome.changed {
-                    self.versions.model += 1;
-                }
-                let why = if outcome.changed {
-                    format!("stepped; the model moved (version {})", self.versions.model)
-                } else {
-                    "stepped; the model did not move".to_string()
-                };
-                report.push("model", true, why, wall, 0);
-
-                // Stage: map.
-                let input = self.versions.model;
-                let due = self.versions.map.is_due(input);
-                let why = if !due && self.topology_changed {
-                    "a cut or carve changed the model's topology".to_string()
-                } else {
-                    self.versions.map.reason("model", input)
-                };
-                if due || std::mem::take(&mut self.topology_changed) {
-                    let t = Instant::now();
-                    self.dirty = self.dirty.union(m.model.dirty_region());
-                    m.map(disp)?;
-                    m.update_mask()?;
-                    self.versions.map.ran_on(input);
-                    self.topology_changed = false;
-                    let wall = t.elapsed();
-                    self.metrics
-                        .stage("map")
-                        .record_run(wall, self.source.grid.len() as u64);
-                    report.push("map", true, why, wall, self.source.grid.len() as u64);
-                } else {
-                    self.metrics.stage("map").skipped += 1;
-                    report.push("map", false, why, Duration::ZERO, 0);
-                }
-
-                // Stage: resample.
-                let input = self.versions.map.version;
-                let why = self.versions.resample.reason("map", input);
-                if self.versions.resample.is_due(input) {
-                    let t = Instant::now();
-                    let mask = m.mask.as_ref().map(|(mask, _)| mask);
-                    let r = res.run(
-                        &self.source,
-                        disp,
-                        mask,
-                        &self.gpu,
-                        self.dirty,
-                        self.wait_for_gpu,
-                    )?;
-                    self.dirty = DirtyRegion::None;
-                    self.versions.resample.ran_on(input);
-                    let wall = t.elapsed();
-                    self.metrics
-                        .stage("resample")
-                        .record_run(wall, r.voxels_touched);
-                    self.render_dirty = self
-                        .render_dirty
-                        .union(refilled_region(&r, res.resampler.output_grid()));
-                    if let Some(g) = res.resampler.output_grid() {
-                        self.metrics.output_dims = g.dims;
-                    }
-                    // Displacements (3 × f32) plus the resampler's own scratch.
-                    self.metrics.resample_extra_bytes_per_voxel = 12.0
-                        + res.resampler.scratch_bytes() as f64
-                            / self.source.grid.len().max(1) as f64;
-                    report.push(
-                        "resample",
-                        true,
-                        format!("{why}; {} voxels re-filled", r.voxels_touched),
-                        wall,
-                        r.voxels_touched,
-                    );
-                } else {
-                    self.metrics.stage("resample").skipped += 1;
-                    report.push("resample", false, why, Duration::ZERO, 0);
-                }
-            }
-            _ => {
-                for stage in ["model", "map", "resample"] {
-                    report.push(
-                        stage,
-                        false,
-                        "not built: the session has no model".into(),
-                        Duration::ZERO,
-                        0,
-                    );
-                }
+        if self.model.is_some() {
+            report.stages.push(self.model_stage()?);
+            report.stages.push(self.map_stage()?);
+            report.stages.push(self.resample_stage()?);
+        } else {
+            for stage in ["model", "map", "resample"] {
+                report.push(
+                    stage,
+                    false,
+                    "not built: the session has no model".into(),
+                    Duration::ZERO,
+                    0,
+                );
             }
         }
-
-        // Stage: roi (the session's maps, re-grown on a new volume).
         if !self.rois.is_empty() {
-            let input = self.versions.resample.version;
-            let why = self.versions.roi.reason("resample", input);
-            if self.versions.roi.is_due(input) {
-                let t = Instant::now();
-                self.ensure_volume()?;
-                let volume = match &self.resampled {
-                    Some((_, v)) => v,
-                    None => &self.source,
-                };
-                let mut visits = 0;
-                for r in &mut self.rois {
-                    visits += r.regrow(volume).map_err(roi_err)?.visits;
-                }
-                self.versions.roi.ran_on(input);
-                let wall = t.elapsed();
-                self.metrics.stage("roi").record_run(wall, visits);
-                report.push("roi", true, format!("{why}; maps re-grown"), wall, visits);
-            } else {
-                self.metrics.stage("roi").skipped += 1;
-                report.push("roi", false, why, Duration::ZERO, 0);
-            }
+            report.stages.push(self.roi_stage()?);
         }
         self.frame += 1;
         if self.counts_frames {
             self.metrics.frames = self.frame;
         }
         Ok(report)
+    }
+
+    /// Stage model: steps the model one frame (its own clock) with the
+    /// interactions handed over since the last step; a new model version
+    /// when it moved.
+    fn model_stage(&mut self) -> Result<StageOutcome, RunError> {
+        let m = self.model.as_mut().ok_or_else(no_model)?;
+        let t = Instant::now();
+        let outcome = m.model.step(FrameInfo {
+            frame: m.frame,
+            frames: self.frames,
+            dt_s: self.dt_s,
+        })?;
+        m.frame += 1;
+        let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);
+        self.metrics.stage("model").record_run(wall, 0);
+        let why = if outcome.changed {
+            self.versions.model += 1;
+            format!("stepped; the model moved (version {})", self.versions.model)
+        } else {
+            "stepped; the model did not move".to_string()
+        };
+        Ok(ran("model", why, wall, 0))
+    }
+
+    /// Stage map: the model's displacements at the sampling mesh's
+    /// vertices, and its removed tetrahedra, when the model moved — or
+    /// when a cut or carve changed its topology without moving it.
+    fn map_stage(&mut self) -> Result<StageOutcome, RunError> {
+        let input = self.versions.model;
+        let due = self.versions.map.is_due(input);
+        let topology = std::mem::take(&mut self.topology_changed);
+        let why = if !due && topology {
+            "a cut or carve changed the model's topology".to_string()
+        } else {
+            self.versions.map.reason("model", input)
+        };
+        if !(due || topology) {
+            self.metrics.stage("map").skipped += 1;
+            return Ok(skipped("map", why));
+        }
+        let (Some(m), Some(disp)) = (self.model.as_mut(), self.displacements.as_mut()) else {
+            return Err(no_model());
+        };
+        let t = Instant::now();
+        self.dirty = self.dirty.union(m.model.dirty_region());
+        m.map(disp)?;
+        m.update_mask()?;
+        self.versions.map.ran_on(input);
+        let wall = t.elapsed();
+        let points = self.source.grid.len() as u64;
+        self.metrics.stage("map").record_run(wall, points);
+        Ok(ran("map", why, wall, points))
+    }
+
+    /// Stage resample: the source re-sampled under the mapped
+    /// displacements over the dirty region, when the map moved.
+    fn resample_stage(&mut self) -> Result<StageOutcome, RunError> {
+        let input = self.versions.map.version;
+        let why = self.versions.resample.reason("map", input);
+        if !self.versions.resample.is_due(input) {
+            self.metrics.stage("resample").skipped += 1;
+            return Ok(skipped("resample", why));
+        }
+        let (Some(m), Some(disp), Some(res)) = (
+            self.model.as_ref(),
+            self.displacements.as_ref(),
+            self.resample.as_mut(),
+        ) else {
+            return Err(no_model());
+        };
+        let t = Instant::now();
+        let mask = m.mask.as_ref().map(|(mask, _)| mask);
+        let r = res.run(
+            &self.source,
+            disp,
+            mask,
+            &self.gpu,
+            self.dirty,
+            self.wait_for_gpu,
+        )?;
+        self.dirty = DirtyRegion::None;
+        self.versions.resample.ran_on(input);
+        let wall = t.elapsed();
+        self.metrics
+            .stage("resample")
+            .record_run(wall, r.voxels_touched);
+        let output_grid = res.resampler.output_grid();
+        self.render_dirty = self.render_dirty.union(refilled_region(&r, output_grid));
+        if let Some(g) = output_grid {
+            self.metrics.output_dims = g.dims;
+        }
+        // Displacements (3 × f32) plus the resampler's own scratch.
+        self.metrics.resample_extra_bytes_per_voxel =
+            12.0 + res.resampler.scratch_bytes() as f64 / self.source.grid.len().max(1) as f64;
+        let why = format!("{why}; {} voxels re-filled", r.voxels_touched);
+        Ok(ran("resample", why, wall, r.voxels_touched))
+    }
+
+    /// Stage roi: the session's maps re-grown (as far as they had grown)
+    /// on a new volume.
+    fn roi_stage(&mut self) -> Result<StageOutcome, RunError> {
+        let input = self.versions.resample.version;
+        let why = self.versions.roi.reason("resample", input);
+        if !self.versions.roi.is_due(input) {
+            self.metrics.stage("roi").skipped += 1;
+            return Ok(skipped("roi", why));
+        }
+        let t = Instant::now();
+        self.ensure_volume()?;
+        let volume = match &self.resampled {
+            Some((_, v)) => v,
+            None => &self.source,
+        };
+        let mut visits = 0;
+        for r in &mut self.rois {
+            visits += r.regrow(volume).map_err(roi_err)?.visits;
+        }
+        self.versions.roi.ran_on(input);
+        let wall = t.elapsed();
+        self.metrics.stage("roi").record_run(wall, visits);
+        Ok(ran("roi", format!("{why}; maps re-grown"), wall, visits))
     }
 
     /// Replaces the model with an instance of `plugin` (its parameters as
@@ -1034,6 +1044,32 @@ impl Drop for Session {
         self.model = None;
         self.release_gpu();
     }
+}
+
+/// A stage that did work.
+fn ran(stage: &'static str, why: String, wall: Duration, voxels: u64) -> StageOutcome {
+    StageOutcome {
+        stage,
+        ran: true,
+        why,
+        wall,
+        voxels,
+    }
+}
+
+/// A stage skipped because its input did not move.
+fn skipped(stage: &'static str, why: String) -> StageOutcome {
+    StageOutcome {
+        stage,
+        ran: false,
+        why,
+        wall: Duration::ZERO,
+        voxels: 0,
+    }
+}
+
+fn no_model() -> RunError {
+    RunError::Other("the session has no model; swap_model first".into())
 }
 
 fn roi_err(e: impl std::fmt::Display) -> RunError {
