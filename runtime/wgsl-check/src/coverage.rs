@@ -37,8 +37,8 @@ pub fn shaders_dir() -> PathBuf {
 /// `dir` with `/` separators, sorted.
 pub fn shader_files(dir: &Path) -> Vec<String> {
     fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) {
-        let entries = std::fs::read_dir(dir)
-            .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()));
+        let entries =
+            std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()));
         for entry in entries {
             let path = entry.expect("directory entry").path();
             if path.is_dir() {
@@ -135,7 +135,10 @@ mod tests {
         let clear = std::fs::read_to_string(dir.join("clear.wgsl")).unwrap();
         let sources = [format!("{common}\n{clear}")];
         let missing = uncovered_files("resample", sources.iter().map(String::as_str));
-        assert!(missing.contains(&"resample/raster.wgsl".to_owned()), "{missing:?}");
+        assert!(
+            missing.contains(&"resample/raster.wgsl".to_owned()),
+            "{missing:?}"
+        );
         assert!(!missing.contains(&"resample/common.wgsl".to_owned()));
         assert!(!missing.contains(&"resample/clear.wgsl".to_owned()));
     }

@@ -159,7 +159,12 @@ struct Params { n: u32, scale: f32, pad: vec2<u32>, origin: vec3<f32>, }
             .collect();
         assert_eq!(
             got,
-            [("n", 0, 4), ("scale", 4, 4), ("pad", 8, 8), ("origin", 16, 12)]
+            [
+                ("n", 0, 4),
+                ("scale", 4, 4),
+                ("pad", 8, 8),
+                ("origin", 16, 12)
+            ]
         );
         assert_eq!(l.size, 32, "vec3<f32> aligns the struct to 16");
     }
@@ -167,18 +172,38 @@ struct Params { n: u32, scale: f32, pad: vec2<u32>, origin: vec3<f32>, }
     #[test]
     fn a_matching_rust_struct_passes() {
         let s = crate::validate("layout", SRC);
-        crate::assert_struct_layout!(s, "Params", Params { n, scale, pad, origin });
+        crate::assert_struct_layout!(
+            s,
+            "Params",
+            Params {
+                n,
+                scale,
+                pad,
+                origin
+            }
+        );
     }
 
     #[test]
     #[should_panic(expected = "field 1: Rust `pad` (for `pad`) at 4 (8 bytes), WGSL `scale` at 4")]
     fn a_reordered_rust_struct_fails() {
         let s = crate::validate("layout", SRC);
-        crate::assert_struct_layout!(s, "Params", Shifted { n, pad, scale, origin });
+        crate::assert_struct_layout!(
+            s,
+            "Params",
+            Shifted {
+                n,
+                pad,
+                scale,
+                origin
+            }
+        );
     }
 
     #[test]
-    #[should_panic(expected = "field 2: Rust `scale` (for `pad`) at 12 (4 bytes), WGSL `pad` at 8 (8 bytes)")]
+    #[should_panic(
+        expected = "field 2: Rust `scale` (for `pad`) at 12 (4 bytes), WGSL `pad` at 8 (8 bytes)"
+    )]
     fn renamed_fields_are_still_checked_by_offset() {
         let s = crate::validate("layout", SRC);
         crate::assert_struct_layout!(s, "Params", Shifted { n, pad as "scale", scale as "pad", origin });
@@ -195,6 +220,15 @@ struct Params { n: u32, scale: f32, pad: vec2<u32>, origin: vec3<f32>, }
             origin: [f32; 8],
         }
         let s = crate::validate("layout", SRC);
-        crate::assert_struct_layout!(s, "Params", Longer { n, scale, pad, origin });
+        crate::assert_struct_layout!(
+            s,
+            "Params",
+            Longer {
+                n,
+                scale,
+                pad,
+                origin
+            }
+        );
     }
 }

@@ -27,8 +27,8 @@ mod shader;
 mod validate;
 
 pub use coverage::{SHADER_OWNERS, ShaderSet, shader_files, shaders_dir, uncovered_files};
-pub use layout::{MemberLayout, StructLayout};
 #[doc(hidden)]
 pub use layout::field_size as __field_size;
+pub use layout::{MemberLayout, StructLayout};
 pub use shader::Shader;
 pub use validate::{ShaderError, capabilities, try_validate, validate};

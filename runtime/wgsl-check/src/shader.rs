@@ -115,9 +115,7 @@ impl Shader {
             .iter()
             .find(|(_, v)| v.name.as_deref() == Some(var))
             .and_then(|(_, v)| v.binding.as_ref())
-            .unwrap_or_else(|| {
-                panic!("shader `{}` has no resource variable `{var}`", self.name)
-            })
+            .unwrap_or_else(|| panic!("shader `{}` has no resource variable `{var}`", self.name))
             .binding
     }
 

@@ -25,7 +25,11 @@ fn rust_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
 #[test]
 fn every_shader_directory_has_an_owner() {
     let files = shader_files(&shaders_dir());
-    assert!(!files.is_empty(), "no WGSL under {}", shaders_dir().display());
+    assert!(
+        !files.is_empty(),
+        "no WGSL under {}",
+        shaders_dir().display()
+    );
     let unowned: Vec<&String> = files
         .iter()
         .filter(|f| {
