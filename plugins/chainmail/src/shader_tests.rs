@@ -36,21 +36,49 @@ fn the_kernels_validate_and_share_chainmails_constants() {
     assert_eq!(s.workgroup_size("map_identity"), [MAP_WORKGROUP, 1, 1]);
 
     // Arrival keys: wave in the high bits, time in the low TIME_BITS.
-    assert_eq!(s.const_u32("WAVE_SHIFT"), TIME_BITS);
-    assert_eq!(s.const_u32("MAX_TIME"), MAX_TIME);
+    assert_eq!(
+        s.const_u32("WAVE_SHIFT"),
+        TIME_BITS,
+        "WAVE_SHIFT vs state::TIME_BITS"
+    );
+    assert_eq!(
+        s.const_u32("MAX_TIME"),
+        MAX_TIME,
+        "MAX_TIME vs state::MAX_TIME"
+    );
     let (shift, max_time) = (s.const_u32("WAVE_SHIFT"), s.const_u32("MAX_TIME"));
     let k = key(MAX_WAVE, MAX_TIME);
     assert_eq!((k >> shift, k & max_time), (MAX_WAVE, MAX_TIME));
 
     // Site byte: material (ABSENT = no element) and the held/fixed flags.
-    assert_eq!(s.const_u32("ABSENT"), u32::from(ABSENT));
-    assert_eq!(s.const_u32("HELD"), u32::from(HELD));
-    assert_eq!(s.const_u32("FIXED"), u32::from(FIXED));
-    assert_eq!(s.const_u32("CHANGED"), u32::from(CHANGED));
+    assert_eq!(
+        s.const_u32("ABSENT"),
+        u32::from(ABSENT),
+        "ABSENT vs lattice::ABSENT"
+    );
+    assert_eq!(
+        s.const_u32("HELD"),
+        u32::from(HELD),
+        "HELD vs lattice::HELD"
+    );
+    assert_eq!(
+        s.const_u32("FIXED"),
+        u32::from(FIXED),
+        "FIXED vs lattice::FIXED"
+    );
+    assert_eq!(
+        s.const_u32("CHANGED"),
+        u32::from(CHANGED),
+        "CHANGED vs blocks::CHANGED"
+    );
 
     // Buffer layouts.
-    assert_eq!(s.struct_layout("Params").size as usize, 4 * PARAM_WORDS);
-    assert_eq!(s.const_u32("LINK_WORDS") as usize, LINK_WORDS);
-    assert_eq!(s.const_u32("STAT_WORDS") as usize, STAT_WORDS);
+    assert_eq!(
+        s.struct_layout("Params").size as usize,
+        4 * PARAM_WORDS,
+        "Params vs PARAM_WORDS"
+    );
+    assert_eq!(s.const_u32("LINK_WORDS") as usize, LINK_WORDS, "LINK_WORDS");
+    assert_eq!(s.const_u32("STAT_WORDS") as usize, STAT_WORDS, "STAT_WORDS");
     set.finish();
 }
