@@ -61,6 +61,7 @@ rename() {
         -e "s#shaders/template#shaders/$name#g" \
         -e "s/template_plugin/${snake}_plugin/g" \
         -e "s/\"template\"/\"$name\"/g" \
+        -e "s#\"template/#\"$name/#g" \
         -e "s/\"template /\"$name /g" \
         -e "s/Template/$camel/g" \
         "$1"
@@ -87,12 +88,22 @@ if [[ $count -ne 2 ]]; then
     exit 1
 fi
 
+# The shader coverage guard (runtime/wgsl-check) names the module that
+# validates each shaders/ folder: the new folder's owner is the new crate.
+owners=runtime/wgsl-check/src/coverage.rs
+sed -i "s#^\(\s*\)(\"template\", \"plugins/template/src\"),\$#&\n\1(\"$name\", \"plugins/$name/src\"),#" "$owners"
+if ! grep -q "(\"$name\", \"plugins/$name/src\")" "$owners"; then
+    echo "error: could not add shaders/$name to SHADER_OWNERS in $owners; add it by hand" >&2
+    exit 1
+fi
+
 cat <<MSG
 created plugin \`$name\`:
   plugins/$name/            crate voxflex-$name → libvoxflex_$snake.so, types ${camel}Field, ${camel}Params
   shaders/$name/            its WGSL
   tests/tests/${snake}_plugin.rs   its integration test
   Cargo.toml                plugins/$name added to members and default-members
+  $owners   shaders/$name owned by plugins/$name/src (naga validation)
 next: change the STEP comments' code (docs/PLUGINS.md), then
   cargo build && cargo test -p voxflex-$name && cargo test -p voxflex-integration-tests --test ${snake}_plugin
 MSG

@@ -42,6 +42,8 @@ const FIXED: u32 = 0x80u;
 const CHANGED: u32 = 64u;
 const MAX_TIME: u32 = 0xfffffu;
 const WAVE_SHIFT: u32 = 20u;
+const LINK_WORDS: u32 = 5u;  // per material pair: d.x, d.y, d.z, weight, tau
+const STAT_WORDS: u32 = 4u;  // per listed block: face mask, visits, updates, largest move
 
 var<workgroup> wg_mask: atomic<u32>;
 var<workgroup> wg_visits: atomic<u32>;
@@ -84,20 +86,20 @@ fn material(n: u32) -> u32 {
 
 // Link table entry of materials a, b: (d, weight, tau).
 fn link_d(a: u32, b: u32) -> vec3<f32> {
-    let at = (a * p.counts.z + b) * 5u;
+    let at = (a * p.counts.z + b) * LINK_WORDS;
     return vec3<f32>(bitcast<f32>(links[at]), bitcast<f32>(links[at + 1u]), bitcast<f32>(links[at + 2u]));
 }
 
 fn link_weight(a: u32, b: u32) -> f32 {
-    return bitcast<f32>(links[(a * p.counts.z + b) * 5u + 3u]);
+    return bitcast<f32>(links[(a * p.counts.z + b) * LINK_WORDS + 3u]);
 }
 
 fn link_tau(a: u32, b: u32) -> u32 {
-    return links[(a * p.counts.z + b) * 5u + 4u];
+    return links[(a * p.counts.z + b) * LINK_WORDS + 4u];
 }
 
 fn elastic(m: u32) -> f32 {
-    return bitcast<f32>(links[p.counts.z * p.counts.z * 5u + m]);
+    return bitcast<f32>(links[p.counts.z * p.counts.z * LINK_WORDS + m]);
 }
 
 // The neighbour of element c along link l (+x, −x, +y, −y, +z, −z), or
@@ -255,10 +257,10 @@ fn propagate(
     atomicOr(&wg_mask, mask);
     workgroupBarrier();
     if (lid == 0u) {
-        atomicStore(&stats[4u * slot], atomicLoad(&wg_mask));
-        atomicStore(&stats[4u * slot + 1u], atomicLoad(&wg_visits));
-        atomicStore(&stats[4u * slot + 2u], atomicLoad(&wg_updates));
-        atomicStore(&stats[4u * slot + 3u], 0u);
+        atomicStore(&stats[STAT_WORDS * slot], atomicLoad(&wg_mask));
+        atomicStore(&stats[STAT_WORDS * slot + 1u], atomicLoad(&wg_visits));
+        atomicStore(&stats[STAT_WORDS * slot + 2u], atomicLoad(&wg_updates));
+        atomicStore(&stats[STAT_WORDS * slot + 3u], 0u);
     }
 }
 
@@ -337,11 +339,11 @@ fn relax(
         let m = atomicLoad(&wg_mask);
         let mv = atomicLoad(&wg_max);
         if (colour == 0u) {
-            atomicStore(&stats[4u * slot], m);
-            atomicStore(&stats[4u * slot + 3u], mv);
+            atomicStore(&stats[STAT_WORDS * slot], m);
+            atomicStore(&stats[STAT_WORDS * slot + 3u], mv);
         } else {
-            atomicOr(&stats[4u * slot], m);
-            atomicMax(&stats[4u * slot + 3u], mv);
+            atomicOr(&stats[STAT_WORDS * slot], m);
+            atomicMax(&stats[STAT_WORDS * slot + 3u], mv);
         }
     }
 }

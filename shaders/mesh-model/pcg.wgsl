@@ -49,6 +49,7 @@ const RR: u32 = 192u;   // r·r, for the stopping test
 
 const WG: u32 = 64u;
 const RED: u32 = 256u;
+const MAX_PARTIALS: u32 = 1024u; // first-pass partials per product (pcg_gpu.rs)
 
 fn flat(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     let row = nwg.x * WG;
@@ -212,7 +213,7 @@ fn advance() {
     scalars[RZ] = scalars[RZ_NEW];
 }
 
-var<workgroup> sums: array<f32, 256>;
+var<workgroup> sums: array<f32, RED>;
 
 fn reduce_into(lid: u32, value: f32) -> f32 {
     sums[lid] = value;
@@ -249,7 +250,7 @@ fn dot_partial(wg: u32, lid: u32, which: u32) {
     }
     let total = reduce_into(lid, acc);
     if (lid == 0u) {
-        partial[which * 1024u + wg] = total;
+        partial[which * MAX_PARTIALS + wg] = total;
     }
 }
 
@@ -277,7 +278,7 @@ fn dot_final(@builtin(local_invocation_index) lid: u32) {
     for (var which = 0u; which < 3u; which = which + 1u) {
         var acc = 0.0;
         for (var w = lid; w < p_.partials; w = w + RED) {
-            acc = acc + partial[which * 1024u + w];
+            acc = acc + partial[which * MAX_PARTIALS + w];
         }
         let total = reduce_into(lid, acc);
         if (lid == 0u) {

@@ -26,6 +26,7 @@ fn scratch_checkout() -> tempfile::TempDir {
         "tests/tests/template_plugin.rs",
         "scripts/new-plugin.sh",
         "Cargo.toml",
+        "runtime/wgsl-check/src/coverage.rs",
     ] {
         copy_tree(rel);
     }
@@ -135,6 +136,12 @@ fn new_plugin_script_copies_the_template_under_the_new_names() {
         "{cargo}"
     );
     assert_eq!(cargo.matches("\"plugins/template\",").count(), 2, "{cargo}");
+    // Its shader folder has an owner for the naga coverage guard.
+    let owners = read(root, "runtime/wgsl-check/src/coverage.rs");
+    assert!(
+        owners.contains("(\"soft-ball\", \"plugins/soft-ball/src\"),"),
+        "{owners}"
+    );
     // The template itself is untouched.
     assert_eq!(
         read(root, "plugins/template/src/lib.rs"),

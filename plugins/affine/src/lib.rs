@@ -42,6 +42,10 @@ use voxflex_core::volume::VolumeView;
 /// The WGSL twin of [`field::FieldUniforms::displacement`].
 pub const FIELD_WGSL: &str = include_str!("../../../shaders/affine/field.wgsl");
 
+/// Threads per workgroup of the field kernel (`@workgroup_size` in
+/// `field.wgsl`).
+const WORKGROUP: u32 = 64;
+
 enum Binding {
     Lattice(Grid),
     List {
@@ -216,7 +220,11 @@ impl AffineField {
             BufferBinding::whole(5, out[1]),
             BufferBinding::whole(6, out[2]),
         ];
-        gpu.dispatch(pipeline, &bindings, gpu.workgroups_for(n as u64, 64)?)?;
+        gpu.dispatch(
+            pipeline,
+            &bindings,
+            gpu.workgroups_for(n as u64, WORKGROUP)?,
+        )?;
         Ok(())
     }
 }
@@ -344,6 +352,9 @@ impl DeformationPlugin for AffineField {
 }
 
 voxflex_abi::export_deformation_plugin!(AffineField);
+
+#[cfg(test)]
+mod shader_tests;
 
 #[cfg(test)]
 mod tests {

@@ -42,6 +42,11 @@ pub const CHAINMAIL_WGSL: &str = include_str!("../../../shaders/chainmail/chainm
 const PARAM_WORDS: usize = 20;
 /// Result words per listed block: face mask, visits, updates, largest move.
 const STAT_WORDS: usize = 4;
+/// Words per material pair in the link table: d x, y, z and weight (f32
+/// bits), tau (`LINK_WORDS` in the shader).
+const LINK_WORDS: usize = 5;
+/// Threads per workgroup of `map_identity` (one invocation per voxel).
+const MAP_WORKGROUP: u32 = 64;
 
 /// What the kernels report for one launch.
 struct Results {
@@ -99,15 +104,16 @@ impl GpuChainMail {
             )));
         }
         let m = lat.materials.len();
-        let mut table = Vec::with_capacity(m * m * 5 + m);
+        let mut table = Vec::with_capacity(m * m * LINK_WORDS + m);
         for l in &lat.links {
-            table.extend([
+            let record: [u32; LINK_WORDS] = [
                 l.d[0].to_bits(),
                 l.d[1].to_bits(),
                 l.d[2].to_bits(),
                 l.weight.to_bits(),
                 l.tau,
-            ]);
+            ];
+            table.extend(record);
         }
         table.extend(lat.materials.iter().map(|mat| mat.elastic.to_bits()));
         let [nx, ny, nz] = lat.dims.map(|d| d as u32);
@@ -390,7 +396,7 @@ impl GpuChainMail {
         ];
         let groups = self
             .gpu
-            .workgroups_for(voxels as u64, 64)
+            .workgroups_for(voxels as u64, MAP_WORKGROUP)
             .map_err(gpu_err)?;
         self.gpu
             .dispatch(self.map, &bindings, groups)
@@ -412,3 +418,7 @@ impl Drop for GpuChainMail {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;

@@ -20,6 +20,11 @@ use voxflex_mesh::mesh_model::{Boundary, NodeState};
 /// The kernels.
 pub const SPRINGS_WGSL: &str = include_str!("../../../shaders/mass-spring/springs.wgsl");
 
+/// Threads per workgroup of every kernel (`WG` in `springs.wgsl`).
+const WORKGROUP: u32 = 64;
+/// 32-bit words of the kernels' `Params`.
+const PARAM_WORDS: usize = 8;
+
 fn gpu_err(e: impl std::fmt::Display) -> ModelError {
     ModelError(format!("mass-spring (GPU): {e}"))
 }
@@ -80,7 +85,7 @@ impl GpuSprings {
         let g = &*gpu;
         let buffers = (|| {
             Ok::<_, voxflex_core::error::GpuError>((
-                g.create_buffer(32, "mass-spring params")?,
+                g.create_buffer(4 * PARAM_WORDS as u64, "mass-spring params")?,
                 g.upload(&table.geometry, "mass-spring springs")?,
                 g.upload(&table.ends, "mass-spring ends")?,
                 g.upload(&table.kc, "mass-spring stiffness and damping")?,
@@ -200,7 +205,9 @@ impl GpuSprings {
             bind(16, self.tet_corners),
             bind(17, self.tet_geom),
         ];
-        let tet_groups = g.workgroups_for(self.tets as u64, 64).map_err(gpu_err)?;
+        let tet_groups = g
+            .workgroups_for(self.tets as u64, WORKGROUP)
+            .map_err(gpu_err)?;
         let node_bindings = [
             bind(0, self.params),
             bind(4, self.force),
@@ -229,11 +236,15 @@ impl GpuSprings {
             Some([a, b, c, d]) => Some([a?, b?, c?, d?]),
             None => None,
         };
-        let spring_groups = g.workgroups_for(self.springs as u64, 64).map_err(gpu_err)?;
-        let node_groups = g.workgroups_for(self.nodes as u64, 64).map_err(gpu_err)?;
+        let spring_groups = g
+            .workgroups_for(self.springs as u64, WORKGROUP)
+            .map_err(gpu_err)?;
+        let node_groups = g
+            .workgroups_for(self.nodes as u64, WORKGROUP)
+            .map_err(gpu_err)?;
         for s in 1..=substeps {
             let frac = s as f32 / substeps as f32;
-            let params: [u32; 8] = [
+            let params: [u32; PARAM_WORDS] = [
                 self.springs as u32,
                 self.nodes as u32,
                 (h as f32).to_bits(),
@@ -335,3 +346,7 @@ impl Drop for GpuSprings {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;

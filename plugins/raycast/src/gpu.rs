@@ -35,6 +35,12 @@ pub const CELLS_WGSL: &str = include_str!("../../../shaders/raycast/cells.wgsl")
 /// The WGSL of the leap-distance kernel (one separable pass per dispatch).
 pub const LEAP_WGSL: &str = include_str!("../../../shaders/raycast/leap.wgsl");
 
+/// Threads per workgroup of the `cells.wgsl` and `leap.wgsl` kernels (one
+/// invocation per macro-cell, `@workgroup_size(64, 1, 1)`).
+const CELL_WORKGROUP: u32 = 64;
+/// Pixels per side of a `raycast.wgsl` workgroup (`@workgroup_size(8, 8, 1)`).
+const PIXEL_TILE: u64 = 8;
+
 /// Uniforms of `leap.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -283,7 +289,7 @@ impl GpuRenderer {
                 },
                 BufferBinding::whole(2, accel),
             ],
-            self.gpu.workgroups_for(n as u64, 64)?,
+            self.gpu.workgroups_for(n as u64, CELL_WORKGROUP)?,
         )?;
         Ok(fresh)
     }
@@ -323,7 +329,7 @@ impl GpuRenderer {
         let t = total as u32;
         let (a, b) = (base + 2 * t, base + 3 * t);
         let pipeline = self.gpu.compile(LEAP_WGSL, "main")?;
-        let groups = self.gpu.workgroups_for(total as u64, 64)?;
+        let groups = self.gpu.workgroups_for(total as u64, CELL_WORKGROUP)?;
         // x: emptiness → a, y: a → b, z: b → a.
         for (axis, (src, dst)) in [(a, a), (a, b), (b, a)].into_iter().enumerate() {
             let u = LeapUniforms {
@@ -396,10 +402,10 @@ impl GpuRenderer {
             return Err(too_big("the image", bytes, self.max_binding()));
         }
         let limit = self.gpu.limits().max_compute_workgroups_per_dimension as u64;
-        let groups = [w.div_ceil(8), h.div_ceil(8)];
+        let groups = [w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE)];
         if groups.iter().any(|&g| g > limit) {
             return Err(ModelError(format!(
-                "a {w}×{h} image needs {groups:?} workgroups of 8×8, above the GPU's {limit} per dimension"
+                "a {w}×{h} image needs {groups:?} workgroups of {PIXEL_TILE}×{PIXEL_TILE}, above the GPU's {limit} per dimension"
             )));
         }
         let target = match out {
@@ -503,3 +509,7 @@ impl Drop for GpuRenderer {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;

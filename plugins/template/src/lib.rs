@@ -71,3 +71,6 @@ impl DeformationPlugin for TemplateField {
 // The one line that makes this crate a plugin: it exports
 // `voxflex_plugin_v1` with the ABI version and layout hash the host checks.
 voxflex_abi::export_deformation_plugin!(TemplateField);
+
+#[cfg(test)]
+mod shader_tests;

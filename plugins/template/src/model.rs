@@ -25,7 +25,7 @@ use voxflex_core::volume::VolumeView;
 pub const FIELD_WGSL: &str = include_str!("../../../shaders/template/bulge.wgsl");
 
 /// Threads per workgroup of the kernel (`@workgroup_size` in the WGSL).
-const WORKGROUP: u32 = 64;
+pub(crate) const WORKGROUP: u32 = 64;
 
 /// A point set the host bound (`bind`), and its device copy once a GPU
 /// `map` needed one.

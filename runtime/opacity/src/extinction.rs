@@ -32,7 +32,7 @@ pub const SANE_MAX: f32 = 1e30;
 
 /// Bound on `|e_v|` before rounding: twice the full fixed-point range, so a
 /// clamped value still extinguishes (or lifts) fully.
-const E_BOUND: f32 = 131_072.0;
+pub(crate) const E_BOUND: f32 = 131_072.0;
 
 /// `x.round_ties_even()` for `|x| ≤ 2²²`, without a libm call: adding
 /// `1.5 · 2²³` leaves no fraction bits, so the addition itself rounds to

@@ -643,3 +643,7 @@ impl Growth for GpuGrowth {
         &self.state
     }
 }
+
+#[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;

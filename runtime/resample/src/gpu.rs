@@ -568,6 +568,10 @@ impl Kernels for GpuKernels<'_> {
 }
 
 #[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
 

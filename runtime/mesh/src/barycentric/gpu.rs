@@ -15,6 +15,11 @@ use crate::tet_mesh::TetMesh;
 /// The map kernel.
 pub const MAP_WGSL: &str = include_str!("../../../../shaders/barycentric/map.wgsl");
 
+/// Threads per workgroup of the map kernel (`@workgroup_size` in `map.wgsl`).
+const WORKGROUP: u32 = 64;
+/// Bytes of the kernel's `Params` (the point count and three unused words).
+const PARAMS_BYTES: u64 = 16;
+
 /// A binding on the device.
 #[derive(Debug)]
 pub struct GpuBinding {
@@ -54,7 +59,7 @@ impl BarycentricBinding {
             w12: gpu.upload(&w12, "barycentric weights 1-2")?,
             w3: gpu.upload(&w3, "barycentric weights 3")?,
             tets: gpu.upload(&mesh.tets, "barycentric tetrahedra")?,
-            params: gpu.create_buffer(16, "barycentric params")?,
+            params: gpu.create_buffer(PARAMS_BYTES, "barycentric params")?,
             points: self.len(),
         })
     }
@@ -109,7 +114,11 @@ impl GpuBinding {
                 slab(7, out[1], 4),
                 slab(8, out[2], 4),
             ];
-            gpu.dispatch(pipeline, &bindings, gpu.workgroups_for(count as u64, 64)?)?;
+            gpu.dispatch(
+                pipeline,
+                &bindings,
+                gpu.workgroups_for(count as u64, WORKGROUP)?,
+            )?;
             first += count;
         }
         Ok(())
@@ -122,3 +131,7 @@ impl GpuBinding {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;

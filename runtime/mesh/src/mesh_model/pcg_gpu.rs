@@ -31,6 +31,10 @@ const RED: u64 = 256;
 const MAX_PARTIALS: u64 = 1024;
 /// Words between scalar slots (256-byte offsets).
 const SLOT: usize = 64;
+/// Threads per workgroup of the per-node kernels (`WG` in `pcg.wgsl`).
+const WORKGROUP: u32 = 64;
+/// Bytes of the kernels' `Params` (node count, partials, two unused words).
+const PARAMS_BYTES: u64 = 16;
 
 /// The solver's buffers and pipelines on the device.
 pub struct GpuPcg {
@@ -102,7 +106,7 @@ impl GpuPcg {
         let g = &*gpu;
         let vector = |label: &str| g.create_buffer(16 * nodes.max(1) as u64, label);
         let bufs = Buffers {
-            params: g.create_buffer(16, "pcg params")?,
+            params: g.create_buffer(PARAMS_BYTES, "pcg params")?,
             row_start: g.upload(&a.row_start, "pcg row starts")?,
             col: g.upload(&a.col, "pcg columns")?,
             blocks: g.create_buffer(48 * blocks.max(1) as u64, "pcg blocks")?,
@@ -233,7 +237,7 @@ impl GpuPcg {
 
         let bb = &self.bufs;
         let w = |i: u32, id: BufferId| BufferBinding::whole(i, id);
-        let nodes_groups = g.workgroups_for(n as u64, 64)?;
+        let nodes_groups = g.workgroups_for(n as u64, WORKGROUP)?;
         let red_groups = [partials as u32, 1, 1];
         let k = &self.kernels;
         let run = |pipeline: PipelineId, bindings: &[BufferBinding], groups: [u32; 3]| {
@@ -411,3 +415,7 @@ impl Drop for GpuPcg {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "shader_tests.rs"]
+mod shader_tests;

@@ -1,0 +1,84 @@
+//! The ChainMail kernels' WGSL checked without a GPU: the module validates
+//! as wgpu would accept it, declares exactly the kernels [`GpuChainMail`]
+//! compiles, and agrees with the Rust side on the key layout (wave/time
+//! split), the site flag bits, the block-changed bit, the buffer layouts
+//! (`Params` words, link records, result words) and the workgroup sizes.
+
+use super::*;
+use crate::blocks::CHANGED;
+use crate::lattice::{ABSENT, FIXED, HELD};
+use crate::state::{MAX_TIME, MAX_WAVE, TIME_BITS, key};
+use voxflex_wgsl_check::ShaderSet;
+
+/// The entry points `GpuChainMail::new` compiles.
+const KERNELS: [&str; 4] = ["propagate", "relax", "sync_copies", "map_identity"];
+
+#[test]
+fn the_kernels_validate_and_share_chainmails_constants() {
+    let mut set = ShaderSet::new("chainmail");
+    let s = set.validate("chainmail/chainmail.wgsl", CHAINMAIL_WGSL);
+    let mut declared = s.compute_entry_points();
+    declared.sort_unstable();
+    let mut compiled = KERNELS;
+    compiled.sort_unstable();
+    assert_eq!(
+        declared, compiled,
+        "kernels declared vs compiled by GpuChainMail"
+    );
+
+    // Block kernels run one workgroup per listed block (`workgroups_for(len,
+    // 1)`) and stride their threads by WG; map_identity is one invocation per
+    // voxel in workgroups of MAP_WORKGROUP.
+    let wg = s.const_u32("WG");
+    for k in KERNELS {
+        assert_eq!(s.workgroup_size(k), [wg, 1, 1], "{k} strides by WG");
+    }
+    assert_eq!(s.workgroup_size("map_identity"), [MAP_WORKGROUP, 1, 1]);
+
+    // Arrival keys: wave in the high bits, time in the low TIME_BITS.
+    assert_eq!(
+        s.const_u32("WAVE_SHIFT"),
+        TIME_BITS,
+        "WAVE_SHIFT vs state::TIME_BITS"
+    );
+    assert_eq!(
+        s.const_u32("MAX_TIME"),
+        MAX_TIME,
+        "MAX_TIME vs state::MAX_TIME"
+    );
+    let (shift, max_time) = (s.const_u32("WAVE_SHIFT"), s.const_u32("MAX_TIME"));
+    let k = key(MAX_WAVE, MAX_TIME);
+    assert_eq!((k >> shift, k & max_time), (MAX_WAVE, MAX_TIME));
+
+    // Site byte: material (ABSENT = no element) and the held/fixed flags.
+    assert_eq!(
+        s.const_u32("ABSENT"),
+        u32::from(ABSENT),
+        "ABSENT vs lattice::ABSENT"
+    );
+    assert_eq!(
+        s.const_u32("HELD"),
+        u32::from(HELD),
+        "HELD vs lattice::HELD"
+    );
+    assert_eq!(
+        s.const_u32("FIXED"),
+        u32::from(FIXED),
+        "FIXED vs lattice::FIXED"
+    );
+    assert_eq!(
+        s.const_u32("CHANGED"),
+        u32::from(CHANGED),
+        "CHANGED vs blocks::CHANGED"
+    );
+
+    // Buffer layouts.
+    assert_eq!(
+        s.struct_layout("Params").size as usize,
+        4 * PARAM_WORDS,
+        "Params vs PARAM_WORDS"
+    );
+    assert_eq!(s.const_u32("LINK_WORDS") as usize, LINK_WORDS, "LINK_WORDS");
+    assert_eq!(s.const_u32("STAT_WORDS") as usize, STAT_WORDS, "STAT_WORDS");
+    set.finish();
+}
