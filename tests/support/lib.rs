@@ -8,6 +8,9 @@
 
 #![warn(missing_docs)]
 
+mod field_parity;
+pub use field_parity::{FieldParity, field_parity, field_plugin_on_gpu};
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

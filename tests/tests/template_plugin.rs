@@ -6,12 +6,8 @@
 //! plugin starts with these checks.
 
 use std::sync::Arc;
-use voxflex_abi::host_side::{DeformationProxy, HostServices};
-use voxflex_core::deformation::{
-    DeformationModel, DisplacementTarget, ExecutionBackend, FrameInfo, RestPoints,
-};
 use voxflex_core::glam::DVec3;
-use voxflex_core::gpu::{GpuService, GpuServiceExt};
+use voxflex_core::gpu::GpuService;
 use voxflex_core::grid::Grid;
 use voxflex_integration_tests::*;
 use voxflex_runtime::gpu_context::testing::test_gpu;
@@ -155,27 +151,6 @@ fn bad_template_params_are_refused_by_validate_naming_the_key() {
     );
 }
 
-/// The plugin loaded from its `.so`, initialised on the GPU backend.
-fn load_on_gpu(gpu: Arc<dyn GpuService>, params: &str, grid: Grid) -> DeformationProxy {
-    let p = voxflex_runtime::plugin_loader::load_by_name(PLUGIN, &[plugin_dir(&[PLUGIN])]).unwrap();
-    let services = HostServices::new(Some(gpu), 2);
-    // SAFETY: the loader checked the library's ABI version and layout hash,
-    // and plugin libraries are never unloaded, so the vtable outlives the proxy.
-    let mut m =
-        unsafe { DeformationProxy::create(PLUGIN, p.deformation.unwrap(), params, services) }
-            .unwrap();
-    let data = vec![0u8; grid.len()];
-    m.init(
-        voxflex_core::volume::VolumeView {
-            grid,
-            data: voxflex_core::volume::VoxelSlice::U8(&data),
-        },
-        ExecutionBackend::Gpu,
-    )
-    .unwrap();
-    m
-}
-
 #[test]
 fn template_plugin_wgsl_field_matches_its_rayon_field() {
     let Some(gpu) = test_gpu() else { return };
@@ -185,47 +160,13 @@ fn template_plugin_wgsl_field_matches_its_rayon_field() {
         "radius_mm = 12\namplitude_mm = 6",
         "centre = [4, -3, 2]\nradius_mm = 9\namplitude_mm = -5\nramp_frames = 4",
     ] {
-        let mut m = load_on_gpu(gpu.clone(), params, grid);
-        let pts: Vec<[f32; 3]> = (0..grid.len())
-            .step_by(3)
-            .map(|n| RestPoints::Lattice(grid).point(n).as_vec3().to_array())
-            .collect();
-        for rest in [RestPoints::Lattice(grid), RestPoints::Points(&pts)] {
-            let n = rest.len();
-            let b = m.bind(rest).unwrap();
-            m.step(FrameInfo {
-                frame: 0,
-                frames: 1,
-                dt_s: 0.0,
-            })
-            .unwrap();
-            let mut cpu = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
-            let [x, y, z] = &mut cpu;
-            m.map(b, DisplacementTarget::Cpu { x, y, z }).unwrap();
-            let ids = [0, 1, 2].map(|_| gpu.create_buffer(n as u64 * 4, "d").unwrap());
-            m.map(
-                b,
-                DisplacementTarget::Gpu {
-                    x: ids[0],
-                    y: ids[1],
-                    z: ids[2],
-                },
-            )
-            .unwrap();
-            let mut worst = 0f32;
-            for (a, id) in ids.iter().enumerate() {
-                let mut g = vec![0f32; n];
-                gpu.download(*id, &mut g).unwrap();
-                gpu.destroy_buffer(*id);
-                for (c, g) in cpu[a].iter().zip(&g) {
-                    worst = worst.max((c - g).abs());
-                }
-            }
-            let largest = cpu.iter().flatten().fold(0f32, |a, v| a.max(v.abs()));
-            assert!(largest > 0.1, "{params}: the field must move something");
+        let mut m = field_plugin_on_gpu(gpu.clone(), PLUGIN, params, grid);
+        for r in field_parity(&mut m, gpu.as_ref(), grid, 3) {
+            assert!(r.largest > 0.1, "{params}: the field must move something");
             assert!(
-                worst <= 1e-5,
-                "{params}: GPU and CPU fields differ by {worst} mm"
+                r.worst <= 1e-5,
+                "{params}: GPU and CPU fields differ by {} mm",
+                r.worst
             );
         }
     }
