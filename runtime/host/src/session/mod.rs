@@ -11,7 +11,8 @@
 //! moved (a model that did not move re-runs nothing downstream) and says
 //! what ran and why ([`StepReport`]). [`Session::render`] and
 //! [`Session::slice`] make images in memory; ROI maps are grown stepwise
-//! ([`Session::add_roi`], [`Session::roi_step`]) and shown by `render`.
+//! ([`Session::add_roi`], [`Session::roi_step`]) on the session's backend
+//! (CPU or GPU) and shown by `render`.
 //! A scene run ([`crate::pipeline::run_scene`]) is a loop over a session
 //! that writes files; `voxflex bench` times the same stages.
 //!
@@ -682,8 +683,9 @@ impl Session {
     /// returns the adapter computing now (`cpu` for the CPU path). The
     /// model is rebuilt on the source at rest with the same plugin and
     /// parameters (a plugin's state cannot move between backends); the
-    /// resampled volume and the ROI maps are kept, and the next step maps
-    /// and resamples in full.
+    /// resampled volume is kept, the ROI maps are re-grown on the new
+    /// backend as far as they had grown, and the next step maps and
+    /// resamples in full.
     pub fn set_backend(&mut self, choice: BackendChoice) -> Result<String, RunError> {
         let model = self.model.as_ref().map(|m| m.plugin.clone());
         let resolved_choice = choice_for(&self.context, choice, model.as_ref())?;
@@ -951,8 +953,10 @@ impl Session {
     }
 
     /// Seeds an ROI map on the current volume (no step yet; see
-    /// [`Self::roi_step`]). The map is re-grown as far again whenever the
-    /// volume changes, and shown by [`Self::render`].
+    /// [`Self::roi_step`]) on the session's backend: the CPU, or the GPU
+    /// over one upload of the current volume shared by every map. The map
+    /// is re-grown as far again whenever the volume or the backend
+    /// changes, and shown by [`Self::render`].
     pub fn add_roi(&mut self, seed: Seed, params: GrowthParams) -> Result<RoiId, RunError> {
         self.ensure_volume()?;
         self.ensure_roi_values()?;
