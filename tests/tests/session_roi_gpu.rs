@@ -181,10 +181,13 @@ fn a_new_volume_regrows_the_gpu_maps_as_the_cpu_would() {
         "the dragged face moves the map"
     );
     let volume = gpu.volume().unwrap().clone();
-    let mut cpu = Session::from_volume(volume, SessionDefaults {
-        backend: BackendChoice::Cpu,
-        ..SessionDefaults::default()
-    })
+    let mut cpu = Session::from_volume(
+        volume,
+        SessionDefaults {
+            backend: BackendChoice::Cpu,
+            ..SessionDefaults::default()
+        },
+    )
     .unwrap();
     let s = cpu.add_roi(seed(), params).unwrap();
     let e = cpu
