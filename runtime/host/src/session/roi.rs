@@ -49,7 +49,15 @@ pub(crate) enum RoiDevice<'a> {
     },
 }
 
-impl RoiDevice<'_> {
+impl<'a> RoiDevice<'a> {
+    /// The GPU context, if any.
+    pub(crate) fn gpu(&self) -> Option<&'a dyn GpuService> {
+        match self {
+            RoiDevice::Cpu => None,
+            RoiDevice::Gpu { gpu, .. } => Some(*gpu),
+        }
+    }
+
     fn name(&self) -> &'static str {
         match self {
             RoiDevice::Cpu => "CPU",
@@ -267,16 +275,6 @@ impl SessionRoi {
             steps: self.steps,
             converged: self.converged,
             voxels_above_half: voxflex_opacity::runner::voxels_above_half(&self.map),
-        }
-    }
-}
-
-impl<'a> RoiDevice<'a> {
-    /// The GPU context, if any.
-    pub(crate) fn gpu(&self) -> Option<&'a dyn GpuService> {
-        match self {
-            RoiDevice::Cpu => None,
-            RoiDevice::Gpu { gpu, .. } => Some(*gpu),
         }
     }
 }
