@@ -11,7 +11,8 @@
 //! moved (a model that did not move re-runs nothing downstream) and says
 //! what ran and why ([`StepReport`]). [`Session::render`] and
 //! [`Session::slice`] make images in memory; ROI maps are grown stepwise
-//! ([`Session::add_roi`], [`Session::roi_step`]) and shown by `render`.
+//! ([`Session::add_roi`], [`Session::roi_step`]) on the session's backend
+//! (CPU or GPU) and shown by `render`.
 //! A scene run ([`crate::pipeline::run_scene`]) is a loop over a session
 //! that writes files; `voxflex bench` times the same stages.
 //!
@@ -72,7 +73,7 @@ use crate::plugin_loader::{self, LoadedPlugin, PluginListing};
 use crate::scene::{CameraSettings, RenderSettings, Scene};
 use crate::visualise::{RenderStage, RgbaImage, camera_for};
 use model_stage::{Displacements, ModelStage, ResampleStage, refilled_region};
-use roi::SessionRoi;
+use roi::{RoiDevice, SessionRoi};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -83,7 +84,7 @@ use voxflex_core::gpu::GpuService;
 use voxflex_core::interaction::InteractionSpec;
 use voxflex_core::volume::{Volume, VoxelData};
 use voxflex_io::png::{SliceAxis, Window, render_slice};
-use voxflex_opacity::{GrowthParams, GrowthReport, OpacityMap, Seed};
+use voxflex_opacity::{GpuOpacityVolume, GrowthParams, GrowthReport, OpacityMap, Seed};
 use voxflex_phantom::phantom;
 use voxflex_resample::ResampleParams;
 
@@ -158,6 +159,10 @@ pub struct Session {
     renderer: Option<RendererSlot>,
     rois: Vec<SessionRoi>,
     next_roi: u64,
+    /// The current volume uploaded for the ROI maps growing on the GPU,
+    /// with the resample version it holds (0: the source); `None` on the
+    /// CPU or without GPU ROI maps.
+    roi_values: Option<(u64, GpuOpacityVolume)>,
     versions: Versions,
     /// Source region (mm) the model moved since the last resample.
     dirty: DirtyRegion,
@@ -315,6 +320,7 @@ impl Session {
             renderer: None,
             rois: vec![],
             next_roi: 0,
+            roi_values: None,
             versions: Versions::default(),
             dirty: DirtyRegion::None,
             render_dirty: DirtyRegion::All,
@@ -403,6 +409,7 @@ impl Session {
             renderer: None,
             rois: vec![],
             next_roi: 0,
+            roi_values: None,
             versions: Versions::default(),
             dirty: DirtyRegion::None,
             render_dirty: DirtyRegion::All,
@@ -637,13 +644,11 @@ impl Session {
         }
         let t = Instant::now();
         self.ensure_volume()?;
-        let volume = match &self.resampled {
-            Some((_, v)) => v,
-            None => &self.source,
-        };
+        self.ensure_roi_values()?;
+        let (rois, volume, device) = self.roi_parts();
         let mut visits = 0;
-        for r in &mut self.rois {
-            visits += r.regrow(volume).map_err(roi_err)?.visits;
+        for r in rois {
+            visits += r.regrow(volume, device)?.visits;
         }
         self.versions.roi.ran_on(input);
         let wall = t.elapsed();
@@ -678,8 +683,9 @@ impl Session {
     /// returns the adapter computing now (`cpu` for the CPU path). The
     /// model is rebuilt on the source at rest with the same plugin and
     /// parameters (a plugin's state cannot move between backends); the
-    /// resampled volume and the ROI maps are kept, and the next step maps
-    /// and resamples in full.
+    /// resampled volume is kept, the ROI maps are re-grown on the new
+    /// backend as far as they had grown, and the next step maps and
+    /// resamples in full.
     pub fn set_backend(&mut self, choice: BackendChoice) -> Result<String, RunError> {
         let model = self.model.as_ref().map(|m| m.plugin.clone());
         let resolved_choice = choice_for(&self.context, choice, model.as_ref())?;
@@ -722,10 +728,85 @@ impl Session {
         if let Some((p, params)) = renderer {
             self.build_renderer(&p, &params)?;
         }
+        // The ROI maps re-grown on the new backend as far as before.
+        self.follow_rois()?;
         Ok(())
     }
 
+    /// Re-grows on the session's backend, as far as before, every ROI map
+    /// whose growth was released or lives on the other backend.
+    fn follow_rois(&mut self) -> Result<(), RunError> {
+        if self.rois.is_empty() {
+            return Ok(());
+        }
+        self.ensure_volume()?;
+        self.ensure_roi_values()?;
+        let (rois, volume, device) = self.roi_parts();
+        for r in rois {
+            r.follow(volume, device)?;
+        }
+        Ok(())
+    }
+
+    /// Uploads the current volume for the ROI maps when the session
+    /// computes on the GPU and the copy there is missing or older (after
+    /// [`Self::ensure_volume`]); nothing on the CPU.
+    fn ensure_roi_values(&mut self) -> Result<(), RunError> {
+        let Some(gpu) = &self.gpu else {
+            return Ok(());
+        };
+        let at = self.resampled.as_ref().map_or(0, |(v, _)| *v);
+        match self.roi_values {
+            Some((held, _)) if held == at => return Ok(()),
+            Some((_, old)) => {
+                old.release(gpu.as_ref());
+                self.roi_values = None;
+            }
+            None => {}
+        }
+        let values =
+            GpuOpacityVolume::upload(gpu.as_ref(), self.volume_ref().view()).map_err(roi_err)?;
+        self.roi_values = Some((at, values));
+        Ok(())
+    }
+
+    /// Frees the ROI maps' upload of the volume once no map grows on the GPU.
+    fn release_unused_roi_values(&mut self) {
+        if self.rois.iter().any(SessionRoi::on_gpu) {
+            return;
+        }
+        if let (Some((_, values)), Some(gpu)) = (self.roi_values.take(), &self.gpu) {
+            values.release(gpu.as_ref());
+        }
+    }
+
+    /// The ROI maps, the volume they grow on and where they grow (the
+    /// GPU only once [`Self::ensure_roi_values`] uploaded the volume).
+    fn roi_parts(&mut self) -> (&mut [SessionRoi], &Volume, RoiDevice<'_>) {
+        let volume = match &self.resampled {
+            Some((_, v)) => v,
+            None => &self.source,
+        };
+        let device = match (&self.gpu, &self.roi_values) {
+            (Some(gpu), Some((_, values))) => RoiDevice::Gpu {
+                gpu: gpu.as_ref(),
+                values,
+            },
+            _ => RoiDevice::Cpu,
+        };
+        (&mut self.rois, volume, device)
+    }
+
     fn release_gpu(&mut self) {
+        let gpu = self.gpu.as_deref();
+        for r in &mut self.rois {
+            if r.on_gpu() {
+                r.release(gpu);
+            }
+        }
+        if let (Some((_, values)), Some(gpu)) = (self.roi_values.take(), gpu) {
+            values.release(gpu);
+        }
         if let Some(d) = &self.displacements {
             d.release(&self.gpu);
         }
@@ -872,12 +953,22 @@ impl Session {
     }
 
     /// Seeds an ROI map on the current volume (no step yet; see
-    /// [`Self::roi_step`]). The map is re-grown as far again whenever the
-    /// volume changes, and shown by [`Self::render`].
+    /// [`Self::roi_step`]) on the session's backend: the CPU, or the GPU
+    /// over one upload of the current volume shared by every map. The map
+    /// is re-grown as far again whenever the volume or the backend
+    /// changes, and shown by [`Self::render`].
     pub fn add_roi(&mut self, seed: Seed, params: GrowthParams) -> Result<RoiId, RunError> {
         self.ensure_volume()?;
+        self.ensure_roi_values()?;
         let id = RoiId(self.next_roi);
-        let roi = SessionRoi::new(id, self.volume_ref(), seed, params).map_err(roi_err)?;
+        let (_, volume, device) = self.roi_parts();
+        let roi = match SessionRoi::new(id, volume, device, seed, params) {
+            Ok(r) => r,
+            Err(e) => {
+                self.release_unused_roi_values();
+                return Err(e);
+            }
+        };
         self.next_roi += 1;
         self.rois.push(roi);
         self.versions.roi.consumed = Some(self.versions.resample.version);
@@ -897,12 +988,10 @@ impl Session {
     pub fn roi_step(&mut self, id: RoiId, n: usize) -> Result<GrowthReport, RunError> {
         let i = self.roi_index(id)?;
         self.ensure_volume()?;
+        self.ensure_roi_values()?;
         let t = Instant::now();
-        let volume = match &self.resampled {
-            Some((_, v)) => v,
-            None => &self.source,
-        };
-        let report = self.rois[i].step(volume, n).map_err(roi_err)?;
+        let (rois, volume, device) = self.roi_parts();
+        let report = rois[i].step(volume, device, n)?;
         self.metrics
             .stage("roi")
             .record_run(t.elapsed(), report.visits);
@@ -914,23 +1003,26 @@ impl Session {
     pub fn roi_run_to_end(&mut self, id: RoiId) -> Result<GrowthReport, RunError> {
         let i = self.roi_index(id)?;
         self.ensure_volume()?;
+        self.ensure_roi_values()?;
         let t = Instant::now();
-        let volume = match &self.resampled {
-            Some((_, v)) => v,
-            None => &self.source,
-        };
-        let report = self.rois[i].run_to_end(volume).map_err(roi_err)?;
+        let (rois, volume, device) = self.roi_parts();
+        let report = rois[i].run_to_end(volume, device)?;
         self.metrics
             .stage("roi")
             .record_run(t.elapsed(), report.visits);
         Ok(report)
     }
 
-    /// Removes ROI map `id`; false when there was none.
+    /// Removes ROI map `id` (freeing its GPU buffers, and the volume's
+    /// upload with the last GPU map); false when there was none.
     pub fn remove_roi(&mut self, id: RoiId) -> bool {
-        let before = self.rois.len();
-        self.rois.retain(|r| r.id != id);
-        self.rois.len() != before
+        let Some(i) = self.rois.iter().position(|r| r.id == id) else {
+            return false;
+        };
+        let mut roi = self.rois.remove(i);
+        roi.release(self.gpu.as_deref());
+        self.release_unused_roi_values();
+        true
     }
 
     /// The ROI maps, in the order they were added.

@@ -1,9 +1,17 @@
 //! The ROI maps a session holds: spatial opacity maps grown stepwise from
 //! a seed over the session's current volume (voxflex_opacity), shown
-//! by [`super::Session::render`].
+//! by [`super::Session::render`]. They grow on the session's backend: on
+//! the CPU ([`CpuGrowth`]) or on its GPU ([`GpuGrowth`], over one upload of
+//! the current volume shared by every map), bit for bit the same maps.
 
+use voxflex_core::gpu::GpuService;
 use voxflex_core::volume::Volume;
-use voxflex_opacity::{CpuGrowth, GrowthParams, GrowthReport, OpacityMap, Seed};
+use voxflex_opacity::{
+    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, GrowthReport, OpacityMap, Seed,
+};
+
+use super::roi_err;
+use crate::pipeline::RunError;
 
 /// A session's handle to one of its ROI maps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -26,6 +34,94 @@ pub struct RoiInfo {
     pub voxels_above_half: usize,
 }
 
+/// Where a session's ROI maps grow: on the CPU, or on the session's GPU
+/// with the current volume uploaded there (one copy for every map).
+#[derive(Clone, Copy)]
+pub(crate) enum RoiDevice<'a> {
+    /// rayon on the CPU.
+    Cpu,
+    /// The session's GPU and its upload of the current volume.
+    Gpu {
+        /// The session's GPU context.
+        gpu: &'a dyn GpuService,
+        /// The current volume's values in that context.
+        values: &'a GpuOpacityVolume,
+    },
+}
+
+impl<'a> RoiDevice<'a> {
+    /// The GPU context, if any.
+    pub(crate) fn gpu(&self) -> Option<&'a dyn GpuService> {
+        match self {
+            RoiDevice::Cpu => None,
+            RoiDevice::Gpu { gpu, .. } => Some(*gpu),
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            RoiDevice::Cpu => "CPU",
+            RoiDevice::Gpu { .. } => "GPU",
+        }
+    }
+}
+
+/// One map's growth in progress, on the device it was seeded on.
+#[derive(Debug)]
+enum RoiGrowth {
+    Cpu(CpuGrowth),
+    Gpu(GpuGrowth),
+}
+
+impl RoiGrowth {
+    fn seed(
+        volume: &Volume,
+        device: RoiDevice<'_>,
+        seed: &Seed,
+        params: GrowthParams,
+    ) -> Result<Self, voxflex_opacity::OpacityError> {
+        Ok(match device {
+            RoiDevice::Cpu => RoiGrowth::Cpu(CpuGrowth::new(volume.view(), seed, params)?),
+            RoiDevice::Gpu { gpu, values } => {
+                RoiGrowth::Gpu(GpuGrowth::new(gpu, values, volume.view(), seed, params)?)
+            }
+        })
+    }
+
+    fn runs_on(&self, device: RoiDevice<'_>) -> bool {
+        matches!(
+            (self, device),
+            (RoiGrowth::Cpu(_), RoiDevice::Cpu) | (RoiGrowth::Gpu(_), RoiDevice::Gpu { .. })
+        )
+    }
+
+    fn is_converged(&self) -> bool {
+        match self {
+            RoiGrowth::Cpu(g) => g.is_converged(),
+            RoiGrowth::Gpu(g) => g.is_converged(),
+        }
+    }
+
+    /// The map as it stands (a GPU growth reads it back from `device`).
+    fn map(&self, device: RoiDevice<'_>) -> Result<OpacityMap, RunError> {
+        match (self, device.gpu()) {
+            (RoiGrowth::Cpu(g), _) => Ok(g.map()),
+            (RoiGrowth::Gpu(g), Some(gpu)) => g.map(gpu).map_err(roi_err),
+            (RoiGrowth::Gpu(_), None) => Err(roi_err(
+                "a map grown on the GPU cannot be read without the GPU; remove it and add it again",
+            )),
+        }
+    }
+
+    /// Frees its GPU buffers (nothing for a CPU growth); `gpu` is the
+    /// context it was seeded in.
+    fn release(self, gpu: Option<&dyn GpuService>) {
+        if let (RoiGrowth::Gpu(g), Some(gpu)) = (self, gpu) {
+            g.release(gpu);
+        }
+    }
+}
+
 /// One ROI map: its request, its growth on the current volume and the map
 /// as it stands.
 #[derive(Debug)]
@@ -33,44 +129,70 @@ pub(crate) struct SessionRoi {
     pub(crate) id: RoiId,
     pub(crate) seed: Seed,
     pub(crate) params: GrowthParams,
-    growth: CpuGrowth,
+    /// `None` once released (a backend change): re-grown on next use.
+    growth: Option<RoiGrowth>,
     /// Steps grown on the current volume.
     steps: u64,
     /// Run to convergence (re-grown to convergence on a new volume).
     to_end: bool,
+    converged: bool,
     map: OpacityMap,
 }
 
 impl SessionRoi {
-    /// Seeds a map on `volume` (no step run).
+    /// Seeds a map on `volume` on `device` (no step run).
     pub(crate) fn new(
         id: RoiId,
         volume: &Volume,
+        device: RoiDevice<'_>,
         seed: Seed,
         params: GrowthParams,
-    ) -> Result<Self, voxflex_opacity::OpacityError> {
-        let growth = CpuGrowth::new(volume.view(), &seed, params)?;
-        let map = growth.map();
+    ) -> Result<Self, RunError> {
+        let growth = RoiGrowth::seed(volume, device, &seed, params).map_err(roi_err)?;
+        let map = match growth.map(device) {
+            Ok(m) => m,
+            Err(e) => {
+                growth.release(device.gpu());
+                return Err(e);
+            }
+        };
         Ok(Self {
             id,
             seed,
             params,
-            growth,
+            converged: growth.is_converged(),
+            growth: Some(growth),
             steps: 0,
             to_end: false,
             map,
         })
     }
 
-    /// Grows up to `n` more steps on `volume` (the one it was seeded on).
+    /// Grows up to `n` more steps on `volume` (the current one) on
+    /// `device` (re-grown there first as far as before when it grew
+    /// elsewhere or was released).
     pub(crate) fn step(
         &mut self,
         volume: &Volume,
+        device: RoiDevice<'_>,
         n: usize,
-    ) -> Result<GrowthReport, voxflex_opacity::OpacityError> {
-        let report = self.growth.step(volume.view(), n)?;
+    ) -> Result<GrowthReport, RunError> {
+        self.follow(volume, device)?;
+        let report = match (&mut self.growth, device) {
+            (Some(RoiGrowth::Cpu(g)), RoiDevice::Cpu) => g.step(volume.view(), n),
+            (Some(RoiGrowth::Gpu(g)), RoiDevice::Gpu { gpu, values }) => g.step(gpu, values, n),
+            _ => {
+                return Err(roi_err(format!(
+                    "map {} is not seeded on the session's {}; remove it and add it again",
+                    self.id.0,
+                    device.name()
+                )));
+            }
+        }
+        .map_err(roi_err)?;
         self.steps += report.steps;
-        self.map = self.growth.map();
+        self.converged = report.converged;
+        self.read_map(device)?;
         Ok(report)
     }
 
@@ -78,25 +200,65 @@ impl SessionRoi {
     pub(crate) fn run_to_end(
         &mut self,
         volume: &Volume,
-    ) -> Result<GrowthReport, voxflex_opacity::OpacityError> {
+        device: RoiDevice<'_>,
+    ) -> Result<GrowthReport, RunError> {
         self.to_end = true;
-        self.step(volume, usize::MAX)
+        self.step(volume, device, usize::MAX)
     }
 
-    /// Seeds again on a new `volume` and grows as far as before: the same
-    /// number of steps, or to convergence if it was run to the end.
+    /// Seeds again on a new `volume` on `device` and grows as far as
+    /// before: the same number of steps, or to convergence if it was run to
+    /// the end. The old growth is released (it lived in `device`'s context,
+    /// or on the CPU).
     pub(crate) fn regrow(
         &mut self,
         volume: &Volume,
-    ) -> Result<GrowthReport, voxflex_opacity::OpacityError> {
+        device: RoiDevice<'_>,
+    ) -> Result<GrowthReport, RunError> {
         let steps = if self.to_end {
             usize::MAX
         } else {
             self.steps as usize
         };
-        self.growth = CpuGrowth::new(volume.view(), &self.seed, self.params)?;
+        self.release(device.gpu());
+        self.growth =
+            Some(RoiGrowth::seed(volume, device, &self.seed, self.params).map_err(roi_err)?);
         self.steps = 0;
-        self.step(volume, steps)
+        self.step(volume, device, steps)
+    }
+
+    /// Re-grows on `device` as far as before when its growth is released
+    /// or lives on another device (a CPU growth is dropped; a GPU one must
+    /// have been released with its context before).
+    pub(crate) fn follow(
+        &mut self,
+        volume: &Volume,
+        device: RoiDevice<'_>,
+    ) -> Result<Option<GrowthReport>, RunError> {
+        match &self.growth {
+            Some(g) if g.runs_on(device) => Ok(None),
+            _ => self.regrow(volume, device).map(Some),
+        }
+    }
+
+    /// Frees its growth's GPU buffers (`gpu`: the context it grew in); the
+    /// map as it stands is kept, the growth is seeded again on next use.
+    pub(crate) fn release(&mut self, gpu: Option<&dyn GpuService>) {
+        if let Some(g) = self.growth.take() {
+            g.release(gpu);
+        }
+    }
+
+    /// True when its growth holds GPU buffers.
+    pub(crate) fn on_gpu(&self) -> bool {
+        matches!(self.growth, Some(RoiGrowth::Gpu(_)))
+    }
+
+    fn read_map(&mut self, device: RoiDevice<'_>) -> Result<(), RunError> {
+        if let Some(g) = &self.growth {
+            self.map = g.map(device)?;
+        }
+        Ok(())
     }
 
     /// The map as it stands (voxel box of the current volume).
@@ -111,7 +273,7 @@ impl SessionRoi {
             seed: self.seed,
             params: self.params,
             steps: self.steps,
-            converged: self.growth.is_converged(),
+            converged: self.converged,
             voxels_above_half: voxflex_opacity::runner::voxels_above_half(&self.map),
         }
     }

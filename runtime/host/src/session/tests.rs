@@ -179,3 +179,40 @@ fn a_session_moves_to_another_thread() {
     .unwrap();
     assert_eq!(frame, 1);
 }
+
+/// On the GPU the ROI maps hold GPU buffers (their growths and one upload
+/// of the volume): removing the maps frees every one, and moving to the
+/// CPU keeps the maps. Skips without an adapter (fails under CI=true).
+#[test]
+fn gpu_roi_maps_free_their_buffers() {
+    if crate::gpu_context::testing::test_gpu().is_none() {
+        return;
+    }
+    let mut s = cube_session(16);
+    s.set_backend(BackendChoice::Gpu).unwrap();
+    let live = |s: &Session| s.resolved.gpu.as_ref().unwrap().stats().live_buffers;
+    let base = live(&s);
+    let centre = s.source().grid.centre();
+    let params = GrowthParams::default();
+    let a = s.add_roi(Seed::World(centre), params).unwrap();
+    let one = live(&s);
+    assert!(one > base, "a GPU map holds buffers ({base} → {one})");
+    let b = s.add_roi(Seed::World(centre), params).unwrap();
+    let two = live(&s);
+    assert!(two > one, "a second map holds its own ({one} → {two})");
+    s.roi_step(a, 3).unwrap();
+    s.roi_run_to_end(b).unwrap();
+    assert_eq!(live(&s), two, "stepping allocates nothing that stays");
+    assert!(s.remove_roi(b));
+    assert_eq!(live(&s), one, "removing a map frees its buffers");
+    assert!(s.remove_roi(a));
+    assert_eq!(live(&s), base, "the last map frees the volume's upload too");
+    assert!(s.roi_values.is_none());
+    let a = s.add_roi(Seed::World(centre), params).unwrap();
+    s.roi_step(a, 3).unwrap();
+    let map = s.roi_map(a).unwrap().clone();
+    s.set_backend(BackendChoice::Cpu).unwrap();
+    assert!(s.roi_values.is_none() && s.gpu.is_none());
+    assert_eq!(s.roi_map(a), Some(&map));
+    assert_eq!(s.rois()[0].steps, 3);
+}
