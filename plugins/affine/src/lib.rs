@@ -46,6 +46,17 @@ pub const FIELD_WGSL: &str = include_str!("../../../shaders/affine/field.wgsl");
 /// `field.wgsl`).
 const WORKGROUP: u32 = 64;
 
+/// Binding numbers of `field.wgsl`'s variables (named as there).
+mod bind {
+    pub const U: u32 = 0;
+    pub const PX: u32 = 1;
+    pub const PY: u32 = 2;
+    pub const PZ: u32 = 3;
+    pub const UX: u32 = 4;
+    pub const UY: u32 = 5;
+    pub const UZ: u32 = 6;
+}
+
 enum Binding {
     Lattice(Grid),
     List {
@@ -212,13 +223,13 @@ impl AffineField {
         };
         let pipeline = gpu.compile(FIELD_WGSL, "main")?;
         let bindings = [
-            BufferBinding::whole(0, uniforms),
-            BufferBinding::whole(1, pts[0]),
-            BufferBinding::whole(2, pts[1]),
-            BufferBinding::whole(3, pts[2]),
-            BufferBinding::whole(4, out[0]),
-            BufferBinding::whole(5, out[1]),
-            BufferBinding::whole(6, out[2]),
+            BufferBinding::whole(bind::U, uniforms),
+            BufferBinding::whole(bind::PX, pts[0]),
+            BufferBinding::whole(bind::PY, pts[1]),
+            BufferBinding::whole(bind::PZ, pts[2]),
+            BufferBinding::whole(bind::UX, out[0]),
+            BufferBinding::whole(bind::UY, out[1]),
+            BufferBinding::whole(bind::UZ, out[2]),
         ];
         gpu.dispatch(
             pipeline,

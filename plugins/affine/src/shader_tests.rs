@@ -3,7 +3,7 @@
 //! the Rust side ([`FieldUniforms`]).
 
 use crate::field::{FieldUniforms, UNIFORM_BYTES};
-use crate::{FIELD_WGSL, WORKGROUP};
+use crate::{FIELD_WGSL, WORKGROUP, bind};
 use std::mem::offset_of;
 use voxflex_wgsl_check::ShaderSet;
 
@@ -41,5 +41,17 @@ fn the_field_kernel_validates_and_shares_the_rust_layout() {
         .map(|m| (m.name.as_str(), m.offset as usize))
         .collect();
     assert_eq!(wgsl, rust, "`Uniforms` of field.wgsl vs FieldUniforms");
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("u", bind::U),
+        ("px", bind::PX),
+        ("py", bind::PY),
+        ("pz", bind::PZ),
+        ("ux", bind::UX),
+        ("uy", bind::UY),
+        ("uz", bind::UZ),
+    ] {
+        assert_eq!(s.binding(var), binding, "`{var}`");
+    }
     set.finish();
 }

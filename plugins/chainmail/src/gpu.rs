@@ -48,6 +48,20 @@ const LINK_WORDS: usize = 5;
 /// Threads per workgroup of `map_identity` (one invocation per voxel).
 const MAP_WORKGROUP: u32 = 64;
 
+/// Binding numbers of `chainmail.wgsl`'s variables (named as there; `PARAMS` is `p`).
+mod bind {
+    pub const PARAMS: u32 = 0;
+    pub const U: u32 = 1;
+    pub const KEYS: u32 = 2;
+    pub const SITES: u32 = 3;
+    pub const LINKS: u32 = 4;
+    pub const LIST: u32 = 5;
+    pub const STATS: u32 = 6;
+    pub const OUT_X: u32 = 7;
+    pub const OUT_Y: u32 = 8;
+    pub const OUT_Z: u32 = 9;
+}
+
 /// What the kernels report for one launch.
 struct Results {
     visits: u64,
@@ -274,13 +288,13 @@ impl GpuChainMail {
     fn control_bindings(&self, colour: usize, len: usize) -> [BufferBinding; 2] {
         [
             BufferBinding {
-                binding: 0,
+                binding: bind::PARAMS,
                 buffer: self.control,
                 offset: colour as u64 * self.slot_bytes,
                 size: 4 * PARAM_WORDS as u64,
             },
             BufferBinding {
-                binding: 5,
+                binding: bind::LIST,
                 buffer: self.control,
                 offset: 2 * self.slot_bytes,
                 size: 4 * len.max(1) as u64,
@@ -331,11 +345,11 @@ impl GpuChainMail {
         }
         self.write_control(rd, active, 0.0)?;
         let with = [
-            (1, self.u),
-            (2, self.keys),
-            (3, self.cells),
-            (4, self.links),
-            (6, self.stats),
+            (bind::U, self.u),
+            (bind::KEYS, self.keys),
+            (bind::SITES, self.cells),
+            (bind::LINKS, self.links),
+            (bind::STATS, self.stats),
         ];
         self.launch(self.propagate, 0, active.len(), &with)?;
         let r = self.results(active)?;
@@ -354,10 +368,10 @@ impl GpuChainMail {
         }
         self.write_control(cur, set, tol as f32)?;
         let with = [
-            (1, self.u),
-            (3, self.cells),
-            (4, self.links),
-            (6, self.stats),
+            (bind::U, self.u),
+            (bind::SITES, self.cells),
+            (bind::LINKS, self.links),
+            (bind::STATS, self.stats),
         ];
         for colour in 0..2 {
             self.launch(self.relax, colour, set.len(), &with)?;
@@ -375,7 +389,7 @@ impl GpuChainMail {
             return Ok(());
         }
         self.write_control(from, blocks, 0.0)?;
-        self.launch(self.sync, 0, blocks.len(), &[(1, self.u)])
+        self.launch(self.sync, 0, blocks.len(), &[(bind::U, self.u)])
     }
 
     /// The current displacements (copy `cur`) in voxel order into `out`
@@ -389,10 +403,10 @@ impl GpuChainMail {
         self.write_control(cur, &[], 0.0)?;
         let bindings = [
             self.control_bindings(0, 0)[0],
-            BufferBinding::whole(1, self.u),
-            BufferBinding::whole(7, out[0]),
-            BufferBinding::whole(8, out[1]),
-            BufferBinding::whole(9, out[2]),
+            BufferBinding::whole(bind::U, self.u),
+            BufferBinding::whole(bind::OUT_X, out[0]),
+            BufferBinding::whole(bind::OUT_Y, out[1]),
+            BufferBinding::whole(bind::OUT_Z, out[2]),
         ];
         let groups = self
             .gpu

@@ -80,5 +80,20 @@ fn the_kernels_validate_and_share_chainmails_constants() {
     );
     assert_eq!(s.const_u32("LINK_WORDS") as usize, LINK_WORDS, "LINK_WORDS");
     assert_eq!(s.const_u32("STAT_WORDS") as usize, STAT_WORDS, "STAT_WORDS");
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("p", bind::PARAMS),
+        ("u", bind::U),
+        ("keys", bind::KEYS),
+        ("sites", bind::SITES),
+        ("links", bind::LINKS),
+        ("list", bind::LIST),
+        ("stats", bind::STATS),
+        ("out_x", bind::OUT_X),
+        ("out_y", bind::OUT_Y),
+        ("out_z", bind::OUT_Z),
+    ] {
+        assert_eq!(s.binding(var), binding, "`{var}`");
+    }
     set.finish();
 }

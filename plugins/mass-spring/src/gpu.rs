@@ -25,6 +25,28 @@ const WORKGROUP: u32 = 64;
 /// 32-bit words of the kernels' `Params`.
 const PARAM_WORDS: usize = 8;
 
+/// Binding numbers of `springs.wgsl`'s variables (named as there; `PARAMS` is `p`).
+mod bind {
+    pub const PARAMS: u32 = 0;
+    pub const SPRINGS: u32 = 1;
+    pub const ENDS: u32 = 2;
+    pub const KC: u32 = 3;
+    pub const FORCE: u32 = 4;
+    pub const START: u32 = 5;
+    pub const INCIDENT: u32 = 6;
+    pub const U: u32 = 7;
+    pub const V: u32 = 8;
+    pub const NODE: u32 = 9;
+    pub const DRIVE: u32 = 10;
+    pub const FNODE: u32 = 11;
+    pub const TIE_START: u32 = 12;
+    pub const TIE_LIST: u32 = 13;
+    pub const UNTIE_START: u32 = 14;
+    pub const UNTIE_LIST: u32 = 15;
+    pub const TETS: u32 = 16;
+    pub const TET_GEOM: u32 = 17;
+}
+
 fn gpu_err(e: impl std::fmt::Display) -> ModelError {
     ModelError(format!("mass-spring (GPU): {e}"))
 }
@@ -187,36 +209,36 @@ impl GpuSprings {
         write(self.v, &vec4(&state.v)).map_err(gpu_err)?;
         write(self.node, &node).map_err(gpu_err)?;
         write(self.drive, &drive).map_err(gpu_err)?;
-        let bind = |i: u32, id: BufferId| BufferBinding::whole(i, id);
+        let whole = |i: u32, id: BufferId| BufferBinding::whole(i, id);
         // Each pipeline's layout holds only the bindings its entry point uses.
         let spring_bindings = [
-            bind(0, self.params),
-            bind(1, self.table),
-            bind(2, self.ends),
-            bind(3, self.kc),
-            bind(4, self.force),
-            bind(7, self.u),
-            bind(8, self.v),
+            whole(bind::PARAMS, self.params),
+            whole(bind::SPRINGS, self.table),
+            whole(bind::ENDS, self.ends),
+            whole(bind::KC, self.kc),
+            whole(bind::FORCE, self.force),
+            whole(bind::U, self.u),
+            whole(bind::V, self.v),
         ];
         let tet_bindings = [
-            bind(0, self.params),
-            bind(4, self.force),
-            bind(7, self.u),
-            bind(16, self.tet_corners),
-            bind(17, self.tet_geom),
+            whole(bind::PARAMS, self.params),
+            whole(bind::FORCE, self.force),
+            whole(bind::U, self.u),
+            whole(bind::TETS, self.tet_corners),
+            whole(bind::TET_GEOM, self.tet_geom),
         ];
         let tet_groups = g
             .workgroups_for(self.tets as u64, WORKGROUP)
             .map_err(gpu_err)?;
         let node_bindings = [
-            bind(0, self.params),
-            bind(4, self.force),
-            bind(5, self.start),
-            bind(6, self.incident),
-            bind(7, self.u),
-            bind(8, self.v),
-            bind(9, self.node),
-            bind(10, self.drive),
+            whole(bind::PARAMS, self.params),
+            whole(bind::FORCE, self.force),
+            whole(bind::START, self.start),
+            whole(bind::INCIDENT, self.incident),
+            whole(bind::U, self.u),
+            whole(bind::V, self.v),
+            whole(bind::NODE, self.node),
+            whole(bind::DRIVE, self.drive),
         ];
         let ties = if bc.hanging.is_empty() {
             None
@@ -268,31 +290,31 @@ impl GpuSprings {
                     .map_err(gpu_err)?,
                 Some([ts, tl, us, ul]) => {
                     let forces = [
-                        bind(0, self.params),
-                        bind(4, self.force),
-                        bind(5, self.start),
-                        bind(6, self.incident),
-                        bind(8, self.v),
-                        bind(9, self.node),
-                        bind(11, self.fnode),
+                        whole(bind::PARAMS, self.params),
+                        whole(bind::FORCE, self.force),
+                        whole(bind::START, self.start),
+                        whole(bind::INCIDENT, self.incident),
+                        whole(bind::V, self.v),
+                        whole(bind::NODE, self.node),
+                        whole(bind::FNODE, self.fnode),
                     ];
                     let tied = [
-                        bind(0, self.params),
-                        bind(7, self.u),
-                        bind(8, self.v),
-                        bind(9, self.node),
-                        bind(10, self.drive),
-                        bind(11, self.fnode),
-                        bind(14, us),
-                        bind(15, ul),
+                        whole(bind::PARAMS, self.params),
+                        whole(bind::U, self.u),
+                        whole(bind::V, self.v),
+                        whole(bind::NODE, self.node),
+                        whole(bind::DRIVE, self.drive),
+                        whole(bind::FNODE, self.fnode),
+                        whole(bind::UNTIE_START, us),
+                        whole(bind::UNTIE_LIST, ul),
                     ];
                     let tie = [
-                        bind(0, self.params),
-                        bind(7, self.u),
-                        bind(8, self.v),
-                        bind(10, self.drive),
-                        bind(12, ts),
-                        bind(13, tl),
+                        whole(bind::PARAMS, self.params),
+                        whole(bind::U, self.u),
+                        whole(bind::V, self.v),
+                        whole(bind::DRIVE, self.drive),
+                        whole(bind::TIE_START, ts),
+                        whole(bind::TIE_LIST, tl),
                     ];
                     for (pipeline, b) in [
                         (self.node_forces, &forces[..]),

@@ -46,5 +46,28 @@ fn the_kernels_validate_and_share_the_rust_constants() {
     let expected: Vec<(&str, u32)> = order.into_iter().zip((0..).step_by(4)).collect();
     assert_eq!(words, expected);
     assert_eq!(s.const_u32("END_B"), crate::kernel::END_B);
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("p", bind::PARAMS),
+        ("springs", bind::SPRINGS),
+        ("ends", bind::ENDS),
+        ("kc", bind::KC),
+        ("force", bind::FORCE),
+        ("start", bind::START),
+        ("incident", bind::INCIDENT),
+        ("u", bind::U),
+        ("v", bind::V),
+        ("node", bind::NODE),
+        ("drive", bind::DRIVE),
+        ("fnode", bind::FNODE),
+        ("tie_start", bind::TIE_START),
+        ("tie_list", bind::TIE_LIST),
+        ("untie_start", bind::UNTIE_START),
+        ("untie_list", bind::UNTIE_LIST),
+        ("tets", bind::TETS),
+        ("tet_geom", bind::TET_GEOM),
+    ] {
+        assert_eq!(s.binding(var), binding, "`{var}`");
+    }
     set.finish();
 }

@@ -41,6 +41,31 @@ const CELL_WORKGROUP: u32 = 64;
 /// Pixels per side of a `raycast.wgsl` workgroup (`@workgroup_size(8, 8, 1)`).
 const PIXEL_TILE: u64 = 8;
 
+/// Binding numbers of the kernels' variables, per shader (named as there).
+mod bind {
+    /// `raycast.wgsl`.
+    pub mod ray {
+        pub const U: u32 = 0;
+        pub const VOL: u32 = 1;
+        pub const LUT: u32 = 2;
+        pub const ACCEL: u32 = 3;
+        pub const MAPS: u32 = 4;
+        pub const OUT_PX: u32 = 5;
+        pub const STATS: u32 = 6;
+    }
+    /// `cells.wgsl`.
+    pub mod cells {
+        pub const C: u32 = 0;
+        pub const VOL: u32 = 1;
+        pub const ACCEL: u32 = 2;
+    }
+    /// `leap.wgsl`.
+    pub mod leap {
+        pub const P: u32 = 0;
+        pub const ACCEL: u32 = 1;
+    }
+}
+
 /// Uniforms of `leap.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -280,14 +305,14 @@ impl GpuRenderer {
         self.gpu.dispatch(
             pipeline,
             &[
-                BufferBinding::whole(0, self.cell_uniforms),
+                BufferBinding::whole(bind::cells::C, self.cell_uniforms),
                 BufferBinding {
-                    binding: 1,
+                    binding: bind::cells::VOL,
                     buffer: volume,
                     offset: 0,
                     size: self.voxels as u64 * 4,
                 },
-                BufferBinding::whole(2, accel),
+                BufferBinding::whole(bind::cells::ACCEL, accel),
             ],
             self.gpu.workgroups_for(n as u64, CELL_WORKGROUP)?,
         )?;
@@ -341,7 +366,10 @@ impl GpuRenderer {
             self.gpu.write_buffer(ub, 0, bytemuck::bytes_of(&u))?;
             self.gpu.dispatch(
                 pipeline,
-                &[BufferBinding::whole(0, ub), BufferBinding::whole(1, accel)],
+                &[
+                    BufferBinding::whole(bind::leap::P, ub),
+                    BufferBinding::whole(bind::leap::ACCEL, accel),
+                ],
                 groups,
             )?;
         }
@@ -448,23 +476,23 @@ impl GpuRenderer {
         self.gpu.dispatch(
             pipeline,
             &[
-                BufferBinding::whole(0, self.uniforms),
+                BufferBinding::whole(bind::ray::U, self.uniforms),
                 BufferBinding {
-                    binding: 1,
+                    binding: bind::ray::VOL,
                     buffer: volume,
                     offset: 0,
                     size: self.voxels as u64 * 4,
                 },
-                BufferBinding::whole(2, self.lut),
-                BufferBinding::whole(3, accel),
-                BufferBinding::whole(4, maps),
+                BufferBinding::whole(bind::ray::LUT, self.lut),
+                BufferBinding::whole(bind::ray::ACCEL, accel),
+                BufferBinding::whole(bind::ray::MAPS, maps),
                 BufferBinding {
-                    binding: 5,
+                    binding: bind::ray::OUT_PX,
                     buffer: target,
                     offset: 0,
                     size: bytes,
                 },
-                BufferBinding::whole(6, self.stats),
+                BufferBinding::whole(bind::ray::STATS, self.stats),
             ],
             [groups[0] as u32, groups[1] as u32, 1],
         )?;

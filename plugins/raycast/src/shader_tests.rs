@@ -54,6 +54,19 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
         assert_eq!(ray.const_u32(name), rust, "{name}");
     }
 
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("u", bind::ray::U),
+        ("vol", bind::ray::VOL),
+        ("lut", bind::ray::LUT),
+        ("accel", bind::ray::ACCEL),
+        ("maps", bind::ray::MAPS),
+        ("out_px", bind::ray::OUT_PX),
+        ("stats", bind::ray::STATS),
+    ] {
+        assert_eq!(ray.binding(var), binding, "ray: `{var}`");
+    }
+
     let cells = set.validate("raycast/cells.wgsl", CELLS_WGSL);
     assert_eq!(cells.compute_entry_points(), ["main"]);
     assert_eq!(cells.workgroup_size("main"), [CELL_WORKGROUP, 1, 1]);
@@ -73,6 +86,15 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
         }
     );
 
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("c", bind::cells::C),
+        ("vol", bind::cells::VOL),
+        ("accel", bind::cells::ACCEL),
+    ] {
+        assert_eq!(cells.binding(var), binding, "cells: `{var}`");
+    }
+
     let leap = set.validate("raycast/leap.wgsl", LEAP_WGSL);
     assert_eq!(leap.compute_entry_points(), ["main"]);
     assert_eq!(leap.workgroup_size("main"), [CELL_WORKGROUP, 1, 1]);
@@ -84,5 +106,9 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
     assert_struct_layout!(leap, "P", LeapUniforms { counts, offs, lut });
     assert_eq!(leap.const_u32("CAP"), u32::from(LEAP_CAP));
 
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [("p", bind::leap::P), ("accel", bind::leap::ACCEL)] {
+        assert_eq!(leap.binding(var), binding, "leap: `{var}`");
+    }
     set.finish();
 }

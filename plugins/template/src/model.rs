@@ -27,6 +27,17 @@ pub const FIELD_WGSL: &str = include_str!("../../../shaders/template/bulge.wgsl"
 /// Threads per workgroup of the kernel (`@workgroup_size` in the WGSL).
 pub(crate) const WORKGROUP: u32 = 64;
 
+/// Binding numbers of `bulge.wgsl`'s variables (named as there).
+pub(crate) mod bind {
+    pub const U: u32 = 0;
+    pub const PX: u32 = 1;
+    pub const PY: u32 = 2;
+    pub const PZ: u32 = 3;
+    pub const UX: u32 = 4;
+    pub const UY: u32 = 5;
+    pub const UZ: u32 = 6;
+}
+
 /// A point set the host bound (`bind`), and its device copy once a GPU
 /// `map` needed one.
 enum Binding {
@@ -174,13 +185,13 @@ impl TemplateField {
         // Compiled once: the host caches pipelines by the shader's hash.
         let pipeline = gpu.compile(FIELD_WGSL, "main")?;
         let bindings = [
-            BufferBinding::whole(0, uniforms),
-            BufferBinding::whole(1, points[0]),
-            BufferBinding::whole(2, points[1]),
-            BufferBinding::whole(3, points[2]),
-            BufferBinding::whole(4, out[0]),
-            BufferBinding::whole(5, out[1]),
-            BufferBinding::whole(6, out[2]),
+            BufferBinding::whole(bind::U, uniforms),
+            BufferBinding::whole(bind::PX, points[0]),
+            BufferBinding::whole(bind::PY, points[1]),
+            BufferBinding::whole(bind::PZ, points[2]),
+            BufferBinding::whole(bind::UX, out[0]),
+            BufferBinding::whole(bind::UY, out[1]),
+            BufferBinding::whole(bind::UZ, out[2]),
         ];
         gpu.dispatch(
             pipeline,

@@ -6,7 +6,7 @@
 //! such test.
 
 use crate::field::FieldUniforms;
-use crate::model::{FIELD_WGSL, WORKGROUP};
+use crate::model::{FIELD_WGSL, WORKGROUP, bind};
 use voxflex_wgsl_check::{ShaderSet, assert_struct_layout};
 
 #[test]
@@ -28,5 +28,17 @@ fn the_bulge_kernel_validates_and_shares_the_rust_layout() {
             mode,
         }
     );
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("u", bind::U),
+        ("px", bind::PX),
+        ("py", bind::PY),
+        ("pz", bind::PZ),
+        ("ux", bind::UX),
+        ("uy", bind::UY),
+        ("uz", bind::UZ),
+    ] {
+        assert_eq!(s.binding(var), binding, "`{var}`");
+    }
     set.finish();
 }

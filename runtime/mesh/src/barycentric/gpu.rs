@@ -20,6 +20,19 @@ const WORKGROUP: u32 = 64;
 /// Bytes of the kernel's `Params` (the point count and three unused words).
 const PARAMS_BYTES: u64 = 16;
 
+/// Binding numbers of `map.wgsl`'s variables (named as there; `PARAMS` is `p`).
+mod bind {
+    pub const PARAMS: u32 = 0;
+    pub const TET_OF: u32 = 1;
+    pub const W12: u32 = 2;
+    pub const W3: u32 = 3;
+    pub const TETS: u32 = 4;
+    pub const NODES: u32 = 5;
+    pub const OUT_X: u32 = 6;
+    pub const OUT_Y: u32 = 7;
+    pub const OUT_Z: u32 = 8;
+}
+
 /// A binding on the device.
 #[derive(Debug)]
 pub struct GpuBinding {
@@ -99,20 +112,20 @@ impl GpuBinding {
                 size: (count as u64 * bytes_per_point).next_multiple_of(4),
             };
             let bindings = [
-                BufferBinding::whole(0, self.params),
-                slab(1, self.tet_of, 4),
-                slab(2, self.w12, 4),
+                BufferBinding::whole(bind::PARAMS, self.params),
+                slab(bind::TET_OF, self.tet_of, 4),
+                slab(bind::W12, self.w12, 4),
                 BufferBinding {
-                    binding: 3,
+                    binding: bind::W3,
                     buffer: self.w3,
                     offset: first as u64 * 2,
                     size: (count as u64).div_ceil(2) * 4,
                 },
-                BufferBinding::whole(4, self.tets),
-                BufferBinding::whole(5, nodes),
-                slab(6, out[0], 4),
-                slab(7, out[1], 4),
-                slab(8, out[2], 4),
+                BufferBinding::whole(bind::TETS, self.tets),
+                BufferBinding::whole(bind::NODES, nodes),
+                slab(bind::OUT_X, out[0], 4),
+                slab(bind::OUT_Y, out[1], 4),
+                slab(bind::OUT_Z, out[2], 4),
             ];
             gpu.dispatch(
                 pipeline,

@@ -36,6 +36,28 @@ const WORKGROUP: u32 = 64;
 /// Bytes of the kernels' `Params` (node count, partials, two unused words).
 const PARAMS_BYTES: u64 = 16;
 
+/// Binding numbers of `pcg.wgsl`'s variables (named as there; `PARAMS` is `p_`).
+mod bind {
+    pub const PARAMS: u32 = 0;
+    pub const ROW_START: u32 = 1;
+    pub const COL: u32 = 2;
+    pub const BLOCKS: u32 = 3;
+    pub const INV: u32 = 4;
+    pub const FREE: u32 = 5;
+    pub const X: u32 = 6;
+    pub const R: u32 = 7;
+    pub const Z: u32 = 8;
+    pub const P: u32 = 9;
+    pub const Q: u32 = 10;
+    pub const SCALARS: u32 = 11;
+    pub const PARTIAL: u32 = 12;
+    pub const B: u32 = 13;
+    pub const TIE_START: u32 = 14;
+    pub const TIE_LIST: u32 = 15;
+    pub const UNTIE_START: u32 = 16;
+    pub const UNTIE_LIST: u32 = 17;
+}
+
 /// The solver's buffers and pipelines on the device.
 pub struct GpuPcg {
     gpu: Arc<dyn GpuService>,
@@ -244,47 +266,51 @@ impl GpuPcg {
             g.dispatch(pipeline, bindings, groups)
         };
         let dots = [
-            w(0, bb.params),
-            w(5, bb.free),
-            w(7, bb.r),
-            w(8, bb.z),
-            w(9, bb.p),
-            w(10, bb.q),
-            w(12, bb.partial),
+            w(bind::PARAMS, bb.params),
+            w(bind::FREE, bb.free),
+            w(bind::R, bb.r),
+            w(bind::Z, bb.z),
+            w(bind::P, bb.p),
+            w(bind::Q, bb.q),
+            w(bind::PARTIAL, bb.partial),
         ];
-        let finals = [w(0, bb.params), w(11, bb.scalars), w(12, bb.partial)];
-        let scalars = [w(11, bb.scalars)];
+        let finals = [
+            w(bind::PARAMS, bb.params),
+            w(bind::SCALARS, bb.scalars),
+            w(bind::PARTIAL, bb.partial),
+        ];
+        let scalars = [w(bind::SCALARS, bb.scalars)];
         let tie_bindings = ties.map(|[ts, tl, us, ul]| {
             (
                 [
-                    w(0, bb.params),
-                    w(5, bb.free),
-                    w(7, bb.r),
-                    w(10, bb.q),
-                    w(16, us),
-                    w(17, ul),
+                    w(bind::PARAMS, bb.params),
+                    w(bind::FREE, bb.free),
+                    w(bind::R, bb.r),
+                    w(bind::Q, bb.q),
+                    w(bind::UNTIE_START, us),
+                    w(bind::UNTIE_LIST, ul),
                 ],
                 [
-                    w(0, bb.params),
-                    w(5, bb.free),
-                    w(9, bb.p),
-                    w(14, ts),
-                    w(15, tl),
+                    w(bind::PARAMS, bb.params),
+                    w(bind::FREE, bb.free),
+                    w(bind::P, bb.p),
+                    w(bind::TIE_START, ts),
+                    w(bind::TIE_LIST, tl),
                 ],
             )
         });
         run(
             k.start,
             &[
-                w(0, bb.params),
-                w(1, bb.row_start),
-                w(2, bb.col),
-                w(3, bb.blocks),
-                w(5, bb.free),
-                w(6, bb.x),
-                w(7, bb.r),
-                w(9, bb.p),
-                w(13, bb.b),
+                w(bind::PARAMS, bb.params),
+                w(bind::ROW_START, bb.row_start),
+                w(bind::COL, bb.col),
+                w(bind::BLOCKS, bb.blocks),
+                w(bind::FREE, bb.free),
+                w(bind::X, bb.x),
+                w(bind::R, bb.r),
+                w(bind::P, bb.p),
+                w(bind::B, bb.b),
             ],
             nodes_groups,
         )?;
@@ -294,12 +320,12 @@ impl GpuPcg {
         run(
             k.begin_search,
             &[
-                w(0, bb.params),
-                w(4, bb.inv),
-                w(5, bb.free),
-                w(7, bb.r),
-                w(8, bb.z),
-                w(9, bb.p),
+                w(bind::PARAMS, bb.params),
+                w(bind::INV, bb.inv),
+                w(bind::FREE, bb.free),
+                w(bind::R, bb.r),
+                w(bind::Z, bb.z),
+                w(bind::P, bb.p),
             ],
             nodes_groups,
         )?;
@@ -322,27 +348,32 @@ impl GpuPcg {
         let mut res = residual(g)?;
         let mut iterations = 0;
         let spmv = [
-            w(0, bb.params),
-            w(1, bb.row_start),
-            w(2, bb.col),
-            w(3, bb.blocks),
-            w(5, bb.free),
-            w(6, bb.x),
-            w(9, bb.p),
-            w(10, bb.q),
+            w(bind::PARAMS, bb.params),
+            w(bind::ROW_START, bb.row_start),
+            w(bind::COL, bb.col),
+            w(bind::BLOCKS, bb.blocks),
+            w(bind::FREE, bb.free),
+            w(bind::X, bb.x),
+            w(bind::P, bb.p),
+            w(bind::Q, bb.q),
         ];
         let update_xr = [
-            w(0, bb.params),
-            w(4, bb.inv),
-            w(5, bb.free),
-            w(6, bb.x),
-            w(7, bb.r),
-            w(8, bb.z),
-            w(9, bb.p),
-            w(10, bb.q),
-            w(11, bb.scalars),
+            w(bind::PARAMS, bb.params),
+            w(bind::INV, bb.inv),
+            w(bind::FREE, bb.free),
+            w(bind::X, bb.x),
+            w(bind::R, bb.r),
+            w(bind::Z, bb.z),
+            w(bind::P, bb.p),
+            w(bind::Q, bb.q),
+            w(bind::SCALARS, bb.scalars),
         ];
-        let update_p = [w(0, bb.params), w(8, bb.z), w(9, bb.p), w(11, bb.scalars)];
+        let update_p = [
+            w(bind::PARAMS, bb.params),
+            w(bind::Z, bb.z),
+            w(bind::P, bb.p),
+            w(bind::SCALARS, bb.scalars),
+        ];
         while res > settings.tolerance && iterations < settings.max_iterations {
             let batch = CHECK_EVERY.min(settings.max_iterations - iterations);
             for _ in 0..batch {

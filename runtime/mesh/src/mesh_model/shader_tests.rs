@@ -50,5 +50,28 @@ fn the_pcg_kernels_validate_and_share_the_rust_constants() {
         assert_eq!(s.const_u32(slot) as usize, k * SLOT, "scalar slot {slot}");
     }
     assert_eq!(s.struct_layout("Params").size as u64, PARAMS_BYTES);
+    // Every variable's `@binding` is the number the dispatches bind it at.
+    for (var, binding) in [
+        ("p_", bind::PARAMS),
+        ("row_start", bind::ROW_START),
+        ("col", bind::COL),
+        ("blocks", bind::BLOCKS),
+        ("inv", bind::INV),
+        ("free", bind::FREE),
+        ("x", bind::X),
+        ("r", bind::R),
+        ("z", bind::Z),
+        ("p", bind::P),
+        ("q", bind::Q),
+        ("scalars", bind::SCALARS),
+        ("partial", bind::PARTIAL),
+        ("b", bind::B),
+        ("tie_start", bind::TIE_START),
+        ("tie_list", bind::TIE_LIST),
+        ("untie_start", bind::UNTIE_START),
+        ("untie_list", bind::UNTIE_LIST),
+    ] {
+        assert_eq!(s.binding(var), binding, "`{var}`");
+    }
     set.finish();
 }
