@@ -60,6 +60,15 @@ pub enum RunError {
     /// The model failed.
     #[error("{0}")]
     Model(#[from] ModelError),
+    /// A session's call into its deformation model failed; `call` says
+    /// which (see [`RunError::model_call`]).
+    #[error("model {call}: {error}")]
+    ModelCall {
+        /// The call that failed.
+        call: crate::session::ModelCall,
+        /// The model's error.
+        error: ModelError,
+    },
     /// The resampler failed.
     #[error("resample: {0}")]
     Resample(#[from] ResampleError),
