@@ -409,7 +409,12 @@ fn run_scene(
     // Create, init and the bind of the source lattice.
     if let Err(e) = s.swap_model(model, &sc.params) {
         t.refused += 1;
-        t.fail(sc, id, e.model_call().map_or("swap_model", ModelCall::name), &e);
+        t.fail(
+            sc,
+            id,
+            e.model_call().map_or("swap_model", ModelCall::name),
+            &e,
+        );
         return;
     }
     let mut prev_max = 0.0f64;
@@ -440,8 +445,8 @@ fn run_scene(
         t.frames += 1;
         let mut max = 0.0f64;
         let mut finite = true;
-        for l in 0..x.len() {
-            let u = DVec3::new(x[l] as f64, y[l] as f64, z[l] as f64);
+        for ((&ux, &uy), &uz) in x.iter().zip(&y).zip(&z) {
+            let u = DVec3::new(ux as f64, uy as f64, uz as f64);
             if !u.is_finite() {
                 finite = false;
                 break;

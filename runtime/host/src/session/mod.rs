@@ -600,12 +600,14 @@ impl Session {
     fn model_stage(&mut self) -> Result<StageOutcome, RunError> {
         let m = self.model.as_mut().ok_or_else(no_model)?;
         let t = Instant::now();
-        let outcome = m.model.step(FrameInfo {
-            frame: m.frame,
-            frames: self.frames,
-            dt_s: self.dt_s,
-        })
-        .map_err(ModelCall::Step.failed())?;
+        let outcome = m
+            .model
+            .step(FrameInfo {
+                frame: m.frame,
+                frames: self.frames,
+                dt_s: self.dt_s,
+            })
+            .map_err(ModelCall::Step.failed())?;
         m.frame += 1;
         let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);
         self.metrics.stage("model").record_run(wall, 0);

@@ -221,7 +221,10 @@ fn gpu_roi_maps_free_their_buffers() {
 fn tracked_points_and_the_displacement_field_need_a_model() {
     let mut s = cube_session(8);
     let e = s.track_points(&[[0.0, 0.0, 0.0]]).unwrap_err().to_string();
-    assert!(e.contains("need a model") && e.contains("swap_model"), "{e}");
+    assert!(
+        e.contains("need a model") && e.contains("swap_model"),
+        "{e}"
+    );
     assert!(s.tracked().is_empty());
     let e = s.tracked_displacements(TrackId(0)).unwrap_err().to_string();
     assert!(e.contains("no tracked points 0"), "{e}");

@@ -16,9 +16,9 @@
 //! Without a model there is nothing to bind to: `track_points` and
 //! `tracked_displacements` return an error saying to `swap_model` first.
 
+use super::Session;
 use super::model_call::ModelCall;
 use super::model_stage::ModelStage;
-use super::Session;
 use crate::pipeline::RunError;
 use voxflex_core::deformation::{BindingId, DisplacementTarget, RestPoints};
 use voxflex_core::glam::DVec3;
