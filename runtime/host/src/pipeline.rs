@@ -61,8 +61,10 @@ pub enum RunError {
     #[error("{0}")]
     Model(#[from] ModelError),
     /// A session's call into its deformation model failed; `call` says
-    /// which (see [`RunError::model_call`]).
-    #[error("model {call}: {error}")]
+    /// which (see [`RunError::model_call`]). The message is the model's
+    /// own, as [`RunError::Model`] gives it (a scene's `validate` and `run`
+    /// give the same words).
+    #[error("{error}")]
     ModelCall {
         /// The call that failed.
         call: crate::session::ModelCall,

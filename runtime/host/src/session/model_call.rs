@@ -71,10 +71,10 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_model_error_names_its_call_in_the_message_and_the_value() {
+    fn a_model_error_carries_its_call() {
         let e = ModelCall::Step.failed()(ModelError::new("plugin `x`: bad"));
         assert_eq!(e.model_call(), Some(ModelCall::Step));
-        assert_eq!(e.to_string(), "model step: plugin `x`: bad");
+        assert_eq!(e.to_string(), "plugin `x`: bad", "the model's own words");
         assert_eq!(RunError::Other("o".into()).model_call(), None);
     }
 }
