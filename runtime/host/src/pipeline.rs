@@ -60,6 +60,17 @@ pub enum RunError {
     /// The model failed.
     #[error("{0}")]
     Model(#[from] ModelError),
+    /// A session's call into its deformation model failed; `call` says
+    /// which (see [`RunError::model_call`]). The message is the model's
+    /// own, as [`RunError::Model`] gives it (a scene's `validate` and `run`
+    /// give the same words).
+    #[error("{error}")]
+    ModelCall {
+        /// The call that failed.
+        call: crate::session::ModelCall,
+        /// The model's error.
+        error: ModelError,
+    },
     /// The resampler failed.
     #[error("resample: {0}")]
     Resample(#[from] ResampleError),

@@ -1,6 +1,7 @@
 //! `voxflex bench --stress`: a numerical stress run of every deformation
 //! model through the real path (each plugin loaded from its shared library,
-//! driven across the C ABI like a scene's), on randomized scenes.
+//! driven across the C ABI through a CPU [`Session`] like a scene's), on
+//! randomized scenes.
 //!
 //! Per model, `--stress-scenes` scenes (default 200) of `--stress-frames`
 //! frames (default 13), from a seeded RNG (`--seed`): a small u8 volume
@@ -14,12 +15,15 @@
 //! frames; solver, integrator, proxy step and affine field drawn too.
 //!
 //! Outcomes counted per model:
-//! - **frames run** (a frame: interactions, step, map of every lattice point);
+//! - **frames run** (a frame: interactions, the session's model stage, then
+//!   its map stage when due — every lattice point mapped and the removed
+//!   tetrahedra asked; no resample);
 //! - **warnings** (`tracing` warnings raised by the models);
 //! - **refused**: a scene or interaction the model refused with a clear
 //!   error (a creation, `init`, `bind` or `interact` error) — an OK outcome;
-//! - **errors**: a `step`/`map` that stopped its scene with the model's
-//!   error — an OK outcome (the scene stops there);
+//! - **errors**: a `step`/`map`/`removed_tetrahedra` that stopped its scene
+//!   with the model's error (the session's [`ModelCall`] names which) — an
+//!   OK outcome (the scene stops there);
 //! - **panics**: any call that panicked inside the plugin (caught at the
 //!   C-ABI boundary) — must be 0;
 //! - **silent non-finite**: a frame whose step *succeeded* but whose mapped
@@ -35,17 +39,14 @@
 //!   grab length) — a silent blow-up, reported by scene number.
 
 use super::{BenchError, BenchOptions, err};
+use crate::backend::BackendChoice;
 use crate::plugin_loader;
+use crate::session::{Interaction, ModelCall, Session, SessionDefaults};
 use std::fmt::Write as _;
-use std::sync::Arc;
-use voxflex_abi::host_side::{DeformationProxy, HostServices};
-use voxflex_core::deformation::{
-    DeformationModel, DisplacementTarget, ExecutionBackend, FrameInfo, RestPoints,
-};
+use std::path::PathBuf;
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
 use voxflex_core::volume::{Volume, VoxelData};
-use voxflex_resample::TetMask;
 
 /// The models stressed, in report order.
 pub const MODELS: [&str; 4] = ["chainmail", "mass-spring", "corotational-fem", "affine"];
@@ -384,44 +385,38 @@ impl ModelTally {
 
 fn run_scene(
     model: &str,
-    plugin: &plugin_loader::LoadedPlugin,
-    services: &Arc<HostServices>,
+    dirs: &[PathBuf],
     sc: &StressScene,
     id: u64,
     frames: u64,
     t: &mut ModelTally,
 ) {
-    let Some(vtable) = plugin.deformation else {
-        t.refused += 1;
-        return;
+    let defaults = SessionDefaults {
+        backend: BackendChoice::Cpu,
+        plugin_dirs: dirs.to_vec(),
+        frames,
+        dt_s: sc.dt_s,
+        ..SessionDefaults::default()
     };
-    // SAFETY: checked, never-unloaded library.
-    let created = unsafe { DeformationProxy::create(model, vtable, &sc.params, services.clone()) };
-    let mut m = match created {
-        Ok(m) => m,
+    let mut s = match Session::from_volume(sc.volume.clone(), defaults) {
+        Ok(s) => s,
         Err(e) => {
             t.refused += 1;
-            t.fail(sc, id, "create", &e);
+            t.fail(sc, id, "session", &e);
             return;
         }
     };
-    if let Err(e) = m.init(sc.volume.view(), ExecutionBackend::Cpu) {
+    // Create, init and the bind of the source lattice.
+    if let Err(e) = s.swap_model(model, &sc.params) {
         t.refused += 1;
-        t.fail(sc, id, "init", &e);
+        t.fail(
+            sc,
+            id,
+            e.model_call().map_or("swap_model", ModelCall::name),
+            &e,
+        );
         return;
     }
-    let grid = sc.volume.grid;
-    let binding = match m.bind(RestPoints::Lattice(grid)) {
-        Ok(b) => b,
-        Err(e) => {
-            t.refused += 1;
-            t.fail(sc, id, "bind", &e);
-            return;
-        }
-    };
-    let n = grid.len();
-    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-    let mut mask: Option<Vec<u8>> = None;
     let mut prev_max = 0.0f64;
     let floor = 1e-3 * sc.size;
     let blow_up = 100.0 * (sc.size + sc.grab);
@@ -429,47 +424,29 @@ fn run_scene(
         let mut interacted = false;
         for (_, text) in sc.interactions.iter().filter(|(f, _)| *f == frame) {
             interacted = true;
-            if let Err(e) = m.interact(text) {
+            if let Err(e) = s.interact(&Interaction::Toml(text.clone())) {
                 t.refused += 1;
                 t.fail(sc, id, "interact", &e);
             }
         }
-        let info = FrameInfo {
-            frame,
-            frames,
-            dt_s: sc.dt_s,
+        // The model stage, then the map stage when due: every lattice
+        // point mapped and the removed tetrahedra asked, as the pipeline
+        // does (no resample: the stress is the models').
+        let field = s.step_model().and_then(|_| s.displacement_field());
+        let [x, y, z] = match field {
+            Ok(f) => f,
+            Err(e) => {
+                t.errors += 1;
+                let call = e.model_call().map_or("session", ModelCall::name);
+                t.fail(sc, id, &format!("frame {frame} {call}"), &e);
+                return;
+            }
         };
-        let stepped = m.step(info).and_then(|s| {
-            if s.changed {
-                let _ = m.dirty_region();
-            }
-            m.map(
-                binding,
-                DisplacementTarget::Cpu {
-                    x: &mut x,
-                    y: &mut y,
-                    z: &mut z,
-                },
-            )?;
-            // Topology, as the pipeline asks for it.
-            if mask.is_none() && m.removed_tetrahedra(binding, &mut [])? {
-                mask = TetMask::new(&grid).ok().map(|k| vec![0u8; k.cell_count()]);
-            }
-            if let Some(bits) = mask.as_mut() {
-                m.removed_tetrahedra(binding, bits)?;
-            }
-            Ok(())
-        });
-        if let Err(e) = stepped {
-            t.errors += 1;
-            t.fail(sc, id, &format!("frame {frame}"), &e);
-            return;
-        }
         t.frames += 1;
         let mut max = 0.0f64;
         let mut finite = true;
-        for l in 0..n {
-            let u = DVec3::new(x[l] as f64, y[l] as f64, z[l] as f64);
+        for ((&ux, &uy), &uz) in x.iter().zip(&y).zip(&z) {
+            let u = DVec3::new(ux as f64, uy as f64, uz as f64);
             if !u.is_finite() {
                 finite = false;
                 break;
@@ -514,7 +491,6 @@ pub fn stress(
     let scenes = args.stress_scenes;
     let frames = args.stress_frames.max(1);
     let dirs = plugin_loader::search_path(&args.plugin_dirs);
-    let services = HostServices::new(None, rayon::current_num_threads());
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -543,7 +519,8 @@ pub fn stress(
             .iter()
             .position(|m| *m == model)
             .unwrap_or(MODELS.len());
-        let plugin = plugin_loader::load_by_name(model, &dirs).map_err(err)?;
+        // Found (and checked) once; each scene's session loads it by name.
+        plugin_loader::load_by_name(model, &dirs).map_err(err)?;
         let mut t = ModelTally::default();
         let capture = crate::warnings::capture();
         for s in 0..scenes {
@@ -551,7 +528,7 @@ pub fn stress(
                 Rng(args.seed ^ ((mi as u64) << 48) ^ s.wrapping_mul(0x2545_F491_4F6C_DD1D));
             let sc = scene(model, &mut rng, frames);
             t.scenes += 1;
-            run_scene(model, &plugin, &services, &sc, s, frames, &mut t);
+            run_scene(model, &args.plugin_dirs, &sc, s, frames, &mut t);
         }
         // The capture keeps the first warnings and ends with a count of the
         // rest ("… and N more warnings not kept").

@@ -16,6 +16,13 @@
 //! A scene run ([`crate::pipeline::run_scene`]) is a loop over a session
 //! that writes files; `voxflex bench` times the same stages.
 //!
+//! Tracked points ([`Session::track_points`], see `tracked.rs`) read the
+//! displacement of chosen world points (landmarks, sensors, a bench's
+//! probes) on demand, and [`Session::step_model`] advances the model alone,
+//! leaving map and resample due for the next [`Session::step`]: `voxflex
+//! bench --fronts` and `--stress` drive models this way. A model's error
+//! says which call failed ([`ModelCall`], [`RunError::model_call`]).
+//!
 //! A session is [`Send`]: one thread at a time drives it, any thread may.
 //!
 //! ```no_run
@@ -51,19 +58,23 @@
 
 mod defaults;
 mod interaction;
+mod model_call;
 mod model_stage;
 mod plugins;
 mod report;
 mod roi;
 mod slice;
+mod tracked;
 mod versions;
 
 pub use defaults::SessionDefaults;
 pub use interaction::Interaction;
+pub use model_call::ModelCall;
 pub use plugins::ScenePlugins;
 pub use report::{StageOutcome, StepReport};
 pub use roi::{RoiId, RoiInfo};
 pub use slice::SliceImage;
+pub use tracked::TrackId;
 pub use versions::{StageVersion, Versions};
 
 use crate::backend::{self, BackendChoice, ResolvedBackend};
@@ -159,6 +170,9 @@ pub struct Session {
     renderer: Option<RendererSlot>,
     rois: Vec<SessionRoi>,
     next_roi: u64,
+    /// Tracked point sets, bound on every model (see `tracked.rs`).
+    tracked: Vec<tracked::TrackedSet>,
+    next_track: u64,
     /// The current volume uploaded for the ROI maps growing on the GPU,
     /// with the resample version it holds (0: the source); `None` on the
     /// CPU or without GPU ROI maps.
@@ -320,6 +334,8 @@ impl Session {
             renderer: None,
             rois: vec![],
             next_roi: 0,
+            tracked: vec![],
+            next_track: 0,
             roi_values: None,
             versions: Versions::default(),
             dirty: DirtyRegion::None,
@@ -409,6 +425,8 @@ impl Session {
             renderer: None,
             rois: vec![],
             next_roi: 0,
+            tracked: vec![],
+            next_track: 0,
             roi_values: None,
             versions: Versions::default(),
             dirty: DirtyRegion::None,
@@ -428,9 +446,10 @@ impl Session {
     }
 
     /// Builds the model stage (and the map and resample stages the first
-    /// time) with `plugin`; the next step maps in full.
+    /// time) with `plugin`, the tracked points bound on it; the next step
+    /// maps in full.
     fn build_model(&mut self, plugin: &LoadedPlugin, params_toml: &str) -> Result<(), RunError> {
-        let stage = ModelStage::new(
+        let mut stage = ModelStage::new(
             &self.context,
             plugin,
             params_toml,
@@ -438,6 +457,9 @@ impl Session {
             &self.source,
             self.resolved.backend,
         )?;
+        for set in &self.tracked {
+            tracked::bind(&mut stage, set)?;
+        }
         if self.displacements.is_none() {
             self.displacements = Some(Displacements::new(
                 &self.source,
@@ -494,7 +516,9 @@ impl Session {
             ))
         })?;
         let text = interaction.to_toml();
-        m.model.interact(&text)?;
+        m.model
+            .interact(&text)
+            .map_err(ModelCall::Interact.failed())?;
         let kind = InteractionSpec::from_toml(&text).map(|s| s.kind());
         self.topology_changed |= matches!(kind, Ok("cut" | "carve"));
         self.pending_interaction += t.elapsed();
@@ -529,11 +553,45 @@ impl Session {
         if !self.rois.is_empty() {
             report.stages.push(self.roi_stage()?);
         }
+        self.advance_frame();
+        Ok(report)
+    }
+
+    /// Advances the model alone one frame — the interactions handed over
+    /// since the last step, then the model stage — and leaves the map,
+    /// resample and ROI stages due: the next [`Self::step`] runs whichever
+    /// its [`Versions`] say (what the model moved is mapped and resampled
+    /// then; a model that did not move re-runs nothing, as ever). For a
+    /// caller that reads the model through tracked points
+    /// ([`Self::track_points`]) and looks at no volume (benches, sensors):
+    /// nothing is mapped or re-sampled. Counts a frame like `step`; the
+    /// report holds the model stage only (not built without a model).
+    pub fn step_model(&mut self) -> Result<StepReport, RunError> {
+        let mut report = StepReport {
+            frame: self.frame,
+            stages: vec![],
+        };
+        if self.model.is_some() {
+            report.stages.push(self.model_stage()?);
+        } else {
+            report.push(
+                "model",
+                false,
+                "not built: the session has no model".into(),
+                Duration::ZERO,
+                0,
+            );
+        }
+        self.advance_frame();
+        Ok(report)
+    }
+
+    /// One frame stepped (by `step` or `step_model`).
+    fn advance_frame(&mut self) {
         self.frame += 1;
         if self.counts_frames {
             self.metrics.frames = self.frame;
         }
-        Ok(report)
     }
 
     /// Stage model: steps the model one frame (its own clock) with the
@@ -542,11 +600,14 @@ impl Session {
     fn model_stage(&mut self) -> Result<StageOutcome, RunError> {
         let m = self.model.as_mut().ok_or_else(no_model)?;
         let t = Instant::now();
-        let outcome = m.model.step(FrameInfo {
-            frame: m.frame,
-            frames: self.frames,
-            dt_s: self.dt_s,
-        })?;
+        let outcome = m
+            .model
+            .step(FrameInfo {
+                frame: m.frame,
+                frames: self.frames,
+                dt_s: self.dt_s,
+            })
+            .map_err(ModelCall::Step.failed())?;
         m.frame += 1;
         let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);
         self.metrics.stage("model").record_run(wall, 0);
@@ -848,6 +909,27 @@ impl Session {
         Ok(self.volume_ref())
     }
 
+    /// The map stage's displacement field: one displacement per source
+    /// voxel (x fastest, on the source grid), mm, world axes, as x, y and z
+    /// arrays — read back from the GPU when the session computes there.
+    /// Runs the map stage first when it is due (the model moved, or a cut
+    /// or carve changed its topology, since the last map: every voxel
+    /// centre mapped and the removed tetrahedra asked for), so the next
+    /// [`Self::step`] does not map again but resamples what moved. Errors
+    /// without a model, or with the model's [`ModelCall::Map`] or
+    /// [`ModelCall::RemovedTetrahedra`] error.
+    pub fn displacement_field(&mut self) -> Result<[Vec<f32>; 3], RunError> {
+        if self.model.is_none() {
+            return Err(no_model());
+        }
+        if self.versions.map.is_due(self.versions.model) || self.topology_changed {
+            self.map_stage()?;
+        }
+        let n = self.source.grid.len();
+        let disp = self.displacements.as_ref().ok_or_else(no_model)?;
+        disp.to_cpu(n, &self.gpu)
+    }
+
     /// The source volume, as loaded.
     pub fn source(&self) -> &Volume {
         &self.source
@@ -1039,7 +1121,7 @@ impl Session {
     /// outside its proxy, …); empty without a model.
     pub fn model_notes(&mut self) -> Result<ModelNotes, RunError> {
         match self.model.as_mut() {
-            Some(m) => Ok(m.model.notes()?),
+            Some(m) => Ok(m.model.notes().map_err(ModelCall::Notes.failed())?),
             None => Ok(ModelNotes::new()),
         }
     }

@@ -3,6 +3,8 @@
 //! the source lattice, the displacement field (CPU arrays or GPU buffers)
 //! and the resampler with its tetrahedron mask.
 
+use super::model_call::ModelCall;
+use super::tracked::TrackId;
 use crate::pipeline::RunError;
 use crate::plugin_loader::LoadedPlugin;
 use std::sync::Arc;
@@ -52,6 +54,28 @@ impl Displacements {
         })
     }
 
+    /// The `n` displacements of each axis as CPU arrays (read back from
+    /// the GPU there), mm.
+    pub(crate) fn to_cpu(
+        &self,
+        n: usize,
+        gpu: &Option<Arc<dyn GpuService>>,
+    ) -> Result<[Vec<f32>; 3], RunError> {
+        match (self, gpu) {
+            (Displacements::Cpu(d), _) => Ok(d.clone()),
+            (Displacements::Gpu { disp, .. }, Some(gpu)) => {
+                let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0f32; n]);
+                for (id, v) in disp.iter().zip(out.iter_mut()) {
+                    gpu.read_buffer(*id, 0, bytemuck::cast_slice_mut(v))?;
+                }
+                Ok(out)
+            }
+            (Displacements::Gpu { .. }, None) => {
+                Err(RunError::Other("GPU displacements without a GPU".into()))
+            }
+        }
+    }
+
     /// Frees the GPU buffers (a no-op on the CPU).
     pub(crate) fn release(&self, gpu: &Option<Arc<dyn GpuService>>) {
         if let (Displacements::Gpu { disp, source }, Some(gpu)) = (self, gpu) {
@@ -69,6 +93,8 @@ pub(crate) struct ModelStage {
     pub(crate) params_toml: String,
     pub(crate) model: Box<dyn DeformationModel>,
     pub(crate) binding: BindingId,
+    /// The session's tracked point sets bound on this model.
+    pub(crate) tracked: Vec<(TrackId, BindingId)>,
     /// Tetrahedra the model removed (cuts, carving); allocated when the
     /// model first reports one, with the cell bytes it writes into.
     pub(crate) mask: Option<(TetMask, Vec<u8>)>,
@@ -96,14 +122,20 @@ impl ModelStage {
         })?;
         // SAFETY: the vtable comes from a checked, never-unloaded library.
         let mut model =
-            unsafe { DeformationProxy::create(&plugin.name, vtable, params_toml, services) }?;
-        model.init(source.view(), backend)?;
-        let binding = model.bind(RestPoints::Lattice(source.grid))?;
+            unsafe { DeformationProxy::create(&plugin.name, vtable, params_toml, services) }
+                .map_err(ModelCall::Create.failed())?;
+        model
+            .init(source.view(), backend)
+            .map_err(ModelCall::Init.failed())?;
+        let binding = model
+            .bind(RestPoints::Lattice(source.grid))
+            .map_err(ModelCall::Bind.failed())?;
         Ok(Self {
             plugin: plugin.clone(),
             params_toml: params_toml.to_owned(),
             model: Box::new(model),
             binding,
+            tracked: vec![],
             mask: None,
             source_grid: source.grid,
             frame: 0,
@@ -122,7 +154,9 @@ impl ModelStage {
                 z: *z,
             },
         };
-        self.model.map(self.binding, target)?;
+        self.model
+            .map(self.binding, target)
+            .map_err(ModelCall::Map.failed())?;
         Ok(())
     }
 
@@ -131,7 +165,11 @@ impl ModelStage {
     /// any, so models without topology changes never allocate a mask.
     pub(crate) fn update_mask(&mut self) -> Result<bool, RunError> {
         if self.mask.is_none() {
-            if !self.model.removed_tetrahedra(self.binding, &mut [])? {
+            if !self
+                .model
+                .removed_tetrahedra(self.binding, &mut [])
+                .map_err(ModelCall::RemovedTetrahedra.failed())?
+            {
                 return Ok(false);
             }
             let mask = TetMask::new(&self.source_grid)?;
@@ -139,7 +177,11 @@ impl ModelStage {
             self.mask = Some((mask, bytes));
         }
         let (mask, bytes) = self.mask.as_mut().expect("allocated above");
-        if !self.model.removed_tetrahedra(self.binding, bytes)? {
+        if !self
+            .model
+            .removed_tetrahedra(self.binding, bytes)
+            .map_err(ModelCall::RemovedTetrahedra.failed())?
+        {
             return Ok(false);
         }
         Ok(mask.replace_bits(bytes)?)

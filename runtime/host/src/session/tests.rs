@@ -216,3 +216,33 @@ fn gpu_roi_maps_free_their_buffers() {
     assert_eq!(s.roi_map(a), Some(&map));
     assert_eq!(s.rois()[0].steps, 3);
 }
+
+#[test]
+fn tracked_points_and_the_displacement_field_need_a_model() {
+    let mut s = cube_session(8);
+    let e = s.track_points(&[[0.0, 0.0, 0.0]]).unwrap_err().to_string();
+    assert!(
+        e.contains("need a model") && e.contains("swap_model"),
+        "{e}"
+    );
+    assert!(s.tracked().is_empty());
+    let e = s.tracked_displacements(TrackId(0)).unwrap_err().to_string();
+    assert!(e.contains("no tracked points 0"), "{e}");
+    assert!(!s.untrack(TrackId(0)));
+    let e = s.displacement_field().unwrap_err().to_string();
+    assert!(e.contains("swap_model"), "{e}");
+    let e = s.track_points(&[]).unwrap_err().to_string();
+    assert!(e.contains("no points"), "{e}");
+}
+
+#[test]
+fn step_model_without_a_model_steps_nothing() {
+    let mut s = cube_session(8);
+    let r = s.step_model().unwrap();
+    assert_eq!(r.frame, 0);
+    assert_eq!(r.stages.len(), 1, "{r}");
+    let o = r.stage("model").unwrap();
+    assert!(!o.ran && o.why.contains("no model"), "{o:?}");
+    assert_eq!(s.frame(), 1);
+    assert_eq!(s.versions(), Versions::default());
+}

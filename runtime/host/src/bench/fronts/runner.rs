@@ -1,27 +1,29 @@
 //! Runs a deformation plugin, loaded from its shared library, through a
-//! small scene the way the pipeline does: create with a params table,
-//! `init` on a volume (CPU backend), `bind` the points whose displacement
-//! the front compares, interactions at their frames, one `step` per frame,
-//! then `map`. Dynamic models can run on until they come to rest.
+//! small scene the way the pipeline does — through a [`Session`] on the
+//! CPU: `swap_model` with a params table (create, `init` on the volume),
+//! the points whose displacement the front compares tracked
+//! ([`Session::track_points`]), interactions at their frames, one
+//! [`Session::step_model`] per frame (the model alone: nobody looks at a
+//! resampled volume), then the tracked displacements. Dynamic models can
+//! run on until they come to rest.
 
 use super::super::{BenchError, err};
-use crate::plugin_loader;
+use crate::backend::BackendChoice;
+use crate::pipeline::RunError;
+use crate::session::{Interaction, Session, SessionDefaults};
 use std::cell::RefCell;
 use std::collections::HashSet;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
-use voxflex_abi::host_side::{DeformationProxy, HostServices};
-use voxflex_core::deformation::{
-    DeformationModel, DisplacementTarget, ExecutionBackend, FrameInfo, ModelNotes, RestPoints,
-};
+use voxflex_core::deformation::ModelNotes;
 use voxflex_core::glam::DVec3;
 use voxflex_core::volume::Volume;
 
-/// Where plugins are looked for, and the host services they get.
+/// Where plugins are looked for.
 pub(super) struct Plugins {
+    /// Searched first, before `VOXFLEX_PLUGIN_PATH` and the executable's
+    /// directory (the session's `plugin_dirs`).
     dirs: Vec<PathBuf>,
-    services: Arc<HostServices>,
     /// Plugins already run once (the first run of each is a discarded
     /// warm-up: library loading, thread start-up, first allocations).
     warm: RefCell<HashSet<String>>,
@@ -31,8 +33,7 @@ impl Plugins {
     /// The CLI's plugin search path with `extra` searched first; no GPU.
     pub fn new(extra: &[PathBuf]) -> Self {
         Self {
-            dirs: plugin_loader::search_path(extra),
-            services: HostServices::new(None, rayon::current_num_threads()),
+            dirs: extra.to_vec(),
             warm: RefCell::new(HashSet::new()),
         }
     }
@@ -75,7 +76,8 @@ pub(super) struct Scene<'a> {
 pub(super) struct Outcome {
     /// Displacement of each bound point, mm.
     pub u: Vec<DVec3>,
-    /// Wall time from `create` to the last `map`, ms.
+    /// Wall time from `swap_model` (the model's creation) to the last map
+    /// of the bound points, ms.
     pub time_ms: f64,
     /// Frames stepped (scripted and settling).
     pub frames: u64,
@@ -83,27 +85,6 @@ pub(super) struct Outcome {
     pub settled: bool,
     /// The model's notes at the end.
     pub notes: ModelNotes,
-}
-
-fn map(
-    model: &mut DeformationProxy,
-    binding: voxflex_core::deformation::BindingId,
-    n: usize,
-) -> Result<Vec<DVec3>, BenchError> {
-    let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-    model
-        .map(
-            binding,
-            DisplacementTarget::Cpu {
-                x: &mut x,
-                y: &mut y,
-                z: &mut z,
-            },
-        )
-        .map_err(err)?;
-    Ok((0..n)
-        .map(|i| DVec3::new(x[i] as f64, y[i] as f64, z[i] as f64))
-        .collect())
 }
 
 /// Runs `scene` through its plugin (twice, the first discarded, when the
@@ -115,57 +96,57 @@ pub(super) fn run(plugins: &Plugins, scene: &Scene) -> Result<Outcome, BenchErro
     run_once(plugins, scene)
 }
 
+/// Steps the model alone one frame; true when it moved.
+fn step(session: &mut Session) -> Result<bool, RunError> {
+    let before = session.versions().model;
+    session.step_model()?;
+    Ok(session.versions().model != before)
+}
+
 fn run_once(plugins: &Plugins, scene: &Scene) -> Result<Outcome, BenchError> {
-    let plugin = plugin_loader::load_by_name(scene.plugin, &plugins.dirs).map_err(err)?;
-    let vtable = plugin
-        .deformation
-        .ok_or_else(|| err(format!("{} is not a deformation plugin", scene.plugin)))?;
-    let what = |e: voxflex_core::error::ModelError| {
+    let what = |e: RunError| {
         err(format!(
             "{} ({}): {e}",
             scene.plugin,
             scene.params.replace('\n', "; ")
         ))
     };
-    let t = Instant::now();
-    // SAFETY: a checked library that is never unloaded.
-    let mut model = unsafe {
-        DeformationProxy::create(
-            &plugin.name,
-            vtable,
-            &scene.params,
-            plugins.services.clone(),
-        )
-    }
-    .map_err(what)?;
-    model
-        .init(scene.volume.view(), ExecutionBackend::Cpu)
-        .map_err(what)?;
-    let binding = model.bind(RestPoints::Points(scene.points)).map_err(what)?;
-    let n = scene.points.len();
     let total = scene.frames + scene.settle.map_or(0, |s| s.max_frames);
-    let info = |frame| FrameInfo {
-        frame,
-        frames: total,
-        dt_s: scene.dt_s,
-    };
+    let mut session = Session::from_volume(
+        scene.volume.clone(),
+        SessionDefaults {
+            backend: BackendChoice::Cpu,
+            plugin_dirs: plugins.dirs.clone(),
+            frames: total,
+            dt_s: scene.dt_s,
+            ..SessionDefaults::default()
+        },
+    )
+    .map_err(what)?;
+    let t = Instant::now();
+    session
+        .swap_model(scene.plugin, &scene.params)
+        .map_err(what)?;
+    let probes = session.track_points(scene.points).map_err(what)?;
     for frame in 0..scene.frames {
         for (_, i) in scene.interactions.iter().filter(|(f, _)| *f == frame) {
-            model.interact(i).map_err(what)?;
+            session
+                .interact(&Interaction::Toml(i.clone()))
+                .map_err(what)?;
         }
-        model.step(info(frame)).map_err(what)?;
+        step(&mut session).map_err(what)?;
     }
-    let mut u = map(&mut model, binding, n)?;
+    let mut u = session.tracked_displacements(probes).map_err(what)?;
     let (mut frame, mut settled) = (scene.frames, true);
     if let Some(s) = scene.settle {
         settled = false;
         while frame < total {
             let mut changed = false;
             for _ in 0..s.check_every.max(1) {
-                changed |= model.step(info(frame)).map_err(what)?.changed;
+                changed |= step(&mut session).map_err(what)?;
                 frame += 1;
             }
-            let next = map(&mut model, binding, n)?;
+            let next = session.tracked_displacements(probes).map_err(what)?;
             let moved = u
                 .iter()
                 .zip(&next)
@@ -179,7 +160,7 @@ fn run_once(plugins: &Plugins, scene: &Scene) -> Result<Outcome, BenchError> {
         }
     }
     let time_ms = t.elapsed().as_secs_f64() * 1e3;
-    let notes = model.notes().map_err(what)?;
+    let notes = session.model_notes().map_err(what)?;
     if u.iter().any(|d| !d.is_finite()) {
         return Err(err(format!(
             "{} ({}): a bound point's displacement is not finite",

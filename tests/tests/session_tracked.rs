@@ -1,0 +1,160 @@
+//! Tracked points and `step_model` of the `Session` through the real `.so`
+//! plugins: tracked points follow a grab and agree with the map stage's
+//! field, are bound again on a swapped model; `step_model` steps the model
+//! alone and the next `step` maps and resamples what is due (skips stay
+//! skips); a model's error says which call failed.
+
+use voxflex_core::glam::DVec3;
+use voxflex_integration_tests::plugin_dir;
+use voxflex_phantom::phantom;
+use voxflex_runtime::backend::BackendChoice;
+use voxflex_runtime::session::{Interaction, ModelCall, Session, SessionDefaults, StepReport};
+
+const CHAINMAIL: &str = "materials = [{ range = [50, 200], constraint = 0.01 }]\n\
+                         propagation_iterations = 40\n";
+const FEM: &str = "proxy = { kind = \"uniform\", step = 2 }\n\
+                   materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n\
+                   solver = \"static\"\n";
+
+/// A voxel centre on the 20³ cube phantom's +x face (5 mm voxels, the
+/// cube from −25 to 25 mm), mm.
+const GRAB: [f64; 3] = [22.5, 2.5, 2.5];
+/// A voxel centre on the opposite face, mm.
+const FAR: [f64; 3] = [-22.5, 2.5, 2.5];
+
+fn cube_session() -> Session {
+    let defaults = SessionDefaults {
+        backend: BackendChoice::Cpu,
+        plugin_dirs: vec![plugin_dir(&["chainmail", "corotational-fem"])],
+        ..SessionDefaults::default()
+    };
+    Session::from_volume(phantom("cube", [20, 20, 20]).unwrap(), defaults).unwrap()
+}
+
+fn f32s(p: [f64; 3]) -> [f32; 3] {
+    p.map(|x| x as f32)
+}
+
+fn grab_by(s: &mut Session, by: [f64; 3]) {
+    let to = (DVec3::from_array(GRAB) + DVec3::from_array(by)).to_array();
+    s.interact(&Interaction::Grab {
+        point: GRAB,
+        to,
+        frames: 1,
+    })
+    .unwrap();
+}
+
+fn ran(r: &StepReport) -> Vec<&'static str> {
+    r.stages.iter().filter(|s| s.ran).map(|s| s.stage).collect()
+}
+
+#[test]
+fn tracked_points_follow_a_grab_and_agree_with_the_map_stage() {
+    let mut s = cube_session();
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    let id = s.track_points(&[f32s(GRAB), f32s(FAR)]).unwrap();
+    assert_eq!(s.tracked(), vec![id]);
+    let rest = s.tracked_displacements(id).unwrap();
+    assert_eq!(rest, vec![DVec3::ZERO; 2], "at rest before any step");
+    grab_by(&mut s, [10.0, 0.0, 0.0]);
+    for _ in 0..5 {
+        s.step_model().unwrap();
+    }
+    let u = s.tracked_displacements(id).unwrap();
+    assert!(
+        (u[0] - DVec3::new(10.0, 0.0, 0.0)).length() < 1e-3,
+        "the grabbed point went where it was dragged: {u:?}"
+    );
+    // The map stage's field at the same voxel centres holds the same.
+    let [x, y, z] = s.displacement_field().unwrap();
+    let grid = s.source().grid;
+    for (p, d) in [GRAB, FAR].iter().zip(&u) {
+        let i = grid.world_to_index(DVec3::from_array(*p)).round();
+        let l = grid.linear(i.x as usize, i.y as usize, i.z as usize);
+        let field = DVec3::new(x[l] as f64, y[l] as f64, z[l] as f64);
+        assert!((field - *d).length() < 1e-4, "{p:?}: {field} vs {d}");
+    }
+    // Tracking did not consume what the pipeline has to resample.
+    let r = s.step().unwrap();
+    assert!(r.ran("resample"), "{r}");
+    assert!(s.untrack(id));
+    assert!(!s.untrack(id));
+    let e = s.tracked_displacements(id).unwrap_err().to_string();
+    assert!(e.contains("no tracked points"), "{e}");
+}
+
+#[test]
+fn tracked_points_are_bound_again_on_a_swapped_model() {
+    let mut s = cube_session();
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    let id = s.track_points(&[f32s(GRAB)]).unwrap();
+    grab_by(&mut s, [10.0, 0.0, 0.0]);
+    s.step_model().unwrap();
+    assert!(s.tracked_displacements(id).unwrap()[0].length() > 5.0);
+    s.swap_model("corotational-fem", FEM).unwrap();
+    assert_eq!(
+        s.tracked_displacements(id).unwrap(),
+        vec![DVec3::ZERO],
+        "the same id on the new model, at rest"
+    );
+    grab_by(&mut s, [0.0, 0.0, -5.0]);
+    s.step_model().unwrap();
+    let u = s.tracked_displacements(id).unwrap()[0];
+    assert!(
+        u.z < -1.0 && u.is_finite(),
+        "the FEM moved the tracked point: {u}"
+    );
+    // A swap the new model refuses keeps the old model and its bindings.
+    assert!(s.swap_model("chainmail", "materials = 5").is_err());
+    assert_eq!(s.tracked_displacements(id).unwrap()[0], u);
+}
+
+#[test]
+fn step_model_steps_the_model_alone_and_the_next_step_maps_what_is_due() {
+    let mut s = cube_session();
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    // A new model: the map is due in full whatever the model does.
+    let r = s.step_model().unwrap();
+    assert_eq!(ran(&r), ["model"], "{r}");
+    assert_eq!(r.stages.len(), 1, "map and resample are not reported: {r}");
+    assert_eq!(s.frame(), 1);
+    assert_eq!(s.versions().map.version, 0);
+    let m = s.metrics().unwrap();
+    assert_eq!(m.stages["model"].runs, 1);
+    assert!(
+        !m.stages.contains_key("map") || (m.stages["map"].runs, m.stages["map"].skipped) == (0, 0),
+        "step_model neither runs nor skips the map"
+    );
+    let r = s.step().unwrap();
+    assert_eq!(ran(&r), ["model", "map", "resample"], "{r}");
+    // At rest: a model step moves nothing, so the next step skips the rest.
+    s.step_model().unwrap();
+    let r = s.step().unwrap();
+    assert_eq!(ran(&r), ["model"], "skips stay skips: {r}");
+    // A grab stepped by step_model alone: the next step maps and resamples.
+    grab_by(&mut s, [5.0, 0.0, 0.0]);
+    let (model, map) = (s.versions().model, s.versions().map.version);
+    s.step_model().unwrap();
+    assert!(s.versions().model > model, "the model moved");
+    assert_eq!(s.versions().map.version, map, "not mapped yet");
+    let r = s.step().unwrap();
+    assert!(r.ran("map") && r.ran("resample"), "{r}");
+    assert_eq!(s.frame(), 6);
+}
+
+#[test]
+fn a_model_error_says_which_call_failed() {
+    let mut s = cube_session();
+    let e = s.swap_model("chainmail", "materials = 5").unwrap_err();
+    assert_eq!(e.model_call(), Some(ModelCall::Create), "{e}");
+    assert!(e.to_string().contains("plugin `chainmail`"), "{e}");
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    let e = s
+        .interact(&Interaction::Toml("kind = \"no-such-kind\"".into()))
+        .unwrap_err();
+    assert_eq!(e.model_call(), Some(ModelCall::Interact), "{e}");
+    let e = s.track_points(&[[f32::NAN, 0.0, 0.0]]).unwrap_err();
+    assert_eq!(e.model_call(), Some(ModelCall::Bind), "{e}");
+    assert!(s.tracked().is_empty(), "a refused set is not tracked");
+}
