@@ -203,6 +203,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                         mut extra: Vec<(&'static str, String)>| {
             let e = cut_error(&points, &run.u, c, d);
             let mut ex = vec![
+                ("cut_x_mm", format!("{c:.2}")),
                 ("max_mm", format!("{:.4}", e.max_mm)),
                 ("wrong_side", e.wrong_side.to_string()),
                 ("blurred", e.blurred.to_string()),
