@@ -3,8 +3,10 @@
 //! fall with resolution where theory says they must — the corotational
 //! FEM cantilever against Timoshenko beam theory and against its finest
 //! solve, the large deflection against the elastica, the grab against the
-//! fine FEM solve — and trilinear resampling beats tetrahedral against the
-//! f64 reference under every field.
+//! fine FEM solve — ChainMail's cut at one element per voxel leaves every
+//! voxel on its own piece's side and beats its down-sampled cuts against
+//! the analytic answer, and trilinear resampling beats tetrahedral against
+//! the f64 reference under every field.
 
 use std::collections::BTreeMap;
 use voxflex_integration_tests::*;
@@ -75,7 +77,14 @@ fn quick_fronts_are_written_finite_and_converge() {
     );
     assert!(o.status.success(), "{}", text(&o));
     let md = std::fs::read_to_string(out.join("front.md")).expect("front.md");
-    for front in ["fem_cantilever", "fem_elastica", "grab", "resample", "roi"] {
+    for front in [
+        "fem_cantilever",
+        "fem_elastica",
+        "grab",
+        "cut",
+        "resample",
+        "roi",
+    ] {
         let svg = std::fs::read_to_string(out.join(format!("{front}.svg"))).expect("svg");
         assert!(
             svg.starts_with("<svg") && svg.contains("run time, ms"),
@@ -127,6 +136,51 @@ fn quick_fronts_are_written_finite_and_converge() {
     // error stays below the grab's 2 mm (a torn beam moves only its face).
     for r in g.iter().filter(|r| r["series"].starts_with("ChainMail")) {
         assert!(num(r, "error") < 0.5, "ChainMail: {r:?}");
+    }
+    // The cut: ChainMail with one element per voxel cuts between two voxel
+    // layers, so every voxel centre ends on its own piece's side; down-
+    // sampled, the voxels between the element layers astride the plane
+    // take a blend of both pieces' motion, and the error grows.
+    let cut = rows(&out, "cut");
+    let groups: std::collections::BTreeSet<&str> =
+        cut.iter().map(|r| r["cut_x_mm"].as_str()).collect();
+    assert!(groups.len() >= 2, "cut: plane positions {groups:?}");
+    for g in groups {
+        let rows: Vec<_> = cut.iter().filter(|r| r["cut_x_mm"] == g).cloned().collect();
+        let chainmail = series(&rows, "ChainMail c = 0.3", "downsample", "error");
+        let (one, coarser) = chainmail.split_first().unwrap();
+        assert_eq!(one.0, 1.0, "{g}: {chainmail:?}");
+        for r in rows.iter().filter(|r| r["series"].starts_with("ChainMail")) {
+            if num(r, "downsample") == 1.0 {
+                assert_eq!(
+                    num(r, "blurred"),
+                    0.0,
+                    "{g}: ChainMail one element per voxel: {r:?}"
+                );
+            } else {
+                assert!(
+                    num(r, "blurred") > 0.0,
+                    "{g}: ChainMail down-sampled: {r:?}"
+                );
+            }
+        }
+        for c in coarser {
+            assert!(
+                one.1 < c.1,
+                "{g}: ChainMail at downsample 1 ({}) is not below downsample {} ({})",
+                one.1,
+                c.0,
+                c.1
+            );
+        }
+        // The mesh models' cut separates the pieces: away from the plane
+        // both are at rigid rest.
+        for r in rows
+            .iter()
+            .filter(|r| !r["series"].starts_with("ChainMail"))
+        {
+            assert!(num(r, "far_rms_mm") < 0.1, "{g}: {r:?}");
+        }
     }
     // Resampling: trilinear beats tetrahedral under every field and size.
     let rs = rows(&out, "resample");

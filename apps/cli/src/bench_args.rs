@@ -37,16 +37,16 @@ pub struct BenchArgs {
     #[arg(long, conflicts_with = "fronts")]
     pub accuracy: bool,
     /// Measure the run-time/error front of every model instead (FEM
-    /// cantilever and elastica, the same grab across models, resampling,
-    /// ROI maps) and write `<front>.csv`, `<front>.svg` and `front.md`
-    /// into `--out`.
+    /// cantilever and elastica, the same grab and the same cut across
+    /// models, resampling, ROI maps) and write `<front>.csv`, `<front>.svg`
+    /// and `front.md` into `--out`.
     #[arg(long)]
     pub fronts: bool,
     /// With `--fronts`: tiny sizes (seconds; what the tests run).
     #[arg(long, requires = "fronts")]
     pub quick: bool,
     /// With `--fronts`: only these fronts (fem_cantilever, fem_elastica,
-    /// grab, resample, roi; repeatable).
+    /// grab, cut, resample, roi; repeatable).
     #[arg(long, requires = "fronts")]
     pub only: Vec<String>,
     /// With `--fronts`: the output directory.

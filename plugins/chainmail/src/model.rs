@@ -734,7 +734,8 @@ impl ChainMail {
     }
 
     /// What the model reports about its run (see [`RunLog::notes`]), plus
-    /// the iteration counts.
+    /// the iteration counts, the `downsample` in force and the sampling-mesh
+    /// tetrahedra removed by cuts and carving.
     pub fn notes(&self) -> voxflex_core::deformation::ModelNotes {
         let mut notes = voxflex_core::deformation::ModelNotes::new();
         self.log.notes(&mut notes);
@@ -745,6 +746,13 @@ impl ChainMail {
         );
         notes.insert("relaxation_sweeps".into(), c.relaxation_iterations as f64);
         notes.insert("repair_waves".into(), c.repair_waves as f64);
+        // Source voxels per element along each axis (the `downsample` in
+        // force, the default when the params leave it out).
+        notes.insert("downsample".into(), self.lat.downsample as f64);
+        // Sampling-mesh tetrahedra the cuts and carving removed so far
+        // (tissue the renderer no longer draws).
+        let removed: u32 = self.removed_tets.iter().map(|b| b.count_ones()).sum();
+        notes.insert("removed_tetrahedra".into(), removed as f64);
         self.far_grabs.add_notes(&mut notes);
         notes
     }

@@ -639,6 +639,11 @@ fn cuts_and_carves_of_a_down_sampled_model_reach_the_sampling_mesh() {
     // every row of cells across the plane has one.
     assert!(marked.iter().all(|&c| c % 20 == 9));
     assert_eq!(marked.len(), 20 * 20);
+    // The notes count the removed tetrahedra and say the down-sampling.
+    let notes = m.notes();
+    let removed: u32 = bits.iter().map(|b| b.count_ones()).sum();
+    assert_eq!(notes["removed_tetrahedra"], removed as f64, "{notes:?}");
+    assert_eq!(notes["downsample"], 2.0);
     // Carving a ball removes the tetrahedra around the voxels inside it.
     let mut m = ChainMail::new(v.view(), params("downsample = 2", mats)).unwrap();
     m.interact(

@@ -9,13 +9,16 @@
 //! one series per model/configuration, the default configuration ringed),
 //! and `front.md` (every front's table, its Pareto front and its knee).
 //!
-//! Fronts ([`fem`], [`grab`], [`resample`], [`roi`]):
+//! Fronts ([`cut`], [`fem`], [`grab`], [`resample`], [`roi`]):
 //! - `fem_cantilever`: corotational FEM tip deflection vs Timoshenko beam
 //!   theory and vs the finest solve, proxy step × CG tolerance;
 //! - `fem_elastica`: static Newton under large rotation vs the Euler
 //!   elastica, PL²/EI = 3, 10, 30, proxy step;
 //! - `grab`: corotational FEM, mass-spring and ChainMail on the same grab
 //!   of a soft beam vs a fine FEM solve (displacement at the bound points);
+//! - `cut`: ChainMail, mass-spring and corotational FEM on the same
+//!   complete cut of a soft beam, one piece then grabbed, vs the analytic
+//!   answer (the grabbed piece translates rigidly, the other stays still);
 //! - `resample`: tetrahedral vs trilinear interpolation vs an f64
 //!   reference under affine, twist and bend, several sizes;
 //! - `roi`: ROI map 1 − Dice against the labelled abdomen, per λ.
@@ -26,6 +29,7 @@
 //! a load, a field, a seed). `front.md` says for each whether the default
 //! configuration is the knee, Pareto-optimal, or dominated.
 
+mod cut;
 mod fem;
 mod grab;
 mod plot;
@@ -83,7 +87,14 @@ pub(crate) struct Front {
 }
 
 /// The fronts by name, in run order.
-pub(crate) const NAMES: [&str; 5] = ["fem_cantilever", "fem_elastica", "grab", "resample", "roi"];
+pub(crate) const NAMES: [&str; 6] = [
+    "fem_cantilever",
+    "fem_elastica",
+    "grab",
+    "cut",
+    "resample",
+    "roi",
+];
 
 /// Runs the fronts and writes their files; returns a human-readable report.
 pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
@@ -109,6 +120,7 @@ pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
             "fem_cantilever" => vec![fem::cantilever(&plugins, args.quick)?],
             "fem_elastica" => vec![fem::elastica(&plugins, args.quick)?],
             "grab" => vec![grab::front(&plugins, args.quick)?],
+            "cut" => vec![cut::front(&plugins, args.quick)?],
             "resample" => vec![resample::front(args.quick)?],
             _ => vec![roi::front(args.quick)?],
         };
