@@ -629,7 +629,7 @@ fn the_default_proxy_keeps_the_node_spacing_of_each_element() {
         ));
         let other = tetrahedra(&format!(
             "{}element = \"{element}\"",
-            step(cells_per_spacing * DEFAULT_NODE_SPACING + 1)
+            step(cells_per_spacing * DEFAULT_NODE_SPACING / 2)
         ));
         assert_eq!(by_default, explicit, "{element}");
         assert_ne!(
