@@ -3,10 +3,12 @@
 //! fall with resolution where theory says they must — the corotational
 //! FEM cantilever against Timoshenko beam theory and against its finest
 //! solve, the large deflection against the elastica, the grab against the
-//! fine FEM solve — ChainMail's cut at one element per voxel leaves every
+//! fine FEM solve, P2 at least as close as P1 on the same proxy — that
+//! each mesh model's ringed default is the configuration the plugin runs
+//! by default, that ChainMail's cut at one element per voxel leaves every
 //! voxel on its own piece's side and beats its down-sampled cuts against
-//! the analytic answer, and trilinear resampling beats tetrahedral against
-//! the f64 reference under every field.
+//! the analytic answer, and that trilinear resampling beats tetrahedral
+//! against the f64 reference under every field.
 
 use std::collections::BTreeMap;
 use voxflex_integration_tests::*;
@@ -132,6 +134,29 @@ fn quick_fronts_are_written_finite_and_converge() {
     let mut v = series(&g, "FEM static", "step", "error");
     v.reverse();
     falls("grab, FEM static", &v);
+    // Quadratic tetrahedra hold the linear ones' displacements and more:
+    // on the same proxy, P2 is at least as close to the fine solve as P1.
+    let p1 = series(&g, "FEM static", "step", "error");
+    let p2 = series(&g, "FEM static P2", "step", "error");
+    let mut common = 0;
+    for (step, e1) in &p1 {
+        if let Some((_, e2)) = p2.iter().find(|(s, _)| s == step) {
+            common += 1;
+            assert!(e2 <= e1, "grab at step {step}: P2 {e2} vs P1 {e1}");
+        }
+    }
+    assert!(common > 0, "no step with both P1 and P2: {p1:?} {p2:?}");
+    // The ringed default of each mesh plugin is the configuration the
+    // plugin runs with no key but its materials (the bench compares first
+    // frames), measured once.
+    for model in ["FEM", "mass-spring"] {
+        let d: Vec<_> = g
+            .iter()
+            .filter(|r| r["series"].starts_with(model) && r["default"] == "true")
+            .map(|r| format!("{} {}", r["series"], r["config"]))
+            .collect();
+        assert_eq!(d.len(), 1, "{model} defaults in the grab front: {d:?}");
+    }
     // ChainMail's kinematic answer follows the grab through the beam: its
     // error stays below the grab's 2 mm (a torn beam moves only its face).
     for r in g.iter().filter(|r| r["series"].starts_with("ChainMail")) {

@@ -43,8 +43,8 @@ use voxflex_mesh::mesh_model::amg::Amg;
 use voxflex_mesh::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_mesh::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_mesh::mesh_model::{
-    BlockMatrix, Boundary, EdgeLayer, ElasticMaterial, MeshSolver, NodeState, SolveReport,
-    lumped_masses,
+    BlockMatrix, Boundary, DEFAULT_NODE_SPACING, EdgeLayer, ElasticMaterial, MeshSolver, NodeState,
+    ProxySpec, SolveReport, lumped_masses,
 };
 
 /// Which solve runs each frame.
@@ -111,7 +111,8 @@ pub enum PreconditionerKind {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FemParams {
-    /// `"p1"` (default) or `"p2"`.
+    /// `"p1"` (default) or `"p2"`; without a `proxy` key P2 runs on cells
+    /// twice P1's default ([`MeshSolver::default_proxy`]).
     #[serde(default)]
     pub element: ElementKind,
     /// `"dynamic"` (default) or `"static"`.
@@ -583,6 +584,18 @@ impl MeshSolver for CorotationalFem {
     const DESCRIPTION: &'static str =
         "corotational linear FEM on a tetrahedral proxy (static or implicit backward Euler, PCG)";
     type Params = FemParams;
+
+    /// Uniform cells of [`DEFAULT_NODE_SPACING`] voxels with P1; twice
+    /// that with P2, whose mid-edge nodes keep the nodes as far apart.
+    fn default_proxy(params: &FemParams) -> ProxySpec {
+        let cells_per_spacing = match params.element {
+            ElementKind::P1 => 1,
+            ElementKind::P2 => 2,
+        };
+        ProxySpec::Uniform {
+            step: cells_per_spacing * DEFAULT_NODE_SPACING,
+        }
+    }
 
     const GPU: bool = true;
 

@@ -603,3 +603,44 @@ fn one_voxel_objects_and_slabs_survive_at_every_offset() {
     voxflex_mesh::mesh_model::small_features::every_offset::<CorotationalFem>(params)
         .unwrap_or_else(|e| panic!("{e}"));
 }
+
+/// With no `proxy` key the proxy's nodes lie `DEFAULT_NODE_SPACING` voxels
+/// apart whatever the element: P1 on uniform cells of that many voxels,
+/// P2 (a node mid-edge) on cells twice that size.
+#[test]
+fn the_default_proxy_keeps_the_node_spacing_of_each_element() {
+    use voxflex_core::deformation::ExecutionBackend;
+    use voxflex_mesh::mesh_model::DEFAULT_NODE_SPACING;
+    let volume = voxflex_phantom::phantom("cube", [33, 33, 33]).unwrap();
+    let tetrahedra = |params: &str| {
+        let mut m = Fem::from_toml(&format!(
+            "materials = [{{ range = [50, 150], youngs_modulus = 2000 }}]\n{params}"
+        ))
+        .unwrap();
+        m.init(volume.view(), ExecutionBackend::Cpu).unwrap();
+        m.notes().unwrap()["proxy_tetrahedra"]
+    };
+    let step = |s: usize| format!("proxy = {{ kind = \"uniform\", step = {s} }}\n");
+    for (element, cells_per_spacing) in [("p1", 1), ("p2", 2)] {
+        let by_default = tetrahedra(&format!("element = \"{element}\""));
+        let explicit = tetrahedra(&format!(
+            "{}element = \"{element}\"",
+            step(cells_per_spacing * DEFAULT_NODE_SPACING)
+        ));
+        let other = tetrahedra(&format!(
+            "{}element = \"{element}\"",
+            step(cells_per_spacing * DEFAULT_NODE_SPACING / 2)
+        ));
+        assert_eq!(by_default, explicit, "{element}");
+        assert_ne!(
+            by_default, other,
+            "{element}: the cube must tell the steps apart"
+        );
+    }
+    // The element's own default follows the same rule.
+    let default_step = match FemParams::default().element {
+        ElementKind::P1 => DEFAULT_NODE_SPACING,
+        ElementKind::P2 => 2 * DEFAULT_NODE_SPACING,
+    };
+    assert_eq!(tetrahedra(""), tetrahedra(&step(default_step)));
+}

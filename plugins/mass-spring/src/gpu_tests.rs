@@ -4,7 +4,7 @@
 //! these tests print SKIPPED, except under `CI=true`, where a missing
 //! adapter fails them.
 
-use crate::solver::{MassSpring, SpringParams};
+use crate::solver::{Integrator, MassSpring, SpringParams};
 use std::sync::Arc;
 use voxflex_core::deformation::{DeformationModel, DisplacementTarget, FrameInfo, RestPoints};
 use voxflex_core::glam::DVec3;
@@ -34,7 +34,10 @@ fn bar(gpu: Option<Arc<dyn GpuService>>) -> Springs {
         mesh,
         materials,
         DVec3::new(0.0, 0.0, -9810.0),
-        SpringParams::default(),
+        SpringParams {
+            integrator: Integrator::Explicit,
+            ..SpringParams::default()
+        },
     )
     .unwrap()
     .with_gpu(gpu);
@@ -130,7 +133,7 @@ fn gpu_implicit_steps_and_octree_proxies_match_rayon() {
             ElasticMaterial::new(8000.0, 0.3, 1e-3),
         ];
         let params = SpringParams {
-            integrator: crate::solver::Integrator::Implicit,
+            integrator: Integrator::Implicit,
             cg_tolerance: 1e-6,
             ..SpringParams::default()
         };
@@ -171,7 +174,7 @@ fn gpu_implicit_steps_and_octree_proxies_match_rayon() {
         "proxy = { kind = \"octree\", max_cell = 8 }\n\
          materials = [{ name = \"soft\", range = [50, 150], youngs_modulus = 2000 }, \
                       { name = \"hard\", range = [150, 256], youngs_modulus = 20000 }]\n\
-         gravity = [0, 0, -9810]",
+         gravity = [0, 0, -9810]\nintegrator = \"explicit\"",
         &["kind = \"fix\"\nmaterial = \"hard\""],
         frame,
         10,
@@ -205,6 +208,7 @@ fn gpu_implicit_steps_and_octree_proxies_match_rayon() {
 fn gpu_volume_springs_untangle_as_rayon_does() {
     let Some(gpu) = test_gpu() else { return };
     let params = SpringParams {
+        integrator: Integrator::Explicit,
         volume_stiffness: 1.0,
         ..SpringParams::default()
     };

@@ -1,9 +1,9 @@
 //! # voxflex-mass-spring — a mass-spring model on a tetrahedral proxy
 //!
 //! Springs on the proxy's edges with stiffness from Young's modulus and the
-//! tetrahedra's volumes, lumped masses, spring and mass damping; explicit
-//! symplectic Euler sub-stepped below the stability limit, or a linearised
-//! backward-Euler step solved by PCG (see [`solver`]).
+//! tetrahedra's volumes, lumped masses, spring and mass damping; a
+//! linearised backward-Euler step solved by PCG (the default), or explicit
+//! symplectic Euler sub-stepped below the stability limit (see [`solver`]).
 //!
 //! Everything but the solver — the proxy, materials, boundary conditions,
 //! interactions, binding and map — is [`voxflex_mesh::mesh_model`]'s, so a
@@ -17,7 +17,7 @@
 //! [model.params.mass-spring]
 //! proxy = { kind = "uniform", step = 4 }
 //! materials = [{ name = "soft tissue", range = [-50, 300], youngs_modulus = 3000 }]
-//! integrator = "explicit"   # or "implicit"
+//! integrator = "implicit"   # the default; or "explicit"
 //! damping_ratio = 0.1
 //! ```
 

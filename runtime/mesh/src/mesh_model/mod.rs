@@ -40,7 +40,7 @@ pub use boundary::Boundary;
 pub use edge_layer::EdgeLayer;
 pub use material::{ElasticMaterial, lumped_masses};
 pub use model::MeshModel;
-pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
+pub use params::{DEFAULT_NODE_SPACING, MaterialSpec, MeshModelParams, ProxySpec};
 pub use pcg::{CgOutcome, CgSettings};
 
 use crate::deformation::ModelNotes;
@@ -151,6 +151,16 @@ pub trait MeshSolver: Send + Sized + 'static {
         materials: &[ElasticMaterial],
         params: Self::Params,
     ) -> Result<Self, ModelError>;
+
+    /// The proxy of a scene that names none (no `proxy` key), given the
+    /// solver's keys; by default [`ProxySpec::default`], uniform cells of
+    /// [`params::DEFAULT_NODE_SPACING`] voxels. A solver whose elements
+    /// add nodes inside a cell (quadratic elements) returns larger cells
+    /// with the same node spacing.
+    fn default_proxy(params: &Self::Params) -> ProxySpec {
+        let _ = params;
+        ProxySpec::default()
+    }
 
     /// True when [`MeshSolver::use_gpu`] can move the solver onto a GPU.
     const GPU: bool = false;

@@ -152,7 +152,12 @@ impl<S: MeshSolver> MeshModel<S> {
     }
 
     /// A model from parsed parameters.
-    pub fn new(params: MeshModelParams, solver_params: S::Params) -> Self {
+    /// A scene without a `proxy` key gets the solver's
+    /// ([`MeshSolver::default_proxy`]).
+    pub fn new(mut params: MeshModelParams, solver_params: S::Params) -> Self {
+        if params.proxy.is_none() {
+            params.proxy = Some(S::default_proxy(&solver_params));
+        }
         Self {
             params,
             solver_params: Some(solver_params),
@@ -188,7 +193,7 @@ impl<S: MeshSolver> MeshModel<S> {
     ) -> Result<Self, ModelError> {
         let mut m = Self::new(
             MeshModelParams {
-                proxy: ProxySpec::default(),
+                proxy: Some(ProxySpec::default()),
                 materials: Vec::new(),
                 gravity: gravity.to_array(),
                 vtu: None,
@@ -309,7 +314,8 @@ impl<S: MeshSolver> MeshModel<S> {
         let materials: Vec<ElasticMaterial> =
             specs.iter().map(ElasticMaterial::from_spec).collect();
         let mesh_error = |e: crate::error::MeshError| ModelError(format!("{name}: {e}"));
-        match &self.params.proxy {
+        let spec = self.params.proxy.clone().unwrap_or_default();
+        match &spec {
             ProxySpec::File { path } => {
                 let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
                 let mut mesh = match ext {

@@ -37,9 +37,18 @@ pub enum ProxySpec {
     },
 }
 
+/// The default cell size of a uniform proxy, voxels: also the default
+/// spacing between a mesh model's nodes (a solver with nodes inside its
+/// cells, such as quadratic elements, takes larger cells for the same
+/// spacing: [`crate::mesh_model::MeshSolver::default_proxy`]).
+pub const DEFAULT_NODE_SPACING: usize = 4;
+
 impl Default for ProxySpec {
+    /// Uniform cells of [`DEFAULT_NODE_SPACING`] voxels.
     fn default() -> Self {
-        ProxySpec::Uniform { step: 4 }
+        ProxySpec::Uniform {
+            step: DEFAULT_NODE_SPACING,
+        }
     }
 }
 
@@ -79,9 +88,11 @@ fn default_density() -> f64 {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MeshModelParams {
-    /// The proxy (default: uniform cells of 4 voxels).
+    /// The proxy; `None` (no `proxy` key) takes the solver's default
+    /// ([`crate::mesh_model::MeshSolver::default_proxy`]: uniform cells
+    /// with nodes [`DEFAULT_NODE_SPACING`] voxels apart).
     #[serde(default)]
-    pub proxy: ProxySpec,
+    pub proxy: Option<ProxySpec>,
     /// The material transfer function: intensity ranges (or mesh-file
     /// labels) → elastic parameters. The first match wins.
     pub materials: Vec<MaterialSpec>,
@@ -179,8 +190,10 @@ impl MeshModelParams {
             ));
         }
         match self.proxy {
-            ProxySpec::Uniform { step: 0 } => fail("proxy.step must be at least 1 voxel".into()),
-            ProxySpec::Octree { max_cell: 0 } => {
+            Some(ProxySpec::Uniform { step: 0 }) => {
+                fail("proxy.step must be at least 1 voxel".into())
+            }
+            Some(ProxySpec::Octree { max_cell: 0 }) => {
                 fail("proxy.max_cell must be at least 1 voxel".into())
             }
             _ => Ok(()),
@@ -221,7 +234,7 @@ mod tests {
              proxy = { kind = \"octree\", max_cell = 8 }\ncg_tolerance = 1e-6",
         )
         .unwrap();
-        assert_eq!(p.proxy, ProxySpec::Octree { max_cell: 8 });
+        assert_eq!(p.proxy, Some(ProxySpec::Octree { max_cell: 8 }));
         assert_eq!(p.materials[0].poisson_ratio, 0.45);
         assert!(rest.contains_key("cg_tolerance") && rest.len() == 1);
         let e = split("fem", "materials = []").unwrap_err().0;

@@ -7,12 +7,14 @@
 //! over 10 frames and held. The reference is `corotational-fem`'s static
 //! solve on the proxy of step 1 (a node at every voxel centre) with tight
 //! tolerances (CG 1e-10, static 1e-8). Error: the RMS (and max) over every voxel centre of the
-//! distance between a model's displacement and the reference's, mm. The
+//! distance between a model's displacement and the reference's, mm. FEM
+//! runs both element families (P1, and P2 with its mid-edge nodes). The
 //! dynamic models (FEM `solver = "dynamic"`, both mass-spring
 //! integrators, ChainMail's relaxation) run on after the grab until no
 //! point moves more than 1e-3 mm over 10 frames (capped; `settled` says
 //! whether they got there); their time is the whole run to rest.
 
+use super::fem;
 use super::runner::{self, Plugins, Scene, Settle};
 use super::{Front, Point};
 use crate::bench::BenchError;
@@ -26,47 +28,104 @@ fn material_fem() -> &'static str {
 }
 
 /// The models of the front: series label, plugin, params (given the
-/// resolution) and whether they need to settle.
+/// resolution), whether they need to settle, and the proxy steps measured.
 struct ModelSpec {
     series: &'static str,
     plugin: &'static str,
     /// Extra params lines (after proxy / materials).
     params: &'static str,
     dynamic: bool,
-    /// The default configuration at this resolution.
-    default_at: usize,
+    /// The element family ([`fem::ELEMENTS`] name; `P1` for mass-spring,
+    /// whose springs lie on the proxy's edges).
+    element: &'static str,
+    /// Proxy steps measured (voxels), full run and `--quick`, within the
+    /// family's cap on tetrahedra ([`fem::Family::steps`]).
+    steps: [&'static [usize]; 2],
 }
+
+/// P1 proxy steps (voxels): full run, `--quick`.
+const P1_STEPS: [&[usize]; 2] = [&[6, 4, 3, 2], &[4, 2]];
+/// P2 proxy steps: its mid-edge nodes halve the node spacing, so a P2
+/// step `s` has the nodes of a P1 step `s/2` (`--quick` leaves out step 2,
+/// whose static solve would take most of the quick front in a debug build).
+const P2_STEPS: [&[usize]; 2] = [&[12, 8, 6, 4], &[8, 4]];
+
+/// Two runs are the same configuration when their bound points' first-frame
+/// displacements agree within this fraction of the largest: far below what
+/// separates two proxies, element orders or integrators (≥ 1e-2 here), far
+/// above the CG's run-to-run rounding (parallel sums).
+const SAME_RUN: f64 = 1e-4;
 
 const MESH_MODELS: &[ModelSpec] = &[
     ModelSpec {
         series: "FEM static",
         plugin: "corotational-fem",
-        params: "solver = \"static\"",
+        params: "solver = \"static\"\nelement = \"p1\"",
         dynamic: false,
-        default_at: 0,
+        element: "P1",
+        steps: P1_STEPS,
     },
     ModelSpec {
         series: "FEM dynamic",
         plugin: "corotational-fem",
-        params: "",
+        params: "element = \"p1\"",
         dynamic: true,
-        default_at: 4,
+        element: "P1",
+        steps: P1_STEPS,
+    },
+    ModelSpec {
+        series: "FEM static P2",
+        plugin: "corotational-fem",
+        params: "solver = \"static\"\nelement = \"p2\"",
+        dynamic: false,
+        element: "P2",
+        steps: P2_STEPS,
+    },
+    ModelSpec {
+        series: "FEM dynamic P2",
+        plugin: "corotational-fem",
+        params: "element = \"p2\"",
+        dynamic: true,
+        element: "P2",
+        steps: P2_STEPS,
     },
     ModelSpec {
         series: "mass-spring explicit",
         plugin: "mass-spring",
-        params: "",
+        params: "integrator = \"explicit\"",
         dynamic: true,
-        default_at: 4,
+        element: "P1",
+        steps: P1_STEPS,
     },
     ModelSpec {
         series: "mass-spring implicit",
         plugin: "mass-spring",
         params: "integrator = \"implicit\"",
         dynamic: true,
-        default_at: 0,
+        element: "P1",
+        steps: P1_STEPS,
     },
 ];
+
+impl ModelSpec {
+    /// The proxy steps measured on a block of `dims` voxels.
+    fn steps(&self, dims: [usize; 3], quick: bool) -> Result<Vec<usize>, BenchError> {
+        let family = fem::ELEMENTS
+            .iter()
+            .find(|f| f.name == self.element)
+            .ok_or_else(|| BenchError(format!("no element family {}", self.element)))?;
+        Ok(family.steps(self.steps[quick as usize], dims, quick))
+    }
+}
+
+/// Whether displacements `a` and `b` (mm) are the same run's ([`SAME_RUN`]).
+fn same_run(a: &[DVec3], b: &[DVec3]) -> bool {
+    let scale = b.iter().map(|d| d.length()).fold(0.0, f64::max);
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| (*x - *y).length() <= SAME_RUN * scale)
+}
 
 fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
     let (mut sum, mut max) = (0.0, 0.0f64);
@@ -81,7 +140,6 @@ fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
 /// The grab front.
 pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
     let m: usize = if quick { 4 } else { 12 };
-    let steps: &[usize] = if quick { &[4, 2] } else { &[6, 4, 3, 2] };
     let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
     let settle = if quick {
         Settle {
@@ -98,7 +156,8 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
     };
     let (l, w) = (4.0 * m as f64, m as f64);
     let by = 0.5 * m as f64;
-    let volume = runner::block([4 * m + 1, m + 1, m + 1], 1.0, 100);
+    let dims = [4 * m + 1, m + 1, m + 1];
+    let volume = runner::block(dims, 1.0, 100);
     let points = runner::lattice_points(&volume, |_| true);
     let mut interactions = vec![(
         0,
@@ -139,6 +198,20 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
         ),
     )?;
     let ref_max = reference.u.iter().map(|d| d.length()).fold(0.0, f64::max);
+    // The plugins' own defaults: the first frame with no key but the
+    // materials. A row is the default when its first frame is this one.
+    let first_frame = |plugin, params: String| -> Result<Vec<DVec3>, BenchError> {
+        let one = Scene {
+            frames: 1,
+            ..scene(plugin, params, None)
+        };
+        Ok(runner::run(plugins, &one)?.u)
+    };
+    let mut defaults = vec![];
+    for plugin in ["corotational-fem", "mass-spring"] {
+        defaults.push((plugin, first_frame(plugin, material_fem().to_string())?));
+    }
+    let mut default_rows = vec![];
     let mut out = vec![];
     let mut push = |series: &str,
                     config: String,
@@ -167,7 +240,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
         });
     };
     for spec in MESH_MODELS {
-        for &step in steps {
+        for step in spec.steps(dims, quick)? {
             let params = format!(
                 "proxy = {{ kind = \"uniform\", step = {step} }}\n{}\n{}",
                 material_fem(),
@@ -175,8 +248,15 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             );
             let run = runner::run(
                 plugins,
-                &scene(spec.plugin, params, spec.dynamic.then_some(settle)),
+                &scene(spec.plugin, params.clone(), spec.dynamic.then_some(settle)),
             )?;
+            let first = first_frame(spec.plugin, params)?;
+            let is_default = defaults
+                .iter()
+                .any(|(plugin, u)| *plugin == spec.plugin && same_run(&first, u));
+            if is_default {
+                default_rows.push(format!("{} at step {step}", spec.series));
+            }
             let extra = vec![
                 ("step", step.to_string()),
                 ("tetrahedra", runner::note(&run.notes, "proxy_tetrahedra")),
@@ -186,13 +266,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     runner::note(&run.notes, "unconverged_solves"),
                 ),
             ];
-            push(
-                spec.series,
-                format!("step {step}"),
-                &run,
-                spec.default_at == step,
-                extra,
-            );
+            push(spec.series, format!("step {step}"), &run, is_default, extra);
         }
     }
     for &d in downsamples {
@@ -227,14 +301,20 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
              {ref_max:.3} mm, its run {:.0} ms. Error: RMS over all {} voxel centres of \
              |u − u_ref| (mm; `max_mm` the largest). Dynamic models run on until no point moves \
              more than {} mm in {} frames (at most {} frames after the grab); their time is the \
-             whole run. `step` is the proxy step in voxels (mm here); the mesh models' default \
-             is dynamic at step 4, ChainMail's one element per voxel.",
+             whole run. `step` is the proxy step in voxels (mm here; P2 adds a node mid-edge, \
+             so its node spacing is step/2). Defaults (a row whose first frame is the plugin's \
+             with no key but the materials): {}; ChainMail one element per voxel.",
             (m + 1) * (m + 1),
             reference.time_ms,
             points.len(),
             settle.tolerance_mm,
             settle.check_every,
-            settle.max_frames
+            settle.max_frames,
+            if default_rows.is_empty() {
+                "none measured".to_string()
+            } else {
+                default_rows.join(", ")
+            },
         ),
         points: out,
     })
