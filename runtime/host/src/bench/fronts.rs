@@ -29,6 +29,7 @@
 //! a load, a field, a seed). `front.md` says for each whether the default
 //! configuration is the knee, Pareto-optimal, or dominated.
 
+mod beam;
 mod cut;
 mod fem;
 mod grab;

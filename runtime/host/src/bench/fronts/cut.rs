@@ -19,14 +19,12 @@
 //! sharpness). Every model runs on after the grab until no point moves
 //! more than 1e-3 mm over 10 frames (capped); its time is the whole run.
 
-use super::runner::{self, Plugins, Scene, Settle};
+use super::beam::{Beam, GRAB_FRAMES, MATERIAL_CHAINMAIL, MATERIAL_MESH};
+use super::runner::{self, Plugins, Scene};
 use super::{Front, Point};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
 use voxflex_mesh::mesh_model::params::ProxySpec;
-
-/// Frames over which the grab moves.
-const GRAB_FRAMES: u64 = 10;
 
 /// The cut planes' offsets from the beam's middle, mm: fractions that put
 /// them on no voxel centre, element layer or proxy node plane, one either
@@ -42,16 +40,6 @@ const FAR_MM: f64 = 6.0;
 /// A voxel centre moved with a piece when its displacement lies within
 /// this fraction of |d| of the piece's.
 const WITH_MOTION: f64 = 0.1;
-
-/// The grab front's soft material, for the mesh models.
-fn material_mesh() -> &'static str {
-    "materials = [{ range = [50, 200], youngs_modulus = 3000, poisson_ratio = 0.3, density = 1000 }]"
-}
-
-/// The grab front's soft material, for ChainMail.
-fn material_chainmail() -> &'static str {
-    "materials = [{ range = [50, 200], constraint = 0.3 }]"
-}
 
 /// A mesh model of the front: series label, plugin, extra params (none:
 /// the plugin's default solver).
@@ -136,46 +124,18 @@ fn default_step() -> Option<usize> {
 
 /// The cut front.
 pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
-    let m: usize = if quick { 4 } else { 12 };
     let steps: &[usize] = if quick { &[4, 2] } else { &[6, 4, 3, 2] };
     let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
-    let settle = if quick {
-        Settle {
-            max_frames: 300,
-            tolerance_mm: 1e-2,
-            check_every: 10,
-        }
-    } else {
-        Settle {
-            max_frames: 1500,
-            tolerance_mm: 1e-3,
-            check_every: 10,
-        }
-    };
-    let (l, w) = (4.0 * m as f64, m as f64);
+    let beam = Beam::new(quick);
+    let settle = beam.settle(quick, 1500);
+    let (m, l, w) = (beam.m, beam.length, beam.width);
     let d = DVec3::new(0.0, 0.5 * m as f64, 0.0);
-    let volume = runner::block([4 * m + 1, m + 1, m + 1], 1.0, 100);
-    let points = runner::lattice_points(&volume, |_| true);
+    let (volume, points) = (&beam.volume, &beam.points);
     let mut out = vec![];
     let cuts: Vec<f64> = CUT_OFFSETS_MM.iter().map(|o| 0.5 * l + o).collect();
     for &c in &cuts {
         let group = format!("cut at x = {c:.2} mm");
-        let mut interactions = vec![(
-            0,
-            format!(
-                "kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, {0}, {0}]",
-                w + 0.01
-            ),
-        )];
-        for p in runner::lattice_points(&volume, |p| (p.x - l).abs() < 1e-6) {
-            interactions.push((
-                0,
-                format!(
-                    "kind = \"grab\"\npoint = [{}, {}, {}]\nby = [{}, {}, {}]\nframes = {GRAB_FRAMES}",
-                    p[0], p[1], p[2], d.x, d.y, d.z
-                ),
-            ));
-        }
+        let mut interactions = beam.fix_and_grab(d);
         // The cut after the grabs (same frame, before any step): the grabbed
         // piece is never without an anchor.
         interactions.push((
@@ -189,8 +149,8 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
         let scene = |plugin, params: String| Scene {
             plugin,
             params,
-            volume: &volume,
-            points: &points,
+            volume,
+            points,
             interactions: interactions.clone(),
             frames: GRAB_FRAMES,
             dt_s: 1.0 / 30.0,
@@ -201,7 +161,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                         run: &runner::Outcome,
                         is_default: bool,
                         mut extra: Vec<(&'static str, String)>| {
-            let e = cut_error(&points, &run.u, c, d);
+            let e = cut_error(points, &run.u, c, d);
             let mut ex = vec![
                 ("cut_x_mm", format!("{c:.2}")),
                 ("max_mm", format!("{:.4}", e.max_mm)),
@@ -227,7 +187,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             for &step in steps {
                 let params = format!(
                     "proxy = {{ kind = \"uniform\", step = {step} }}\n{}",
-                    material_mesh()
+                    MATERIAL_MESH
                 );
                 let run = runner::run(plugins, &scene(spec.plugin, params))?;
                 let extra = vec![
@@ -249,7 +209,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
         }
         // ChainMail's default down-sampling, as the plugin reports it after a
         // run whose params leave it out; that run is the default's row.
-        let default_run = runner::run(plugins, &scene("chainmail", material_chainmail().into()))?;
+        let default_run = runner::run(plugins, &scene("chainmail", MATERIAL_CHAINMAIL.into()))?;
         let default_downsample = default_run
             .notes
             .get("downsample")
@@ -264,7 +224,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     plugins,
                     &scene(
                         "chainmail",
-                        format!("{}\ndownsample = {ds}", material_chainmail()),
+                        format!("{}\ndownsample = {ds}", MATERIAL_CHAINMAIL),
                     ),
                 )?;
                 &explicit

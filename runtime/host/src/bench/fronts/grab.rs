@@ -14,18 +14,12 @@
 //! point moves more than 1e-3 mm over 10 frames (capped; `settled` says
 //! whether they got there); their time is the whole run to rest.
 
+use super::beam::{Beam, GRAB_FRAMES, MATERIAL_CHAINMAIL, MATERIAL_MESH};
 use super::fem;
 use super::runner::{self, Plugins, Scene, Settle};
 use super::{Front, Point};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
-
-/// Frames over which the grab moves.
-const GRAB_FRAMES: u64 = 10;
-
-fn material_fem() -> &'static str {
-    "materials = [{ range = [50, 200], youngs_modulus = 3000, poisson_ratio = 0.3, density = 1000 }]"
-}
 
 /// The models of the front: series label, plugin, params (given the
 /// resolution), whether they need to settle, and the proxy steps measured.
@@ -139,47 +133,18 @@ fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
 
 /// The grab front.
 pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
-    let m: usize = if quick { 4 } else { 12 };
     let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
-    let settle = if quick {
-        Settle {
-            max_frames: 150,
-            tolerance_mm: 1e-2,
-            check_every: 10,
-        }
-    } else {
-        Settle {
-            max_frames: 600,
-            tolerance_mm: 1e-3,
-            check_every: 10,
-        }
-    };
-    let (l, w) = (4.0 * m as f64, m as f64);
+    let beam = Beam::new(quick);
+    let settle = beam.settle(quick, 600);
+    let (m, l, w) = (beam.m, beam.length, beam.width);
     let by = 0.5 * m as f64;
-    let dims = [4 * m + 1, m + 1, m + 1];
-    let volume = runner::block(dims, 1.0, 100);
-    let points = runner::lattice_points(&volume, |_| true);
-    let mut interactions = vec![(
-        0,
-        format!(
-            "kind = \"fix\"\nmin = [-0.01, -0.01, -0.01]\nmax = [0.01, {0}, {0}]",
-            w + 0.01
-        ),
-    )];
-    for p in runner::lattice_points(&volume, |p| (p.x - l).abs() < 1e-6) {
-        interactions.push((
-            0,
-            format!(
-                "kind = \"grab\"\npoint = [{}, {}, {}]\nby = [0, 0, {}]\nframes = {GRAB_FRAMES}",
-                p[0], p[1], p[2], -by
-            ),
-        ));
-    }
+    let (volume, points) = (&beam.volume, &beam.points);
+    let interactions = beam.fix_and_grab(DVec3::new(0.0, 0.0, -by));
     let scene = |plugin, params: String, settle: Option<Settle>| Scene {
         plugin,
         params,
-        volume: &volume,
-        points: &points,
+        volume,
+        points,
         interactions: interactions.clone(),
         frames: GRAB_FRAMES,
         dt_s: 1.0 / 30.0,
@@ -192,7 +157,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             format!(
                 "proxy = {{ kind = \"uniform\", step = 1 }}\n{}\nsolver = \"static\"\n\
                  cg_tolerance = 1e-10\nstatic_tolerance = 1e-8\ncg_max_iterations = 100000",
-                material_fem()
+                MATERIAL_MESH
             ),
             None,
         ),
@@ -209,7 +174,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
     };
     let mut defaults = vec![];
     for plugin in ["corotational-fem", "mass-spring"] {
-        defaults.push((plugin, first_frame(plugin, material_fem().to_string())?));
+        defaults.push((plugin, first_frame(plugin, MATERIAL_MESH.to_string())?));
     }
     let mut default_rows = vec![];
     let mut out = vec![];
@@ -240,11 +205,10 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
         });
     };
     for spec in MESH_MODELS {
-        for step in spec.steps(dims, quick)? {
+        for step in spec.steps(volume.grid.dims, quick)? {
             let params = format!(
                 "proxy = {{ kind = \"uniform\", step = {step} }}\n{}\n{}",
-                material_fem(),
-                spec.params
+                MATERIAL_MESH, spec.params
             );
             let run = runner::run(
                 plugins,
@@ -270,8 +234,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
         }
     }
     for &d in downsamples {
-        let params =
-            format!("materials = [{{ range = [50, 200], constraint = 0.3 }}]\ndownsample = {d}");
+        let params = format!("{MATERIAL_CHAINMAIL}\ndownsample = {d}");
         let run = runner::run(plugins, &scene("chainmail", params, Some(settle)))?;
         let extra = vec![
             ("downsample", d.to_string()),
