@@ -199,13 +199,26 @@ fn quick_fronts_are_written_finite_and_converge() {
             );
         }
         // The mesh models' cut separates the pieces: away from the plane
-        // both are at rigid rest.
+        // both are at rigid rest; and the model says how many voxel centres
+        // its cut left on the wrong piece (`cut_voxels_across`, warned) —
+        // exactly the ones the analytic answer finds there.
         for r in rows
             .iter()
             .filter(|r| !r["series"].starts_with("ChainMail"))
         {
             assert!(num(r, "far_rms_mm") < 0.1, "{g}: {r:?}");
+            assert_eq!(
+                num(r, "cut_voxels_across"),
+                num(r, "wrong_side"),
+                "{g}: the model's own count of voxels cut onto the wrong piece: {r:?}"
+            );
         }
+        assert!(
+            rows.iter()
+                .filter(|r| !r["series"].starts_with("ChainMail"))
+                .any(|r| num(r, "wrong_side") > 0.0),
+            "{g}: no mesh-model row cut a voxel onto the wrong piece: the check above proves nothing"
+        );
     }
     // Resampling: trilinear beats tetrahedral under every field and size.
     let rs = rows(&out, "resample");

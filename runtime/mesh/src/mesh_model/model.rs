@@ -71,6 +71,9 @@ pub struct MeshModel<S: MeshSolver> {
     /// Labelled voxels no proxy cell of their material covers (proxies
     /// built from the volume; `proxy::unrepresented_voxels`).
     labelled_voxels_lost: usize,
+    /// Lattice points (voxel centres) that the cuts so far left carried
+    /// by a proxy tetrahedron on the other side of the cut.
+    cut_voxels_across: usize,
     /// Inverted tetrahedra after each frame.
     inversions: InversionWatch,
     /// Grabs whose point lay beyond one element from the proxy.
@@ -171,6 +174,7 @@ impl<S: MeshSolver> MeshModel<S> {
             gpu: None,
             device: None,
             labelled_voxels_lost: 0,
+            cut_voxels_across: 0,
             inversions: InversionWatch::default(),
             far_grabs: FarGrabs::default(),
         }
@@ -586,17 +590,20 @@ impl<S: MeshSolver> MeshModel<S> {
     fn cut(&mut self, cut: &CutPolygon) -> Result<(), ModelError> {
         let name = S::NAME;
         let b = built_mut(&mut self.built)?;
-        // The lattice bindings' removed tetrahedra, from the positions
-        // before the cut (both sides still coincide there).
+        let x: Vec<DVec3> = b.positions();
+        // The lattice bindings' removed tetrahedra, and the points the cut
+        // leaves on the wrong piece, from the positions before the cut
+        // (both sides still coincide there).
+        let mut across = 0;
         for bound in &mut self.bindings {
             let Some(near) = lattice_near(bound, b, (cut.lo, cut.hi)) else {
                 continue;
             };
+            across += carried_across(bound, &near, &b.mesh, &x, cut);
             let removed = tets_cut_by(near.cells, (near.first, near.end), &near.positions, cut);
             bound.unreported |= !removed.is_empty();
             bound.removed.extend(removed);
         }
-        let x: Vec<DVec3> = b.positions();
         let result = cut_mesh(&mut b.mesh, &x, cut);
         if result.faces == 0 {
             tracing::warn!("{name} cut: the polygon crosses no face of the proxy");
@@ -618,6 +625,15 @@ impl<S: MeshSolver> MeshModel<S> {
             load.forces.resize(nodes, DVec3::ZERO);
         }
         self.topology_changed("cut")?;
+        if across > 0 {
+            self.cut_voxels_across += across;
+            tracing::warn!(
+                "{name} cut: {across} voxel centres lie across the cut from the proxy \
+                 tetrahedron that carries them and move with the other piece: the cut is \
+                 only as sharp as the proxy's cells; a finer `proxy` or the chainmail \
+                 plugin cuts voxel-sharp (note `cut_voxels_across`)"
+            );
+        }
         tracing::info!(
             faces = result.faces,
             new_nodes = result.origin.len(),
@@ -891,6 +907,30 @@ impl LatticeBox {
     }
 }
 
+/// How many points of `near` (a lattice binding's box, current positions)
+/// lie across `cut` from the centroid of the proxy tetrahedron that
+/// carries them (`x`: node positions, mm): the cut separates along the
+/// proxy's faces, so such a point will move with the other piece.
+fn carried_across(
+    bound: &Bound,
+    near: &LatticeBox,
+    mesh: &TetMesh,
+    x: &[DVec3],
+    cut: &CutPolygon,
+) -> usize {
+    let Some(g) = bound.lattice else { return 0 };
+    near.positions
+        .iter()
+        .enumerate()
+        .filter(|&(i, p)| {
+            let [a, b, c] = near.point(i);
+            let tet = mesh.tets[bound.binding.tet[g.linear(a, b, c)] as usize];
+            let centroid = tet.iter().map(|&n| x[n as usize]).sum::<DVec3>() / 4.0;
+            cut.crosses(*p, centroid)
+        })
+        .count()
+}
+
 /// For a lattice binding, the lattice points whose current positions may
 /// lie in the world box `(lo, hi)` (mm): the index box grown by the largest
 /// node displacement and two spacings, with every point's current position.
@@ -1026,7 +1066,9 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
     /// `labelled_voxels_lost` (labelled voxels in proxy cells of another
     /// material), `inverted_tetrahedra` (after the last frame) and
     /// `inverted_tetrahedra_max` (over the run), `bound_points_outside_proxy` (bound to the nearest tetrahedron with
-    /// clamped weights), `steps`, `substeps` and `solver_iterations` summed
+    /// clamped weights), `cut_voxels_across` (voxel centres the cuts left
+    /// carried by a tetrahedron across the cut: they move with the other
+    /// piece), `steps`, `substeps` and `solver_iterations` summed
     /// over the run, and `last_residual` (relative, of the last linear
     /// solve; 0 for explicit steps), `worst_residual` (the largest relative
     /// residual of any linear solve of the run) and `unconverged_solves`
@@ -1047,6 +1089,7 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
             self.labelled_voxels_lost as f64,
         );
         notes.insert("bound_points_outside_proxy".into(), outside as f64);
+        notes.insert("cut_voxels_across".into(), self.cut_voxels_across as f64);
         notes.insert("steps".into(), self.totals.steps as f64);
         notes.insert("inverted_tetrahedra".into(), self.inversions.current as f64);
         notes.insert("inverted_tetrahedra_max".into(), self.inversions.max as f64);

@@ -197,6 +197,10 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     ("substeps", runner::note(&run.notes, "substeps")),
                     ("downsample", String::new()),
                     ("removed_tetrahedra", String::new()),
+                    (
+                        "cut_voxels_across",
+                        runner::note(&run.notes, "cut_voxels_across"),
+                    ),
                 ];
                 push(
                     spec.series,
@@ -239,6 +243,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     "removed_tetrahedra",
                     runner::note(&run.notes, "removed_tetrahedra"),
                 ),
+                ("cut_voxels_across", String::new()),
             ];
             push(
                 "ChainMail c = 0.3",
