@@ -595,11 +595,16 @@ impl<S: MeshSolver> MeshModel<S> {
         // leaves on the wrong piece, from the positions before the cut
         // (both sides still coincide there).
         let mut across = 0;
+        // A point carried across lies in its tetrahedron, which the cut
+        // crosses: within the largest tetrahedron's extent of the polygon.
+        let reach = DVec3::splat(largest_extent(&b.mesh, &x));
         for bound in &mut self.bindings {
+            if let Some(wide) = lattice_near(bound, b, (cut.lo - reach, cut.hi + reach)) {
+                across += carried_across(bound, &wide, &b.mesh, &x, cut);
+            }
             let Some(near) = lattice_near(bound, b, (cut.lo, cut.hi)) else {
                 continue;
             };
-            across += carried_across(bound, &near, &b.mesh, &x, cut);
             let removed = tets_cut_by(near.cells, (near.first, near.end), &near.positions, cut);
             bound.unreported |= !removed.is_empty();
             bound.removed.extend(removed);
@@ -929,6 +934,20 @@ fn carried_across(
             cut.crosses(*p, centroid)
         })
         .count()
+}
+
+/// The largest extent along any axis of a tetrahedron of `mesh` at node
+/// positions `x` (mm).
+fn largest_extent(mesh: &TetMesh, x: &[DVec3]) -> f64 {
+    mesh.tets
+        .iter()
+        .map(|t| {
+            let p = t.map(|n| x[n as usize]);
+            let lo = p.iter().fold(p[0], |a, b| a.min(*b));
+            let hi = p.iter().fold(p[0], |a, b| a.max(*b));
+            (hi - lo).max_element()
+        })
+        .fold(0.0, f64::max)
 }
 
 /// For a lattice binding, the lattice points whose current positions may
