@@ -199,6 +199,26 @@ const _: fn() = || {
     assert_send::<Session>();
 };
 
+/// What [`Session::open_loaded`] and [`Session::from_volume`] settle
+/// before a session exists; [`Session::assemble`] builds it from this.
+struct Opening {
+    context: String,
+    plugin_dirs: Vec<PathBuf>,
+    threads: usize,
+    choice: BackendChoice,
+    resolved: ResolvedBackend,
+    source: Volume,
+    /// Wall time of loading (or generating) the source.
+    source_wall: Duration,
+    frames: u64,
+    dt_s: f64,
+    counts_frames: bool,
+    resample_params: ResampleParams,
+    wait_for_gpu: bool,
+    metrics: RunMetrics,
+    opened: Instant,
+}
+
 fn configure_threads(threads: usize) {
     if threads > 0 {
         // Only the first call in a process takes effect; later ones share it.
@@ -279,7 +299,7 @@ impl Session {
                 p.name
             );
         }
-        let mut metrics = RunMetrics {
+        let metrics = RunMetrics {
             scene: scene.settings.name.clone(),
             voxflex_version: env!("CARGO_PKG_VERSION").into(),
             frames: scene.settings.frames,
@@ -288,16 +308,10 @@ impl Session {
             backend_reason: resolved.reason.clone(),
             ..Default::default()
         };
-        let gpu = resolved.gpu_service();
-
         // Stage: source.
         let t = Instant::now();
         let source = load_source(scene)?;
-        metrics
-            .stage("source")
-            .record_run(t.elapsed(), source.grid.len() as u64);
-        metrics.source_dims = source.grid.dims;
-        metrics.output_dims = source.grid.dims;
+        let source_wall = t.elapsed();
 
         let background = scene
             .resample
@@ -312,40 +326,22 @@ impl Session {
             Some(r) => r.apply(params),
             None => params,
         };
-        let services = HostServices::new(gpu.clone(), rayon::current_num_threads());
-        let mut session = Session {
+        let mut session = Session::assemble(Opening {
             context,
             plugin_dirs: scene.plugin_dirs(),
             threads: scene.settings.threads,
             choice: scene.settings.backend,
             resolved,
-            gpu,
-            services,
             source,
-            frame: 0,
+            source_wall,
             frames: scene.settings.frames,
             dt_s: scene.settings.dt_s,
             counts_frames: false,
-            model: None,
-            displacements: None,
-            resample: None,
             resample_params,
             wait_for_gpu: false,
-            renderer: None,
-            rois: vec![],
-            next_roi: 0,
-            tracked: vec![],
-            next_track: 0,
-            roi_values: None,
-            versions: Versions::default(),
-            dirty: DirtyRegion::None,
-            render_dirty: DirtyRegion::All,
-            resampled: None,
-            pending_interaction: Duration::ZERO,
-            topology_changed: false,
             metrics,
             opened,
-        };
+        });
         match (&scene.model, &plugins.model) {
             (Some(_), Some(p)) => session.build_model(p, &scene.model_params_toml())?,
             _ => {
@@ -382,7 +378,7 @@ impl Session {
         };
         let source_wall = t.elapsed();
         let resolved = backend::resolve(defaults.backend)?;
-        let mut metrics = RunMetrics {
+        let metrics = RunMetrics {
             scene: "session".into(),
             voxflex_version: env!("CARGO_PKG_VERSION").into(),
             backend: backend_name(resolved.backend),
@@ -392,36 +388,59 @@ impl Session {
                 .to_vec(),
             ..Default::default()
         };
-        metrics
-            .stage("source")
-            .record_run(source_wall, source.grid.len() as u64);
-        metrics.source_dims = source.grid.dims;
-        metrics.output_dims = source.grid.dims;
         let resample_params = ResampleParams {
             background: defaults
                 .background
                 .unwrap_or_else(|| source.value_range().0),
             ..defaults.resample
         };
-        let gpu = resolved.gpu_service();
-        Ok(Session {
+        Ok(Session::assemble(Opening {
             context: "session".into(),
             plugin_dirs: defaults.plugin_dirs,
             threads: defaults.threads,
             choice: defaults.backend,
-            services: HostServices::new(gpu.clone(), rayon::current_num_threads()),
             resolved,
-            gpu,
             source,
-            frame: 0,
+            source_wall,
             frames: defaults.frames,
             dt_s: defaults.dt_s,
             counts_frames: true,
+            resample_params,
+            wait_for_gpu: defaults.wait_for_gpu,
+            metrics,
+            opened,
+        }))
+    }
+
+    /// A session at frame 0 on `o.source`: the source stage's run recorded,
+    /// the GPU service and host services from `o.resolved`, no model,
+    /// renderer, ROI maps or tracked points, every stage due.
+    fn assemble(o: Opening) -> Self {
+        let mut metrics = o.metrics;
+        metrics
+            .stage("source")
+            .record_run(o.source_wall, o.source.grid.len() as u64);
+        metrics.source_dims = o.source.grid.dims;
+        metrics.output_dims = o.source.grid.dims;
+        let gpu = o.resolved.gpu_service();
+        Session {
+            context: o.context,
+            plugin_dirs: o.plugin_dirs,
+            threads: o.threads,
+            choice: o.choice,
+            services: HostServices::new(gpu.clone(), rayon::current_num_threads()),
+            resolved: o.resolved,
+            gpu,
+            source: o.source,
+            frame: 0,
+            frames: o.frames,
+            dt_s: o.dt_s,
+            counts_frames: o.counts_frames,
             model: None,
             displacements: None,
             resample: None,
-            resample_params,
-            wait_for_gpu: defaults.wait_for_gpu,
+            resample_params: o.resample_params,
+            wait_for_gpu: o.wait_for_gpu,
             renderer: None,
             rois: vec![],
             next_roi: 0,
@@ -435,8 +454,8 @@ impl Session {
             pending_interaction: Duration::ZERO,
             topology_changed: false,
             metrics,
-            opened,
-        })
+            opened: o.opened,
+        }
     }
 
     fn built(&mut self, stages: &[&str]) {
