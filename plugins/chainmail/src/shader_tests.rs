@@ -17,14 +17,7 @@ const KERNELS: [&str; 4] = ["propagate", "relax", "sync_copies", "map_identity"]
 fn the_kernels_validate_and_share_chainmails_constants() {
     let mut set = ShaderSet::new("chainmail");
     let s = set.validate("chainmail/chainmail.wgsl", CHAINMAIL_WGSL);
-    let mut declared = s.compute_entry_points();
-    declared.sort_unstable();
-    let mut compiled = KERNELS;
-    compiled.sort_unstable();
-    assert_eq!(
-        declared, compiled,
-        "kernels declared vs compiled by GpuChainMail"
-    );
+    s.assert_compute_entry_points(&KERNELS, "GpuChainMail");
 
     // Block kernels run one workgroup per listed block (`workgroups_for(len,
     // 1)`) and stride their threads by WG; map_identity is one invocation per

@@ -20,14 +20,7 @@ const KERNELS: [&str; 6] = [
 fn the_kernels_validate_and_share_the_rust_constants() {
     let mut set = ShaderSet::new("mass-spring");
     let s = set.validate("mass-spring/springs.wgsl", SPRINGS_WGSL);
-    let mut declared = s.compute_entry_points();
-    declared.sort_unstable();
-    let mut compiled = KERNELS;
-    compiled.sort_unstable();
-    assert_eq!(
-        declared, compiled,
-        "kernels declared vs compiled by GpuSprings"
-    );
+    s.assert_compute_entry_points(&KERNELS, "GpuSprings");
     for k in KERNELS {
         assert_eq!(s.workgroup_size(k), [WORKGROUP, 1, 1], "{k}");
     }

@@ -64,6 +64,22 @@ impl Shader {
             .collect()
     }
 
+    /// Asserts that the module declares exactly the `@compute` entry points
+    /// `compiled` names (in any order): the ones `compiler` (the Rust type
+    /// that builds the pipelines) compiles. A kernel added on one side
+    /// only fails here.
+    pub fn assert_compute_entry_points(&self, compiled: &[&str], compiler: &str) {
+        let mut declared = self.compute_entry_points();
+        let mut compiled = compiled.to_vec();
+        declared.sort_unstable();
+        compiled.sort_unstable();
+        assert_eq!(
+            declared, compiled,
+            "{}: kernels declared vs compiled by {compiler}",
+            self.name
+        );
+    }
+
     fn entry_index(&self, entry: &str) -> usize {
         self.module
             .entry_points
