@@ -117,9 +117,13 @@ impl Session {
                 },
             )
             .map_err(ModelCall::Map.failed())?;
-        Ok((0..n)
-            .map(|i| DVec3::new(x[i] as f64, y[i] as f64, z[i] as f64))
-            .collect())
+        finite(
+            &context,
+            id,
+            (0..n)
+                .map(|i| DVec3::new(x[i] as f64, y[i] as f64, z[i] as f64))
+                .collect(),
+        )
     }
 
     /// Stops tracking set `id` (its binding on the current model stays
@@ -141,8 +145,41 @@ impl Session {
     }
 }
 
+/// `u` when every displacement is finite; otherwise an error naming the
+/// set and the first point the model mapped to NaN or ∞ (a model that
+/// diverged must not hand a front end a wrong position without a word).
+fn finite(context: &str, id: TrackId, u: Vec<DVec3>) -> Result<Vec<DVec3>, RunError> {
+    match u.iter().position(|d| !d.is_finite()) {
+        None => Ok(u),
+        Some(i) => Err(RunError::Other(format!(
+            "{context}: tracked points {}: the model mapped point {i} to a non-finite \
+             displacement {:?} (the model diverged: see its warnings and notes)",
+            id.0, u[i]
+        ))),
+    }
+}
+
 fn no_model(context: &str) -> RunError {
     RunError::Other(format!(
         "{context}: tracked points need a model; call swap_model first"
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_non_finite_tracked_displacement_is_an_error_naming_the_point() {
+        let ok = vec![DVec3::new(1.0, -2.0, 0.5), DVec3::ZERO];
+        assert_eq!(finite("s", TrackId(3), ok.clone()).unwrap(), ok);
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let u = vec![DVec3::ZERO, DVec3::new(0.0, bad, 0.0)];
+            let e = finite("s", TrackId(3), u).unwrap_err().to_string();
+            assert!(
+                e.contains("tracked points 3") && e.contains("point 1") && e.contains("non-finite"),
+                "{e}"
+            );
+        }
+    }
 }
