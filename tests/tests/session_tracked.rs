@@ -158,3 +158,89 @@ fn a_model_error_says_which_call_failed() {
     assert_eq!(e.model_call(), Some(ModelCall::Bind), "{e}");
     assert!(s.tracked().is_empty(), "a refused set is not tracked");
 }
+
+/// The largest |a − b| over the three components of two displacement
+/// fields, mm.
+fn field_gap(a: &[Vec<f32>; 3], b: &[Vec<f32>; 3]) -> f32 {
+    let mut gap = 0f32;
+    for (ca, cb) in a.iter().zip(b) {
+        assert_eq!(ca.len(), cb.len(), "the fields cover the same grid");
+        for (x, y) in ca.iter().zip(cb) {
+            gap = gap.max((x - y).abs());
+        }
+    }
+    gap
+}
+
+/// On the GPU path, tracked points and the map stage's field are read back
+/// from the model's GPU state; both equal the CPU session's after the same
+/// grab, for ChainMail and the FEM. Skips without an adapter (fails under
+/// CI=true, as every GPU test).
+#[test]
+fn tracked_points_and_the_field_on_the_gpu_equal_the_cpu() {
+    if voxflex_runtime::gpu_context::testing::test_gpu().is_none() {
+        return;
+    }
+    for (plugin, params, tolerance) in [
+        ("chainmail", CHAINMAIL, 1e-4),
+        ("corotational-fem", FEM, 2e-3),
+    ] {
+        let mut runs = vec![];
+        for backend in [BackendChoice::Cpu, BackendChoice::Gpu] {
+            let mut s = cube_session();
+            s.set_backend(backend).unwrap();
+            s.swap_model(plugin, params).unwrap();
+            let id = s.track_points(&[f32s(GRAB), f32s(FAR)]).unwrap();
+            grab_by(&mut s, [0.0, 0.0, -5.0]);
+            for k in 0..3 {
+                s.step_model()
+                    .unwrap_or_else(|e| panic!("{plugin} on {backend:?}, step {k}: {e}"));
+            }
+            let tracked = s.tracked_displacements(id).unwrap();
+            let field = s.displacement_field().unwrap();
+            runs.push((s.metrics().unwrap().backend, tracked, field));
+        }
+        let [
+            (cpu_backend, cpu_tracked, cpu_field),
+            (gpu_backend, gpu_tracked, gpu_field),
+        ] = <[_; 2]>::try_from(runs).unwrap();
+        assert_eq!((cpu_backend.as_str(), gpu_backend.as_str()), ("cpu", "gpu"));
+        assert!(
+            cpu_tracked[0].length() > 3.0,
+            "{plugin}: the grab moved the point"
+        );
+        for (c, g) in cpu_tracked.iter().zip(&gpu_tracked) {
+            assert!(
+                (*c - *g).length() < tolerance,
+                "{plugin}: tracked {c} (cpu) vs {g} (gpu)"
+            );
+        }
+        let gap = field_gap(&cpu_field, &gpu_field);
+        assert!(
+            gap < tolerance as f32,
+            "{plugin}: fields differ by {gap} mm"
+        );
+    }
+}
+
+/// A static FEM body held by one grabbed node and nothing else, at rest
+/// after the grab: every later frame asks for nothing new, so each converges
+/// as it starts (no Newton iteration), for as long as the grab is held.
+/// Before the solve kept a force scale across frames (`ForceScale`), the
+/// second frame's rounding noise was its own scale and the step failed.
+#[test]
+fn a_held_static_grab_at_rest_stays_converged() {
+    let mut s = cube_session();
+    s.swap_model("corotational-fem", FEM).unwrap();
+    grab_by(&mut s, [0.0, 0.0, -5.0]);
+    s.step_model().unwrap();
+    let first = s.model_notes().unwrap()["newton_iterations"];
+    assert!(first >= 1.0, "the grab took Newton iterations: {first}");
+    for k in 1..4 {
+        s.step_model()
+            .unwrap_or_else(|e| panic!("frame {k} of a held grab at rest: {e}"));
+    }
+    let notes = s.model_notes().unwrap();
+    assert_eq!(notes["newton_iterations"], first, "{notes:?}");
+    assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
+}

@@ -243,6 +243,8 @@ pub struct CorotationalFem {
     gpu: Option<GpuPcg>,
     /// The static solves' figures.
     stats: StaticStats,
+    /// The mean force scale of the converged static load steps (µN).
+    force_scale: newton::ForceScale,
     /// Rest positions of the solver's nodes (corners, then edge nodes for
     /// P2), mm.
     positions: Vec<DVec3>,
@@ -677,6 +679,7 @@ impl MeshSolver for CorotationalFem {
             edge_nodes,
             gpu: None,
             stats: StaticStats::default(),
+            force_scale: newton::ForceScale::default(),
             deformed: positions.clone(),
             positions,
             amg: Default::default(),

@@ -3,6 +3,7 @@
 //! [`CorotationalFem::step_static`]).
 
 use super::{CorotationalFem, Twist};
+
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
 use voxflex_mesh::mesh_model::{Boundary, NodeState, SolveReport};
@@ -17,13 +18,47 @@ const SMALLEST_LINE_STEP: f64 = 1.0 / 64.0;
 
 /// A Newton iterate's figures: relative force residual, residual force
 /// per node (µN), total potential and the largest potential met (µN·mm),
-/// and the force-scale floor of its load step (µN).
+/// the force-scale floor of its load step and the force scale its
+/// residual was measured against (µN).
 struct Point {
     residual: f64,
     g: Vec<DVec3>,
     potential: f64,
     scale: f64,
     floor: f64,
+    force_scale: f64,
+}
+
+/// The mean force scale (µN) of the load steps converged so far — the
+/// "time-averaged force" of nonlinear FE codes (Abaqus's q̃). A load step's
+/// residual is measured against at least this, so a frame that asks for
+/// nothing new (a held grab at rest: every force zero to rounding) is
+/// converged as it starts, instead of its rounding noise being its own
+/// scale, which no Newton iteration can shrink.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct ForceScale {
+    sum: f64,
+    count: u64,
+}
+
+impl ForceScale {
+    /// The mean of the recorded scales, µN (0 before any).
+    fn mean(&self) -> f64 {
+        if self.count == 0 {
+            0.0
+        } else {
+            self.sum / self.count as f64
+        }
+    }
+
+    /// Records a converged load step's force scale (µN); zero and
+    /// non-finite scales are left out.
+    fn record(&mut self, scale: f64) {
+        if scale.is_finite() && scale > 0.0 {
+            self.sum += scale;
+            self.count += 1;
+        }
+    }
 }
 
 /// One Newton solve's end: converged or not, with its relative force
@@ -31,6 +66,7 @@ struct Point {
 struct NewtonEnd {
     converged: bool,
     residual: f64,
+    force_scale: f64,
 }
 
 /// Euclidean norm over the free nodes.
@@ -85,6 +121,7 @@ impl CorotationalFem {
         let mut last = NewtonEnd {
             converged: false,
             residual: f64::NAN,
+            force_scale: 0.0,
         };
         while done < 1.0 {
             let lambda = (done + step).min(1.0);
@@ -106,6 +143,7 @@ impl CorotationalFem {
             last = end;
             self.stats.load_steps += 1;
             if last.converged {
+                self.force_scale.record(last.force_scale);
                 state.u = trial;
                 done = lambda;
                 step = (2.0 * step).min(1.0);
@@ -143,7 +181,9 @@ impl CorotationalFem {
     /// largest of `|f_ext|` there, `|f_int(u)|` over all nodes (reactions
     /// included) and `floor` (µN; the residual a load step starts from, so
     /// that a step whose answer is stress-free, such as a grabbed piece
-    /// moving rigidly, still has a scale) — and the residual force per node.
+    /// moving rigidly, still has a scale, and at least the mean scale of
+    /// the converged load steps before, [`ForceScale`]) —, the residual
+    /// force per node and the force scale (µN).
     fn force_residual(
         &self,
         bc: &Boundary,
@@ -151,7 +191,7 @@ impl CorotationalFem {
         f_ext: &[DVec3],
         u: &[DVec3],
         floor: f64,
-    ) -> (f64, Vec<DVec3>) {
+    ) -> (f64, Vec<DVec3>, f64) {
         let f_int = self.elastic_forces(u);
         let mut g: Vec<DVec3> = f_ext.iter().zip(&f_int).map(|(a, b)| *a - *b).collect();
         let mut ext = f_ext.to_vec();
@@ -167,6 +207,7 @@ impl CorotationalFem {
                 f64::INFINITY
             },
             g,
+            scale,
         )
     }
 
@@ -189,9 +230,9 @@ impl CorotationalFem {
         report: &mut SolveReport,
     ) -> Result<(NewtonEnd, u32), ModelError> {
         let tolerance = self.params.static_tolerance;
-        let (_, g) = self.force_residual(bc, free, f_ext, u, 0.0);
-        let floor = free_norm(&g, free);
-        let (residual, g) = self.force_residual(bc, free, f_ext, u, floor);
+        let (_, g, _) = self.force_residual(bc, free, f_ext, u, 0.0);
+        let floor = free_norm(&g, free).max(self.force_scale.mean());
+        let (residual, g, force_scale) = self.force_residual(bc, free, f_ext, u, floor);
         let potential = self.potential(u, f_ext);
         let mut at = Point {
             residual,
@@ -199,6 +240,7 @@ impl CorotationalFem {
             potential,
             scale: potential.abs(),
             floor,
+            force_scale,
         };
         let mut iterations = 0;
         while at.residual > tolerance && iterations < self.params.static_iterations {
@@ -231,6 +273,7 @@ impl CorotationalFem {
             NewtonEnd {
                 converged: at.residual <= tolerance,
                 residual: at.residual,
+                force_scale: at.force_scale,
             },
             iterations,
         ))
@@ -257,7 +300,7 @@ impl CorotationalFem {
         while s >= SMALLEST_LINE_STEP {
             let mut trial: Vec<DVec3> = u.iter().zip(du).map(|(a, d)| *a + s * *d).collect();
             bc.tie(&mut trial);
-            let (r, g) = self.force_residual(bc, free, f_ext, &trial, at.floor);
+            let (r, g, force_scale) = self.force_residual(bc, free, f_ext, &trial, at.floor);
             let p = self.potential(&trial, f_ext);
             let flat = (p - at.potential).abs() <= 1e-11 * at.scale;
             if p <= at.potential - 1e-4 * s * descent || flat && r < at.residual {
@@ -268,6 +311,7 @@ impl CorotationalFem {
                     potential: p,
                     scale: at.scale.max(p.abs()),
                     floor: at.floor,
+                    force_scale,
                 });
             }
             s *= 0.5;
