@@ -15,6 +15,8 @@ const CHAINMAIL: &str = "materials = [{ range = [50, 200], constraint = 0.01 }]\
 const FEM: &str = "proxy = { kind = \"uniform\", step = 2 }\n\
                    materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n\
                    solver = \"static\"\n";
+const SPRINGS: &str = "proxy = { kind = \"uniform\", step = 2 }\n\
+                       materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n";
 
 /// A voxel centre on the 20³ cube phantom's +x face (5 mm voxels, the
 /// cube from −25 to 25 mm), mm.
@@ -25,7 +27,11 @@ const FAR: [f64; 3] = [-22.5, 2.5, 2.5];
 fn cube_session() -> Session {
     let defaults = SessionDefaults {
         backend: BackendChoice::Cpu,
-        plugin_dirs: vec![plugin_dir(&["chainmail", "corotational-fem"])],
+        plugin_dirs: vec![plugin_dir(&[
+            "chainmail",
+            "corotational-fem",
+            "mass-spring",
+        ])],
         ..SessionDefaults::default()
     };
     Session::from_volume(phantom("cube", [20, 20, 20]).unwrap(), defaults).unwrap()
@@ -243,4 +249,31 @@ fn a_held_static_grab_at_rest_stays_converged() {
     let notes = s.model_notes().unwrap();
     assert_eq!(notes["newton_iterations"], first, "{notes:?}");
     assert!(notes["newton_force_residual"] <= 1e-6, "{notes:?}");
+}
+
+/// Every model holds a grab at rest frame after frame without an error, and
+/// the held point stays where it was dragged (the static FEM case above,
+/// for ChainMail, the dynamic FEM and the implicit mass-spring).
+#[test]
+fn every_model_holds_a_grab_at_rest() {
+    let dynamic = FEM.replace("static", "dynamic");
+    for (plugin, params) in [
+        ("chainmail", CHAINMAIL),
+        ("corotational-fem", dynamic.as_str()),
+        ("mass-spring", SPRINGS),
+    ] {
+        let mut s = cube_session();
+        s.swap_model(plugin, params).unwrap();
+        let id = s.track_points(&[f32s(GRAB)]).unwrap();
+        grab_by(&mut s, [0.0, 0.0, -5.0]);
+        for k in 0..6 {
+            s.step_model()
+                .unwrap_or_else(|e| panic!("{plugin}, frame {k} of a held grab: {e}"));
+        }
+        let u = s.tracked_displacements(id).unwrap()[0];
+        assert!(
+            (u - DVec3::new(0.0, 0.0, -5.0)).length() < 0.5,
+            "{plugin}: the held point stays at the target: {u}"
+        );
+    }
 }
