@@ -98,7 +98,7 @@ fn validate_gives_every_error_run_gives() {
                 "",
                 &out,
             ),
-            "poisson_ratio 0.6",
+            "poisson_ratio` = 0.6",
         ),
         (
             "negative Young's modulus",
@@ -108,7 +108,7 @@ fn validate_gives_every_error_run_gives() {
                 "",
                 &out,
             ),
-            "youngs_modulus -5",
+            "youngs_modulus` = -5",
         ),
         (
             "render param typo",

@@ -371,7 +371,7 @@ fn plugins_lists_name_kind_version_abi_capabilities_path() {
     assert!(
         line.contains("deformation")
             && line.contains(env!("CARGO_PKG_VERSION"))
-            && line.contains("v1"),
+            && line.contains(&format!("v{}", voxflex_abi::ABI_VERSION)),
         "{line}"
     );
     assert!(

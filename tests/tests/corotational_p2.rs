@@ -80,7 +80,7 @@ fn a_p2_scene_runs_through_the_cli_on_cpu_and_gpu_and_bends_unlike_p1() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("element = \"p3\"") && err.contains("\"p2\""),
+        err.contains("`element` = \"p3\"") && err.contains("\"p2\""),
         "{}",
         text(&o)
     );

@@ -69,6 +69,10 @@ enum Command {
         /// Extra directories to search first.
         #[arg(long = "dir")]
         dirs: Vec<PathBuf>,
+        /// Print the parameter table of plugin NAME instead: every key with its
+        /// type, unit, range, default and a one-line doc.
+        #[arg(long = "params", value_name = "NAME")]
+        params: Option<String>,
     },
     /// Describe a volume file or phantom: dims, spacing, value range, histogram summary.
     Info {
@@ -240,7 +244,11 @@ fn dispatch(command: Command) -> Result<()> {
     match command {
         Command::Run { scene, out, force } => run(scene, out, force),
         Command::Validate { scene } => validate(scene),
-        Command::Plugins { dirs } => plugins(dirs),
+        Command::Plugins {
+            dirs,
+            params: Some(name),
+        } => plugin_params(&name, dirs),
+        Command::Plugins { dirs, params: None } => plugins(dirs),
         Command::Info { volume, dims } => info(volume, dims),
         Command::Roi {
             volume,
@@ -366,6 +374,21 @@ fn validate(path: PathBuf) -> Result<()> {
     let scene = Scene::load(&path)?;
     voxflex_runtime::preflight::check(&scene)?;
     println!("{}: ok", path.display());
+    Ok(())
+}
+
+/// `voxflex plugins --params NAME`: the keys of a plugin's parameter table.
+fn plugin_params(name: &str, dirs: Vec<PathBuf>) -> Result<()> {
+    let p = plugin_loader::load_by_name(name, &plugin_loader::search_path(&dirs))?;
+    let table = match p.kind_name() {
+        "renderer" => "[render.params]",
+        _ => "[model.params]",
+    };
+    println!(
+        "{} {} — the keys of its {table} table:\n",
+        p.name, p.version
+    );
+    print!("{}", p.params.to_text());
     Ok(())
 }
 

@@ -349,6 +349,12 @@ impl DeformationModel for AffineField {
     }
 }
 
+impl voxflex_abi::DeclaresParams for AffineField {
+    fn params_schema() -> Result<String, String> {
+        voxflex_abi::params_schema::json(&schemars::schema_for!(AffineParams))
+    }
+}
+
 impl DeformationPlugin for AffineField {
     const NAME: &'static str = "affine";
     const DESCRIPTION: &'static str =

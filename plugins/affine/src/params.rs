@@ -1,10 +1,11 @@
 //! The plugin's parameters: the TOML of the scene's `[model.params]` table.
 
-use serde::Deserialize;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use voxflex_core::error::ModelError;
 
 /// Which analytic field.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, JsonSchema, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum FieldKind {
     /// `x' = c + M (x − c) + t` with `matrix` (3 rows of 4: M | t, t in mm).
@@ -18,7 +19,7 @@ pub enum FieldKind {
 }
 
 /// A world axis.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, JsonSchema, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum Axis {
     /// x.
@@ -31,17 +32,19 @@ pub enum Axis {
 
 /// Confines the field to a ball with a smooth (C²) fall-off:
 /// `u(x) = w(|x − centre| / radius) · u_full(x)`, `w(r) = (1 − r²)³` for r < 1.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Region {
     /// Ball centre, world mm.
+    #[schemars(extend("unit" = "mm"))]
     pub centre: [f64; 3],
     /// Ball radius, mm (> 0).
+    #[schemars(extend("unit" = "mm"), range(min = 0))]
     pub radius: f64,
 }
 
 /// Parameters of the `affine` plugin (`[model.params]`).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct AffineParams {
     /// The field.
@@ -54,16 +57,19 @@ pub struct AffineParams {
     pub towards: Axis,
     /// Total twist or bend angle over the volume's extent, degrees.
     #[serde(default)]
+    #[schemars(extend("unit" = "degrees"))]
     pub angle_deg: f64,
     /// Affine matrix rows `[m00, m01, m02, t0]`, … (t in mm), about `centre`.
     #[serde(default = "identity_rows")]
     pub matrix: [[f64; 4]; 3],
     /// Fixed point of the field, world mm (default: the volume centre).
     #[serde(default)]
+    #[schemars(extend("unit" = "mm"))]
     pub centre: Option<[f64; 3]>,
     /// Frames over which the field ramps linearly from identity to full
     /// (default 1: full at the first frame). After that the field is still.
     #[serde(default = "default_ramp")]
+    #[schemars(extend("unit" = "frames"), range(min = 1))]
     pub ramp_frames: u64,
     /// Optional ball the field is confined to.
     #[serde(default)]

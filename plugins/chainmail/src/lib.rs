@@ -300,6 +300,12 @@ impl ChainMailPlugin {
     }
 }
 
+impl voxflex_abi::DeclaresParams for ChainMailPlugin {
+    fn params_schema() -> Result<String, String> {
+        voxflex_abi::params_schema::json(&schemars::schema_for!(params::ChainMailParams))
+    }
+}
+
 impl DeformationPlugin for ChainMailPlugin {
     const NAME: &'static str = "chainmail";
     const DESCRIPTION: &'static str =

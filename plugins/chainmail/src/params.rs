@@ -9,7 +9,9 @@ use serde::Deserialize;
 use voxflex_core::error::ModelError;
 
 /// Which propagation algorithm runs.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, schemars::JsonSchema, serde::Serialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Algorithm {
     /// Timestamp propagation with wavefront counters, Jacobi iterations over
@@ -23,7 +25,9 @@ pub enum Algorithm {
 }
 
 /// How the parallel propagation finds its work.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, schemars::JsonSchema, serde::Serialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Schedule {
     /// Active blocks (`block` elements each) in one launch per iteration.
@@ -36,7 +40,7 @@ pub enum Schedule {
 /// A link constraint: the half-size of the box a neighbour may occupy around
 /// its rest offset, as a fraction of the element spacing, on all axes or per
 /// axis.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum Constraint {
     /// The same fraction on x, y and z.
@@ -57,7 +61,7 @@ impl Constraint {
 
 /// One entry of the material transfer function: voxels whose intensity is in
 /// `range` (`lo ≤ v < hi`) become elements of this material.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Material {
     /// A name for logs and metrics.
@@ -70,6 +74,7 @@ pub struct Material {
     /// Fraction of the relaxation move applied per iteration (1 elastic,
     /// 0 plastic: keeps its deformation).
     #[serde(default = "one")]
+    #[schemars(range(min = 0, max = 1))]
     pub elastic: f64,
     /// Rigid: constraint 0, so links inside the material never stretch,
     /// shear or compress (the material translates with its neighbours).
@@ -82,7 +87,7 @@ fn one() -> f64 {
 }
 
 /// Voxel-index box (inclusive) the model is cropped to.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Crop {
     /// Lower corner, voxel indices of the source volume.
@@ -92,7 +97,7 @@ pub struct Crop {
 }
 
 /// Parameters of the `chainmail` plugin (`[model.params]`).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ChainMailParams {
     /// `"parallel"` (default) or `"sequential"`.
@@ -103,6 +108,7 @@ pub struct ChainMailParams {
     pub materials: Vec<Material>,
     /// One element per `downsample` voxels along each axis (default 1).
     #[serde(default = "default_downsample")]
+    #[schemars(extend("unit" = "voxels"), range(min = 1, max = 64))]
     pub downsample: usize,
     /// Optional crop of the source volume (voxel indices, inclusive).
     #[serde(default)]
@@ -123,6 +129,7 @@ pub struct ChainMailParams {
     /// Relaxation stops when no element moves more than this fraction of
     /// the element spacing in an iteration (default 1e-4).
     #[serde(default = "default_rest_tolerance")]
+    #[schemars(range(min = 0, max = 1))]
     pub rest_tolerance: f64,
     /// Over-relaxation factor ω of the relaxation sweeps, in (0, 2): each
     /// element moves `ω · elastic` of the way to its neighbours' weighted

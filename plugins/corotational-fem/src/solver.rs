@@ -48,7 +48,9 @@ use voxflex_mesh::mesh_model::{
 };
 
 /// Which solve runs each frame.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, schemars::JsonSchema, serde::Serialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum SolverKind {
     /// Equilibrium under the current loads and constraints.
@@ -58,8 +60,10 @@ pub enum SolverKind {
     Dynamic,
 }
 
-/// The finite element (`element = "…"`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The finite element (`element = "…"`; deserialised by hand for its
+/// message, described to the schema by the derive).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, schemars::JsonSchema, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ElementKind {
     /// 4-node linear tetrahedra on the proxy's nodes (`"p1"`), one
     /// rotation per element.
@@ -87,7 +91,9 @@ impl<'de> Deserialize<'de> for ElementKind {
 }
 
 /// The PCG's preconditioner (`preconditioner = "…"`).
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, schemars::JsonSchema, serde::Serialize,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum PreconditionerKind {
     /// For the static solver (bending-dominated) AMG from
@@ -108,7 +114,7 @@ pub enum PreconditionerKind {
 }
 
 /// The solver's keys of `[model.params.corotational-fem]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FemParams {
     /// `"p1"` (default) or `"p2"`; without a `proxy` key P2 runs on cells
@@ -120,32 +126,40 @@ pub struct FemParams {
     pub solver: SolverKind,
     /// PCG stops at this relative residual (default 1e-6).
     #[serde(default = "pcg::default_tolerance")]
+    #[schemars(range(min = 0, max = 1))]
     pub cg_tolerance: f64,
     /// PCG iteration cap per solve; `None` (the default) derives it from
     /// the problem size ([`pcg::size_cap`]).
     #[serde(default)]
+    #[schemars(range(min = 1))]
     pub cg_max_iterations: Option<u32>,
     /// The PCG's preconditioner (default `"auto"`).
     #[serde(default)]
     pub preconditioner: PreconditionerKind,
     /// Newton iterations per load step of the static solve (default 25).
     #[serde(default = "default_static_iterations")]
+    #[schemars(range(min = 1))]
     pub static_iterations: u32,
     /// The static solve has converged when the force residual
     /// `|f_ext − f_int(u)|` on the free nodes is at most this fraction of
     /// the force scale (the largest of `|f_ext|` there, `|f_int(u)|` over
-    /// all nodes, reactions included, and the residual the load step
-    /// started from) (default 1e-6).
+    /// all nodes, reactions included, the residual the load step started
+    /// from, and the mean force scale of the load steps converged before)
+    /// (default 1e-6).
     #[serde(default = "default_static_tolerance")]
+    #[schemars(range(min = 0, max = 1))]
     pub static_tolerance: f64,
     /// Implicit steps per frame (default 1).
     #[serde(default = "one")]
+    #[schemars(range(min = 1))]
     pub substeps: u32,
     /// Rayleigh mass damping α, 1/s (default 1).
     #[serde(default = "default_mass_damping")]
+    #[schemars(extend("unit" = "1/s"), range(min = 0))]
     pub mass_damping: f64,
     /// Rayleigh stiffness damping β, s (default 0.01).
     #[serde(default = "default_stiffness_damping")]
+    #[schemars(extend("unit" = "s"), range(min = 0))]
     pub stiffness_damping: f64,
 }
 

@@ -68,7 +68,9 @@ use voxflex_mesh::mesh_model::{
 };
 
 /// The time integrator.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, schemars::JsonSchema, serde::Serialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Integrator {
     /// Symplectic Euler with a stable sub-step.
@@ -82,7 +84,7 @@ pub enum Integrator {
 }
 
 /// The solver's keys of `[model.params.mass-spring]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SpringParams {
     /// `"implicit"` (default) or `"explicit"`.
@@ -90,13 +92,16 @@ pub struct SpringParams {
     pub integrator: Integrator,
     /// Spring damping as a fraction of critical (default 0.1).
     #[serde(default = "default_damping_ratio")]
+    #[schemars(range(min = 0))]
     pub damping_ratio: f64,
     /// Mass damping α, 1/s (default 1).
     #[serde(default = "default_mass_damping")]
+    #[schemars(extend("unit" = "1/s"), range(min = 0))]
     pub mass_damping: f64,
     /// Most explicit sub-steps per frame before the step is refused
     /// (default 10,000).
     #[serde(default = "default_max_substeps")]
+    #[schemars(range(min = 1))]
     pub max_substeps: u32,
     /// PCG relative residual of the implicit step (default 1e-6).
     #[serde(default = "pcg::default_tolerance")]
@@ -105,9 +110,10 @@ pub struct SpringParams {
     #[serde(default = "pcg::default_max_iterations")]
     pub cg_max_iterations: u32,
     /// Volume springs' stiffness `κ` as a multiple of each tetrahedron's
-    /// Young's modulus (dimensionless, ≥ 0; default 1; 0 turns them off):
+    /// Young's modulus (dimensionless, ≥ 0; default 0: off):
     /// see the module.
     #[serde(default = "default_volume_stiffness")]
+    #[schemars(range(min = 0))]
     pub volume_stiffness: f64,
 }
 

@@ -663,6 +663,12 @@ impl Renderer for RaycastRenderer {
 #[cfg(test)]
 mod tests;
 
+impl voxflex_abi::DeclaresParams for RaycastRenderer {
+    fn params_schema() -> Result<String, String> {
+        voxflex_abi::params_schema::json(&schemars::schema_for!(params::RaycastParams))
+    }
+}
+
 impl voxflex_abi::RendererPlugin for RaycastRenderer {
     const NAME: &'static str = "raycast";
     const DESCRIPTION: &'static str =

@@ -28,7 +28,9 @@ use voxflex_core::error::ModelError;
 pub const MAX_CLIP_PLANES: usize = 6;
 
 /// How the samples along a ray become a pixel.
-#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum RenderMode {
     /// Emission–absorption, front to back (the default).
@@ -39,7 +41,9 @@ pub enum RenderMode {
 }
 
 /// How opacity maps are read between voxel centres.
-#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum MapInterpolation {
     /// Trilinear interpolation of the voxel opacities (the default).
@@ -50,7 +54,7 @@ pub enum MapInterpolation {
 }
 
 /// Blinn–Phong shading with a headlight, on the gradient of the volume.
-#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Shading {
     /// Shade composite samples (MIP is never shaded).
@@ -78,7 +82,7 @@ impl Default for Shading {
 }
 
 /// A half-space kept by clipping: points `x` with `normal · (x − point) ≥ 0`.
-#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ClipPlane {
     /// A point on the plane, world mm.
@@ -88,7 +92,7 @@ pub struct ClipPlane {
 }
 
 /// An axis-aligned box in world mm; only what is inside is drawn.
-#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CropBox {
     /// Lower corner, world mm.
@@ -98,7 +102,7 @@ pub struct CropBox {
 }
 
 /// The `transfer_function` table as written: a preset or points.
-#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TransferFunctionSpec {
     /// A built-in preset name (`ct-bone`, `ct-soft-tissue`, `ct-lung`, `mri-t1`).
@@ -120,7 +124,7 @@ pub struct TransferFunctionSpec {
 
 /// `transfer_function.gaussian`: `g` is a Gaussian at `mean` with `sigma`
 /// (data units); `a` (default 0.01) and `b` (default 0.99) as in the paper.
-#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GaussianSpec {
     /// Centre of the Gaussian (the seed's mean `d_s`), data units.
@@ -143,22 +147,26 @@ fn gaussian_b() -> f64 {
 }
 
 /// Parameters of the `raycast` renderer (see the module docs for the TOML).
-#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RaycastParams {
     /// Composite or MIP.
     pub mode: RenderMode,
     /// Ray step in voxels of the smallest spacing (> 0).
+    #[schemars(extend("unit" = "voxels"), range(min = 0))]
     pub sample_distance: f64,
     /// Thickness (mm) of the slab whose opacity the TF alpha gives (> 0).
+    #[schemars(extend("unit" = "mm"), range(min = 0))]
     pub opacity_unit_distance: f64,
     /// Stop rays whose accumulated opacity reaches `termination_threshold`.
     pub early_termination: bool,
     /// Opacity at which a ray stops, in (0, 1].
+    #[schemars(range(min = 0, max = 1))]
     pub termination_threshold: f64,
     /// Skip macro-cells whose value range the TF maps to zero opacity.
     pub empty_space_skipping: bool,
     /// Edge of a macro-cell, voxels (2..=64).
+    #[schemars(extend("unit" = "voxels"), range(min = 2, max = 64))]
     pub macro_cell: u32,
     /// Opacity-map interpolation.
     pub opacity_map_interpolation: MapInterpolation,

@@ -19,9 +19,10 @@
 //! 4. [`model`] — the [`DeformationModel`](voxflex_core::deformation::DeformationModel)
 //!    impl: init, bind, interact, step, dirty region, map (rayon and GPU).
 //! 5. `shaders/template/bulge.wgsl` — the WGSL twin of step 3.
-//! 6. Below — the name, description and capabilities the host lists
+//! 6. Below — the parameter schema the host reads (derived from step 2).
+//! 7. Below — the name, description and capabilities the host lists
 //!    (`voxflex plugins`), `create`, and the one export line.
-//! 7. `tests/tests/template_plugin.rs` — load the built `.so` through the
+//! 8. `tests/tests/template_plugin.rs` — load the built `.so` through the
 //!    runtime, run a scene, and hold the GPU path to the CPU path.
 //!
 //! Scene usage:
@@ -48,7 +49,17 @@ use voxflex_abi::ffi::{CAPABILITY_CPU, CAPABILITY_GPU};
 use voxflex_abi::{DeformationPlugin, HostContext};
 use voxflex_core::error::ModelError;
 
-// STEP 6: how the host sees the plugin. `NAME` is what a scene writes in
+// STEP 6: the parameter schema the host reads (`voxflex plugins --params
+// template`, `voxflex validate`, the viewer's form): derived from the very
+// type `create` parses, so it cannot drift. Units and ranges are the
+// `#[schemars(...)]` attributes on its fields (step 2).
+impl voxflex_abi::DeclaresParams for TemplateField {
+    fn params_schema() -> Result<String, String> {
+        voxflex_abi::params_schema::json(&schemars::schema_for!(TemplateParams))
+    }
+}
+
+// STEP 7: how the host sees the plugin. `NAME` is what a scene writes in
 // `plugin = "…"` and must match the library file (`libvoxflex_<NAME with
 // - as _>.so`); `CAPABILITIES` says which backends `map` supports (drop
 // `CAPABILITY_GPU` for a CPU-only model: the host then refuses

@@ -18,22 +18,26 @@ use voxflex_core::error::ModelError;
 /// amplitude_mm = 10      # strength, mm (the largest displacement is 0.286 × this)
 /// ramp_frames = 5        # frames over which the field grows in (≥ 1, default 1)
 /// ```
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TemplateParams {
     /// Centre of the ball, world mm (LPS); `None` = the volume's centre.
     #[serde(default)]
+    #[schemars(extend("unit" = "mm"))]
     pub centre: Option<[f64; 3]>,
     /// Radius of the ball, mm. Nothing outside it moves.
+    #[schemars(extend("unit" = "mm"), range(min = 0))]
     pub radius_mm: f64,
     /// Strength of the bulge, mm: points move by
     /// `amplitude_mm · t (1 − t²)²` along the radius, `t = r / radius_mm`
     /// (negative: a dent). The largest move, `0.286 · amplitude_mm`, is at
     /// `t = 1/√5`.
+    #[schemars(extend("unit" = "mm"))]
     pub amplitude_mm: f64,
     /// Frames over which the field ramps in linearly (default 1: full at
     /// the first frame); after that it is still and nothing re-runs.
     #[serde(default = "one_frame")]
+    #[schemars(extend("unit" = "frames"), range(min = 1))]
     pub ramp_frames: u64,
 }
 

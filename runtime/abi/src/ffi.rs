@@ -164,6 +164,10 @@ pub struct PluginDeclaration {
     pub renderer: *const RendererVTable,
     /// Reserved for the actuator vtable, null.
     pub actuator: *const c_void,
+    /// Writes the plugin's parameter schema (JSON Schema text, UTF-8) into
+    /// `out` (a host buffer of `cap` bytes); 0 on success, else an error
+    /// in `err` ([`crate::params_schema`]).
+    pub params_schema: unsafe extern "C" fn(out: *mut ErrorBuf, err: *mut ErrorBuf) -> i32,
 }
 
 // SAFETY: immutable static data.

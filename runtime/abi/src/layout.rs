@@ -57,7 +57,8 @@ pub const fn compute() -> u64 {
             capabilities,
             deformation,
             renderer,
-            actuator
+            actuator,
+            params_schema
         }
     );
     hash_type!(

@@ -24,12 +24,13 @@ pub mod host_side;
 pub mod layout;
 pub mod log_bridge;
 pub mod notes_text;
+pub mod params_schema;
 pub mod plugin;
 pub mod renderer;
 
 /// Version of the boundary. Bump on any change to a function signature or
 /// to the meaning of a field; the layout hash catches layout changes.
-pub const ABI_VERSION: u32 = 1;
+pub const ABI_VERSION: u32 = 2;
 
 /// Fingerprint of every `#[repr(C)]` boundary type (see [`layout`]).
 pub const LAYOUT_HASH: u64 = layout::compute();
@@ -37,5 +38,6 @@ pub const LAYOUT_HASH: u64 = layout::compute();
 /// Name of the symbol every plugin library exports.
 pub const ENTRY_SYMBOL: &str = "voxflex_plugin_v1";
 
+pub use params_schema::DeclaresParams;
 pub use plugin::{DeformationPlugin, HostContext};
 pub use renderer::RendererPlugin;

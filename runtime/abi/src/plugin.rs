@@ -189,7 +189,9 @@ impl GpuService for HostGpu {
 }
 
 /// A deformation model that can be exported as a plugin.
-pub trait DeformationPlugin: DeformationModel + Sized + 'static {
+pub trait DeformationPlugin:
+    DeformationModel + crate::params_schema::DeclaresParams + Sized + 'static
+{
     /// Name scenes use (`plugin = "..."`): lower-case, hyphens allowed.
     const NAME: &'static str;
     /// One-line description for `voxflex plugins`.
@@ -540,6 +542,7 @@ macro_rules! export_deformation_plugin {
                 deformation: &__VOXFLEX_VTABLE,
                 renderer: ::std::ptr::null(),
                 actuator: ::std::ptr::null(),
+                params_schema: $crate::params_schema::entry::<$ty>,
             };
         $crate::__export_header!(__VOXFLEX_DECLARATION);
     };

@@ -15,7 +15,9 @@ use voxflex_core::opacity_map::OpacityMap;
 use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
 
 /// A renderer that can be exported as a plugin.
-pub trait RendererPlugin: Renderer + Sized + 'static {
+pub trait RendererPlugin:
+    Renderer + crate::params_schema::DeclaresParams + Sized + 'static
+{
     /// Name scenes use (`[render] plugin = "..."`).
     const NAME: &'static str;
     /// One-line description for `voxflex plugins`.
@@ -203,6 +205,7 @@ macro_rules! export_renderer_plugin {
                 deformation: ::std::ptr::null(),
                 renderer: &__VOXFLEX_VTABLE,
                 actuator: ::std::ptr::null(),
+                params_schema: $crate::params_schema::entry::<$ty>,
             };
         $crate::__export_header!(__VOXFLEX_DECLARATION);
     };

@@ -81,6 +81,12 @@ impl Renderer for Flat {
     }
 }
 
+impl voxflex_abi::DeclaresParams for Flat {
+    fn params_schema() -> Result<String, String> {
+        Ok(r#"{"type":"object"}"#.into())
+    }
+}
+
 impl RendererPlugin for Flat {
     const NAME: &'static str = "flat";
     const DESCRIPTION: &'static str = "test";

@@ -80,6 +80,12 @@ impl DeformationModel for Probe {
     }
 }
 
+impl voxflex_abi::DeclaresParams for Probe {
+    fn params_schema() -> Result<String, String> {
+        Ok(r#"{"type":"object","properties":{"offset":{"type":"number"}}}"#.into())
+    }
+}
+
 impl DeformationPlugin for Probe {
     const NAME: &'static str = "probe";
     const DESCRIPTION: &'static str = "test probe";

@@ -17,6 +17,7 @@ pub mod fingerprint;
 pub mod gpu_context;
 pub mod metrics;
 pub mod out_dir;
+pub mod param_schema;
 pub mod pipeline;
 pub mod plugin_loader;
 pub mod preflight;

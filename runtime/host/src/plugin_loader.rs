@@ -15,6 +15,7 @@ use voxflex_abi::ffi::{
     CAPABILITY_CPU, CAPABILITY_GPU, DeformationVTable, PLUGIN_MAGIC, PluginEntry, PluginHeader,
     PluginKind, RendererVTable,
 };
+use voxflex_core::error::ModelError;
 
 /// Loading a plugin failed.
 #[derive(Debug, thiserror::Error)]
@@ -86,6 +87,9 @@ pub struct LoadedPlugin {
     pub deformation: Option<&'static DeformationVTable>,
     /// The renderer vtable (kind = renderer).
     pub renderer: Option<&'static RendererVTable>,
+    /// The keys of its parameter table, as the plugin declared them
+    /// ([`crate::param_schema`]).
+    pub params: crate::param_schema::ParamSchema,
 }
 
 impl LoadedPlugin {
@@ -99,6 +103,29 @@ impl LoadedPlugin {
             v.push("gpu");
         }
         v.join(", ")
+    }
+
+    /// A parameter table (TOML text) against the plugin's declared schema:
+    /// every unknown key, missing key, wrong type and value out of range at
+    /// once — the plugin's `create`, which the host calls next, stops at its
+    /// first. A table that is not TOML is left to `create`, which names the
+    /// error. Every path that creates a plugin instance calls this first,
+    /// so `validate`, `run` and a session give the same message.
+    pub fn check_params(&self, params_toml: &str) -> Result<(), ModelError> {
+        let Ok(table) = params_toml.parse::<toml::Table>() else {
+            return Ok(());
+        };
+        let issues = self.params.check(&table);
+        if issues.is_empty() {
+            return Ok(());
+        }
+        Err(ModelError(format!(
+            "plugin `{}` parameters: {} (`voxflex plugins --params {}` lists every key with its \
+             type, unit, range and default)",
+            self.name,
+            issues.join("; "),
+            self.name
+        )))
     }
 
     /// Lower-case kind name.
@@ -336,6 +363,11 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
         PluginKind::Renderer => renderer = Some(unsafe { &*decl.renderer }),
         PluginKind::Actuator => {}
     }
+    // SAFETY: the entry of a checked, never-unloaded library.
+    let schema = unsafe { voxflex_abi::params_schema::read(&name, decl.params_schema) }
+        .map_err(|e| invalid(format!("its parameter schema could not be read: {e}")))?;
+    let params = crate::param_schema::ParamSchema::from_json(&schema)
+        .map_err(|e| invalid(format!("declares a {e} the host cannot read")))?;
     tracing::debug!(plugin = %name, %version, path = %path.display(), "plugin loaded");
     Ok(LoadedPlugin {
         path: path.to_path_buf(),
@@ -347,6 +379,7 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
         abi_version: header.abi_version,
         deformation,
         renderer,
+        params,
     })
 }
 

@@ -91,6 +91,7 @@ fn check_model(
             p.name
         )));
     }
+    p.check_params(&scene.model_params_toml())?;
     // SAFETY: the vtable comes from a checked, never-unloaded library.
     let mut model = unsafe {
         DeformationProxy::create(
@@ -131,6 +132,7 @@ fn check_renderer(
             p.kind_name()
         ))
     })?;
+    p.check_params(&scene.render_params_toml())?;
     // SAFETY: checked, never-unloaded library.
     unsafe {
         RendererProxy::create(

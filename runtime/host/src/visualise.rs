@@ -248,6 +248,7 @@ impl RenderStage {
                 plugin.kind_name()
             ))
         })?;
+        plugin.check_params(params_toml)?;
         // SAFETY: checked, never-unloaded library.
         let mut renderer =
             unsafe { RendererProxy::create(&plugin.name, vtable, params_toml, services) }?;

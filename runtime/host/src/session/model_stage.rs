@@ -120,6 +120,9 @@ impl ModelStage {
                 plugin.kind_name()
             ))
         })?;
+        plugin
+            .check_params(params_toml)
+            .map_err(ModelCall::Create.failed())?;
         // SAFETY: the vtable comes from a checked, never-unloaded library.
         let mut model =
             unsafe { DeformationProxy::create(&plugin.name, vtable, params_toml, services) }

@@ -142,7 +142,7 @@ pub trait MeshSolver: Send + Sized + 'static {
     const DESCRIPTION: &'static str;
     /// The solver's own keys of the plugin's table (everything but
     /// [`MeshModelParams`]'s), refusing unknown keys.
-    type Params: serde::de::DeserializeOwned + Clone + Send;
+    type Params: serde::de::DeserializeOwned + schemars::JsonSchema + Clone + Send;
 
     /// Builds the solver for `mesh` (rest configuration, world mm), whose
     /// tetrahedron `t` has material `materials[mesh.labels[t]]`.

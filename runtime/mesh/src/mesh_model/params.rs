@@ -11,7 +11,7 @@ use serde::Deserialize;
 use std::path::PathBuf;
 
 /// Where the tetrahedral proxy comes from.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ProxySpec {
     /// Hexahedral cells every `step` voxels, five tetrahedra each
@@ -19,6 +19,7 @@ pub enum ProxySpec {
     /// voxel at its centre.
     Uniform {
         /// Cell size, voxels (≥ 1).
+        #[schemars(extend("unit" = "voxels"), range(min = 1))]
         step: usize,
     },
     /// A label-aware, 2:1-balanced octree with leaves of at most
@@ -26,6 +27,7 @@ pub enum ProxySpec {
     /// tied to their masters.
     Octree {
         /// Largest leaf, voxels (rounded down to a power of two).
+        #[schemars(extend("unit" = "voxels"), range(min = 1))]
         max_cell: usize,
     },
     /// A tetrahedral mesh file: Gmsh `.msh` 4.1 ASCII or TetGen `.node`
@@ -53,7 +55,7 @@ impl Default for ProxySpec {
 }
 
 /// One material of the material transfer function.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSpec {
     /// Name (for `fix` by material and for messages).
@@ -67,13 +69,16 @@ pub struct MaterialSpec {
     #[serde(default)]
     pub label: Option<u16>,
     /// Young's modulus, Pa (> 0).
+    #[schemars(extend("unit" = "Pa"), range(min = 0))]
     pub youngs_modulus: f64,
     /// Poisson ratio (0 ≤ ν < 0.5; default 0.45, near-incompressible soft
     /// tissue).
     #[serde(default = "default_poisson")]
+    #[schemars(range(min = 0, max = 0.5))]
     pub poisson_ratio: f64,
     /// Density, kg/m³ (default 1000, water).
     #[serde(default = "default_density")]
+    #[schemars(extend("unit" = "kg/m³"), range(min = 0))]
     pub density: f64,
 }
 
@@ -85,7 +90,7 @@ fn default_density() -> f64 {
 }
 
 /// The shared keys of a mesh model's table.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeshModelParams {
     /// The proxy; `None` (no `proxy` key) takes the solver's default
@@ -99,6 +104,7 @@ pub struct MeshModelParams {
     /// Gravity, mm/s² in world axes (default none; Earth is
     /// `[0, 0, -9810]` with z up).
     #[serde(default)]
+    #[schemars(extend("unit" = "mm/s²"))]
     pub gravity: [f64; 3],
     /// Writes the deformed proxy to this `.vtu` file after every frame that
     /// changed it (atomically), for ParaView.
