@@ -165,3 +165,55 @@ impl Beam {
         interactions
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxflex_mesh::proxy::uniform_proxy_with_losses;
+
+    /// Voxels the uniform proxy of `step` gives to the other material
+    /// (soft 0, stiff 1, by voxel value as the materials tables do).
+    fn lost(beam: &Beam, step: usize) -> usize {
+        let g = beam.volume.grid;
+        let label = |v: [usize; 3]| {
+            let x = beam
+                .volume
+                .data
+                .as_slice()
+                .get_f32(g.linear(v[0], v[1], v[2]));
+            Some(u16::from(x > 500.0))
+        };
+        uniform_proxy_with_losses(&g, step, label).unwrap().1
+    }
+
+    #[test]
+    fn the_inclusion_lies_on_step_one_cell_faces_and_on_no_measured_steps() {
+        for quick in [true, false] {
+            let beam = Beam::two_material(quick, 1.0);
+            let inc = beam.inclusion.unwrap();
+            let stiff = beam
+                .points
+                .iter()
+                .filter(|p| inc.contains(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)))
+                .count();
+            assert!(stiff > 0, "quick {quick}: no stiff voxel");
+            // Step 1, on the 1 mm and the 0.5 mm label volumes: every cell
+            // holds one material, so no voxel is lost.
+            assert_eq!(lost(&beam, 1), 0, "quick {quick}, 1 mm");
+            let fine = Beam::two_material(quick, 0.5);
+            assert_eq!(fine.volume.grid.dims[0], 2 * beam.volume.grid.dims[0] - 1);
+            assert_eq!(lost(&fine, 1), 0, "quick {quick}, 0.5 mm");
+            // Every measured coarser step cuts across the inclusion.
+            let steps: &[usize] = if quick {
+                &[2, 4, 8]
+            } else {
+                &[2, 3, 4, 6, 8, 12]
+            };
+            for &s in steps {
+                assert!(lost(&beam, s) > 0, "quick {quick}, step {s}");
+            }
+        }
+        // One material: nothing to lose.
+        assert_eq!(lost(&Beam::new(true), 4), 0);
+    }
+}
