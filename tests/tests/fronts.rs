@@ -7,8 +7,10 @@
 //! each mesh model's ringed default is the configuration the plugin runs
 //! by default, that ChainMail's cut at one element per voxel leaves every
 //! voxel on its own piece's side and beats its down-sampled cuts against
-//! the analytic answer, and that trilinear resampling beats tetrahedral
-//! against the f64 reference under every field.
+//! the analytic answer, that trilinear resampling beats tetrahedral
+//! against the f64 reference under every field, and that the two-material
+//! grab's fine reference is converged, its coarse proxies mis-assign
+//! voxels, and its errors grow with the voxels they mis-assign.
 
 use std::collections::BTreeMap;
 use voxflex_integration_tests::*;
@@ -83,6 +85,7 @@ fn quick_fronts_are_written_finite_and_converge() {
         "fem_cantilever",
         "fem_elastica",
         "grab",
+        "two_material",
         "cut",
         "resample",
         "roi",
@@ -161,6 +164,81 @@ fn quick_fronts_are_written_finite_and_converge() {
     // error stays below the grab's 2 mm (a torn beam moves only its face).
     for r in g.iter().filter(|r| r["series"].starts_with("ChainMail")) {
         assert!(num(r, "error") < 0.5, "ChainMail: {r:?}");
+    }
+    // Two materials: the two fine solves (P2 on the step-1 proxy, P1 on the
+    // same body's half-voxel proxy) agree far closer than any mesh row
+    // comes to them, so the reference is converged at the rows' scale;
+    // every mesh proxy measured gives some voxels of the stiff inclusion
+    // to the other material (its faces lie on no cell face); the FEM rows
+    // that lose the most voxels are farther from the reference than those
+    // that lose the fewest, whatever their element (material resolution
+    // sets the error: the full front's P2 is no closer than P1 on the same
+    // proxy); the finest P1 proxy is closer than the coarsest; and the
+    // ringed defaults are the plugins' own.
+    let t = rows(&out, "two_material");
+    let mesh: Vec<_> = t
+        .iter()
+        .filter(|r| !r["series"].starts_with("ChainMail"))
+        .collect();
+    let closest = mesh
+        .iter()
+        .map(|r| num(r, "error"))
+        .fold(f64::MAX, f64::min);
+    for r in &t {
+        assert!(
+            num(r, "ref_gap_mm") < 0.2 * closest,
+            "two materials: the fine solves differ by {} mm, the closest row is {closest} mm off",
+            r["ref_gap_mm"]
+        );
+    }
+    for r in &mesh {
+        assert!(num(r, "voxels_lost") > 0.0, "two materials: {r:?}");
+    }
+    let fem: Vec<_> = mesh
+        .iter()
+        .filter(|r| r["series"].starts_with("FEM"))
+        .collect();
+    let lost =
+        |f: fn(f64, f64) -> f64, init| fem.iter().map(|r| num(r, "voxels_lost")).fold(init, f);
+    let (most, fewest) = (lost(f64::max, 0.0), lost(f64::min, f64::MAX));
+    assert!(
+        most > fewest,
+        "two materials: every proxy loses {most} voxels"
+    );
+    let err_at = |n: f64| -> Vec<f64> {
+        fem.iter()
+            .filter(|r| num(r, "voxels_lost") == n)
+            .map(|r| num(r, "error"))
+            .collect()
+    };
+    let (far, near) = (err_at(most), err_at(fewest));
+    let nearest_of_far = far.iter().copied().fold(f64::MAX, f64::min);
+    let farthest_of_near = near.iter().copied().fold(0.0, f64::max);
+    assert!(
+        nearest_of_far > farthest_of_near,
+        "two materials: FEM rows losing {most} voxels ({far:?}) vs {fewest} ({near:?})"
+    );
+    let p1 = series(&t, "FEM static", "step", "error");
+    let (finest, coarsest) = (p1[0], p1[p1.len() - 1]);
+    assert!(
+        finest.1 < coarsest.1,
+        "two materials, FEM static P1: step {} ({}) vs step {} ({})",
+        finest.0,
+        finest.1,
+        coarsest.0,
+        coarsest.1
+    );
+    for model in ["FEM", "mass-spring"] {
+        let d: Vec<_> = t
+            .iter()
+            .filter(|r| r["series"].starts_with(model) && r["default"] == "true")
+            .map(|r| format!("{} {}", r["series"], r["config"]))
+            .collect();
+        assert_eq!(
+            d.len(),
+            1,
+            "{model} defaults in the two-material front: {d:?}"
+        );
     }
     // The cut: ChainMail with one element per voxel cuts between two voxel
     // layers, so every voxel centre ends on its own piece's side; down-

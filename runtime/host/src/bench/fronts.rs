@@ -9,7 +9,8 @@
 //! one series per model/configuration, the default configuration ringed),
 //! and `front.md` (every front's table, its Pareto front and its knee).
 //!
-//! Fronts ([`cut`], [`fem`], [`grab`], [`resample`], [`roi`]):
+//! Fronts ([`cut`], [`fem`], [`grab`], [`resample`], [`roi`],
+//! [`two_material`]):
 //! - `fem_cantilever`: corotational FEM tip deflection vs Timoshenko beam
 //!   theory and vs the finest solve, proxy step × CG tolerance;
 //! - `fem_elastica`: static Newton under large rotation vs the Euler
@@ -21,7 +22,10 @@
 //!   answer (the grabbed piece translates rigidly, the other stays still);
 //! - `resample`: tetrahedral vs trilinear interpolation vs an f64
 //!   reference under affine, twist and bend, several sizes;
-//! - `roi`: ROI map 1 − Dice against the labelled abdomen, per λ.
+//! - `roi`: ROI map 1 − Dice against the labelled abdomen, per λ;
+//! - `two_material`: the grab with a stiff inclusion whose faces lie on no
+//!   coarse proxy cell face, FEM P1/P2, mass-spring and ChainMail vs a
+//!   converged fine P2 solve (material resolution).
 //!
 //! The knee ([`knee`]): among the Pareto-optimal points, the one farthest
 //! from the chord between the fastest and the most accurate, in log–log
@@ -37,6 +41,7 @@ mod plot;
 mod resample;
 mod roi;
 mod runner;
+mod two_material;
 
 use super::{BenchError, BenchOptions, err};
 use std::fmt::Write as _;
@@ -88,10 +93,11 @@ pub(crate) struct Front {
 }
 
 /// The fronts by name, in run order.
-pub(crate) const NAMES: [&str; 6] = [
+pub(crate) const NAMES: [&str; 7] = [
     "fem_cantilever",
     "fem_elastica",
     "grab",
+    "two_material",
     "cut",
     "resample",
     "roi",
@@ -121,6 +127,7 @@ pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
             "fem_cantilever" => vec![fem::cantilever(&plugins, args.quick)?],
             "fem_elastica" => vec![fem::elastica(&plugins, args.quick)?],
             "grab" => vec![grab::front(&plugins, args.quick)?],
+            "two_material" => vec![two_material::front(&plugins, args.quick)?],
             "cut" => vec![cut::front(&plugins, args.quick)?],
             "resample" => vec![resample::front(args.quick)?],
             _ => vec![roi::front(args.quick)?],

@@ -20,11 +20,13 @@ use super::runner::{self, Plugins, Scene, Settle};
 use super::{Front, Point};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
+use voxflex_core::volume::Volume;
 
-/// The models of the front: series label, plugin, params (given the
+/// The models of a grab front: series label, plugin, params (given the
 /// resolution), whether they need to settle, and the proxy steps measured.
-struct ModelSpec {
-    series: &'static str,
+pub(super) struct ModelSpec {
+    /// The series label.
+    pub series: &'static str,
     plugin: &'static str,
     /// Extra params lines (after proxy / materials).
     params: &'static str,
@@ -50,7 +52,9 @@ const P2_STEPS: [&[usize]; 2] = [&[12, 8, 6, 4], &[8, 4]];
 /// above the CG's run-to-run rounding (parallel sums).
 const SAME_RUN: f64 = 1e-4;
 
-const MESH_MODELS: &[ModelSpec] = &[
+/// The mesh models of the `grab` front (the `two_material` front measures
+/// the first four and the last).
+pub(super) const MESH_MODELS: &[ModelSpec] = &[
     ModelSpec {
         series: "FEM static",
         plugin: "corotational-fem",
@@ -121,7 +125,9 @@ fn same_run(a: &[DVec3], b: &[DVec3]) -> bool {
             .all(|(x, y)| (*x - *y).length() <= SAME_RUN * scale)
 }
 
-fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
+/// The RMS and the largest distance between displacements `u` and
+/// `reference` (mm).
+pub(super) fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
     let (mut sum, mut max) = (0.0, 0.0f64);
     for (a, b) in u.iter().zip(reference) {
         let d = (*a - *b).length();
@@ -131,51 +137,138 @@ fn errors(u: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
     ((sum / u.len().max(1) as f64).sqrt(), max)
 }
 
-/// The grab front.
-pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
-    let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
-    let beam = Beam::new(quick);
-    let settle = beam.settle(quick, 600);
-    let (m, l, w) = (beam.m, beam.length, beam.width);
-    let by = 0.5 * m as f64;
-    let (volume, points) = (&beam.volume, &beam.points);
-    let interactions = beam.fix_and_grab(DVec3::new(0.0, 0.0, -by));
-    let scene = |plugin, params: String, settle: Option<Settle>| Scene {
+/// A grab of a beam: its end face moved by `by` over [`GRAB_FRAMES`] and
+/// held, dynamic runs settling as `settle` says; what the `grab` and
+/// `two_material` fronts share.
+pub(super) struct GrabProblem<'a> {
+    /// The beam (volume, probe points).
+    pub beam: &'a Beam,
+    /// The grab, mm.
+    pub by: DVec3,
+    /// How dynamic runs come to rest.
+    pub settle: Settle,
+    /// The mesh models' `materials` line(s).
+    pub mesh_materials: &'a str,
+    /// ChainMail's `materials` line(s).
+    pub chainmail_materials: &'a str,
+    /// The `--quick` sizes (fewer proxy steps and down-samplings).
+    pub quick: bool,
+}
+
+/// A run of the grab on `volume` (the beam's, or the same body's on finer
+/// voxels), tracking `points` (world mm).
+pub(super) fn grab_scene<'a>(
+    volume: &'a Volume,
+    points: &'a [[f32; 3]],
+    interactions: Vec<(u64, String)>,
+    plugin: &'a str,
+    params: String,
+    settle: Option<Settle>,
+) -> Scene<'a> {
+    Scene {
         plugin,
         params,
         volume,
         points,
-        interactions: interactions.clone(),
+        interactions,
         frames: GRAB_FRAMES,
         dt_s: 1.0 / 30.0,
         settle,
-    };
-    let reference = runner::run(
+    }
+}
+
+/// A static `corotational-fem` solve of the grab with tight tolerances (CG
+/// 1e-10, static 1e-8), `element` (`p1`, `p2`) on the proxy of `step`, on
+/// `beam` (the problem's or the same body on finer voxels), tracking the
+/// problem's probe points.
+pub(super) fn fine_solve(
+    plugins: &Plugins,
+    problem: &GrabProblem,
+    beam: &Beam,
+    element: &str,
+    step: usize,
+) -> Result<runner::Outcome, BenchError> {
+    let params = format!(
+        "proxy = {{ kind = \"uniform\", step = {step} }}\n{}\nsolver = \"static\"\n\
+         element = \"{element}\"\ncg_tolerance = 1e-10\nstatic_tolerance = 1e-8\n\
+         cg_max_iterations = 100000",
+        problem.mesh_materials
+    );
+    runner::run(
         plugins,
-        &scene(
+        &grab_scene(
+            &beam.volume,
+            &problem.beam.points,
+            beam.fix_and_grab(problem.by),
             "corotational-fem",
-            format!(
-                "proxy = {{ kind = \"uniform\", step = 1 }}\n{}\nsolver = \"static\"\n\
-                 cg_tolerance = 1e-10\nstatic_tolerance = 1e-8\ncg_max_iterations = 100000",
-                MATERIAL_MESH
-            ),
+            params,
             None,
         ),
-    )?;
-    let ref_max = reference.u.iter().map(|d| d.length()).fold(0.0, f64::max);
-    // The plugins' own defaults: the first frame with no key but the
-    // materials. A row is the default when its first frame is this one.
-    let first_frame = |plugin, params: String| -> Result<Vec<DVec3>, BenchError> {
-        let one = Scene {
-            frames: 1,
-            ..scene(plugin, params, None)
-        };
-        Ok(runner::run(plugins, &one)?.u)
-    };
-    let mut defaults = vec![];
+    )
+}
+
+/// The mesh plugins' own defaults: each one's first frame with no key but
+/// the materials (which also warms the plugins up before a reference).
+pub(super) fn defaults(
+    plugins: &Plugins,
+    problem: &GrabProblem,
+) -> Result<Vec<(&'static str, Vec<DVec3>)>, BenchError> {
+    let mut out = vec![];
     for plugin in ["corotational-fem", "mass-spring"] {
-        defaults.push((plugin, first_frame(plugin, MATERIAL_MESH.to_string())?));
+        out.push((
+            plugin,
+            first_frame(plugins, problem, plugin, problem.mesh_materials.to_string())?,
+        ));
     }
+    Ok(out)
+}
+
+/// The displacements after the first frame of `plugin` with `params`.
+fn first_frame(
+    plugins: &Plugins,
+    problem: &GrabProblem,
+    plugin: &str,
+    params: String,
+) -> Result<Vec<DVec3>, BenchError> {
+    let beam = problem.beam;
+    let one = Scene {
+        frames: 1,
+        ..grab_scene(
+            &beam.volume,
+            &beam.points,
+            beam.fix_and_grab(problem.by),
+            plugin,
+            params,
+            None,
+        )
+    };
+    Ok(runner::run(plugins, &one)?.u)
+}
+
+/// A grab front's rows: every mesh model of `models` on its proxy steps,
+/// then ChainMail down-sampled by each of [`downsamples`], each against
+/// `reference`; a mesh row is its plugin's default when its first frame is
+/// that of `defaults` ([`defaults`]). Every row gets the `common` columns
+/// last. Returns the rows and the default rows' names.
+pub(super) fn rows(
+    plugins: &Plugins,
+    problem: &GrabProblem,
+    models: &[&ModelSpec],
+    defaults: &[(&'static str, Vec<DVec3>)],
+    reference: &[DVec3],
+    common: &[(&'static str, String)],
+) -> Result<(Vec<Point>, Vec<String>), BenchError> {
+    let beam = problem.beam;
+    let scene = |plugin, params: String, settle: Option<Settle>| {
+        grab_scene(
+            &beam.volume,
+            &beam.points,
+            beam.fix_and_grab(problem.by),
+            plugin,
+            params,
+            settle,
+        )
+    };
     let mut default_rows = vec![];
     let mut out = vec![];
     let mut push = |series: &str,
@@ -183,7 +276,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     run: &runner::Outcome,
                     is_default: bool,
                     mut extra: Vec<(&'static str, String)>| {
-        let (rms, max) = errors(&run.u, &reference.u);
+        let (rms, max) = errors(&run.u, reference);
         let mut ex = vec![
             ("max_mm", format!("{max:.4}")),
             ("frames", run.frames.to_string()),
@@ -194,6 +287,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             ),
         ];
         ex.append(&mut extra);
+        ex.extend(common.iter().cloned());
         out.push(Point {
             series: series.to_string(),
             config,
@@ -204,17 +298,21 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             extra: ex,
         });
     };
-    for spec in MESH_MODELS {
-        for step in spec.steps(volume.grid.dims, quick)? {
+    for spec in models {
+        for step in spec.steps(beam.volume.grid.dims, problem.quick)? {
             let params = format!(
                 "proxy = {{ kind = \"uniform\", step = {step} }}\n{}\n{}",
-                MATERIAL_MESH, spec.params
+                problem.mesh_materials, spec.params
             );
             let run = runner::run(
                 plugins,
-                &scene(spec.plugin, params.clone(), spec.dynamic.then_some(settle)),
+                &scene(
+                    spec.plugin,
+                    params.clone(),
+                    spec.dynamic.then_some(problem.settle),
+                ),
             )?;
-            let first = first_frame(spec.plugin, params)?;
+            let first = first_frame(plugins, problem, spec.plugin, params)?;
             let is_default = defaults
                 .iter()
                 .any(|(plugin, u)| *plugin == spec.plugin && same_run(&first, u));
@@ -224,6 +322,10 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             let extra = vec![
                 ("step", step.to_string()),
                 ("tetrahedra", runner::note(&run.notes, "proxy_tetrahedra")),
+                (
+                    "voxels_lost",
+                    runner::note(&run.notes, "labelled_voxels_lost"),
+                ),
                 ("substeps", runner::note(&run.notes, "substeps")),
                 (
                     "unconverged_solves",
@@ -233,9 +335,9 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             push(spec.series, format!("step {step}"), &run, is_default, extra);
         }
     }
-    for &d in downsamples {
-        let params = format!("{MATERIAL_CHAINMAIL}\ndownsample = {d}");
-        let run = runner::run(plugins, &scene("chainmail", params, Some(settle)))?;
+    for &d in downsamples(problem.quick) {
+        let params = format!("{}\ndownsample = {d}", problem.chainmail_materials);
+        let run = runner::run(plugins, &scene("chainmail", params, Some(problem.settle)))?;
         let extra = vec![
             ("downsample", d.to_string()),
             (
@@ -251,6 +353,41 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
             extra,
         );
     }
+    Ok((out, default_rows))
+}
+
+/// The default rows as a phrase for a front's description.
+pub(super) fn defaults_phrase(default_rows: &[String]) -> String {
+    if default_rows.is_empty() {
+        "none measured".to_string()
+    } else {
+        default_rows.join(", ")
+    }
+}
+
+/// ChainMail's down-sampling factors measured: full run, `--quick`.
+fn downsamples(quick: bool) -> &'static [usize] {
+    if quick { &[2, 1] } else { &[4, 3, 2, 1] }
+}
+
+/// The grab front.
+pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
+    let beam = Beam::new(quick);
+    let problem = GrabProblem {
+        beam: &beam,
+        by: DVec3::new(0.0, 0.0, -0.5 * beam.m as f64),
+        settle: beam.settle(quick, 600),
+        mesh_materials: MATERIAL_MESH,
+        chainmail_materials: MATERIAL_CHAINMAIL,
+        quick,
+    };
+    let (m, l, w, by) = (beam.m, beam.length, beam.width, -problem.by.z);
+    let defaults = defaults(plugins, &problem)?;
+    let reference = fine_solve(plugins, &problem, &beam, "p1", 1)?;
+    let ref_max = reference.u.iter().map(|d| d.length()).fold(0.0, f64::max);
+    let models: Vec<&ModelSpec> = MESH_MODELS.iter().collect();
+    let (out, default_rows) = rows(plugins, &problem, &models, &defaults, &reference.u, &[])?;
+    let settle = problem.settle;
     Ok(Front {
         key: "grab",
         title: "the same grab: FEM, mass-spring, ChainMail vs fine FEM".into(),
@@ -269,15 +406,11 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
              with no key but the materials): {}; ChainMail one element per voxel.",
             (m + 1) * (m + 1),
             reference.time_ms,
-            points.len(),
+            beam.points.len(),
             settle.tolerance_mm,
             settle.check_every,
             settle.max_frames,
-            if default_rows.is_empty() {
-                "none measured".to_string()
-            } else {
-                default_rows.join(", ")
-            },
+            defaults_phrase(&default_rows),
         ),
         points: out,
     })
