@@ -63,6 +63,10 @@ pub struct ViewerApp {
     messages: Vec<String>,
     frames: u64,
     screenshot: Screenshot,
+    /// A map to seed and grow once the session is open (world mm).
+    startup_seed: Option<DVec3>,
+    /// Images received when the last ROI rows arrived.
+    renders_at_rois: u64,
 }
 
 impl ViewerApp {
@@ -102,7 +106,22 @@ impl ViewerApp {
             messages: vec![],
             frames: 0,
             screenshot,
+            startup_seed: None,
+            renders_at_rois: 0,
         })
+    }
+
+    /// Seeds an ROI map at world point `p` (mm) and grows it to the end
+    /// as soon as the session is open (`--seed-roi`).
+    pub fn with_startup_seed(mut self, p: Option<DVec3>) -> Self {
+        self.startup_seed = p;
+        self
+    }
+
+    /// Mutable access to the ROI panel (its growth constants, styles and
+    /// save folder).
+    pub fn roi_panel_mut(&mut self) -> &mut RoiPanel {
+        &mut self.roi_panel
     }
 
     /// Queues a command to the session.
@@ -165,9 +184,14 @@ impl ViewerApp {
         self.mode = mode;
     }
 
-    /// True once the slices and a full-quality 3D image are shown.
+    /// True once the slices and a full-quality 3D image are shown (and,
+    /// with a startup seed, its map converged and rendered).
     pub fn ready(&self) -> bool {
-        self.slices.is_some() && self.render.as_ref().is_some_and(|(_, s, _)| *s >= 1.0)
+        let seeded = self.startup_seed.is_none()
+            || (self.rois.iter().all(|r| r.info.converged)
+                && !self.rois.is_empty()
+                && self.renders > self.renders_at_rois);
+        seeded && self.slices.is_some() && self.render.as_ref().is_some_and(|(_, s, _)| *s >= 1.0)
     }
 
     fn receive(&mut self, ctx: &egui::Context) {
@@ -203,7 +227,10 @@ impl ViewerApp {
                     self.render = Some((image, scale, wall));
                     self.renders += 1;
                 }
-                Reply::Rois(r) => self.rois = r,
+                Reply::Rois(r) => {
+                    self.rois = r;
+                    self.renders_at_rois = self.renders;
+                }
                 Reply::Model(m) => self.model_panel.current = Some(m),
                 Reply::Step(r) => {
                     self.steps += 1;
@@ -234,6 +261,14 @@ impl ViewerApp {
                 .find(|(n, _)| n == m)
                 .map(|(_, p)| p.clone())
                 .unwrap_or_default();
+        }
+        if let Some(p) = self.startup_seed {
+            self.cursor = p;
+            self.worker.send(Command::AddRoi {
+                seed: p.to_array(),
+                params: self.roi_panel.params,
+                run_to_end: true,
+            });
         }
         self.opened = Some(o);
     }
@@ -402,6 +437,7 @@ impl ViewerApp {
             self.worker.send(Command::AddRoi {
                 seed: seed.to_array(),
                 params: self.roi_panel.params,
+                run_to_end: false,
             });
         }
         if let Some(point) = input.grab_start {

@@ -2,6 +2,7 @@
 
 use anyhow::Context;
 use clap::Parser;
+use voxflex_core::glam::DVec3;
 use voxflex_viewer::app::ViewerApp;
 use voxflex_viewer::cli::Args;
 use voxflex_viewer::open::OpenRequest;
@@ -31,6 +32,7 @@ fn main() -> anyhow::Result<()> {
     };
     let screenshot = Screenshot::new(args.screenshot.clone(), args.exit_after_frames);
     let outcome = screenshot.outcome();
+    let seed = args.seed_roi;
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("voxflex viewer")
@@ -40,7 +42,11 @@ fn main() -> anyhow::Result<()> {
     eframe::run_native(
         "voxflex-viewer",
         options,
-        Box::new(move |cc| Ok(Box::new(ViewerApp::new(&cc.egui_ctx, req, screenshot)?))),
+        Box::new(move |cc| {
+            let app = ViewerApp::new(&cc.egui_ctx, req, screenshot)?
+                .with_startup_seed(seed.map(DVec3::from_array));
+            Ok(Box::new(app))
+        }),
     )
     .map_err(|e| anyhow::anyhow!("{e}"))
     .context("running the viewer window")?;

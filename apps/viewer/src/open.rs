@@ -3,9 +3,11 @@
 
 use anyhow::Context;
 use std::path::{Path, PathBuf};
+use voxflex_core::camera::Camera;
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::scene::Scene;
-use voxflex_runtime::session::{Session, SessionDefaults, SessionSource};
+use voxflex_runtime::session::{RenderParams, Session, SessionDefaults, SessionSource};
+use voxflex_runtime::visualise::camera_for;
 
 /// The scene opened without an argument: the head phantom (4 mm voxels)
 /// with ChainMail, and the parameters of every deformation plugin for it.
@@ -30,6 +32,9 @@ pub struct OpenedSession {
     pub scene: Scene,
     /// A title for the window.
     pub title: String,
+    /// True when `scene` is what was opened (its `[render]` table then
+    /// sets the 3D view), false for a volume file.
+    pub scene_opened: bool,
 }
 
 fn is_scene(path: &Path) -> bool {
@@ -60,6 +65,7 @@ pub fn open(req: &OpenRequest) -> anyhow::Result<OpenedSession> {
                 session,
                 scene: built_in_scene()?,
                 title: path.display().to_string(),
+                scene_opened: false,
             })
         }
         input => {
@@ -80,9 +86,33 @@ pub fn open(req: &OpenRequest) -> anyhow::Result<OpenedSession> {
                 session,
                 scene,
                 title,
+                scene_opened: true,
             })
         }
     }
+}
+
+/// The renderer and its parameters for the 3D view: the scene's
+/// `[render]` table when a scene was opened and has one, else the
+/// `raycast` plugin's defaults.
+pub fn render_params(opened: &OpenedSession) -> RenderParams {
+    match &opened.scene.render {
+        Some(r) if opened.scene_opened => RenderParams {
+            plugin: r.plugin.clone(),
+            params_toml: opened.scene.render_params_toml(),
+        },
+        _ => RenderParams::default(),
+    }
+}
+
+/// The 3D view's first camera: the scene's `[render]` camera when a scene
+/// was opened and has one, else the session's default view of the volume.
+pub fn first_camera(opened: &mut OpenedSession) -> anyhow::Result<Camera> {
+    let grid = opened.session.volume()?.grid;
+    Ok(match &opened.scene.render {
+        Some(r) if opened.scene_opened => camera_for(r, &grid, 0.0),
+        _ => opened.session.default_camera(512, 512)?,
+    })
 }
 
 /// The deformation plugins the session's search path holds, each with the

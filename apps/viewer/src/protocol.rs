@@ -41,6 +41,8 @@ pub enum Command {
         seed: [f64; 3],
         /// Growth constants.
         params: GrowthParams,
+        /// Grow it to convergence at once.
+        run_to_end: bool,
     },
     /// Grow a map `n` steps.
     RoiStep(RoiId, usize),
@@ -85,7 +87,8 @@ pub struct Opened {
     pub grid: Grid,
     /// The volume's value range (min, max).
     pub value_range: (f32, f32),
-    /// The camera looking at the whole volume, 512² pixels.
+    /// The 3D view's first camera: the scene's `[render]` camera, or the
+    /// whole volume seen from the front.
     pub camera: Camera,
     /// Deformation plugins on the search path, with the parameters the
     /// scene gives each (empty when none).

@@ -4,7 +4,9 @@
 //! pipeline.
 
 use crate::compose::compose_slice;
-use crate::open::{OpenRequest, OpenedSession, deformation_models, open};
+use crate::open::{
+    OpenRequest, OpenedSession, deformation_models, first_camera, open, render_params,
+};
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
 use anyhow::Context;
@@ -100,15 +102,20 @@ struct State {
     rendered: Option<(Camera, f32)>,
     last_growth: HashMap<RoiId, (GrowthReport, Duration)>,
     model: Option<(String, String)>,
+    render: RenderParams,
 }
 
 impl State {
     fn open(req: &OpenRequest, out: &Sender<Reply>) -> anyhow::Result<Self> {
+        let mut opened = open(req)?;
+        let render = render_params(&opened);
+        let camera = first_camera(&mut opened)?;
         let OpenedSession {
             mut session,
             scene,
             title,
-        } = open(req)?;
+            ..
+        } = opened;
         let models = deformation_models(&session, &scene);
         let model = scene.model.as_ref().map(|m| {
             let params = scene.model_params_toml_for(&m.plugin).unwrap_or_default();
@@ -116,7 +123,6 @@ impl State {
         });
         let volume = session.volume()?;
         let (grid, value_range) = (volume.grid, volume.value_range());
-        let camera = session.default_camera(512, 512)?;
         tracing::info!(%title, adapter = %session.adapter_name(), "opened");
         let _ = out.send(Reply::Opened(Box::new(Opened {
             title,
@@ -133,6 +139,7 @@ impl State {
             rendered: None,
             last_growth: HashMap::new(),
             model,
+            render,
         })
     }
 
@@ -164,9 +171,16 @@ impl State {
                 ch.view = true;
                 self.view = Some(v);
             }
-            Command::AddRoi { seed, params } => {
-                s.add_roi(Seed::World(DVec3::from_array(seed)), params)?;
+            Command::AddRoi {
+                seed,
+                params,
+                run_to_end,
+            } => {
+                let id = s.add_roi(Seed::World(DVec3::from_array(seed)), params)?;
                 ch.rois = true;
+                if run_to_end {
+                    self.grow(id, ch, |s| s.roi_run_to_end(id))?;
+                }
             }
             Command::RoiStep(id, n) => self.grow(id, ch, |s| s.roi_step(id, n))?,
             Command::RoiRunToEnd(id) => self.grow(id, ch, |s| s.roi_run_to_end(id))?,
@@ -258,7 +272,7 @@ impl State {
         let due = self.rendered != Some((camera, scale)) || ch.volume || ch.rois;
         if due {
             let t = Instant::now();
-            let image = self.session.render(&camera, &RenderParams::default())?;
+            let image = self.session.render(&camera, &self.render)?;
             self.rendered = Some((camera, scale));
             let _ = out.send(Reply::Render {
                 image,

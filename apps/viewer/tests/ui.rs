@@ -228,3 +228,34 @@ fn a_model_swap_keeps_the_roi_maps() {
         "{after:?}"
     );
 }
+
+#[test]
+fn the_sliders_regrow_the_selected_map_and_save_writes_it() {
+    let mut h = open_phantom();
+    seed_and_grow(&mut h);
+    let before = h.state().rois()[0].info.clone();
+    h.get_by_label("map 0").click();
+    h.step();
+    h.get_by_role_and_label(egui::accesskit::Role::SpinButton, "λ")
+        .set_value_accesskit(3.0);
+    wait(&mut h, "the map grown with λ = 3", |a| {
+        a.rois()[0].info.params.lambda == 3.0 && a.rois()[0].info.converged
+    });
+    let after = h.state().rois()[0].info.clone();
+    assert_eq!(after.id, before.id);
+    assert!(
+        after.voxels_above_half < before.voxels_above_half,
+        "a smaller λ stops the growth sooner: {} → {}",
+        before.voxels_above_half,
+        after.voxels_above_half
+    );
+    let dir = tempfile::tempdir().unwrap();
+    h.state_mut().roi_panel_mut().save_dir = dir.path().display().to_string();
+    h.get_by_label("Save").click();
+    let path = dir.path().join("roi-0.nii.gz");
+    wait(&mut h, "the saved map", |a| {
+        a.messages().iter().any(|m| m.starts_with("wrote"))
+    });
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(&bytes[..2], &[0x1f, 0x8b], "gzip-compressed NIfTI");
+}
