@@ -16,6 +16,7 @@ use egui::{ColorImage, Rect, TextureHandle, TextureOptions};
 use std::time::{Duration, Instant};
 use voxflex_core::camera::Camera;
 use voxflex_core::glam::DVec3;
+use voxflex_core::grid::Grid;
 use voxflex_runtime::session::{StepReport, Window};
 use voxflex_runtime::visualise::RgbaImage;
 
@@ -23,6 +24,8 @@ use voxflex_runtime::visualise::RgbaImage;
 const IDLE_AFTER: Duration = Duration::from_millis(200);
 /// Smooth-scroll points per slice.
 const WHEEL_POINTS_PER_SLICE: f32 = 20.0;
+/// Messages kept for the status bar (the oldest are dropped).
+const MAX_MESSAGES: usize = 100;
 /// Pixels a side of the 3D image at full quality.
 const RENDER_SIZE: u32 = 384;
 
@@ -241,6 +244,8 @@ impl ViewerApp {
                 Reply::Status(s) => self.messages.push(s),
             }
         }
+        let extra = self.messages.len().saturating_sub(MAX_MESSAGES);
+        self.messages.drain(..extra);
     }
 
     fn on_opened(&mut self, o: Opened) {
@@ -430,8 +435,8 @@ impl ViewerApp {
         if input.dragging {
             self.last_drag = Some(Instant::now());
         }
-        if let Some(p) = input.cursor {
-            self.cursor = p;
+        if let (Some(p), Some(o)) = (input.cursor, &self.opened) {
+            self.cursor = clamp_to_grid(&o.grid, p);
         }
         if let Some(seed) = input.seed {
             self.worker.send(Command::AddRoi {
@@ -464,10 +469,21 @@ impl ViewerApp {
                 let mut c = self.cursor.to_array();
                 let spacing = o.grid.spacing.to_array()[axis];
                 c[axis] += slices as f64 * spacing;
-                self.cursor = DVec3::from_array(c);
+                self.cursor = clamp_to_grid(&o.grid, DVec3::from_array(c));
             }
         }
     }
+}
+
+/// World point `p` (mm) moved into the box of `grid`'s voxel centres.
+fn clamp_to_grid(grid: &Grid, p: DVec3) -> DVec3 {
+    let f = grid.world_to_index(p);
+    let top = DVec3::new(
+        grid.dims[0] as f64 - 1.0,
+        grid.dims[1] as f64 - 1.0,
+        grid.dims[2] as f64 - 1.0,
+    );
+    grid.index_to_world(f.clamp(DVec3::ZERO, top.max(DVec3::ZERO)))
 }
 
 fn upload(
