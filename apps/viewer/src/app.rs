@@ -250,6 +250,7 @@ impl ViewerApp {
 
     fn on_opened(&mut self, o: Opened) {
         self.cursor = o.grid.centre();
+        self.preset = Preset::default_for(o.value_range);
         self.window = self.preset.window(o.value_range);
         self.camera = Some(Camera {
             width: RENDER_SIZE,

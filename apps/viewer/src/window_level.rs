@@ -43,6 +43,17 @@ impl Preset {
         }
     }
 
+    /// The preset a volume of values in `lo..=hi` opens with: CT soft
+    /// tissue when the values look like Hounsfield units (air near
+    /// −1000), else the full range.
+    pub fn default_for((lo, hi): (f32, f32)) -> Preset {
+        if lo <= -500.0 && hi > 0.0 {
+            Preset::CtSoftTissue
+        } else {
+            Preset::FullRange
+        }
+    }
+
     /// The window it gives a volume of values in `lo..=hi`.
     pub fn window(self, (lo, hi): (f32, f32)) -> Window {
         let span = hi - lo;
@@ -82,5 +93,7 @@ mod tests {
         let full = Preset::FullRange.window((-1000.0, 1000.0));
         assert_eq!((full.level, full.width), (0.0, 2000.0));
         assert_eq!(Preset::CtBone.window((0.0, 1.0)), Window::CT_BONE);
+        assert_eq!(Preset::default_for((-1000.0, 1200.0)), Preset::CtSoftTissue);
+        assert_eq!(Preset::default_for((0.0, 700.0)), Preset::FullRange);
     }
 }

@@ -114,10 +114,11 @@ impl State {
             mut session,
             scene,
             title,
-            ..
+            scene_opened,
         } = opened;
         let models = deformation_models(&session, &scene);
-        let model = scene.model.as_ref().map(|m| {
+        // A volume file has no model until one is chosen.
+        let model = scene.model.as_ref().filter(|_| scene_opened).map(|m| {
             let params = scene.model_params_toml_for(&m.plugin).unwrap_or_default();
             (m.plugin.clone(), params)
         });
