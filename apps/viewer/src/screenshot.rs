@@ -5,9 +5,10 @@
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
-/// Frames past N after which the screenshot is taken even without images.
-const PATIENCE_FRAMES: u64 = 2000;
+/// Time after which the screenshot is taken even without images.
+const PATIENCE: Duration = Duration::from_secs(120);
 
 /// Where the screenshot mode stands.
 #[derive(Debug)]
@@ -16,6 +17,7 @@ pub struct Screenshot {
     after_frames: u64,
     requested: bool,
     reported: bool,
+    started: Instant,
     /// Set by the screenshot callback: the PNG written (or why not).
     done: Arc<Mutex<Option<Result<(), String>>>>,
 }
@@ -29,6 +31,7 @@ impl Screenshot {
             after_frames: after_frames.unwrap_or(0),
             requested: false,
             reported: false,
+            started: Instant::now(),
             done: Arc::default(),
         }
     }
@@ -44,7 +47,7 @@ impl Screenshot {
     }
 
     /// Called once per frame: asks for the screenshot once `frame` ≥ N and
-    /// `ready` (or N + patience passed), closes the window once it is
+    /// `ready` (or after two minutes without), closes the window once it is
     /// written. Returns the result once, when done.
     pub fn on_frame(
         &mut self,
@@ -56,8 +59,7 @@ impl Screenshot {
             return None;
         }
         ctx.request_repaint();
-        let due =
-            frame >= self.after_frames && (ready || frame >= self.after_frames + PATIENCE_FRAMES);
+        let due = frame >= self.after_frames && (ready || self.started.elapsed() >= PATIENCE);
         match &self.path {
             None if due => {
                 ctx.send_viewport_cmd(egui::ViewportCommand::Close);

@@ -43,7 +43,7 @@ fn the_main_layout_matches_its_snapshot() {
     let t = Instant::now();
     while !h.state().ready() {
         assert!(
-            t.elapsed() < Duration::from_secs(60),
+            t.elapsed() < Duration::from_secs(120),
             "{:?}",
             h.state().messages()
         );

@@ -23,7 +23,7 @@ use voxflex_viewer::protocol::SliceFrame;
 use voxflex_viewer::screenshot::Screenshot;
 
 /// How long a test waits for the worker before failing.
-const PATIENCE: Duration = Duration::from_secs(60);
+const PATIENCE: Duration = Duration::from_secs(120);
 
 /// `target/<profile>`, where the plugins are built.
 fn plugin_dir() -> PathBuf {
