@@ -770,6 +770,19 @@ impl Scene {
             .unwrap_or_default()
     }
 
+    /// The parameters this scene gives plugin `plugin` as TOML text: its
+    /// `[model.params.<plugin>]` sub-table, or, for the scene's own model
+    /// plugin, [`Self::model_params_toml`]; `None` when the scene has none
+    /// for it (a front end swapping models asks this for each plugin).
+    pub fn model_params_toml_for(&self, plugin: &str) -> Option<String> {
+        let m = self.model.as_ref()?;
+        match m.params.get(plugin) {
+            Some(toml::Value::Table(t)) => toml::to_string(t).ok(),
+            _ if m.plugin == plugin => Some(self.model_params_toml()),
+            _ => None,
+        }
+    }
+
     /// The model's parameters as TOML text: the sub-table named after the
     /// plugin when `[model.params]` has one (`[model.params.chainmail]`,
     /// `[model.params.affine]`, …, so swapping models is a one-line edit of
@@ -1225,5 +1238,29 @@ kind = "release"
             .unwrap_err()
             .to_string();
         assert!(e.contains("cubic") && e.contains("trilinear"), "{e}");
+    }
+
+    #[test]
+    fn each_plugin_gets_its_own_params_table() {
+        let text = "[scene]\nname = \"t\"\n[volume]\nsource = \"phantom:cube\"\ndims = [8, 8, 8]\n\
+                    [model]\nplugin = \"affine\"\n[model.params.affine]\nangle_deg = 10\n\
+                    [model.params.chainmail]\npropagation_iterations = 7\n";
+        let s = Scene::parse(text, Path::new("t.toml")).unwrap();
+        let own = s.model_params_toml_for("affine").unwrap();
+        assert!(
+            own.contains("angle_deg = 10") && !own.contains("propagation"),
+            "{own}"
+        );
+        let other = s.model_params_toml_for("chainmail").unwrap();
+        assert!(other.contains("propagation_iterations = 7"), "{other}");
+        assert_eq!(s.model_params_toml_for("mass-spring"), None);
+        // A flat table belongs to the scene's own plugin only.
+        let flat = Scene::parse(GOOD, Path::new("t.toml")).unwrap();
+        assert!(
+            flat.model_params_toml_for("affine")
+                .unwrap()
+                .contains("angle_deg")
+        );
+        assert_eq!(flat.model_params_toml_for("chainmail"), None);
     }
 }

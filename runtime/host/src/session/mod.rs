@@ -63,6 +63,7 @@ mod model_stage;
 mod plugins;
 mod report;
 mod roi;
+mod roi_edit;
 mod slice;
 mod tracked;
 mod versions;
@@ -76,6 +77,12 @@ pub use roi::{RoiId, RoiInfo};
 pub use slice::SliceImage;
 pub use tracked::TrackId;
 pub use versions::{StageVersion, Versions};
+// The types a front end passes to and gets from a session, so that it
+// needs the host (and voxflex-core) only.
+pub use voxflex_core::opacity_map::OpacityMap;
+pub use voxflex_core::slice_axis::SliceAxis;
+pub use voxflex_io::png::{GrayImage, Window};
+pub use voxflex_opacity::{GrowthParams, GrowthReport, Seed};
 
 use crate::backend::{self, BackendChoice, ResolvedBackend};
 use crate::metrics::{PluginReport, RunMetrics};
@@ -94,8 +101,8 @@ use voxflex_core::deformation::{DirtyRegion, ExecutionBackend, FrameInfo, ModelN
 use voxflex_core::gpu::GpuService;
 use voxflex_core::interaction::InteractionSpec;
 use voxflex_core::volume::{Volume, VoxelData};
-use voxflex_io::png::{SliceAxis, Window, render_slice};
-use voxflex_opacity::{GpuOpacityVolume, GrowthParams, GrowthReport, OpacityMap, Seed};
+use voxflex_io::png::render_slice;
+use voxflex_opacity::GpuOpacityVolume;
 use voxflex_phantom::phantom;
 use voxflex_resample::ResampleParams;
 
@@ -104,6 +111,9 @@ use voxflex_resample::ResampleParams;
 pub enum SessionSource {
     /// A volume already loaded.
     Volume(Volume),
+    /// A volume file (NIfTI, MetaImage, NRRD; the format from its name),
+    /// read with the default limits.
+    File(PathBuf),
     /// A phantom (`head`, `cube`, … as `phantom:<name>` in scenes) of
     /// `dims` voxels.
     Phantom {
@@ -373,6 +383,9 @@ impl Session {
         let t = Instant::now();
         let source = match source.into() {
             SessionSource::Volume(v) => v,
+            SessionSource::File(path) => {
+                voxflex_io::read_volume(&path, &voxflex_io::ReadOptions::default())?
+            }
             SessionSource::Phantom { name, dims } => phantom(&name, dims)
                 .map_err(|e| RunError::Other(format!("session: phantom `{name}`: {e}")))?,
         };

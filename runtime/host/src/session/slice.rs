@@ -4,6 +4,7 @@
 
 use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
+use voxflex_core::opacity_map::OpacityMap;
 use voxflex_io::png::{GrayImage, SliceAxis};
 
 /// A rendered slice and where its pixels lie.
@@ -63,5 +64,61 @@ impl SliceImage {
             SliceAxis::Sagittal => (i, [j, nz - 1 - k]),
         };
         (index == self.index).then_some(pixel)
+    }
+
+    /// The opacity (in [0, 1]) of ROI map `map` at every pixel of this
+    /// slice, row-major, top row first (`map.outside` off its box): a
+    /// map drawn over the slice. `map` must be a map of this slice's grid.
+    pub fn overlay(&self, map: &OpacityMap) -> Vec<f32> {
+        let (w, h) = (self.image.width, self.image.height);
+        let mut out = Vec::with_capacity(w * h);
+        for row in 0..h {
+            for column in 0..w {
+                let o = self
+                    .pixel_to_voxel(column, row)
+                    .map_or(0.0, |[i, j, k]| map.get(i, j, k));
+                out.push(o);
+            }
+        }
+        out
+    }
+
+    /// The world point (mm) at continuous pixel coordinates (`column`,
+    /// `row`), pixel centres at whole numbers, anywhere in the slice's
+    /// plane (inside the image or not): where a drag in the view lands.
+    pub fn point_to_world(&self, column: f64, row: f64) -> DVec3 {
+        let top = (self.grid.dims[2] as f64 - 1.0) - row;
+        let index = self.index as f64;
+        let f = match self.axis {
+            SliceAxis::Axial => DVec3::new(column, row, index),
+            SliceAxis::Coronal => DVec3::new(column, index, top),
+            SliceAxis::Sagittal => DVec3::new(index, column, top),
+        };
+        self.grid.index_to_world(f)
+    }
+
+    /// The continuous pixel coordinates `[column, row]` of world point `p`
+    /// (mm) projected onto the slice's plane; the inverse of
+    /// [`Self::point_to_world`] (a crosshair through `p`).
+    pub fn world_to_point(&self, p: DVec3) -> [f64; 2] {
+        let f = self.grid.world_to_index(p);
+        let top = self.grid.dims[2] as f64 - 1.0;
+        match self.axis {
+            SliceAxis::Axial => [f.x, f.y],
+            SliceAxis::Coronal => [f.x, top - f.z],
+            SliceAxis::Sagittal => [f.y, top - f.z],
+        }
+    }
+
+    /// The size of one pixel, mm, as `[width, height]` (the voxel spacing
+    /// along the image's column and row axes): draw the slice in these
+    /// proportions to show it in true millimetres.
+    pub fn pixel_mm(&self) -> [f64; 2] {
+        let s = self.grid.spacing;
+        match self.axis {
+            SliceAxis::Axial => [s.x, s.y],
+            SliceAxis::Coronal => [s.x, s.z],
+            SliceAxis::Sagittal => [s.y, s.z],
+        }
     }
 }

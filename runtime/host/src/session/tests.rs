@@ -99,6 +99,11 @@ fn slice_pixels_map_to_world_points_and_back() {
                 let v = volume.grid.world_to_index(p).round();
                 let voxel = [v.x as usize, v.y as usize, v.z as usize];
                 assert_eq!(img.pixel_to_voxel(col, row), Some(voxel));
+                // The continuous mapping agrees at pixel centres and inverts.
+                let q = img.point_to_world(col as f64, row as f64);
+                assert!((q - p).length() < 1e-9, "{axis:?}");
+                let [c, r] = img.world_to_point(q + DVec3::splat(0.0));
+                assert!((c - col as f64).abs() < 1e-9 && (r - row as f64).abs() < 1e-9);
                 // The same table as a seed click on that slice.
                 let seed = Seed::Slice {
                     axis,
@@ -245,4 +250,78 @@ fn step_model_without_a_model_steps_nothing() {
     assert!(!o.ran && o.why.contains("no model"), "{o:?}");
     assert_eq!(s.frame(), 1);
     assert_eq!(s.versions(), Versions::default());
+}
+
+#[test]
+fn new_roi_params_regrow_the_map_as_far_and_bad_ones_change_nothing() {
+    let mut s = cube_session(16);
+    let centre = s.source().grid.centre();
+    let id = s
+        .add_roi(Seed::World(centre), GrowthParams::default())
+        .unwrap();
+    s.roi_step(id, 3).unwrap();
+    let before = s.roi_map(id).unwrap().clone();
+    let bad = GrowthParams {
+        lambda: -1.0,
+        ..GrowthParams::default()
+    };
+    let e = s.set_roi_params(id, bad).unwrap_err().to_string();
+    assert!(e.contains("-1"), "{e}");
+    assert_eq!(s.roi_map(id), Some(&before));
+    let raised = GrowthParams {
+        o_min: 0.2,
+        ..GrowthParams::default()
+    };
+    let r = s.set_roi_params(id, raised).unwrap();
+    assert_eq!(r.steps, 3, "grown as far as before");
+    let info = &s.rois()[0];
+    assert_eq!((info.params, info.steps), (raised, 3));
+    let map = s.roi_map(id).unwrap();
+    assert_eq!(map.outside, voxflex_core::opacity_map::to_fixed(0.2));
+    assert_ne!(map, &before);
+    assert!(s.set_roi_params(RoiId(99), raised).is_err());
+}
+
+#[test]
+fn a_roi_map_is_written_as_a_volume_and_drawn_over_slices() {
+    let mut s = cube_session(16);
+    let grid = s.source().grid;
+    let id = s
+        .add_roi(Seed::World(grid.centre()), GrowthParams::default())
+        .unwrap();
+    s.roi_run_to_end(id).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("roi.nii");
+    s.write_roi_map(id, &path).unwrap();
+    let back = voxflex_io::read_volume(&path, &Default::default()).unwrap();
+    assert_eq!(back.grid.dims, grid.dims);
+    let at = |i, j, k| back.get_f32(i, j, k);
+    assert!(at(8, 8, 8) >= 0.5, "the seed's cube is in the map");
+    assert!(at(0, 0, 0) < 0.5, "the background is not");
+    assert!(s.write_roi_map(RoiId(7), &path).is_err());
+
+    let slice = s.slice(SliceAxis::Axial, 8, None).unwrap();
+    let overlay = slice.overlay(s.roi_map(id).unwrap());
+    assert_eq!(overlay.len(), 16 * 16);
+    assert!(overlay[8 * 16 + 8] >= 0.5 && overlay[0] < 0.5);
+    let coronal = s.slice(SliceAxis::Coronal, 8, None).unwrap();
+    let o = coronal.overlay(s.roi_map(id).unwrap());
+    // Row 0 is the top (k = 15): background.
+    assert!(o[8] < 0.5 && o[8 * 16 + 8] >= 0.5);
+}
+
+#[test]
+fn a_session_opens_a_volume_file_or_names_it_in_its_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cube.nii");
+    let cube = voxflex_phantom::phantom("cube", [6, 5, 4]).unwrap();
+    voxflex_io::write_volume(&path, cube.view()).unwrap();
+    let s = Session::from_volume(SessionSource::File(path.clone()), cpu()).unwrap();
+    assert_eq!(s.source().grid.dims, [6, 5, 4]);
+    let missing = dir.path().join("missing.nii");
+    let e = Session::from_volume(SessionSource::File(missing), cpu())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("missing.nii"), "{e}");
 }

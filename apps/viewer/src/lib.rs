@@ -1,0 +1,23 @@
+//! voxflex-viewer: the desktop explorer on the host's
+//! [`voxflex_runtime::session::Session`] — three linked slice views and a
+//! ray-cast 3D view, ROI opacity maps grown from a click, and live
+//! deformation with any deformation plugin. The session lives on a worker
+//! thread ([`worker`]); the UI ([`app::ViewerApp`]) sends it commands and
+//! draws the images it sends back, so the UI never waits on the pipeline.
+//! See docs/VIEWER.md.
+
+#![warn(missing_docs)]
+
+pub mod app;
+pub mod cli;
+pub mod compose;
+pub mod model_panel;
+pub mod open;
+pub mod orientation;
+pub mod protocol;
+pub mod roi_panel;
+pub mod screenshot;
+pub mod slice_view;
+pub mod view3d;
+pub mod window_level;
+pub mod worker;

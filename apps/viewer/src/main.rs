@@ -1,0 +1,61 @@
+//! `voxflex-viewer [scene.toml | volume file]`: the desktop explorer.
+
+use anyhow::Context;
+use clap::Parser;
+use voxflex_core::glam::DVec3;
+use voxflex_viewer::app::ViewerApp;
+use voxflex_viewer::cli::Args;
+use voxflex_viewer::open::OpenRequest;
+use voxflex_viewer::screenshot::Screenshot;
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,wgpu_core=warn,wgpu_hal=warn,naga=warn".into()),
+        )
+        .init();
+    let args = Args::parse();
+    if let Some(png) = &args.check_png {
+        let n = voxflex_viewer::screenshot::check_not_blank(png)?;
+        println!("{}: {n} distinct colours: not blank", png.display());
+        return Ok(());
+    }
+    let backend = args
+        .backend
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--backend {}: {e}", args.backend))?;
+    let req = OpenRequest {
+        input: args.input.clone(),
+        backend,
+        plugin_dirs: vec![],
+    };
+    let screenshot = Screenshot::new(args.screenshot.clone(), args.exit_after_frames);
+    let outcome = screenshot.outcome();
+    let seed = args.seed_roi;
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("voxflex viewer")
+            .with_inner_size([1280.0, 860.0]),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "voxflex-viewer",
+        options,
+        Box::new(move |cc| {
+            let app = ViewerApp::new(&cc.egui_ctx, req, screenshot)?
+                .with_startup_seed(seed.map(DVec3::from_array));
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))
+    .context("running the viewer window")?;
+    if args.screenshot.is_some() {
+        match outcome.lock().ok().and_then(|o| o.clone()) {
+            Some(Ok(())) => {}
+            Some(Err(e)) => anyhow::bail!(e),
+            None => anyhow::bail!("the window closed before the screenshot was taken"),
+        }
+    }
+    Ok(())
+}

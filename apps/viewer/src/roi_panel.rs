@@ -1,0 +1,164 @@
+//! The ROI panel: growth constants for new maps (and the selected one),
+//! the list of maps with colour, visibility, Step, Run to end, Save and
+//! Delete, and each map's last growth (useful-visit fraction, time).
+
+use crate::protocol::{Command, RoiRow};
+use egui::{Color32, RichText, Slider};
+use std::collections::HashMap;
+use std::path::PathBuf;
+use voxflex_runtime::session::{GrowthParams, RoiId};
+
+/// Colours given to new maps, in turn.
+const PALETTE: [[u8; 3]; 6] = [
+    [255, 80, 80],
+    [80, 200, 255],
+    [120, 255, 120],
+    [255, 200, 60],
+    [220, 120, 255],
+    [255, 140, 200],
+];
+
+/// How the viewer draws one map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RoiStyle {
+    /// Overlay colour (sRGB).
+    pub colour: [u8; 3],
+    /// Drawn over the slices.
+    pub visible: bool,
+}
+
+/// The panel's own state.
+#[derive(Clone, Debug)]
+pub struct RoiPanel {
+    /// Constants of the next map, and of the selected one.
+    pub params: GrowthParams,
+    /// The map the sliders edit.
+    pub selected: Option<RoiId>,
+    /// Each map's colour and visibility.
+    pub styles: HashMap<RoiId, RoiStyle>,
+    /// Where Save writes maps (`roi-<id>.nii.gz` in it).
+    pub save_dir: String,
+}
+
+impl Default for RoiPanel {
+    fn default() -> Self {
+        Self {
+            params: GrowthParams::default(),
+            selected: None,
+            styles: HashMap::new(),
+            save_dir: ".".into(),
+        }
+    }
+}
+
+impl RoiPanel {
+    /// The style of map `id`, given one from the palette when new.
+    pub fn style(&mut self, id: RoiId) -> RoiStyle {
+        let n = self.styles.len();
+        *self.styles.entry(id).or_insert(RoiStyle {
+            colour: PALETTE[n % PALETTE.len()],
+            visible: true,
+        })
+    }
+
+    /// The visible maps with their colours, for the slice overlays.
+    pub fn overlays(&mut self, rows: &[RoiRow]) -> Vec<(RoiId, [u8; 3])> {
+        rows.iter()
+            .map(|r| (r.info.id, self.style(r.info.id)))
+            .filter(|(_, s)| s.visible)
+            .map(|(id, s)| (id, s.colour))
+            .collect()
+    }
+
+    /// Draws the panel; returns the commands its buttons and sliders gave.
+    pub fn ui(&mut self, ui: &mut egui::Ui, rows: &[RoiRow]) -> Vec<Command> {
+        let mut out = vec![];
+        ui.heading("ROI opacity maps");
+        ui.label("Ctrl+click a slice (or the Seed ROI mode) to seed a map.");
+        let mut released = false;
+        let mut slider = |ui: &mut egui::Ui, s: Slider<'_>| {
+            let r = ui.add(s);
+            released |= r.drag_stopped() || (r.changed() && !r.dragged());
+        };
+        slider(
+            ui,
+            Slider::new(&mut self.params.lambda, 1.0..=300.0)
+                .logarithmic(true)
+                .text("λ"),
+        );
+        slider(
+            ui,
+            Slider::new(&mut self.params.o_min, 0.0..=0.5).text("o_min"),
+        );
+        slider(
+            ui,
+            Slider::new(&mut self.params.o_max, 0.1..=1.0).text("o_max"),
+        );
+        if released && let Some(id) = self.selected {
+            out.push(Command::RoiParams(id, self.params));
+        }
+        ui.horizontal(|ui| {
+            let label = ui.label("Save to");
+            ui.text_edit_singleline(&mut self.save_dir)
+                .labelled_by(label.id);
+        });
+        ui.separator();
+        for row in rows {
+            self.row_ui(ui, row, &mut out);
+        }
+        out
+    }
+
+    fn row_ui(&mut self, ui: &mut egui::Ui, row: &RoiRow, out: &mut Vec<Command>) {
+        let id = row.info.id;
+        let mut style = self.style(id);
+        ui.horizontal(|ui| {
+            ui.color_edit_button_srgb(&mut style.colour);
+            ui.checkbox(&mut style.visible, "");
+            let selected = self.selected == Some(id);
+            let text = format!("map {}", id.0);
+            if ui.selectable_label(selected, text).clicked() {
+                self.selected = Some(id);
+                self.params = row.info.params;
+            }
+        });
+        self.styles.insert(id, style);
+        let i = &row.info;
+        let state = if i.converged { "converged" } else { "growing" };
+        ui.label(format!(
+            "{} steps, {} voxels ≥ ½, {state}",
+            i.steps, i.voxels_above_half
+        ));
+        if let Some((report, wall)) = row.last {
+            ui.label(
+                RichText::new(format!(
+                    "last growth: {} steps, useful visits {:.1} %, {:.1} ms",
+                    report.steps,
+                    100.0 * report.useful_fraction(),
+                    wall.as_secs_f64() * 1e3
+                ))
+                .color(Color32::GRAY),
+            );
+        }
+        ui.horizontal(|ui| {
+            if ui.button("Step").clicked() {
+                out.push(Command::RoiStep(id, 1));
+            }
+            if ui.button("Run to end").clicked() {
+                out.push(Command::RoiRunToEnd(id));
+            }
+            if ui.button("Save").clicked() {
+                let path = PathBuf::from(&self.save_dir).join(format!("roi-{}.nii.gz", id.0));
+                out.push(Command::SaveRoi(id, path));
+            }
+            if ui.button("Delete").clicked() {
+                out.push(Command::RemoveRoi(id));
+                self.styles.remove(&id);
+                if self.selected == Some(id) {
+                    self.selected = None;
+                }
+            }
+        });
+        ui.separator();
+    }
+}

@@ -1,0 +1,261 @@
+//! The viewer driven through its UI, headless (egui_kittest): the
+//! built-in head phantom scene (4 mm voxels, ChainMail) on the CPU, the
+//! session on its worker thread with the real `.so` plugins from
+//! `target/<profile>/` (build them first: `cargo build`).
+//!
+//! - a click on the axial slice in the brain seeds an ROI map; Run to end
+//!   grows it; the map is non-empty and the 3D image changes;
+//! - a grab-drag on a slice moves the resampled volume (the voxel value at
+//!   a point next to the ventricle changes);
+//! - choosing another model in the combo box keeps the ROI maps.
+
+use egui::{Event, Modifiers, PointerButton, Pos2};
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use voxflex_core::glam::DVec3;
+use voxflex_runtime::backend::BackendChoice;
+use voxflex_runtime::session::Seed;
+use voxflex_viewer::app::ViewerApp;
+use voxflex_viewer::open::OpenRequest;
+use voxflex_viewer::protocol::SliceFrame;
+use voxflex_viewer::screenshot::Screenshot;
+
+/// How long a test waits for the worker before failing.
+const PATIENCE: Duration = Duration::from_secs(120);
+
+/// `target/<profile>`, where the plugins are built.
+fn plugin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let dir = exe
+        .parent()
+        .and_then(|d| d.parent())
+        .expect("target/<profile>");
+    assert!(
+        dir.join(voxflex_runtime::plugin_loader::library_file_name(
+            "chainmail"
+        ))
+        .is_file(),
+        "the plugins are not built in {}: run `cargo build` first",
+        dir.display()
+    );
+    dir.to_path_buf()
+}
+
+fn open_phantom() -> Harness<'static, ViewerApp> {
+    let req = OpenRequest {
+        input: None,
+        backend: BackendChoice::Cpu,
+        plugin_dirs: vec![plugin_dir()],
+    };
+    let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
+        .expect("start the viewer");
+    let mut h = Harness::builder()
+        .with_size([1280.0, 860.0])
+        .build_ui_state(|ui, app: &mut ViewerApp| app.show(ui), app);
+    wait(&mut h, "the first images", |a| a.ready());
+    h
+}
+
+/// Steps frames until `done` holds (failing after [`PATIENCE`], with the
+/// viewer's messages).
+fn wait(h: &mut Harness<'static, ViewerApp>, what: &str, done: impl Fn(&ViewerApp) -> bool) {
+    let t = Instant::now();
+    while !done(h.state()) {
+        assert!(
+            t.elapsed() < PATIENCE,
+            "timed out waiting for {what}; viewer messages: {:?}",
+            h.state().messages()
+        );
+        h.step();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    h.step();
+}
+
+/// The screen point of world point `p` (mm) on slice view `n`.
+fn screen_of(h: &Harness<'static, ViewerApp>, n: usize, p: DVec3) -> Pos2 {
+    let app = h.state();
+    let frame: &SliceFrame = &app.slices().expect("slices")[n];
+    let rect = app.slice_rect(n).expect("slice view drawn");
+    let [c, r] = frame.slice.world_to_point(p);
+    let img = &frame.slice.image;
+    Pos2::new(
+        rect.min.x + ((c + 0.5) / img.width as f64) as f32 * rect.width(),
+        rect.min.y + ((r + 0.5) / img.height as f64) as f32 * rect.height(),
+    )
+}
+
+fn press(h: &Harness<'static, ViewerApp>, pos: Pos2, pressed: bool, modifiers: Modifiers) {
+    h.event(Event::PointerButton {
+        pos,
+        button: PointerButton::Primary,
+        pressed,
+        modifiers,
+    });
+}
+
+/// A primary click at `pos` with `modifiers` held down (pressed a frame
+/// before and let go a frame after, as a hand does).
+fn click(h: &mut Harness<'static, ViewerApp>, pos: Pos2, modifiers: Modifiers) {
+    h.event(Event::ModifiersChanged(modifiers));
+    h.hover_at(pos);
+    h.step();
+    press(h, pos, true, modifiers);
+    h.step();
+    press(h, pos, false, modifiers);
+    h.step();
+    h.event(Event::ModifiersChanged(Modifiers::NONE));
+    h.step();
+}
+
+/// Sets the cursor to world point `p` by clicks on the coronal view (x, z)
+/// and then the axial view (x, y), and waits for its value.
+fn put_cursor(h: &mut Harness<'static, ViewerApp>, p: DVec3) -> f32 {
+    let pos = screen_of(h, 1, p);
+    click(h, pos, Modifiers::NONE);
+    wait(h, "the axial slice through the click", |a| {
+        (a.cursor().z - p.z).abs() < 4.0
+            && a.slices()
+                .is_some_and(|s| s[0].slice.world_to_pixel(a.cursor()).is_some())
+    });
+    let pos = screen_of(h, 0, p);
+    click(h, pos, Modifiers::NONE);
+    wait(h, "the cursor's slices", |a| {
+        (a.cursor() - p).length() < 4.0
+            && a.slices().is_some_and(|s| {
+                s[0].slice.world_to_pixel(a.cursor()).is_some()
+                    && s[1].slice.world_to_pixel(a.cursor()).is_some()
+            })
+    });
+    h.state().cursor_value()
+}
+
+/// A brain point away from the ventricles (x = 40 mm).
+const BRAIN: DVec3 = DVec3::new(40.0, 0.0, 15.0);
+
+fn seed_and_grow(h: &mut Harness<'static, ViewerApp>) {
+    put_cursor(h, BRAIN);
+    let pos = screen_of(h, 0, BRAIN);
+    click(h, pos, Modifiers::COMMAND);
+    wait(h, "the new map", |a| a.rois().len() == 1);
+    let Seed::World(seed) = h.state().rois()[0].info.seed else {
+        panic!("a click seeds at a world point")
+    };
+    assert!(
+        (seed - BRAIN).length() < 4.0,
+        "seeded at {seed}, clicked {BRAIN}"
+    );
+    h.get_by_label("Run to end").click();
+    wait(h, "the map to converge", |a| {
+        a.rois()[0].info.converged && a.rois()[0].last.is_some()
+    });
+}
+
+#[test]
+fn a_click_on_the_brain_grows_a_map_that_shows_in_3d() {
+    let mut h = open_phantom();
+    let before = h.state().render_image().0.expect("a 3D image").clone();
+    seed_and_grow(&mut h);
+    let info = h.state().rois()[0].info.clone();
+    // The brain of the 4 mm phantom: a few thousand voxels, not the head.
+    assert!(info.voxels_above_half > 1000, "{info:?}");
+    assert!(info.voxels_above_half < 50 * 60 * 55 / 2, "{info:?}");
+    let (report, _) = h.state().rois()[0].last.expect("growth report");
+    assert!(report.steps > 1 && report.useful_fraction() > 0.0);
+    wait(&mut h, "a 3D image with the map", |a| {
+        a.render_image()
+            .0
+            .is_some_and(|i| i.pixels != before.pixels)
+    });
+}
+
+#[test]
+fn a_grab_drag_on_a_slice_moves_the_volume() {
+    let mut h = open_phantom();
+    // Next to the right ventricle (centre x = 10, semi-axis 5 mm), in brain.
+    let probe = DVec3::new(22.0, -5.0, 15.0);
+    let value = put_cursor(&mut h, probe);
+    assert!(
+        (value - 30.0).abs() < 1.0,
+        "brain (30) at the probe, got {value}"
+    );
+    h.get_by_label("Grab").click();
+    h.step();
+    let from = screen_of(&h, 0, DVec3::new(10.0, -5.0, 15.0));
+    let to = screen_of(&h, 0, probe + DVec3::new(4.0, 0.0, 0.0));
+    h.hover_at(from);
+    h.step();
+    press(&h, from, true, Modifiers::NONE);
+    h.step();
+    for s in 1..=10 {
+        let p = from + (to - from) * (s as f32 / 10.0);
+        h.hover_at(p);
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    press(&h, to, false, Modifiers::NONE);
+    h.step();
+    wait(&mut h, "the deformed volume at the probe", |a| {
+        a.steps() > 0 && (a.cursor_value() - value).abs() > 5.0
+    });
+}
+
+#[test]
+fn a_model_swap_keeps_the_roi_maps() {
+    let mut h = open_phantom();
+    seed_and_grow(&mut h);
+    let before = h.state().rois()[0].info.clone();
+    assert_eq!(h.state().model(), Some("chainmail"));
+    h.get_by_role_and_label(egui::accesskit::Role::ComboBox, "Model")
+        .click();
+    h.run_steps(3);
+    let models = &h.state().opened().expect("opened").models;
+    assert!(models.iter().any(|(m, _)| m == "affine"), "{models:?}");
+    h.get_by_label("affine").click();
+    wait(&mut h, "the swap", |a| {
+        a.model() == Some("affine") && a.steps() > 0
+    });
+    let after = &h.state().rois()[0].info;
+    assert_eq!(
+        (after.id, after.seed, after.params),
+        (before.id, before.seed, before.params)
+    );
+    // Re-grown on the bent volume, to convergence again.
+    assert!(
+        after.converged && after.voxels_above_half > 1000,
+        "{after:?}"
+    );
+}
+
+#[test]
+fn the_sliders_regrow_the_selected_map_and_save_writes_it() {
+    let mut h = open_phantom();
+    seed_and_grow(&mut h);
+    let before = h.state().rois()[0].info.clone();
+    h.get_by_label("map 0").click();
+    h.step();
+    h.get_by_role_and_label(egui::accesskit::Role::SpinButton, "λ")
+        .set_value_accesskit(3.0);
+    wait(&mut h, "the map grown with λ = 3", |a| {
+        a.rois()[0].info.params.lambda == 3.0 && a.rois()[0].info.converged
+    });
+    let after = h.state().rois()[0].info.clone();
+    assert_eq!(after.id, before.id);
+    assert!(
+        after.voxels_above_half < before.voxels_above_half,
+        "a smaller λ stops the growth sooner: {} → {}",
+        before.voxels_above_half,
+        after.voxels_above_half
+    );
+    let dir = tempfile::tempdir().unwrap();
+    h.state_mut().roi_panel_mut().save_dir = dir.path().display().to_string();
+    h.get_by_label("Save").click();
+    let path = dir.path().join("roi-0.nii.gz");
+    wait(&mut h, "the saved map", |a| {
+        a.messages().iter().any(|m| m.starts_with("wrote"))
+    });
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(&bytes[..2], &[0x1f, 0x8b], "gzip-compressed NIfTI");
+}
