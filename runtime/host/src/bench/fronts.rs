@@ -9,7 +9,7 @@
 //! one series per model/configuration, the default configuration ringed),
 //! and `front.md` (every front's table, its Pareto front and its knee).
 //!
-//! Fronts ([`cut`], [`fem`], [`grab`], [`resample`], [`roi`]):
+//! Fronts ([`cut`], [`fem`], [`grab`], [`resample`], [`roi`], [`render`]):
 //! - `fem_cantilever`: corotational FEM tip deflection vs Timoshenko beam
 //!   theory and vs the finest solve, proxy step × CG tolerance;
 //! - `fem_elastica`: static Newton under large rotation vs the Euler
@@ -21,7 +21,9 @@
 //!   answer (the grabbed piece translates rigidly, the other stays still);
 //! - `resample`: tetrahedral vs trilinear interpolation vs an f64
 //!   reference under affine, twist and bend, several sizes;
-//! - `roi`: ROI map 1 − Dice against the labelled abdomen, per λ.
+//! - `roi`: ROI map 1 − Dice against the labelled abdomen, per λ;
+//! - `render`: the `raycast` plugin's image error against a converged
+//!   reference, per ray step and filter option (sampling, gradient, jitter).
 //!
 //! The knee ([`knee`]): among the Pareto-optimal points, the one farthest
 //! from the chord between the fastest and the most accurate, in log–log
@@ -34,6 +36,7 @@ mod cut;
 mod fem;
 mod grab;
 mod plot;
+mod render;
 mod resample;
 mod roi;
 mod runner;
@@ -88,13 +91,14 @@ pub(crate) struct Front {
 }
 
 /// The fronts by name, in run order.
-pub(crate) const NAMES: [&str; 6] = [
+pub(crate) const NAMES: [&str; 7] = [
     "fem_cantilever",
     "fem_elastica",
     "grab",
     "cut",
     "resample",
     "roi",
+    "render",
 ];
 
 /// Runs the fronts and writes their files; returns a human-readable report.
@@ -123,6 +127,7 @@ pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
             "grab" => vec![grab::front(&plugins, args.quick)?],
             "cut" => vec![cut::front(&plugins, args.quick)?],
             "resample" => vec![resample::front(args.quick)?],
+            "render" => vec![render::front(&plugins, args.quick)?],
             _ => vec![roi::front(args.quick)?],
         };
         for front in &f {
