@@ -50,9 +50,10 @@
 //! - **Shading.** Blinn–Phong with a headlight (light and eye along the
 //!   ray, so the half vector is the light vector) on the normalised
 //!   gradient, two-sided: `c·(ambient + diffuse·|n·l|) + specular·|n·l|^shininess`.
-//!   The gradient is the central difference `f(p ± 1 voxel)` of the
-//!   trilinear field (or with `gradient = "sobel"` the 3×3×3 Sobel operator,
-//!   [`filters::sobel`]), on the fly, only at samples with non-zero opacity; where
+//!   The gradient is the 3×3×3 Sobel operator ([`filters::sobel`]: the
+//!   central difference along each axis, `[1, 2, 1] / 4` across it) of the
+//!   voxels, trilinear in between — or with `gradient = "central"` the
+//!   central difference `f(p ± 1 voxel)` of the trilinear field — on the fly, only at samples with non-zero opacity; where
 //!   it vanishes the sample is lit as if facing the light.
 //! - **MIP**: the largest trilinear value along the ray, then the TF: colour
 //!   `c(v_max)`, alpha `a(v_max)` (one unit distance) times `o` at that sample.

@@ -13,7 +13,7 @@
 //! macro_cell = 8                  # macro-cell edge, voxels (2..=64)
 //! opacity_map_interpolation = "trilinear"   # | "nearest"
 //! sampling = "trilinear"          # | "tricubic" (cubic B-spline, 8 trilinear fetches)
-//! gradient = "central"            # | "sobel" (3×3×3 Sobel) — the shading normal
+//! gradient = "sobel"              # 3×3×3 Sobel | "central" — the shading normal
 //! jitter = false                  # per-pixel ray-start offset in [0, step), fixed per pixel
 //! background = [0, 0, 0, 1]       # sRGB (+ alpha) composited behind; absent = keep alpha
 //! transfer_function = { preset = "ct-bone", shift = 0.0 }
@@ -70,11 +70,12 @@ pub enum Sampling {
 #[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum GradientFilter {
-    /// Central differences of the trilinear field, ±1 voxel (the default).
-    #[default]
+    /// Central differences of the trilinear field, ±1 voxel.
     Central,
     /// 3×3×3 Sobel ([`crate::filters::sobel`]): central difference along
-    /// the axis, `[1, 2, 1] / 4` across it, trilinear between voxels.
+    /// the axis, `[1, 2, 1] / 4` across it, trilinear between voxels (the
+    /// default: the knee of the `render` front, docs/BENCHMARKS.md).
+    #[default]
     Sobel,
 }
 
@@ -224,7 +225,7 @@ impl Default for RaycastParams {
             macro_cell: 8,
             opacity_map_interpolation: MapInterpolation::Trilinear,
             sampling: Sampling::Trilinear,
-            gradient: GradientFilter::Central,
+            gradient: GradientFilter::Sobel,
             jitter: false,
             background: None,
             transfer_function: TransferFunctionSpec::default(),

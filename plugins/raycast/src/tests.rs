@@ -550,7 +550,7 @@ fn gpu_matches_cpu() {
             false,
         ),
         // The filters, each alone and together (tricubic also under MIP).
-        ("gradient = \"sobel\"", false),
+        ("gradient = \"central\"", false),
         ("sampling = \"tricubic\"", true),
         ("sampling = \"tricubic\"\nmode = \"mip\"", false),
         ("jitter = true\nsample_distance = 1.7", false),

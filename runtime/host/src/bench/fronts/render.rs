@@ -35,10 +35,13 @@ const REFERENCE_STEP: f64 = 1.0 / 16.0;
 
 /// The option sets compared: series name and `[render]` keys.
 const OPTIONS: [(&str, &str); 6] = [
-    ("central trilinear", ""),
+    ("central trilinear", "gradient = \"central\""),
     ("sobel", "gradient = \"sobel\""),
-    ("tricubic", "sampling = \"tricubic\""),
-    ("jitter", "jitter = true"),
+    (
+        "tricubic",
+        "sampling = \"tricubic\"\ngradient = \"central\"",
+    ),
+    ("jitter", "jitter = true\ngradient = \"central\""),
     (
         "tricubic sobel",
         "sampling = \"tricubic\"\ngradient = \"sobel\"",
@@ -49,8 +52,8 @@ const OPTIONS: [(&str, &str); 6] = [
     ),
 ];
 
-/// The renderer's defaults: step 0.5, central differences, trilinear, no jitter.
-const DEFAULT: (&str, f64) = ("central trilinear", 0.5);
+/// The renderer's defaults: step 0.5, Sobel gradients, trilinear, no jitter.
+const DEFAULT: (&str, f64) = ("sobel", 0.5);
 
 /// The scene's `[render.params]` apart from the step and the filters.
 const BASE: &str = "transfer_function = { preset = \"ct-bone\" }\nbackground = [0, 0, 0]\n";
@@ -160,7 +163,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
              ({ref_ms:.0} ms). Error: RMS over R, G, B, A in [0, 1] of the 8-bit images \
              (`max_abs`: the largest channel difference). Time: median of {repeat} frames \
              after a warm-up. One series per option set over steps {STEPS:?} voxels; the \
-             renderer's default (step 0.5, central differences, trilinear, no jitter) is \
+             renderer's default (step 0.5, Sobel gradients, trilinear, no jitter) is \
              ringed. GPU timings are not taken (meaningless on a software adapter).",
             rayon::current_num_threads()
         ),
