@@ -110,7 +110,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
     let (dims, side, repeat) = if quick {
         ([40, 48, 44], 64, 1)
     } else {
-        ([100, 120, 110], 384, 3)
+        ([100, 120, 110], 384, 5)
     };
     let volume = phantom("head", dims).map_err(err)?;
     let settings = RenderSettings {
