@@ -1,8 +1,9 @@
 // Min/max macro-cells of the `raycast` plugin over a box of cells: the WGSL
 // twin of MacroCells::rebuild (plugins/raycast/src/macrocell.rs).
 //
-// Cell c (per axis) covers voxels [c·s, (c+1)·s] including the shared border
-// voxel, clamped to the volume. One invocation per cell of the box, 64 per
+// Cell c (per axis) covers voxels [c·s − 1, (c+1)·s + 1]: the shared border
+// voxel and a one-voxel halo (tricubic samples read 4³ voxels), clamped to
+// the volume. One invocation per cell of the box, 64 per
 // workgroup, folded into 3-D (flat index as in voxflex_core::gpu::workgroups_1d).
 // Writes f32 bits into `accel`: minima from `counts.w`, maxima `total` later.
 
@@ -28,8 +29,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let b = vec3<u32>(idx % c.size.x, (idx / c.size.x) % c.size.y, idx / (c.size.x * c.size.y));
     let cell = c.lo.xyz + b;
     let last = c.dims.xyz - vec3<u32>(1u);
-    let v0 = min(cell * c.dims.w, last);
-    let v1 = min((cell + vec3<u32>(1u)) * c.dims.w, last);
+    let v0 = min(max(cell * c.dims.w, vec3<u32>(1u)) - vec3<u32>(1u), last);
+    let v1 = min((cell + vec3<u32>(1u)) * c.dims.w + vec3<u32>(1u), last);
     var lo = 3.40282347e38;
     var hi = -3.40282347e38;
     for (var k = v0.z; k <= v1.z; k++) {

@@ -50,6 +50,9 @@ const FLAG_EARLY_TERMINATION: u32 = 2u;
 const FLAG_SHADING: u32 = 4u;
 const FLAG_MAP_NEAREST: u32 = 8u;
 const FLAG_BACKGROUND: u32 = 16u;
+const FLAG_SOBEL: u32 = 32u;
+const FLAG_TRICUBIC: u32 = 64u;
+const FLAG_JITTER: u32 = 128u;
 const T_FAR: f32 = 3.0e38;
 const F32_MIN: f32 = -3.40282347e38;
 
@@ -117,7 +120,131 @@ fn diff(fp: Fp, axis: u32) -> f32 {
     return lerp(lerp(acc[0], acc[1], fb), lerp(acc[2], acc[3], fb), fc);
 }
 
+// ---- Filters: the twins of plugins/raycast/src/filters.rs. ----
+
+// lowbias32 integer hash.
+fn hash32(x_in: u32) -> u32 {
+    var x = x_in;
+    x ^= x >> 16u;
+    x *= 0x7feb352du;
+    x ^= x >> 15u;
+    x *= 0x846ca68bu;
+    x ^= x >> 16u;
+    return x;
+}
+
+// Ray-start offset of a pixel, a fraction of a step in [0, 1).
+fn jitter(px: u32, py: u32) -> f32 {
+    return f32(hash32(px ^ hash32(py)) >> 8u) * (1.0 / 16777216.0);
+}
+
+// Sigg–Hadwiger fetch positions h0, h1 and weight g1 along one axis.
+fn bspline_axis(x: f32) -> vec3<f32> {
+    let i = f32(u32(x));
+    let f = x - i;
+    let f2 = f * f;
+    let f3 = f2 * f;
+    let w0 = (1.0 - 3.0 * f + 3.0 * f2 - f3) * (1.0 / 6.0);
+    let w1 = (4.0 - 6.0 * f2 + 3.0 * f3) * (1.0 / 6.0);
+    let w2 = (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) * (1.0 / 6.0);
+    let w3 = f3 * (1.0 / 6.0);
+    let g0 = w0 + w1;
+    let g1 = w2 + w3;
+    return vec3<f32>(i - 1.0 + w1 / g0, i + 1.0 + w3 / g1, g1);
+}
+
+fn trilinear_at(q: vec3<f32>) -> f32 {
+    return value(footprint(q));
+}
+
+fn tricubic_plane(bx: vec3<f32>, by: vec3<f32>, z: f32) -> f32 {
+    let a = lerp(trilinear_at(vec3<f32>(bx.x, by.x, z)), trilinear_at(vec3<f32>(bx.y, by.x, z)), bx.z);
+    let b = lerp(trilinear_at(vec3<f32>(bx.x, by.y, z)), trilinear_at(vec3<f32>(bx.y, by.y, z)), bx.z);
+    return lerp(a, b, by.z);
+}
+
+// Tricubic B-spline sample at voxel position p: 8 trilinear fetches.
+fn tricubic(p_in: vec3<f32>) -> f32 {
+    let p = clamp(p_in, vec3<f32>(0.0), upper());
+    let bx = bspline_axis(p.x);
+    let by = bspline_axis(p.y);
+    let bz = bspline_axis(p.z);
+    let lo = tricubic_plane(bx, by, bz.x);
+    let hi = tricubic_plane(bx, by, bz.y);
+    return lerp(lo, hi, bz.z);
+}
+
+// Value at p: trilinear, or tricubic when FLAG_TRICUBIC.
+fn sample_value(p: vec3<f32>, fp: Fp) -> f32 {
+    if ((u.cells.w & FLAG_TRICUBIC) != 0u) {
+        return tricubic(p);
+    }
+    return value(fp);
+}
+
+// The 4×4×4 voxels around the footprint, indices clamped.
+fn gather(fp: Fp) -> array<f32, 64> {
+    var b: array<f32, 64>;
+    let last = max(u.dims.xyz, vec3<u32>(1u)) - vec3<u32>(1u);
+    for (var z = 0u; z < 4u; z++) {
+        let iz = min(select(0u, fp.i.z + z - 1u, fp.i.z + z >= 1u), last.z);
+        for (var y = 0u; y < 4u; y++) {
+            let iy = min(select(0u, fp.i.y + y - 1u, fp.i.y + y >= 1u), last.y);
+            let row = u.dims.x * (iy + u.dims.y * iz);
+            for (var x = 0u; x < 4u; x++) {
+                let ix = min(select(0u, fp.i.x + x - 1u, fp.i.x + x >= 1u), last.x);
+                b[x + 4u * (y + 4u * z)] = vol[row + ix];
+            }
+        }
+    }
+    return b;
+}
+
+// Derivative (d) or [1, 2, 1]/4 smoothing at the inner positions of 4 taps.
+fn tap(b0: f32, b1: f32, b2: f32, b3: f32, d: bool) -> vec2<f32> {
+    if (d) {
+        return vec2<f32>(b2 - b0, b3 - b1);
+    }
+    return vec2<f32>((b0 + 2.0 * b1 + b2) * 0.25, (b1 + 2.0 * b2 + b3) * 0.25);
+}
+
+fn sobel_component(block: array<f32, 64>, axis: u32, f: vec3<f32>) -> f32 {
+    var blk = block;
+    var sx: array<f32, 32>;
+    for (var l = 0u; l < 16u; l++) {
+        let r = tap(blk[4u * l], blk[4u * l + 1u], blk[4u * l + 2u], blk[4u * l + 3u], axis == 0u);
+        sx[2u * l] = r.x;
+        sx[2u * l + 1u] = r.y;
+    }
+    var sy: array<f32, 16>;
+    for (var z = 0u; z < 4u; z++) {
+        for (var x = 0u; x < 2u; x++) {
+            let r = tap(sx[x + 2u * (4u * z)], sx[x + 2u * (1u + 4u * z)], sx[x + 2u * (2u + 4u * z)], sx[x + 2u * (3u + 4u * z)], axis == 1u);
+            sy[x + 2u * (2u * z)] = r.x;
+            sy[x + 2u * (1u + 2u * z)] = r.y;
+        }
+    }
+    var c: array<f32, 8>;
+    for (var y = 0u; y < 2u; y++) {
+        for (var x = 0u; x < 2u; x++) {
+            let r = tap(sy[x + 2u * y], sy[x + 2u * (y + 2u)], sy[x + 2u * (y + 4u)], sy[x + 2u * (y + 6u)], axis == 2u);
+            c[x + 2u * y] = r.x;
+            c[x + 2u * y + 4u] = r.y;
+        }
+    }
+    let x00 = lerp(c[0], c[1], f.x);
+    let x10 = lerp(c[2], c[3], f.x);
+    let x01 = lerp(c[4], c[5], f.x);
+    let x11 = lerp(c[6], c[7], f.x);
+    return lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z);
+}
+
 fn gradient(fp: Fp) -> vec3<f32> {
+    if ((u.cells.w & FLAG_SOBEL) != 0u) {
+        let b = gather(fp);
+        let d = vec3<f32>(sobel_component(b, 0u, fp.f), sobel_component(b, 1u, fp.f), sobel_component(b, 2u, fp.f));
+        return d * u.grad_scale.xyz;
+    }
     return vec3<f32>(diff(fp, 0u), diff(fp, 1u), diff(fp, 2u)) * u.grad_scale.xyz;
 }
 
@@ -259,32 +386,56 @@ struct Result {
     terminated: u32,
 }
 
+// Samples of [t0, t1]: `lead` (0/1) in the jitter step [t0, ts], n_full
+// steps of dt from ts, then a last step of rem if not negligible.
 struct Schedule {
+    t0: f32,
+    lead: u32,
+    ts: f32,
     n_full: u32,
     rem: f32,
     n_total: u32,
 }
 
-fn schedule(t0: f32, t1: f32) -> Schedule {
+fn schedule(t0: f32, t1: f32, px: u32, py: u32) -> Schedule {
     let dt = u.step.x;
-    let span = t1 - t0;
+    var xi = 0.0;
+    if ((u.cells.w & FLAG_JITTER) != 0u) {
+        xi = jitter(px, py);
+    }
+    let a = min(xi * dt, t1 - t0);
     var s: Schedule;
-    s.n_full = u32(span * (1.0 / dt));
+    s.t0 = t0;
+    s.lead = select(0u, 1u, a > 1e-4 * dt);
+    s.ts = t0 + a;
+    let span = t1 - s.ts;
+    s.n_full = u32(max(span, 0.0) * (1.0 / dt));
     s.rem = span - f32(s.n_full) * dt;
-    s.n_total = s.n_full + select(0u, 1u, s.rem > 1e-4 * dt);
+    s.n_total = s.lead + s.n_full + select(0u, 1u, s.rem > 1e-4 * dt);
     return s;
 }
 
-fn next_sample(k: u32, t0: f32, t_exit: f32, n_total: u32) -> u32 {
-    let next = u32(ceil(clamp((t_exit - t0) * (1.0 / u.step.x) - 0.5, 0.0, f32(n_total))));
+// Ray parameter (x) and step length (y) of sample k.
+fn sample_at(s: Schedule, k: u32) -> vec2<f32> {
+    let dt = u.step.x;
+    if (k < s.lead) {
+        let a = s.ts - s.t0;
+        return vec2<f32>(s.t0 + 0.5 * a, a);
+    }
+    if (k - s.lead < s.n_full) {
+        return vec2<f32>(s.ts + (f32(k - s.lead) + 0.5) * dt, dt);
+    }
+    return vec2<f32>(s.ts + f32(s.n_full) * dt + 0.5 * s.rem, s.rem);
+}
+
+fn next_sample(k: u32, s: Schedule, t_exit: f32) -> u32 {
+    let next = u32(ceil(clamp((t_exit - s.ts) * (1.0 / u.step.x) - 0.5 + f32(s.lead), 0.0, f32(s.n_total))));
     return max(next, k + 1u);
 }
 
-fn composite(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
+fn composite(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
     let oi = (o - u.origin.xyz) * u.inv_spacing.xyz;
     let di = d * u.inv_spacing.xyz;
-    let s = schedule(t0, t1);
-    let dt = u.step.x;
     let flags = u.cells.w;
     let ess = (flags & FLAG_ESS) != 0u;
     let et = (flags & FLAG_EARLY_TERMINATION) != 0u;
@@ -300,18 +451,15 @@ fn composite(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
         if (k >= s.n_total) {
             break;
         }
-        var t = t0 + f32(s.n_full) * dt + 0.5 * s.rem;
-        var len = s.rem;
-        if (k < s.n_full) {
-            t = t0 + (f32(k) + 0.5) * dt;
-            len = dt;
-        }
+        let tl = sample_at(s, k);
+        let t = tl.x;
+        let len = tl.y;
         let p = oi + di * t;
         if (ess && t >= exit_t) {
             let c = cell_of(p);
             let d = cell_leap(c.l);
             if (d > 0u) {
-                k = next_sample(k, t0, cell_exit(c.c, d, oi, di), s.n_total);
+                k = next_sample(k, s, cell_exit(c.c, d, oi, di));
                 exit_t = -1.0;
                 continue;
             }
@@ -319,7 +467,7 @@ fn composite(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
         }
         k += 1u;
         let fp = footprint(p);
-        let v = value(fp);
+        let v = sample_value(p, fp);
         samples += 1u;
         let tf = lut_lookup(v);
         if (tf.w <= 0.0) {
@@ -361,11 +509,9 @@ fn composite(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
     return r;
 }
 
-fn mip(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
+fn mip(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
     let oi = (o - u.origin.xyz) * u.inv_spacing.xyz;
     let di = d * u.inv_spacing.xyz;
-    let s = schedule(t0, t1);
-    let dt = u.step.x;
     let ess = (u.cells.w & FLAG_ESS) != 0u;
     var vmax = F32_MIN;
     var pmax = vec3<f32>(0.0);
@@ -376,23 +522,20 @@ fn mip(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> Result {
         if (k >= s.n_total) {
             break;
         }
-        var t = t0 + f32(s.n_full) * dt + 0.5 * s.rem;
-        if (k < s.n_full) {
-            t = t0 + (f32(k) + 0.5) * dt;
-        }
+        let t = sample_at(s, k).x;
         let p = oi + di * t;
         if (ess && t >= exit_t) {
             let c = cell_of(p);
             let e = cell_exit(c.c, 1u, oi, di);
             if (samples > 0u && cell_max(c.l) <= vmax) {
-                k = next_sample(k, t0, e, s.n_total);
+                k = next_sample(k, s, e);
                 exit_t = -1.0;
                 continue;
             }
             exit_t = e;
         }
         k += 1u;
-        let v = value(footprint(p));
+        let v = sample_value(p, footprint(p));
         samples += 1u;
         if (v > vmax) {
             vmax = v;
@@ -448,10 +591,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     res.samples = 0u;
     res.terminated = 0u;
     if (iv.x < iv.y) {
+        let sch = schedule(iv.x, iv.y, gid.x, gid.y);
         if (u.image.w == 0u) {
-            res = composite(ray.o, ray.d, iv.x, iv.y);
+            res = composite(ray.o, ray.d, sch);
         } else {
-            res = mip(ray.o, ray.d, iv.x, iv.y);
+            res = mip(ray.o, ray.d, sch);
         }
     }
     var px = res.rgba;

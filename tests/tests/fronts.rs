@@ -66,7 +66,7 @@ fn falls(what: &str, v: &[(f64, f64)]) {
 
 #[test]
 fn quick_fronts_are_written_finite_and_converge() {
-    plugin_dir(&["corotational-fem", "mass-spring", "chainmail"]);
+    plugin_dir(&["corotational-fem", "mass-spring", "chainmail", "raycast"]);
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("fronts");
     let o = voxflex(
@@ -89,6 +89,7 @@ fn quick_fronts_are_written_finite_and_converge() {
         "cut",
         "resample",
         "roi",
+        "render",
     ] {
         let svg = std::fs::read_to_string(out.join(format!("{front}.svg"))).expect("svg");
         assert!(
@@ -321,4 +322,60 @@ fn quick_fronts_are_written_finite_and_converge() {
             "{r:?}"
         );
     }
+}
+
+/// The render front alone (`--only render`): every error finite; for each
+/// option set the error falls as the step falls; the best filters
+/// (tricubic + Sobel, what the reference uses at a tiny step) are at least
+/// as close as central differences + trilinear at every step.
+#[test]
+fn quick_render_front_converges_and_filters_help() {
+    plugin_dir(&["raycast"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("fronts");
+    let o = voxflex(
+        &[
+            "bench",
+            "--fronts",
+            "--quick",
+            "--only",
+            "render",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let r = rows(&out, "render");
+    assert_eq!(r.len(), 24, "6 option sets × 4 steps");
+    for row in &r {
+        let (e, m, t) = (num(row, "error"), num(row, "max_abs"), num(row, "time_ms"));
+        assert!(
+            e.is_finite() && e > 0.0 && m >= e && m <= 1.0 && t > 0.0,
+            "{row:?}"
+        );
+    }
+    let names: std::collections::BTreeSet<&str> = r.iter().map(|x| x["series"].as_str()).collect();
+    for name in &names {
+        falls(
+            &format!("render {name}"),
+            &series(&r, name, "step_voxels", "error")
+                .into_iter()
+                .rev()
+                .map(|(s, e)| (-s, e))
+                .collect::<Vec<_>>(),
+        );
+    }
+    let plain = series(&r, "central trilinear", "step_voxels", "error");
+    let best = series(&r, "tricubic sobel", "step_voxels", "error");
+    for ((s, e0), (_, e1)) in plain.iter().zip(&best) {
+        assert!(
+            e1 <= e0,
+            "step {s}: tricubic + sobel {e1} vs central + trilinear {e0}"
+        );
+    }
+    let d: Vec<_> = r.iter().filter(|x| x["default"] == "true").collect();
+    assert_eq!(d.len(), 1, "one ringed default: {d:?}");
+    let md = std::fs::read_to_string(out.join("front.md")).unwrap();
+    assert!(md.contains("(`render`)"), "{md}");
 }

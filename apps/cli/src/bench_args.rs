@@ -46,7 +46,7 @@ pub struct BenchArgs {
     #[arg(long, requires = "fronts")]
     pub quick: bool,
     /// With `--fronts`: only these fronts (fem_cantilever, fem_elastica,
-    /// grab, cut, resample, roi; repeatable).
+    /// grab, cut, resample, roi, render; repeatable).
     #[arg(long, requires = "fronts")]
     pub only: Vec<String>,
     /// With `--fronts`: the output directory.

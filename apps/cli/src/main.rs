@@ -149,6 +149,18 @@ enum Command {
         /// Phantom resolution (x,y,z), phantoms only.
         #[arg(long, value_delimiter = ',')]
         dims: Option<Vec<usize>>,
+        /// Ray step in voxels (`sample_distance`; default 0.5).
+        #[arg(long)]
+        step: Option<f64>,
+        /// Volume sampling: trilinear or tricubic (cubic B-spline).
+        #[arg(long)]
+        sampling: Option<String>,
+        /// Shading gradient: central or sobel (3×3×3).
+        #[arg(long)]
+        gradient: Option<String>,
+        /// Per-pixel ray-start jitter (fixed per pixel): true or false.
+        #[arg(long)]
+        jitter: Option<bool>,
     },
     /// Benchmark the resampling pipeline through the real plugin path.
     Bench(bench_args::BenchArgs),
@@ -287,6 +299,10 @@ fn dispatch(command: Command) -> Result<()> {
             turntable,
             backend,
             dims,
+            step,
+            sampling,
+            gradient,
+            jitter,
         } => {
             let (width, height) = size
                 .split_once('x')
@@ -303,10 +319,11 @@ fn dispatch(command: Command) -> Result<()> {
                 fov_deg: perspective.unwrap_or(30.0),
                 ..Default::default()
             };
-            let params = format!(
+            let mut params = format!(
                 "mode = \"{}\"\ntransfer_function = {{ preset = \"{preset}\" }}\nbackground = [0, 0, 0]\n",
                 if mip { "mip" } else { "composite" }
             );
+            params.push_str(&filter_keys(step, sampling, gradient, jitter));
             render(
                 volume, dims, out, params, width, height, camera, turntable, backend,
             )
@@ -551,6 +568,29 @@ fn roi(
         out.display()
     );
     Ok(())
+}
+
+/// The `[render]` keys of `voxflex render`'s filter flags (the renderer
+/// checks the values and names the key in its error).
+fn filter_keys(
+    step: Option<f64>,
+    sampling: Option<String>,
+    gradient: Option<String>,
+    jitter: Option<bool>,
+) -> String {
+    let mut out = String::new();
+    if let Some(s) = step {
+        out.push_str(&format!("sample_distance = {s:?}\n"));
+    }
+    for (key, v) in [("sampling", sampling), ("gradient", gradient)] {
+        if let Some(v) = v {
+            out.push_str(&format!("{key} = {v:?}\n"));
+        }
+    }
+    if let Some(j) = jitter {
+        out.push_str(&format!("jitter = {j}\n"));
+    }
+    out
 }
 
 #[allow(clippy::too_many_arguments)]

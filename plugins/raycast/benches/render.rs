@@ -8,11 +8,18 @@
 //! empty-space skipping on (the defaults):
 //!
 //! - `head256_ct_bone_512`: the `ct-bone` preset (goal ≤ 120 ms/frame on 2 cores);
+//! - `head256_ct_bone_512_central`: the same with `gradient = "central"`
+//!   (the default before issue 15; the default is Sobel);
+//! - `head256_ct_bone_512_tricubic`: the same with `sampling = "tricubic"`;
 //! - `head256_ct_soft_tissue_512`: the `ct-soft-tissue` preset;
 //! - `head256_mip_512`: maximum intensity projection.
 //!
-//! Measured on the 2-core development machine (criterion median):
-//! ct-bone 58.6 ms, ct-soft-tissue 142 ms, MIP 130 ms per frame.
+//! Measured on the 2-core development machine (criterion median), quiet,
+//! before issue 15 (central differences): ct-bone 58.6 ms, ct-soft-tissue
+//! 142 ms, MIP 130 ms per frame. After (partial-volume phantom, Sobel
+//! default, macro-cell halo), 2026-12-02 under load average 3–5 (so about
+//! 2× a quiet machine; compare rows within a run): ct-bone 142 ms,
+//! `_central` 118 ms, `_tricubic` 609 ms, ct-soft-tissue 390 ms, MIP 273 ms.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -30,6 +37,14 @@ fn bench(c: &mut Criterion) {
         (
             "head256_ct_bone_512",
             "transfer_function = { preset = \"ct-bone\" }\nsample_distance = 0.5",
+        ),
+        (
+            "head256_ct_bone_512_central",
+            "transfer_function = { preset = \"ct-bone\" }\nsample_distance = 0.5\ngradient = \"central\"",
+        ),
+        (
+            "head256_ct_bone_512_tricubic",
+            "transfer_function = { preset = \"ct-bone\" }\nsample_distance = 0.5\nsampling = \"tricubic\"",
         ),
         (
             "head256_ct_soft_tissue_512",

@@ -7,14 +7,18 @@
 //! clip planes → interval `[t0, t1]` (mm, `t ≥ 0` in front of the eye);
 //! samples at the midpoints of steps of Δt (the last, shorter step at its
 //! own midpoint with its own length, so a homogeneous medium integrates
-//! exactly); empty-space skipping jumps over macro-cells the transfer
+//! exactly; with `jitter`, a first, shorter step of `ξ·Δt`, ξ the pixel's
+//! [`filters::jitter`], sampled likewise, shifts the rest of the ray's
+//! samples); empty-space skipping jumps over macro-cells the transfer
 //! function makes transparent; front-to-back compositing stops at the
 //! termination threshold.
 
+use crate::filters;
 use crate::macrocell::MacroCells;
 use crate::transfer::Lut;
 use crate::uniforms::{
-    FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_MAP_NEAREST, FLAG_SHADING, RayUniforms,
+    FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_JITTER, FLAG_MAP_NEAREST, FLAG_SHADING,
+    FLAG_SOBEL, FLAG_TRICUBIC, RayUniforms,
 };
 use rayon::prelude::*;
 use voxflex_core::glam::Vec3;
@@ -63,6 +67,19 @@ struct Footprint {
     f: Vec3,
     /// Linear index of the lower corner.
     base: usize,
+}
+
+/// Where a ray's samples sit in `[t0, t1]` (mm): `lead` (0 or 1) samples
+/// of the jitter step `[t0, ts]`, `n_full` steps of Δt from `ts`, then a
+/// last step of `rem` if it is not negligible; `n_total` in all.
+#[derive(Clone, Copy)]
+struct Schedule {
+    t0: f32,
+    lead: u32,
+    ts: f32,
+    n_full: u32,
+    rem: f32,
+    n_total: u32,
 }
 
 /// Precomputed integer constants of a [`Scene`].
@@ -195,6 +212,19 @@ impl<'a> Kernel<'a> {
         }
     }
 
+    /// The value at voxel position `p` (trilinear or tricubic) and the
+    /// trilinear footprint (for the opacity map and the gradient).
+    #[inline(always)]
+    fn sample(&self, p: Vec3) -> (f32, Footprint) {
+        let fp = self.footprint(p);
+        if self.flags & FLAG_TRICUBIC != 0 {
+            let v = filters::tricubic(p, self.upper, |q| self.value(&self.footprint(q)));
+            (v, fp)
+        } else {
+            (self.value(&fp), fp)
+        }
+    }
+
     /// Trilinear value at a footprint.
     #[inline(always)]
     fn value(&self, fp: &Footprint) -> f32 {
@@ -240,6 +270,10 @@ impl<'a> Kernel<'a> {
     #[inline(always)]
     fn gradient(&self, fp: &Footprint) -> Vec3 {
         let g = self.s.u.grad_scale;
+        if self.flags & FLAG_SOBEL != 0 {
+            let d = filters::sobel(&filters::gather(self.s.values, self.dims, fp.i), fp.f);
+            return Vec3::new(d.x * g[0], d.y * g[1], d.z * g[2]);
+        }
         Vec3::new(
             self.diff(fp, 0) * g[0],
             self.diff(fp, 1) * g[1],
@@ -331,10 +365,11 @@ impl<'a> Kernel<'a> {
         let (o, d) = self.ray(px, py);
         let (t0, t1) = self.interval(o, d);
         let mut out = if t0 < t1 {
+            let sch = self.schedule(t0, t1, px, py);
             if u.image[3] == 0 {
-                self.composite(o, d, t0, t1)
+                self.composite(o, d, &sch)
             } else {
-                self.mip(o, d, t0, t1)
+                self.mip(o, d, &sch)
             }
         } else {
             RayResult::default()
@@ -348,28 +383,56 @@ impl<'a> Kernel<'a> {
         out
     }
 
-    /// Sample schedule of `[t0, t1]`: full steps and whether a last partial step follows.
+    /// Sample schedule of `[t0, t1]` for pixel `(px, py)`.
     #[inline]
-    fn schedule(&self, t0: f32, t1: f32) -> (u32, f32, u32) {
-        let span = t1 - t0;
+    fn schedule(&self, t0: f32, t1: f32, px: u32, py: u32) -> Schedule {
+        let xi = if self.flags & FLAG_JITTER != 0 {
+            filters::jitter(px, py)
+        } else {
+            0.0
+        };
+        let a = (xi * self.dt).min(t1 - t0);
+        let lead = (a > 1e-4 * self.dt) as u32;
+        let ts = t0 + a;
+        let span = t1 - ts;
         // span ≥ 0: truncation is floor (and avoids a libm call).
         let n_full = (span * self.inv_dt) as u32;
         let rem = span - n_full as f32 * self.dt;
-        let n_total = n_full + (rem > 1e-4 * self.dt) as u32;
-        (n_full, rem, n_total)
+        let n_total = lead + n_full + (rem > 1e-4 * self.dt) as u32;
+        Schedule {
+            t0,
+            lead,
+            ts,
+            n_full,
+            rem,
+            n_total,
+        }
+    }
+
+    /// Ray parameter (mm) and step length of sample `k`.
+    #[inline(always)]
+    fn at(&self, s: &Schedule, k: u32) -> (f32, f32) {
+        if k < s.lead {
+            let a = s.ts - s.t0;
+            (s.t0 + 0.5 * a, a)
+        } else if k - s.lead < s.n_full {
+            (s.ts + ((k - s.lead) as f32 + 0.5) * self.dt, self.dt)
+        } else {
+            (s.ts + s.n_full as f32 * self.dt + 0.5 * s.rem, s.rem)
+        }
     }
 
     /// Index of the first sample at or past ray parameter `t_exit`.
     #[inline]
-    fn next_sample(&self, k: u32, t0: f32, t_exit: f32, n_total: u32) -> u32 {
-        let x = ((t_exit - t0) * self.inv_dt - 0.5).clamp(0.0, n_total as f32);
+    fn next_sample(&self, k: u32, s: &Schedule, t_exit: f32) -> u32 {
+        let x = ((t_exit - s.ts) * self.inv_dt - 0.5 + s.lead as f32).clamp(0.0, s.n_total as f32);
         // ceil(x) for x ≥ 0 without a libm call.
         let i = x as u32;
         let next = if (i as f32) < x { i + 1 } else { i };
         next.max(k + 1)
     }
 
-    fn composite(&self, o: Vec3, d: Vec3, t0: f32, t1: f32) -> RayResult {
+    fn composite(&self, o: Vec3, d: Vec3, sch: &Schedule) -> RayResult {
         let u = self.s.u;
         let lut = self.s.lut;
         let origin = Vec3::from_slice(&u.origin[..3]);
@@ -377,7 +440,7 @@ impl<'a> Kernel<'a> {
         let oi = (o - origin) * inv_sp;
         let di = d * inv_sp;
         let inv_di = Vec3::ONE / di;
-        let (n_full, rem, n_total) = self.schedule(t0, t1);
+        let n_total = sch.n_total;
         let ess = self.flags & FLAG_ESS != 0;
         let et = self.flags & FLAG_EARLY_TERMINATION != 0;
         let shade = self.flags & FLAG_SHADING != 0;
@@ -390,26 +453,21 @@ impl<'a> Kernel<'a> {
         let mut cell_exit = -1.0f32;
         let mut k = 0u32;
         while k < n_total {
-            let (t, len) = if k < n_full {
-                (t0 + (k as f32 + 0.5) * self.dt, self.dt)
-            } else {
-                (t0 + n_full as f32 * self.dt + 0.5 * rem, rem)
-            };
+            let (t, len) = self.at(sch, k);
             let p = oi + di * t;
             if ess && t >= cell_exit {
                 let (c, l) = self.cell_of(p);
                 let d = self.s.leap[l] as u32;
                 if d > 0 {
                     let exit = self.cell_exit(c, d, oi, di, inv_di);
-                    k = self.next_sample(k, t0, exit, n_total);
+                    k = self.next_sample(k, sch, exit);
                     cell_exit = -1.0;
                     continue;
                 }
                 cell_exit = self.cell_exit(c, 1, oi, di, inv_di);
             }
             k += 1;
-            let fp = self.footprint(p);
-            let v = self.value(&fp);
+            let (v, fp) = self.sample(p);
             samples += 1;
             let [r, g, b, kappa] = lut.lookup(v);
             if kappa <= 0.0 {
@@ -453,14 +511,14 @@ impl<'a> Kernel<'a> {
         }
     }
 
-    fn mip(&self, o: Vec3, d: Vec3, t0: f32, t1: f32) -> RayResult {
+    fn mip(&self, o: Vec3, d: Vec3, sch: &Schedule) -> RayResult {
         let u = self.s.u;
         let origin = Vec3::from_slice(&u.origin[..3]);
         let inv_sp = Vec3::from_slice(&u.inv_spacing[..3]);
         let oi = (o - origin) * inv_sp;
         let di = d * inv_sp;
         let inv_di = Vec3::ONE / di;
-        let (n_full, rem, n_total) = self.schedule(t0, t1);
+        let n_total = sch.n_total;
         let ess = self.flags & FLAG_ESS != 0;
         let mut vmax = f32::MIN;
         let mut pmax = Vec3::ZERO;
@@ -468,24 +526,20 @@ impl<'a> Kernel<'a> {
         let mut cell_exit = -1.0f32;
         let mut k = 0u32;
         while k < n_total {
-            let t = if k < n_full {
-                t0 + (k as f32 + 0.5) * self.dt
-            } else {
-                t0 + n_full as f32 * self.dt + 0.5 * rem
-            };
+            let (t, _) = self.at(sch, k);
             let p = oi + di * t;
             if ess && t >= cell_exit {
                 let (c, l) = self.cell_of(p);
                 let exit = self.cell_exit(c, 1, oi, di, inv_di);
                 if samples > 0 && self.s.cells.max[l] <= vmax {
-                    k = self.next_sample(k, t0, exit, n_total);
+                    k = self.next_sample(k, sch, exit);
                     cell_exit = -1.0;
                     continue;
                 }
                 cell_exit = exit;
             }
             k += 1;
-            let v = self.value(&self.footprint(p));
+            let (v, _) = self.sample(p);
             samples += 1;
             if v > vmax {
                 vmax = v;

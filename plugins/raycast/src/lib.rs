@@ -25,9 +25,16 @@
 //!   `sample_distance × smallest spacing` mm; the last, shorter step is
 //!   sampled at its own midpoint with its own Δt, so a homogeneous slab of
 //!   length L integrates to exactly `1 − exp(−κ L)`. Values are trilinear in
-//!   voxel-index space (voxel centres at integers).
+//!   voxel-index space (voxel centres at integers), or with
+//!   `sampling = "tricubic"` the cubic B-spline of the voxels
+//!   ([`filters::tricubic`], 8 trilinear fetches). `jitter = true` starts
+//!   each pixel's samples a fraction `ξ ∈ [0, 1)` of a step later
+//!   ([`filters::jitter`], a hash of the pixel, fixed across frames), the
+//!   first step `[t0, t0 + ξΔt]` sampled at its midpoint with its own Δt,
+//!   so homogeneous slabs stay exact and step aliasing becomes noise.
 //! - **Empty-space skipping.** A min/max macro-cell grid (`macro_cell`³
-//!   voxels, including the shared border voxel) is built once per volume
+//!   voxels, including the shared border voxel and a one-voxel halo for the
+//!   tricubic footprint) is built once per volume
 //!   version and rebuilt only over the dirty region passed to `set_volume`.
 //!   A cell is empty when the TF maps its whole `[min, max]` to κ = 0 (a
 //!   prefix count over the TF table, one entry of margin). Per TF and
@@ -43,8 +50,10 @@
 //! - **Shading.** Blinn–Phong with a headlight (light and eye along the
 //!   ray, so the half vector is the light vector) on the normalised
 //!   gradient, two-sided: `c·(ambient + diffuse·|n·l|) + specular·|n·l|^shininess`.
-//!   The gradient is the central difference `f(p ± 1 voxel)` of the
-//!   trilinear field, on the fly, only at samples with non-zero opacity; where
+//!   The gradient is the 3×3×3 Sobel operator ([`filters::sobel`]: the
+//!   central difference along each axis, `[1, 2, 1] / 4` across it) of the
+//!   voxels, trilinear in between — or with `gradient = "central"` the
+//!   central difference `f(p ± 1 voxel)` of the trilinear field — on the fly, only at samples with non-zero opacity; where
 //!   it vanishes the sample is lit as if facing the light.
 //! - **MIP**: the largest trilinear value along the ray, then the TF: colour
 //!   `c(v_max)`, alpha `a(v_max)` (one unit distance) times `o` at that sample.
@@ -67,7 +76,9 @@
 //!   `1 − exp(−κ L)` for the analytic chord L (bound 1e-3; measured 2.4e-6).
 //! - Default step (0.5 voxel) vs a 16×-oversampled reference, 64³ head,
 //!   `ct-soft-tissue`, shaded: RMS error bound 0.01 of the linear RGBA
-//!   (measured 5e-3), shrinking about 4× per halving of the step.
+//!   (measured 3e-3 on the partial-volume phantom), shrinking about 4× per
+//!   halving of the step. The filters' error against step size and time:
+//!   `voxflex bench --fronts --only render` (docs/BENCHMARKS.md).
 //! - Empty-space skipping + early termination vs brute force: ≤ 1/255.
 //! - CPU vs GPU (lavapipe): ≤ 2/255 per channel (measured ≤ 1/255).
 //! - `cargo bench -p voxflex-raycast --bench render`: 512² image of the 256³
@@ -91,6 +102,7 @@
 
 pub mod color;
 pub mod cpu;
+pub mod filters;
 pub mod gpu;
 pub mod macrocell;
 pub mod maps;

@@ -1,10 +1,12 @@
 //! Voxel boxes, the CPU's f32 copy of the volume and the min/max
 //! **macro-cell grid** of empty-space skipping.
 //!
-//! Macro-cell `c` (per axis) covers voxel indices `[c·s, (c+1)·s]` for edge
-//! `s` — *including* the shared border voxel `(c+1)·s`, so every trilinear
-//! sample taken inside the cell reads only voxels the cell's `[min, max]`
-//! range covers. A grid of `n` voxels has `max(1, ⌈(n−1)/s⌉)` cells. A cell
+//! Macro-cell `c` (per axis) covers voxel indices `[c·s − 1, (c+1)·s + 1]`
+//! (clamped) for edge `s` — the shared border voxel `(c+1)·s` and a halo of
+//! one voxel each side, so every sample taken at a position inside the
+//! cell `[c·s, (c+1)·s]`, trilinear (2³ voxels) or tricubic B-spline (4³
+//! voxels, weights ≥ 0), reads only voxels the cell's `[min, max]` range
+//! covers. A grid of `n` voxels has `max(1, ⌈(n−1)/s⌉)` cells. A cell
 //! is empty for the composite mode when the transfer function has κ = 0 over
 //! its whole range ([`crate::transfer::Lut::range_is_empty`]); the MIP mode
 //! skips cells whose max cannot beat the ray's running maximum.
@@ -167,16 +169,16 @@ impl MacroCells {
     pub fn touching(dims: [usize; 3], cell: usize, voxels: IndexBox) -> IndexBox {
         let counts = Self::counts_for(dims, cell);
         IndexBox {
-            lo: std::array::from_fn(|a| (voxels.lo[a].saturating_sub(1) / cell).min(counts[a] - 1)),
-            hi: std::array::from_fn(|a| (voxels.hi[a] / cell).min(counts[a] - 1)),
+            lo: std::array::from_fn(|a| (voxels.lo[a].saturating_sub(2) / cell).min(counts[a] - 1)),
+            hi: std::array::from_fn(|a| ((voxels.hi[a] + 1) / cell).min(counts[a] - 1)),
         }
     }
 
-    /// Voxel range (inclusive) of cell `c` along axis `a`.
+    /// Voxel range (inclusive) of cell `c` along axis `a`, halo included.
     #[inline]
     fn span(&self, a: usize, c: usize) -> (usize, usize) {
-        let lo = c * self.cell;
-        let hi = ((c + 1) * self.cell).min(self.dims[a] - 1);
+        let lo = (c * self.cell).saturating_sub(1);
+        let hi = ((c + 1) * self.cell + 1).min(self.dims[a] - 1);
         (lo.min(self.dims[a] - 1), hi)
     }
 
@@ -309,13 +311,11 @@ mod tests {
             for j in 0..dims[1] {
                 for i in 0..dims[0] {
                     let v = values[i + dims[0] * (j + dims[1] * k)];
-                    // Every cell whose inclusive span holds (i, j, k).
+                    // Every cell whose span [c·s − 1, (c+1)·s + 1] holds (i, j, k).
                     let cand = |x: usize, a: usize| {
-                        let mut c = vec![(x / cell).min(m.counts[a] - 1)];
-                        if x.is_multiple_of(cell) && x > 0 {
-                            c.push(x / cell - 1);
-                        }
-                        c
+                        (0..m.counts[a])
+                            .filter(|&c| c * cell <= x + 1 && x <= (c + 1) * cell + 1)
+                            .collect::<Vec<_>>()
                     };
                     for &ck in &cand(k, 2) {
                         for &cj in &cand(j, 1) {

@@ -12,6 +12,9 @@
 //! empty_space_skipping = true     # skip macro-cells the TF makes transparent
 //! macro_cell = 8                  # macro-cell edge, voxels (2..=64)
 //! opacity_map_interpolation = "trilinear"   # | "nearest"
+//! sampling = "trilinear"          # | "tricubic" (cubic B-spline, 8 trilinear fetches)
+//! gradient = "sobel"              # 3×3×3 Sobel | "central" — the shading normal
+//! jitter = false                  # per-pixel ray-start offset in [0, step), fixed per pixel
 //! background = [0, 0, 0, 1]       # sRGB (+ alpha) composited behind; absent = keep alpha
 //! transfer_function = { preset = "ct-bone", shift = 0.0 }
 //! # or: transfer_function = { points = [[value, r, g, b, a], …], shift = 0.0, normalized = false }
@@ -51,6 +54,37 @@ pub enum MapInterpolation {
     Trilinear,
     /// The nearest voxel's opacity.
     Nearest,
+}
+
+/// How the volume is read between voxel centres (values, also for MIP).
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampling {
+    /// Trilinear interpolation (the default).
+    #[default]
+    Trilinear,
+    /// The cubic B-spline of the voxels (Sigg & Hadwiger's 8 trilinear
+    /// fetches, [`crate::filters::tricubic`]): smooth, never overshoots,
+    /// reproduces linear data; it approximates (slightly blurs) rather than
+    /// interpolates.
+    Tricubic,
+}
+
+/// How the shading normal (the gradient) is estimated.
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum GradientFilter {
+    /// Central differences of the trilinear field, ±1 voxel.
+    Central,
+    /// 3×3×3 Sobel ([`crate::filters::sobel`]): central difference along
+    /// the axis, `[1, 2, 1] / 4` across it, trilinear between voxels (the
+    /// default: the knee of the `render` front, docs/BENCHMARKS.md).
+    #[default]
+    Sobel,
 }
 
 /// Blinn–Phong shading with a headlight, on the gradient of the volume.
@@ -170,6 +204,14 @@ pub struct RaycastParams {
     pub macro_cell: u32,
     /// Opacity-map interpolation.
     pub opacity_map_interpolation: MapInterpolation,
+    /// Volume sampling between voxel centres.
+    pub sampling: Sampling,
+    /// Gradient (shading normal) estimate.
+    pub gradient: GradientFilter,
+    /// Offset each pixel's first sample by a fraction in `[0, 1)` of a step
+    /// ([`crate::filters::jitter`]; fixed per pixel, so frames do not
+    /// flicker): turns the rings of step aliasing into fine noise.
+    pub jitter: bool,
     /// Background sRGB colour (3 values, alpha 1) or sRGB + alpha (4 values)
     /// composited behind the volume; `None` keeps the image's alpha.
     pub background: Option<Vec<f64>>,
@@ -194,6 +236,9 @@ impl Default for RaycastParams {
             empty_space_skipping: true,
             macro_cell: 8,
             opacity_map_interpolation: MapInterpolation::Trilinear,
+            sampling: Sampling::Trilinear,
+            gradient: GradientFilter::Sobel,
+            jitter: false,
             background: None,
             transfer_function: TransferFunctionSpec::default(),
             shading: Shading::default(),
@@ -552,6 +597,27 @@ mod tests {
         assert!(e.contains("either"), "{e}");
         let e = err("transfer_function = { points = [[0, 0, 0, 0]] }");
         assert!(e.contains("5 numbers"), "{e}");
+    }
+
+    #[test]
+    fn filters_parse_and_bad_values_name_the_key() {
+        let p = RaycastParams::from_toml(
+            "sampling = \"tricubic\"\ngradient = \"sobel\"\njitter = true",
+        )
+        .unwrap();
+        assert_eq!(
+            (p.sampling, p.gradient, p.jitter),
+            (Sampling::Tricubic, GradientFilter::Sobel, true)
+        );
+        let e = err("gradient = \"sobol\"");
+        assert!(
+            e.contains("gradient") && e.contains("sobel") && e.contains("central"),
+            "{e}"
+        );
+        let e = err("sampling = \"cubic\"");
+        assert!(e.contains("sampling") && e.contains("tricubic"), "{e}");
+        let e = err("jitter = 1");
+        assert!(e.contains("jitter"), "{e}");
     }
 
     #[test]

@@ -5,7 +5,8 @@
 use super::*;
 use crate::macrocell::LEAP_CAP;
 use crate::uniforms::{
-    FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_MAP_NEAREST, FLAG_SHADING, RayUniforms,
+    FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_JITTER, FLAG_MAP_NEAREST, FLAG_SHADING,
+    FLAG_SOBEL, FLAG_TRICUBIC, RayUniforms,
 };
 use voxflex_wgsl_check::{ShaderSet, assert_struct_layout};
 
@@ -50,6 +51,9 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
         ("FLAG_SHADING", FLAG_SHADING),
         ("FLAG_MAP_NEAREST", FLAG_MAP_NEAREST),
         ("FLAG_BACKGROUND", FLAG_BACKGROUND),
+        ("FLAG_SOBEL", FLAG_SOBEL),
+        ("FLAG_TRICUBIC", FLAG_TRICUBIC),
+        ("FLAG_JITTER", FLAG_JITTER),
     ] {
         assert_eq!(ray.const_u32(name), rust, "{name}");
     }

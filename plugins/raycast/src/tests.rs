@@ -150,6 +150,66 @@ fn halving_the_step_converges() {
     assert!(errors[0] < 0.01, "default-step RMS error {}", errors[0]);
 }
 
+/// With jitter a homogeneous slab still integrates exactly (the jitter step
+/// is a sample of its own length), and the image is the same every time.
+#[test]
+fn jitter_keeps_beer_lambert_and_is_stable() {
+    check_beer_lambert("jitter = true\n", None, None);
+    check_beer_lambert("jitter = true\n", None, Some(35.0));
+    let vol = head(40);
+    let cam = fit_camera(&vol.grid, 48, 40, 30.0, 15.0, None);
+    let mut r = with_volume(cpu("jitter = true"), &vol);
+    let (a, _) = rgba8(&mut r, &cam);
+    let (b, _) = rgba8(&mut r, &cam);
+    assert_eq!(a, b);
+    let (plain, _) = rgba8(&mut with_volume(cpu(""), &vol), &cam);
+    assert_ne!(a, plain, "jitter changed nothing");
+}
+
+/// Every filter keeps the accelerations exact (the macro-cells' one-voxel
+/// halo covers the tricubic footprint).
+#[test]
+fn filters_keep_the_accelerations_exact() {
+    let vol = head(48);
+    let cam = fit_camera(&vol.grid, 64, 56, 200.0, 20.0, Some(30.0));
+    for base in [
+        "sampling = \"tricubic\"",
+        "sampling = \"tricubic\"\nmode = \"mip\"",
+        "sampling = \"tricubic\"\ngradient = \"sobel\"\njitter = true\n\
+         transfer_function = { preset = \"ct-soft-tissue\" }",
+    ] {
+        let (fast, fs) = rgba8(&mut with_volume(cpu(base), &vol), &cam);
+        let brute_toml = format!("{base}\nempty_space_skipping = false\nearly_termination = false");
+        let (brute, bs) = rgba8(&mut with_volume(cpu(&brute_toml), &vol), &cam);
+        let d = max_diff(&fast, &brute);
+        eprintln!(
+            "{base:?}: max diff {d}/255, samples {} vs {}",
+            fs.samples, bs.samples
+        );
+        assert!(d <= 1, "{base:?}: max diff {d}");
+        assert!(fs.samples < bs.samples, "{base:?}: no saving");
+    }
+}
+
+/// A linear ramp renders the same with trilinear and tricubic sampling
+/// (the B-spline reproduces linear data) away from the volume's faces.
+#[test]
+fn tricubic_reproduces_a_ramp() {
+    let grid = Grid::new([24, 24, 24], DVec3::ONE, DVec3::splat(-11.5));
+    let vol = voxflex_phantom::ramp_on(grid, DVec3::new(1.0, 0.5, 0.25), 0.0);
+    let toml = "transfer_function = { points = [[-30, 0.2, 0.5, 1, 0.02], [30, 1, 0.5, 0.2, 0.08]] }\n\
+                crop_box = { min = [-9, -9, -9], max = [9, 9, 9] }\nshading = { enabled = false }\n";
+    let cam = fit_camera(&vol.grid, 32, 32, 30.0, 20.0, None);
+    let (a, _) = rgba8(&mut with_volume(cpu(toml), &vol), &cam);
+    let (b, _) = rgba8(
+        &mut with_volume(cpu(&format!("{toml}sampling = \"tricubic\"")), &vol),
+        &cam,
+    );
+    assert!(a.chunks(4).any(|p| p[3] > 0));
+    let d = max_diff(&a, &b);
+    assert!(d <= 1, "max diff {d}");
+}
+
 #[test]
 fn accelerations_change_no_pixel() {
     let vol = head(64);
@@ -488,6 +548,17 @@ fn gpu_matches_cpu() {
         (
             "sample_distance = 1.3\nempty_space_skipping = false\nearly_termination = false",
             false,
+        ),
+        // The filters, each alone and together (tricubic also under MIP).
+        ("gradient = \"central\"", false),
+        ("sampling = \"tricubic\"", true),
+        ("sampling = \"tricubic\"\nmode = \"mip\"", false),
+        ("jitter = true\nsample_distance = 1.7", false),
+        ("jitter = true\nmode = \"mip\"", false),
+        (
+            "sampling = \"tricubic\"\ngradient = \"sobel\"\njitter = true\n\
+             transfer_function = { preset = \"ct-soft-tissue\" }",
+            true,
         ),
     ];
     for (toml, with_maps) in cases {

@@ -9,7 +9,7 @@
 //! unit ray direction.
 
 use crate::macrocell::MacroCells;
-use crate::params::{MapInterpolation, RaycastParams, RenderMode};
+use crate::params::{GradientFilter, MapInterpolation, RaycastParams, RenderMode, Sampling};
 use crate::transfer::{LUT_SIZE, Lut};
 use voxflex_core::camera::{Camera, Projection};
 use voxflex_core::glam::DVec3;
@@ -26,6 +26,12 @@ pub const FLAG_SHADING: u32 = 4;
 pub const FLAG_MAP_NEAREST: u32 = 8;
 /// `cells[3]` flag: composite `background` behind the volume.
 pub const FLAG_BACKGROUND: u32 = 16;
+/// `cells[3]` flag: Sobel gradients (else central differences).
+pub const FLAG_SOBEL: u32 = 32;
+/// `cells[3]` flag: tricubic B-spline sampling (else trilinear).
+pub const FLAG_TRICUBIC: u32 = 64;
+/// `cells[3]` flag: per-pixel ray-start jitter.
+pub const FLAG_JITTER: u32 = 128;
 
 /// Word offset of the macro-cell minima in the GPU `accel` buffer (after the
 /// [`LUT_SIZE`] + 1 prefix counts, padded to 4 words).
@@ -118,6 +124,15 @@ impl RayUniforms {
         }
         if p.opacity_map_interpolation == MapInterpolation::Nearest {
             flags |= FLAG_MAP_NEAREST;
+        }
+        if p.gradient == GradientFilter::Sobel {
+            flags |= FLAG_SOBEL;
+        }
+        if p.sampling == Sampling::Tricubic {
+            flags |= FLAG_TRICUBIC;
+        }
+        if p.jitter {
+            flags |= FLAG_JITTER;
         }
         let background = p.background_linear();
         if background.is_some() {

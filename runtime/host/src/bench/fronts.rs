@@ -10,7 +10,7 @@
 //! and `front.md` (every front's table, its Pareto front and its knee).
 //!
 //! Fronts ([`cut`], [`fem`], [`grab`], [`resample`], [`roi`],
-//! [`two_material`]):
+//! [`two_material`], [`render`]):
 //! - `fem_cantilever`: corotational FEM tip deflection vs Timoshenko beam
 //!   theory and vs the finest solve, proxy step × CG tolerance;
 //! - `fem_elastica`: static Newton under large rotation vs the Euler
@@ -25,7 +25,9 @@
 //! - `roi`: ROI map 1 − Dice against the labelled abdomen, per λ;
 //! - `two_material`: the grab with a stiff inclusion whose faces lie on no
 //!   coarse proxy cell face, FEM P1/P2, mass-spring and ChainMail vs a
-//!   converged fine P2 solve (material resolution).
+//!   converged fine P2 solve (material resolution);
+//! - `render`: the `raycast` plugin's image error against a converged
+//!   reference, per ray step and filter option (sampling, gradient, jitter).
 //!
 //! The knee ([`knee`]): among the Pareto-optimal points, the one farthest
 //! from the chord between the fastest and the most accurate, in log–log
@@ -38,6 +40,7 @@ mod cut;
 mod fem;
 mod grab;
 mod plot;
+mod render;
 mod resample;
 mod roi;
 mod runner;
@@ -93,7 +96,7 @@ pub(crate) struct Front {
 }
 
 /// The fronts by name, in run order.
-pub(crate) const NAMES: [&str; 7] = [
+pub(crate) const NAMES: [&str; 8] = [
     "fem_cantilever",
     "fem_elastica",
     "grab",
@@ -101,6 +104,7 @@ pub(crate) const NAMES: [&str; 7] = [
     "cut",
     "resample",
     "roi",
+    "render",
 ];
 
 /// Runs the fronts and writes their files; returns a human-readable report.
@@ -130,6 +134,7 @@ pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
             "two_material" => vec![two_material::front(&plugins, args.quick)?],
             "cut" => vec![cut::front(&plugins, args.quick)?],
             "resample" => vec![resample::front(args.quick)?],
+            "render" => vec![render::front(&plugins, args.quick)?],
             _ => vec![roi::front(args.quick)?],
         };
         for front in &f {

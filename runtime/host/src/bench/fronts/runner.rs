@@ -39,6 +39,13 @@ impl Plugins {
     }
 }
 
+impl Plugins {
+    /// The directories searched for a plugin library, in order.
+    pub fn search_path(&self) -> Vec<PathBuf> {
+        crate::plugin_loader::search_path(&self.dirs)
+    }
+}
+
 /// Running on after the scripted frames until the bound points stop moving.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Settle {
