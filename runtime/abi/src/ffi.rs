@@ -88,6 +88,30 @@ impl ErrorBuf {
         }
         self.len = n;
     }
+
+    /// Writes all of `text` into the host's output buffer `out` (a plugin
+    /// answering with data, not an error): refuses a null buffer, and text
+    /// longer than its capacity, naming `what` it is.
+    ///
+    /// # Safety
+    /// `out` is null or a buffer valid for `cap` bytes of writes.
+    pub unsafe fn write_whole(out: *mut ErrorBuf, text: &str, what: &str) -> Result<(), String> {
+        if out.is_null() {
+            return Err("null output buffer".into());
+        }
+        // SAFETY: checked non-null; the caller passes a buffer of `cap` bytes.
+        let out = unsafe { &mut *out };
+        if text.len() > out.cap {
+            return Err(format!(
+                "{what} takes {} bytes, more than the host's {}",
+                text.len(),
+                out.cap
+            ));
+        }
+        // SAFETY: as above; the text fits.
+        unsafe { out.write(text) };
+        Ok(())
+    }
 }
 
 /// What a plugin is.

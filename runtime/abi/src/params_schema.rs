@@ -38,22 +38,9 @@ pub fn json(schema: &impl serde::Serialize) -> Result<String, String> {
 /// `out` and `err` are null or valid buffers for the call.
 pub unsafe extern "C" fn entry<P: DeclaresParams>(out: *mut ErrorBuf, err: *mut ErrorBuf) -> i32 {
     guard(err, || {
-        if out.is_null() {
-            return Err("null output buffer".into());
-        }
         let text = P::params_schema()?;
-        // SAFETY: checked non-null; the host passes a buffer of `cap` bytes.
-        let out = unsafe { &mut *out };
-        if text.len() > out.cap {
-            return Err(format!(
-                "the parameter schema takes {} bytes, more than the host's {}",
-                text.len(),
-                out.cap
-            ));
-        }
-        // SAFETY: as above; the text fits.
-        unsafe { out.write(&text) };
-        Ok(())
+        // SAFETY: host contract: `out` is null or the host's buffer of `cap` bytes.
+        unsafe { ErrorBuf::write_whole(out, &text, "the parameter schema") }
     })
 }
 

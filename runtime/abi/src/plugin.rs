@@ -480,23 +480,10 @@ unsafe extern "C" fn notes<P: DeformationPlugin>(
     guard(err, || {
         // SAFETY: host contract.
         let s = unsafe { state::<P>(instance) }?;
-        if out.is_null() {
-            return Err("null output buffer".into());
-        }
         let notes = s.model.notes().map_err(|e| e.to_string())?;
         let text = crate::notes_text::encode(&notes)?;
-        // SAFETY: checked non-null; the host passes a buffer of `cap` bytes.
-        let out = unsafe { &mut *out };
-        if text.len() > out.cap {
-            return Err(format!(
-                "the model's notes take {} bytes, more than the host's {}",
-                text.len(),
-                out.cap
-            ));
-        }
-        // SAFETY: as above; the text fits.
-        unsafe { out.write(&text) };
-        Ok(())
+        // SAFETY: host contract: `out` is the host's buffer of `cap` bytes.
+        unsafe { ErrorBuf::write_whole(out, &text, "the model's notes") }
     })
 }
 
