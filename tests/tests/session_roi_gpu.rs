@@ -198,3 +198,54 @@ fn a_new_volume_regrows_the_gpu_maps_as_the_cpu_would() {
     assert_eq!((s, e), (stepped, ended));
     assert_same_maps(&cpu, &gpu, &[stepped, ended], "re-grown on the new volume");
 }
+
+/// A session offered a device (as the viewer offers eframe's) computes on
+/// it — its kernels run there, not on a device of its own — on `gpu` and
+/// after `set_backend`; `auto` refuses a software adapter and stays on the
+/// CPU.
+#[test]
+fn an_offered_device_is_the_one_the_session_computes_on() {
+    let Some(offered) = voxflex_runtime::gpu_context::testing::test_gpu() else {
+        return;
+    };
+    let defaults = |backend| SessionDefaults {
+        backend,
+        plugin_dirs: vec![plugin_dir(&["chainmail"])],
+        gpu: Some(offered.clone()),
+        ..SessionDefaults::default()
+    };
+    let mut s = Session::from_volume(textured_cube(), defaults(BackendChoice::Gpu)).unwrap();
+    assert_eq!(s.adapter_name(), offered.info().name);
+    let before = offered.stats().dispatches;
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    s.interact(&Interaction::Grab {
+        point: [22.5, 2.5, 2.5],
+        to: [27.5, 2.5, 2.5],
+        frames: 1,
+    })
+    .unwrap();
+    s.step().unwrap();
+    assert!(
+        offered.stats().dispatches > before,
+        "the session's kernels ran on the offered device"
+    );
+    s.set_backend(BackendChoice::Cpu).unwrap();
+    s.set_backend(BackendChoice::Gpu).unwrap();
+    let before = offered.stats().dispatches;
+    s.step().unwrap();
+    s.add_roi(seed(), GrowthParams::default()).unwrap();
+    assert!(
+        offered.stats().dispatches > before,
+        "and again after set_backend"
+    );
+    let auto = Session::from_volume(textured_cube(), defaults(BackendChoice::Auto)).unwrap();
+    if offered.info().software {
+        assert_eq!(
+            auto.adapter_name(),
+            "cpu",
+            "auto refuses a software adapter"
+        );
+    } else {
+        assert_eq!(auto.adapter_name(), offered.info().name);
+    }
+}

@@ -119,48 +119,75 @@ pub fn software_adapter_warning(info: &AdapterSummary) -> Option<String> {
 
 /// Resolves the scene's backend choice (see the module docs).
 pub fn resolve(choice: BackendChoice) -> Result<ResolvedBackend, BackendError> {
+    resolve_on(choice, None)
+}
+
+/// [`resolve`], computing on `offered` — a device a front end opened (the
+/// viewer's, so its images need no read-back) — instead of opening one:
+/// `gpu` takes it whatever it is, `auto` takes it when it is a hardware
+/// adapter and runs on the CPU otherwise, `cpu` ignores it.
+pub fn resolve_on(
+    choice: BackendChoice,
+    offered: Option<&Arc<WgpuService>>,
+) -> Result<ResolvedBackend, BackendError> {
     let resolved = match choice {
         BackendChoice::Cpu => ResolvedBackend {
             backend: ExecutionBackend::Cpu,
             gpu: None,
             reason: "backend = \"cpu\": rayon on the CPU; the GPU is not initialised".to_owned(),
         },
-        BackendChoice::Gpu => match WgpuService::new(AdapterPolicy::AnyAdapter) {
-            Ok(gpu) => {
-                let info = gpu.info();
-                let note = if info.software {
-                    " (a software adapter: correct, but slower than the CPU path)"
-                } else {
-                    ""
-                };
-                if let Some(w) = software_adapter_warning(&info) {
-                    tracing::warn!(target: "voxflex::backend", "{w}");
-                }
-                ResolvedBackend {
-                    backend: ExecutionBackend::Gpu,
-                    reason: format!("backend = \"gpu\": {info}{note}"),
-                    gpu: Some(Arc::new(gpu)),
-                }
+        BackendChoice::Gpu => {
+            let gpu = match offered {
+                Some(gpu) => Arc::clone(gpu),
+                None => match WgpuService::new(AdapterPolicy::AnyAdapter) {
+                    Ok(gpu) => Arc::new(gpu),
+                    Err(e) if e.is_no_adapter() => return Err(BackendError::NoGpuAdapter(e)),
+                    Err(e) => return Err(BackendError::Gpu(e)),
+                },
+            };
+            let info = gpu.info();
+            let note = if info.software {
+                " (a software adapter: correct, but slower than the CPU path)"
+            } else {
+                ""
+            };
+            if let Some(w) = software_adapter_warning(&info) {
+                tracing::warn!(target: "voxflex::backend", "{w}");
             }
-            Err(e) if e.is_no_adapter() => return Err(BackendError::NoGpuAdapter(e)),
-            Err(e) => return Err(BackendError::Gpu(e)),
-        },
-        BackendChoice::Auto => match WgpuService::new(AdapterPolicy::HardwareOnly) {
-            Ok(gpu) => ResolvedBackend {
+            ResolvedBackend {
                 backend: ExecutionBackend::Gpu,
-                reason: format!("backend = \"auto\": hardware GPU {}", gpu.info()),
-                gpu: Some(Arc::new(gpu)),
-            },
-            Err(e) => ResolvedBackend {
-                backend: ExecutionBackend::Cpu,
-                gpu: None,
-                reason: format!(
-                    "backend = \"auto\": no hardware GPU, using rayon on the CPU \
-                     (software adapters such as lavapipe count as none; \
-                     backend = \"gpu\" would take them): {e}"
-                ),
-            },
-        },
+                reason: format!("backend = \"gpu\": {info}{note}"),
+                gpu: Some(gpu),
+            }
+        }
+        BackendChoice::Auto => {
+            let gpu = match offered {
+                Some(gpu) if !gpu.info().software => Ok(Arc::clone(gpu)),
+                Some(gpu) => Err(format!(
+                    "the offered device, {}, is a software adapter",
+                    gpu.info()
+                )),
+                None => WgpuService::new(AdapterPolicy::HardwareOnly)
+                    .map(Arc::new)
+                    .map_err(|e| e.to_string()),
+            };
+            match gpu {
+                Ok(gpu) => ResolvedBackend {
+                    backend: ExecutionBackend::Gpu,
+                    reason: format!("backend = \"auto\": hardware GPU {}", gpu.info()),
+                    gpu: Some(gpu),
+                },
+                Err(e) => ResolvedBackend {
+                    backend: ExecutionBackend::Cpu,
+                    gpu: None,
+                    reason: format!(
+                        "backend = \"auto\": no hardware GPU, using rayon on the CPU \
+                         (software adapters such as lavapipe count as none; \
+                         backend = \"gpu\" would take them): {e}"
+                    ),
+                },
+            }
+        }
     };
     tracing::info!(target: "voxflex::backend", "{}", resolved.reason);
     Ok(resolved)

@@ -368,8 +368,10 @@ struct Shared {
     pipelines_compiled: AtomicU64,
     dispatches: AtomicU64,
     submissions: AtomicU64,
-    /// Kept alive as long as the device (declared last: dropped last).
-    _instance: wgpu::Instance,
+    /// Kept alive as long as the device (declared last: dropped last);
+    /// `None` for a device opened by someone else ([`WgpuService::from_device`]),
+    /// who keeps its instance.
+    _instance: Option<wgpu::Instance>,
 }
 
 /// [`GpuService`] over one wgpu device: the host's GPU context.
@@ -406,7 +408,6 @@ impl WgpuService {
         let instance = wgpu::Instance::new(desc);
         let adapter = choose_adapter(&instance, backends, policy)?;
         let adapter_info = adapter.get_info();
-        let summary = AdapterSummary::from_info(&adapter_info);
         let required_limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("voxflex"),
@@ -421,15 +422,42 @@ impl WgpuService {
         device.on_uncaptured_error(Arc::new(|error: wgpu::Error| {
             tracing::error!(target: "voxflex::gpu", "uncaptured wgpu error: {error}");
         }));
+        Ok(Self::assemble(adapter_info, device, queue, Some(instance)))
+    }
+
+    /// The service over a device and queue someone else opened — a desktop
+    /// front end's (eframe's `RenderState`), so that voxflex's kernels and
+    /// the UI's rendering share one device and images need no read-back.
+    /// `adapter_info` describes the device's adapter. The device keeps the
+    /// limits and the uncaptured-error handler its owner gave it (voxflex
+    /// needs no optional feature; its calls run inside error scopes, so
+    /// their errors still come back as [`GpuError`]s); the owner keeps the
+    /// instance alive.
+    pub fn from_device(
+        adapter_info: wgpu::AdapterInfo,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+    ) -> Self {
+        Self::assemble(adapter_info, device, queue, None)
+    }
+
+    fn assemble(
+        adapter_info: wgpu::AdapterInfo,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        instance: Option<wgpu::Instance>,
+    ) -> Self {
+        let summary = AdapterSummary::from_info(&adapter_info);
         let device_limits = device.limits();
         tracing::info!(
             target: "voxflex::gpu",
             adapter = %summary,
             max_storage_buffer_binding_size = device_limits.max_storage_buffer_binding_size,
             max_buffer_size = device_limits.max_buffer_size,
+            shared = instance.is_none(),
             "GPU context opened"
         );
-        Ok(Self {
+        Self {
             shared: Arc::new(Shared {
                 adapter_info,
                 summary,
@@ -448,7 +476,7 @@ impl WgpuService {
                 _instance: instance,
             }),
             binding_limit_override: None,
-        })
+        }
     }
 
     /// A view of the same device (same buffers, same pipeline cache) that
@@ -1185,6 +1213,44 @@ fn affine(@builtin(global_invocation_id) gid: vec3<u32>,
         gpu.destroy_buffer(id);
         assert!(gpu.read_buffer(id, 0, &mut [0u8; 4]).is_err());
         assert!(gpu.dispatch(PipelineId(u64::MAX), &[], [1, 1, 1]).is_err());
+    }
+
+    /// A device opened outside the service (as eframe opens its own) runs
+    /// voxflex's kernels through `from_device` like one the service opened.
+    #[test]
+    fn a_device_opened_elsewhere_runs_the_kernels() {
+        let Some(own) = test_gpu() else { return };
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+            .into_iter()
+            .find(|a| a.get_info().name == own.adapter_info().name)
+            .expect("the test adapter enumerates again");
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).unwrap();
+        let gpu = WgpuService::from_device(adapter.get_info(), device, queue);
+        assert_eq!(gpu.info(), own.info());
+        let x: Vec<f32> = (0..1000).map(|i| i as f32).collect();
+        let xb = gpu.upload(&x, "x").unwrap();
+        let yb = gpu.create_buffer(4000, "y").unwrap();
+        let pb = gpu.upload(&[1000u32, 0, 0, 0], "params").unwrap();
+        let pipe = gpu.compile(AFFINE, "affine").unwrap();
+        let bindings = [
+            BufferBinding::whole(0, xb),
+            BufferBinding::whole(1, yb),
+            BufferBinding::whole(2, pb),
+        ];
+        gpu.dispatch(pipe, &bindings, gpu.workgroups_for(1000, 64).unwrap())
+            .unwrap();
+        let mut y = vec![0f32; 1000];
+        gpu.download(yb, &mut y).unwrap();
+        assert!(x.iter().zip(&y).all(|(a, b)| *b == 2.0 * a + 1.0));
+        let bad = AFFINE.replace("y[i] = 2.0 * x[i] + 1.0;", "y[i] = 2.0 * x[i] +;");
+        assert!(
+            gpu.compile(&bad, "affine").is_err(),
+            "errors still come back"
+        );
+        drop(instance);
     }
 
     #[test]

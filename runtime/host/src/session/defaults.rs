@@ -2,7 +2,9 @@
 //! rather than a scene file.
 
 use crate::backend::BackendChoice;
+use crate::gpu_context::WgpuService;
 use std::path::PathBuf;
+use std::sync::Arc;
 use voxflex_resample::ResampleParams;
 
 /// Settings of [`super::Session::from_volume`]; a scene file's `[scene]`
@@ -32,6 +34,11 @@ pub struct SessionDefaults {
     /// time is the work's (what `voxflex bench` measures); otherwise the
     /// work may still be queued when the stage returns.
     pub wait_for_gpu: bool,
+    /// A device to compute on instead of opening one: a front end's (the
+    /// viewer's eframe device), so the session's buffers live where the UI
+    /// draws. `gpu` takes it, `auto` takes it when it is a hardware adapter
+    /// ([`crate::backend::resolve_on`]); also after [`super::Session::set_backend`].
+    pub gpu: Option<Arc<WgpuService>>,
 }
 
 impl Default for SessionDefaults {
@@ -46,6 +53,7 @@ impl Default for SessionDefaults {
             resample: ResampleParams::default(),
             background: None,
             wait_for_gpu: false,
+            gpu: None,
         }
     }
 }

@@ -85,6 +85,7 @@ pub use voxflex_io::png::{GrayImage, Window};
 pub use voxflex_opacity::{GrowthParams, GrowthReport, Seed};
 
 use crate::backend::{self, BackendChoice, ResolvedBackend};
+use crate::gpu_context::WgpuService;
 use crate::metrics::{PluginReport, RunMetrics};
 use crate::pipeline::{RunError, load_source};
 use crate::plugin_loader::{self, LoadedPlugin, PluginListing};
@@ -163,6 +164,8 @@ pub struct Session {
     threads: usize,
     choice: BackendChoice,
     resolved: ResolvedBackend,
+    /// The device a front end offered ([`SessionDefaults::gpu`]).
+    offered_gpu: Option<Arc<WgpuService>>,
     gpu: Option<Arc<dyn GpuService>>,
     services: Arc<HostServices>,
     source: Volume,
@@ -217,6 +220,7 @@ struct Opening {
     threads: usize,
     choice: BackendChoice,
     resolved: ResolvedBackend,
+    offered_gpu: Option<Arc<WgpuService>>,
     source: Volume,
     /// Wall time of loading (or generating) the source.
     source_wall: Duration,
@@ -342,6 +346,7 @@ impl Session {
             threads: scene.settings.threads,
             choice: scene.settings.backend,
             resolved,
+            offered_gpu: None,
             source,
             source_wall,
             frames: scene.settings.frames,
@@ -390,7 +395,7 @@ impl Session {
                 .map_err(|e| RunError::Other(format!("session: phantom `{name}`: {e}")))?,
         };
         let source_wall = t.elapsed();
-        let resolved = backend::resolve(defaults.backend)?;
+        let resolved = backend::resolve_on(defaults.backend, defaults.gpu.as_ref())?;
         let metrics = RunMetrics {
             scene: "session".into(),
             voxflex_version: env!("CARGO_PKG_VERSION").into(),
@@ -413,6 +418,7 @@ impl Session {
             threads: defaults.threads,
             choice: defaults.backend,
             resolved,
+            offered_gpu: defaults.gpu,
             source,
             source_wall,
             frames: defaults.frames,
@@ -443,6 +449,7 @@ impl Session {
             choice: o.choice,
             services: HostServices::new(gpu.clone(), rayon::current_num_threads()),
             resolved: o.resolved,
+            offered_gpu: o.offered_gpu,
             gpu,
             source: o.source,
             frame: 0,
@@ -798,7 +805,7 @@ impl Session {
     fn rebuild_backend(&mut self, choice: BackendChoice) -> Result<(), RunError> {
         // Keep the current output: the new resampler has none yet.
         self.ensure_volume()?;
-        let resolved = backend::resolve(choice)?;
+        let resolved = backend::resolve_on(choice, self.offered_gpu.as_ref())?;
         let model = self
             .model
             .take()
