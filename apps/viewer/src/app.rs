@@ -234,7 +234,8 @@ impl ViewerApp {
                     self.rois = r;
                     self.renders_at_rois = self.renders;
                 }
-                Reply::Model(m) => self.model_panel.current = Some(m),
+                Reply::Model(m) => self.model_panel.set_current(m),
+                Reply::ModelError(e) => self.model_panel.model_error(&e),
                 Reply::Step(r) => {
                     self.steps += 1;
                     self.last_step = Some(r);
@@ -258,7 +259,7 @@ impl ViewerApp {
             ..o.camera
         });
         self.model_panel.models = o.models.clone();
-        self.model_panel.current = o.model.clone();
+        self.model_panel.schemas = o.schemas.clone();
         self.model_panel.adapter = o.adapter.clone();
         if let Some(m) = &o.model {
             self.model_panel.params = o
@@ -267,6 +268,7 @@ impl ViewerApp {
                 .find(|(n, _)| n == m)
                 .map(|(_, p)| p.clone())
                 .unwrap_or_default();
+            self.model_panel.set_current(m.clone());
         }
         if let Some(p) = self.startup_seed {
             self.cursor = p;

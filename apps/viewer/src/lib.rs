@@ -14,6 +14,7 @@ pub mod compose;
 pub mod model_panel;
 pub mod open;
 pub mod orientation;
+pub mod param_form;
 pub mod protocol;
 pub mod roi_panel;
 pub mod screenshot;

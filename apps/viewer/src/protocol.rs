@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 use voxflex_core::camera::Camera;
 use voxflex_core::grid::Grid;
+use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::session::{
     GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport, Window,
 };
@@ -93,6 +94,8 @@ pub struct Opened {
     /// Deformation plugins on the search path, with the parameters the
     /// scene gives each (empty when none).
     pub models: Vec<(String, String)>,
+    /// Each deformation plugin's parameter schema.
+    pub schemas: Vec<(String, ParamSchema)>,
     /// The model in use, if any.
     pub model: Option<String>,
     /// The adapter computing (`cpu` or a GPU's name).
@@ -150,6 +153,8 @@ pub enum Reply {
     Rois(Vec<RoiRow>),
     /// The model now in use.
     Model(String),
+    /// The session refused a model's parameters (the message names the key).
+    ModelError(String),
     /// What the last step did.
     Step(StepReport),
     /// Per-stage times from the session's metrics.

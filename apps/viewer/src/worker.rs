@@ -5,7 +5,8 @@
 
 use crate::compose::compose_slice;
 use crate::open::{
-    OpenRequest, OpenedSession, deformation_models, first_camera, open, render_params,
+    OpenRequest, OpenedSession, deformation_models, deformation_schemas, first_camera, open,
+    render_params,
 };
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
@@ -131,6 +132,7 @@ impl State {
             value_range,
             camera,
             models,
+            schemas: deformation_schemas(&session),
             model: model.as_ref().map(|(n, _)| n.clone()),
             adapter: session.adapter_name(),
         })));
@@ -196,7 +198,10 @@ impl State {
                 let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
             }
             Command::SwapModel { plugin, params } => {
-                s.swap_model(&plugin, &params)?;
+                if let Err(e) = s.swap_model(&plugin, &params) {
+                    let _ = out.send(Reply::ModelError(e.to_string()));
+                    return Err(e.into());
+                }
                 self.model = Some((plugin.clone(), params));
                 let _ = out.send(Reply::Model(plugin));
                 self.step(ch, out)?;
