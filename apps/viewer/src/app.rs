@@ -9,6 +9,7 @@ use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTim
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
+use crate::tools::{carve_again, cut_quad, half_extent_mm, slice_normal};
 use crate::view3d::view3d;
 use crate::window_level::{Preset, drag_window};
 use crate::worker::Worker;
@@ -37,6 +38,18 @@ struct GrabDrag {
     to: DVec3,
 }
 
+/// A cut line being drawn on slice view `view`: from `from` to `to`
+/// (world mm).
+#[derive(Clone, Copy, Debug)]
+struct CutDrag {
+    view: usize,
+    from: DVec3,
+    to: DVec3,
+}
+
+/// Carve brush radius range, mm.
+const BRUSH_MM: std::ops::RangeInclusive<f64> = 1.0..=50.0;
+
 /// The viewer.
 pub struct ViewerApp {
     worker: Worker,
@@ -60,6 +73,11 @@ pub struct ViewerApp {
     last_step: Option<StepReport>,
     steps: u64,
     grab: Option<GrabDrag>,
+    cut: Option<CutDrag>,
+    /// Carve brush radius, mm.
+    brush_mm: f64,
+    /// Where the carve stroke last carved (world mm).
+    last_carve: Option<DVec3>,
     last_drag: Option<Instant>,
     wheel: [f32; 3],
     sent: Option<ViewRequest>,
@@ -103,6 +121,9 @@ impl ViewerApp {
             last_step: None,
             steps: 0,
             grab: None,
+            cut: None,
+            brush_mm: 8.0,
+            last_carve: None,
             last_drag: None,
             wheel: [0.0; 3],
             sent: None,
@@ -359,6 +380,15 @@ impl ViewerApp {
             ui.selectable_value(&mut self.mode, ClickMode::Cursor, "Cursor");
             ui.selectable_value(&mut self.mode, ClickMode::SeedRoi, "Seed ROI");
             ui.selectable_value(&mut self.mode, ClickMode::Grab, "Grab");
+            ui.selectable_value(&mut self.mode, ClickMode::Cut, "Cut");
+            ui.selectable_value(&mut self.mode, ClickMode::Carve, "Carve");
+            if self.mode == ClickMode::Carve {
+                ui.add(
+                    egui::Slider::new(&mut self.brush_mm, BRUSH_MM)
+                        .suffix(" mm")
+                        .text("brush"),
+                );
+            }
             ui.separator();
             let before = self.preset;
             egui::ComboBox::from_label("Window")
@@ -414,7 +444,14 @@ impl ViewerApp {
             let mut child =
                 ui.new_child(egui::UiBuilder::new().max_rect(cell).id_salt(("slice", n)));
             let input = match (&self.slices, &self.slice_tex[n]) {
-                (Some(s), Some(tex)) => slice_view(&mut child, &s[n], tex, self.cursor, self.mode),
+                (Some(s), Some(tex)) => slice_view(
+                    &mut child,
+                    &s[n],
+                    tex,
+                    self.cursor,
+                    self.mode,
+                    self.brush_mm,
+                ),
                 _ => {
                     child.label("loading…");
                     SliceInput::default()
@@ -448,6 +485,63 @@ impl ViewerApp {
                 run_to_end: false,
             });
         }
+        match self.mode {
+            ClickMode::Cut => self.on_cut(n, &input),
+            ClickMode::Carve => self.on_carve(&input),
+            _ => self.on_grab(&input),
+        }
+        self.on_slice_wheel_and_window(n, &input);
+    }
+
+    /// A cut line: sent as the quad through it across the volume when the
+    /// drag ends.
+    fn on_cut(&mut self, n: usize, input: &SliceInput) {
+        if let Some(from) = input.grab_start {
+            self.cut = Some(CutDrag {
+                view: n,
+                from,
+                to: from,
+            });
+        }
+        if let (Some(to), Some(c)) = (input.grab_to, &mut self.cut) {
+            c.to = to;
+        }
+        if !input.drag_end {
+            return;
+        }
+        let (Some(c), Some(slices), Some(o)) = (self.cut.take(), &self.slices, &self.opened) else {
+            return;
+        };
+        if (c.to - c.from).length() < 1e-3 {
+            return;
+        }
+        let normal = slice_normal(&slices[c.view]);
+        let polygon = cut_quad(c.from, c.to, normal, half_extent_mm(&o.grid));
+        self.worker.send(Command::Cut { polygon });
+    }
+
+    /// A carve click or stroke: a ball at the click, and along the drag
+    /// every half radius.
+    fn on_carve(&mut self, input: &SliceInput) {
+        if input.grab_start.is_some() {
+            self.last_carve = None;
+        }
+        let at = input.carve_click.or(input.grab_to);
+        if let Some(p) = at
+            && (input.carve_click.is_some() || carve_again(self.last_carve, p, self.brush_mm))
+        {
+            self.last_carve = Some(p);
+            self.worker.send(Command::Carve {
+                centre: p.to_array(),
+                radius: self.brush_mm,
+            });
+        }
+        if input.drag_end {
+            self.last_carve = None;
+        }
+    }
+
+    fn on_grab(&mut self, input: &SliceInput) {
         if let Some(point) = input.grab_start {
             self.grab = Some(GrabDrag { point, to: point });
         }
@@ -460,6 +554,9 @@ impl ViewerApp {
                 to: to.to_array(),
             });
         }
+    }
+
+    fn on_slice_wheel_and_window(&mut self, n: usize, input: &SliceInput) {
         if let Some(d) = input.window_drag {
             self.window = drag_window(self.window, d.x, d.y);
         }

@@ -19,6 +19,7 @@ pub mod protocol;
 pub mod roi_panel;
 pub mod screenshot;
 pub mod slice_view;
+pub mod tools;
 pub mod view3d;
 pub mod window_level;
 pub mod worker;

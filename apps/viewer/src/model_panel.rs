@@ -61,7 +61,7 @@ impl ModelPanel {
                     out.push(c);
                 }
             });
-        ui.label("Grab mode: drag on a slice to pull the tissue.");
+        ui.label("Grab: drag on a slice to pull the tissue; Cut: drag a line; Carve: click or drag the brush.");
         ui.horizontal(|ui| {
             for (label, c) in [
                 ("Release", Command::Release),

@@ -69,6 +69,18 @@ pub enum Command {
         /// Target, world mm.
         to: [f64; 3],
     },
+    /// Cut along a planar polygon (world mm), then step.
+    Cut {
+        /// Corners, world mm.
+        polygon: Vec<[f64; 3]>,
+    },
+    /// Remove the tissue inside a ball, then step.
+    Carve {
+        /// Centre, world mm.
+        centre: [f64; 3],
+        /// Radius, mm.
+        radius: f64,
+    },
     /// Let go of everything grabbed, then step.
     Release,
     /// Put the model back at rest (same plugin and parameters) and step.

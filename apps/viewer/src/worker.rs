@@ -214,6 +214,14 @@ impl State {
                 })?;
                 self.step(ch, out)?;
             }
+            Command::Cut { polygon } => {
+                s.interact(&Interaction::Cut { polygon })?;
+                self.step(ch, out)?;
+            }
+            Command::Carve { centre, radius } => {
+                s.interact(&Interaction::CarveBall { centre, radius })?;
+                self.step(ch, out)?;
+            }
             Command::Release => {
                 s.interact(&Interaction::Release)?;
                 self.step(ch, out)?;

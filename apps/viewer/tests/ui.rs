@@ -7,7 +7,10 @@
 //!   grows it; the map is non-empty and the 3D image changes;
 //! - a grab-drag on a slice moves the resampled volume (the voxel value at
 //!   a point next to the ventricle changes);
-//! - choosing another model in the combo box keeps the ROI maps.
+//! - choosing another model in the combo box keeps the ROI maps;
+//! - a cut line drawn across the head, then a grab on one side, opens a
+//!   gap at the cut (air where the uncut tissue stays tissue);
+//! - a carve click turns the voxel under the brush centre to air.
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
@@ -258,4 +261,91 @@ fn the_sliders_regrow_the_selected_map_and_save_writes_it() {
     });
     let bytes = std::fs::read(&path).unwrap();
     assert_eq!(&bytes[..2], &[0x1f, 0x8b], "gzip-compressed NIfTI");
+}
+
+/// A primary drag on axial view from world point `from` to `to` (mm), in
+/// ten moves.
+fn drag_axial(h: &mut Harness<'static, ViewerApp>, from: DVec3, to: DVec3) {
+    let (a, b) = (screen_of(h, 0, from), screen_of(h, 0, to));
+    h.hover_at(a);
+    h.step();
+    press(h, a, true, Modifiers::NONE);
+    h.step();
+    for s in 1..=10 {
+        h.hover_at(a + (b - a) * (s as f32 / 10.0));
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    press(h, b, false, Modifiers::NONE);
+    h.step();
+}
+
+/// The probe's value after pulling the left half of the brain 20 mm to
+/// the left (−x), with or without a cut first along x = 0 across the
+/// whole axial slice.
+fn pull_left_half(cut_first: bool) -> f32 {
+    let mut h = open_phantom();
+    // Just right of the cut line, in brain, away from the ventricles.
+    let probe = DVec3::new(-2.0, 40.0, 15.0);
+    let value = put_cursor(&mut h, probe);
+    assert!((value - 30.0).abs() < 1.0, "brain at the probe: {value}");
+    if cut_first {
+        h.get_by_label("Cut").click();
+        h.step();
+        let steps = h.state().steps();
+        drag_axial(
+            &mut h,
+            DVec3::new(0.0, -118.0, 15.0),
+            DVec3::new(0.0, 118.0, 15.0),
+        );
+        wait(&mut h, "the step after the cut", |a| a.steps() > steps);
+        assert!(
+            h.state().messages().iter().all(|m| !m.starts_with("error")),
+            "{:?}",
+            h.state().messages()
+        );
+    }
+    h.get_by_label("Grab").click();
+    h.step();
+    let steps = h.state().steps();
+    drag_axial(
+        &mut h,
+        DVec3::new(-30.0, 40.0, 15.0),
+        DVec3::new(-50.0, 40.0, 15.0),
+    );
+    wait(&mut h, "the steps of the grab", |a| a.steps() >= steps + 3);
+    // Let the model settle a few frames.
+    for _ in 0..5 {
+        let steps = h.state().steps();
+        h.get_by_label("Step").click();
+        wait(&mut h, "a step", |a| a.steps() > steps);
+    }
+    h.state().cursor_value()
+}
+
+#[test]
+fn a_cut_then_a_grab_opens_a_gap_across_the_cut_line() {
+    let joined = pull_left_half(false);
+    let cut = pull_left_half(true);
+    eprintln!("probe value after the pull: uncut {joined}, cut {cut}");
+    // Uncut, the tissue at the probe stretches and stays tissue; cut, the
+    // left half pulls away and the probe lies in the gap (air, −1000).
+    assert!(joined > -500.0, "uncut: tissue at the probe, got {joined}");
+    assert!(cut < -500.0, "cut: the gap at the probe, got {cut}");
+}
+
+#[test]
+fn a_carve_click_removes_the_tissue_under_the_brush() {
+    let mut h = open_phantom();
+    let grid = h.state().opened().expect("opened").grid;
+    let air = put_cursor(&mut h, grid.index_to_world(DVec3::ZERO));
+    let value = put_cursor(&mut h, BRAIN);
+    assert!((value - 30.0).abs() < 1.0, "brain at {BRAIN}: {value}");
+    h.get_by_label("Carve").click();
+    h.step();
+    let pos = screen_of(&h, 0, BRAIN);
+    click(&mut h, pos, Modifiers::NONE);
+    wait(&mut h, "the carved volume at the brush centre", |a| {
+        (a.cursor_value() - air).abs() < 1.0
+    });
 }
