@@ -78,6 +78,10 @@ pub struct ViewerApp {
     brush_mm: f64,
     /// Where the carve stroke last carved (world mm).
     last_carve: Option<DVec3>,
+    /// File → Save scene's path.
+    save_scene_path: String,
+    /// File → Save volume's path.
+    save_volume_path: String,
     last_drag: Option<Instant>,
     wheel: [f32; 3],
     sent: Option<ViewRequest>,
@@ -124,6 +128,8 @@ impl ViewerApp {
             cut: None,
             brush_mm: 8.0,
             last_carve: None,
+            save_scene_path: "viewer-scene.toml".into(),
+            save_volume_path: "viewer-volume.nii.gz".into(),
             last_drag: None,
             wheel: [0.0; 3],
             sent: None,
@@ -375,6 +381,7 @@ impl ViewerApp {
                 .opened
                 .as_ref()
                 .map_or("opening…".into(), |o| o.title.clone());
+            ui.menu_button("File", |ui| self.file_menu(ui));
             ui.strong(title);
             ui.separator();
             ui.selectable_value(&mut self.mode, ClickMode::Cursor, "Cursor");
@@ -408,6 +415,28 @@ impl ViewerApp {
                 self.window.level, self.window.width
             ));
         });
+    }
+
+    /// File → Save scene / Save volume, each to the path typed above it.
+    fn file_menu(&mut self, ui: &mut egui::Ui) {
+        for (what, path) in [
+            ("Save scene", &mut self.save_scene_path),
+            ("Save volume", &mut self.save_volume_path),
+        ] {
+            ui.horizontal(|ui| {
+                let label = ui.label(format!("{what} to"));
+                ui.text_edit_singleline(path).labelled_by(label.id);
+            });
+            if ui.button(what).clicked() {
+                let p = std::path::PathBuf::from(path.as_str());
+                self.worker.send(if what == "Save scene" {
+                    Command::SaveScene(p)
+                } else {
+                    Command::SaveVolume(p)
+                });
+                ui.close();
+            }
+        }
     }
 
     fn status(&mut self, ui: &mut egui::Ui) {

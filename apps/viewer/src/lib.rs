@@ -17,6 +17,7 @@ pub mod orientation;
 pub mod param_form;
 pub mod protocol;
 pub mod roi_panel;
+pub mod scene_file;
 pub mod screenshot;
 pub mod slice_view;
 pub mod tools;

@@ -87,6 +87,11 @@ pub enum Command {
     Reset,
     /// Run one more step (a model still settling).
     Step,
+    /// Write the session's state as a scene `voxflex run` replays (File →
+    /// Save scene).
+    SaveScene(PathBuf),
+    /// Write the current (deformed) volume (`.nii`, `.nii.gz`, `.mha`, …).
+    SaveVolume(PathBuf),
     /// Stop the worker.
     Quit,
 }

@@ -22,6 +22,7 @@ use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::session::Seed;
 use voxflex_viewer::app::ViewerApp;
 use voxflex_viewer::open::OpenRequest;
+use voxflex_viewer::protocol::Command;
 use voxflex_viewer::protocol::SliceFrame;
 use voxflex_viewer::screenshot::Screenshot;
 
@@ -348,4 +349,89 @@ fn a_carve_click_removes_the_tissue_under_the_brush() {
     wait(&mut h, "the carved volume at the brush centre", |a| {
         (a.cursor_value() - air).abs() < 1.0
     });
+}
+
+/// The `voxflex` binary next to the plugins (`cargo build` puts it there).
+fn voxflex_bin() -> PathBuf {
+    let bin = plugin_dir().join(format!("voxflex{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        bin.is_file(),
+        "{} is not built: run `cargo build` first",
+        bin.display()
+    );
+    bin
+}
+
+fn read(path: &std::path::Path) -> voxflex_core::volume::Volume {
+    voxflex_io::read_volume(path, &voxflex_io::ReadOptions::default())
+        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
+}
+
+#[test]
+fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
+    let mut h = open_phantom();
+    put_cursor(&mut h, DVec3::new(-2.0, 40.0, 15.0));
+    h.get_by_label("Grab").click();
+    h.step();
+    drag_axial(
+        &mut h,
+        DVec3::new(-30.0, 40.0, 15.0),
+        DVec3::new(-45.0, 30.0, 15.0),
+    );
+    wait(&mut h, "the steps of the grab", |a| a.steps() >= 3);
+    h.get_by_label("Release").click();
+    let steps = h.state().steps();
+    wait(&mut h, "the step after the release", |a| a.steps() > steps);
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("saved.toml");
+    let mine = dir.path().join("viewer.nii.gz");
+    h.state().send(Command::SaveScene(scene.clone()));
+    h.state().send(Command::SaveVolume(mine.clone()));
+    wait(&mut h, "both files", |a| {
+        a.messages()
+            .iter()
+            .filter(|m| m.starts_with("wrote"))
+            .count()
+            == 2
+    });
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(text.contains("kind = \"grab\""), "{text}");
+    let out = dir.path().join("out");
+    let run = std::process::Command::new(voxflex_bin())
+        .arg("run")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .env("VOXFLEX_PLUGIN_PATH", plugin_dir())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "voxflex run {}: {}\n{text}",
+        scene.display(),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (a, b) = (read(&mine), read(&out.join("deformed.nii.gz")));
+    assert_eq!(a.grid.dims, b.grid.dims);
+    let source = voxflex_runtime::session::Session::open(
+        &voxflex_runtime::scene::Scene::parse(&text, &scene).unwrap(),
+    )
+    .unwrap()
+    .volume()
+    .unwrap()
+    .clone();
+    let (mut worst, mut moved) = (0.0f32, 0);
+    let [nx, ny, nz] = a.grid.dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let x = a.get_f32(i, j, k);
+                worst = worst.max((x - b.get_f32(i, j, k)).abs());
+                moved += usize::from(x != source.get_f32(i, j, k));
+            }
+        }
+    }
+    eprintln!("{moved} voxels moved; largest viewer/run difference {worst}");
+    assert!(moved > 100, "the grab moved the volume ({moved} voxels)");
+    assert!(worst <= 1.0, "largest voxel difference {worst} (units)");
 }
