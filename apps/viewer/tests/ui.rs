@@ -314,7 +314,9 @@ fn pull_left_half(cut_first: bool) -> f32 {
         DVec3::new(-30.0, 40.0, 15.0),
         DVec3::new(-50.0, 40.0, 15.0),
     );
-    wait(&mut h, "the steps of the grab", |a| a.steps() >= steps + 3);
+    // A busy worker coalesces a drag's targets (the last one counts), so
+    // the drag may take fewer steps than moves.
+    wait(&mut h, "the steps of the grab", |a| a.steps() > steps);
     // Let the model settle a few frames.
     for _ in 0..5 {
         let steps = h.state().steps();
@@ -373,12 +375,14 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     put_cursor(&mut h, DVec3::new(-2.0, 40.0, 15.0));
     h.get_by_label("Grab").click();
     h.step();
+    let steps = h.state().steps();
     drag_axial(
         &mut h,
         DVec3::new(-30.0, 40.0, 15.0),
         DVec3::new(-45.0, 30.0, 15.0),
     );
-    wait(&mut h, "the steps of the grab", |a| a.steps() >= 3);
+    // Coalesced targets: at least one step; Release queues after them all.
+    wait(&mut h, "the steps of the grab", |a| a.steps() > steps);
     h.get_by_label("Release").click();
     let steps = h.state().steps();
     wait(&mut h, "the step after the release", |a| a.steps() > steps);
