@@ -90,7 +90,7 @@ pub enum Command {
     /// Write the session's state as a scene `voxflex run` replays (File →
     /// Save scene).
     SaveScene(PathBuf),
-    /// Write the current (deformed) volume (`.nii`, `.nii.gz`, `.mha`, …).
+    /// Write the current (deformed) volume as NIfTI (`.nii`, `.nii.gz`).
     SaveVolume(PathBuf),
     /// Stop the worker.
     Quit,
