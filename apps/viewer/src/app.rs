@@ -154,6 +154,16 @@ impl ViewerApp {
         &mut self.roi_panel
     }
 
+    /// The deformation panel (its parameter form).
+    pub fn model_panel(&self) -> &ModelPanel {
+        &self.model_panel
+    }
+
+    /// Mutable access to the deformation panel (its parameter form).
+    pub fn model_panel_mut(&mut self) -> &mut ModelPanel {
+        &mut self.model_panel
+    }
+
     /// Queues a command to the session.
     pub fn send(&self, c: Command) {
         self.worker.send(c);

@@ -10,7 +10,11 @@
 //! - choosing another model in the combo box keeps the ROI maps;
 //! - a cut line drawn across the head, then a grab on one side, opens a
 //!   gap at the cut (air where the uncut tissue stays tissue);
-//! - a carve click turns the voxel under the brush centre to air.
+//! - a carve click turns the voxel under the brush centre to air;
+//! - the parameter form files a bad TOML text and the plugin's refusal
+//!   under their key, and Apply rebuilds the model;
+//! - a scene saved after a grab, run by `voxflex run`, gives the viewer's
+//!   volume.
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
@@ -438,4 +442,69 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     eprintln!("{moved} voxels moved; largest viewer/run difference {worst}");
     assert!(moved > 100, "the grab moved the volume ({moved} voxels)");
     assert!(worst <= 1.0, "largest voxel difference {worst} (units)");
+}
+
+/// The form's field for `key` of the model in use.
+fn form_field(h: &Harness<'static, ViewerApp>, key: &str) -> voxflex_viewer::param_form::Field {
+    let form = h.state().model_panel().form.as_ref().expect("a form");
+    form.fields
+        .iter()
+        .find(|f| f.spec.name == key)
+        .unwrap_or_else(|| panic!("no field {key}"))
+        .clone()
+}
+
+#[test]
+fn the_parameter_form_shows_problems_under_their_key_and_applies() {
+    use voxflex_viewer::param_form::FieldValue;
+    let mut h = open_phantom();
+    assert_eq!(
+        form_field(&h, "propagation_iterations").value,
+        FieldValue::Integer(10),
+        "the scene's value"
+    );
+    // Text that is not TOML: filed under the key as the user types.
+    h.get_by_role_and_label(egui::accesskit::Role::MultilineTextInput, "materials *")
+        .focus();
+    h.step();
+    h.event(Event::Text("}".into()));
+    h.run_steps(2);
+    let m = form_field(&h, "materials");
+    assert!(!m.issues.is_empty(), "{m:?}");
+    // A table the schema accepts but the plugin refuses: the session's
+    // error is filed under the key it names.
+    let bad = "[{ range = [-50, 300], constraint = 9.0 }]";
+    let panel = h.state_mut().model_panel_mut();
+    let form = panel.form.as_mut().unwrap();
+    let i = form
+        .fields
+        .iter()
+        .position(|f| f.spec.name == "materials")
+        .unwrap();
+    form.fields[i].value = FieldValue::Toml(bad.into());
+    form.check();
+    h.step();
+    h.get_by_label("Apply").click();
+    wait(&mut h, "the plugin's refusal under `materials`", |a| {
+        let f = a.model_panel().form.as_ref().unwrap();
+        f.fields
+            .iter()
+            .any(|f| f.spec.name == "materials" && !f.issues.is_empty())
+    });
+    // A good table: Apply rebuilds the model, which steps.
+    let good = "[{ range = [-50, 300], constraint = 0.5 }]";
+    let form = h.state_mut().model_panel_mut().form.as_mut().unwrap();
+    form.fields[i].value = FieldValue::Toml(good.into());
+    assert!(form.check(), "{:?}", form.fields[i].issues);
+    let (steps, errors) = (h.state().steps(), h.state().messages().len());
+    h.step();
+    h.get_by_label("Apply").click();
+    wait(&mut h, "the model rebuilt", |a| a.steps() > steps);
+    assert_eq!(
+        h.state().messages().len(),
+        errors,
+        "{:?}",
+        h.state().messages()
+    );
+    assert!(h.state().model_panel().params.contains("constraint = 0.5"));
 }
