@@ -397,3 +397,33 @@ fn an_opened_scene_takes_unscripted_carves_and_loads() {
     assert!(r.ran("map") && r.ran("resample"), "{r}");
     assert_eq!(s.versions().model, 1, "{:?}", s.versions());
 }
+
+/// The session records what its model received, at the model's frames, and
+/// starts over with a new model.
+#[test]
+fn the_session_records_the_interactions_its_model_received() {
+    let mut s = Session::from_volume(two_tone_cube(), defaults(BackendChoice::Cpu)).unwrap();
+    assert!(s.interactions_so_far().is_empty());
+    assert_eq!(s.model_frames(), None);
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    s.step().unwrap();
+    drag(&mut s, GRAB, 5.0);
+    s.interact(&Interaction::Release).unwrap();
+    s.step().unwrap();
+    let got = s.interactions_so_far();
+    assert_eq!(got.len(), 11);
+    // One grab before each of frames 1..=10, the release before frame 11.
+    let frames: Vec<u64> = got.iter().map(|a| a.frame).collect();
+    assert_eq!(frames, (1..=11).collect::<Vec<_>>());
+    assert!(got[9].toml.contains("kind = \"grab\"") && got[9].toml.contains("27.5"));
+    assert!(got[10].toml.contains("release"));
+    assert_eq!(s.model_frames(), Some(12));
+    let (plugin, params) = s.model_params().unwrap();
+    assert_eq!((plugin.as_str(), params.as_str()), ("chainmail", CHAINMAIL));
+    s.swap_model("chainmail", CHAINMAIL).unwrap();
+    assert!(
+        s.interactions_so_far().is_empty(),
+        "a new model starts over"
+    );
+    assert_eq!(s.model_frames(), Some(0));
+}

@@ -9,6 +9,7 @@ use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTim
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
+use crate::tools::{carve_again, cut_quad, half_extent_mm, slice_normal};
 use crate::view3d::view3d;
 use crate::window_level::{Preset, drag_window};
 use crate::worker::Worker;
@@ -37,6 +38,18 @@ struct GrabDrag {
     to: DVec3,
 }
 
+/// A cut line being drawn on slice view `view`: from `from` to `to`
+/// (world mm).
+#[derive(Clone, Copy, Debug)]
+struct CutDrag {
+    view: usize,
+    from: DVec3,
+    to: DVec3,
+}
+
+/// Carve brush radius range, mm.
+const BRUSH_MM: std::ops::RangeInclusive<f64> = 1.0..=50.0;
+
 /// The viewer.
 pub struct ViewerApp {
     worker: Worker,
@@ -60,6 +73,15 @@ pub struct ViewerApp {
     last_step: Option<StepReport>,
     steps: u64,
     grab: Option<GrabDrag>,
+    cut: Option<CutDrag>,
+    /// Carve brush radius, mm.
+    brush_mm: f64,
+    /// Where the carve stroke last carved (world mm).
+    last_carve: Option<DVec3>,
+    /// File → Save scene's path.
+    save_scene_path: String,
+    /// File → Save volume's path.
+    save_volume_path: String,
     last_drag: Option<Instant>,
     wheel: [f32; 3],
     sent: Option<ViewRequest>,
@@ -103,6 +125,11 @@ impl ViewerApp {
             last_step: None,
             steps: 0,
             grab: None,
+            cut: None,
+            brush_mm: 8.0,
+            last_carve: None,
+            save_scene_path: "viewer-scene.toml".into(),
+            save_volume_path: "viewer-volume.nii.gz".into(),
             last_drag: None,
             wheel: [0.0; 3],
             sent: None,
@@ -125,6 +152,16 @@ impl ViewerApp {
     /// save folder).
     pub fn roi_panel_mut(&mut self) -> &mut RoiPanel {
         &mut self.roi_panel
+    }
+
+    /// The deformation panel (its parameter form).
+    pub fn model_panel(&self) -> &ModelPanel {
+        &self.model_panel
+    }
+
+    /// Mutable access to the deformation panel (its parameter form).
+    pub fn model_panel_mut(&mut self) -> &mut ModelPanel {
+        &mut self.model_panel
     }
 
     /// Queues a command to the session.
@@ -234,7 +271,8 @@ impl ViewerApp {
                     self.rois = r;
                     self.renders_at_rois = self.renders;
                 }
-                Reply::Model(m) => self.model_panel.current = Some(m),
+                Reply::Model(m) => self.model_panel.set_current(m),
+                Reply::ModelError(e) => self.model_panel.model_error(&e),
                 Reply::Step(r) => {
                     self.steps += 1;
                     self.last_step = Some(r);
@@ -258,7 +296,7 @@ impl ViewerApp {
             ..o.camera
         });
         self.model_panel.models = o.models.clone();
-        self.model_panel.current = o.model.clone();
+        self.model_panel.schemas = o.schemas.clone();
         self.model_panel.adapter = o.adapter.clone();
         if let Some(m) = &o.model {
             self.model_panel.params = o
@@ -267,6 +305,7 @@ impl ViewerApp {
                 .find(|(n, _)| n == m)
                 .map(|(_, p)| p.clone())
                 .unwrap_or_default();
+            self.model_panel.set_current(m.clone());
         }
         if let Some(p) = self.startup_seed {
             self.cursor = p;
@@ -352,11 +391,21 @@ impl ViewerApp {
                 .opened
                 .as_ref()
                 .map_or("opening…".into(), |o| o.title.clone());
+            ui.menu_button("File", |ui| self.file_menu(ui));
             ui.strong(title);
             ui.separator();
             ui.selectable_value(&mut self.mode, ClickMode::Cursor, "Cursor");
             ui.selectable_value(&mut self.mode, ClickMode::SeedRoi, "Seed ROI");
             ui.selectable_value(&mut self.mode, ClickMode::Grab, "Grab");
+            ui.selectable_value(&mut self.mode, ClickMode::Cut, "Cut");
+            ui.selectable_value(&mut self.mode, ClickMode::Carve, "Carve");
+            if self.mode == ClickMode::Carve {
+                ui.add(
+                    egui::Slider::new(&mut self.brush_mm, BRUSH_MM)
+                        .suffix(" mm")
+                        .text("brush"),
+                );
+            }
             ui.separator();
             let before = self.preset;
             egui::ComboBox::from_label("Window")
@@ -376,6 +425,28 @@ impl ViewerApp {
                 self.window.level, self.window.width
             ));
         });
+    }
+
+    /// File → Save scene / Save volume, each to the path typed above it.
+    fn file_menu(&mut self, ui: &mut egui::Ui) {
+        for (what, path) in [
+            ("Save scene", &mut self.save_scene_path),
+            ("Save volume", &mut self.save_volume_path),
+        ] {
+            ui.horizontal(|ui| {
+                let label = ui.label(format!("{what} to"));
+                ui.text_edit_singleline(path).labelled_by(label.id);
+            });
+            if ui.button(what).clicked() {
+                let p = std::path::PathBuf::from(path.as_str());
+                self.worker.send(if what == "Save scene" {
+                    Command::SaveScene(p)
+                } else {
+                    Command::SaveVolume(p)
+                });
+                ui.close();
+            }
+        }
     }
 
     fn status(&mut self, ui: &mut egui::Ui) {
@@ -412,7 +483,14 @@ impl ViewerApp {
             let mut child =
                 ui.new_child(egui::UiBuilder::new().max_rect(cell).id_salt(("slice", n)));
             let input = match (&self.slices, &self.slice_tex[n]) {
-                (Some(s), Some(tex)) => slice_view(&mut child, &s[n], tex, self.cursor, self.mode),
+                (Some(s), Some(tex)) => slice_view(
+                    &mut child,
+                    &s[n],
+                    tex,
+                    self.cursor,
+                    self.mode,
+                    self.brush_mm,
+                ),
                 _ => {
                     child.label("loading…");
                     SliceInput::default()
@@ -446,6 +524,63 @@ impl ViewerApp {
                 run_to_end: false,
             });
         }
+        match self.mode {
+            ClickMode::Cut => self.on_cut(n, &input),
+            ClickMode::Carve => self.on_carve(&input),
+            _ => self.on_grab(&input),
+        }
+        self.on_slice_wheel_and_window(n, &input);
+    }
+
+    /// A cut line: sent as the quad through it across the volume when the
+    /// drag ends.
+    fn on_cut(&mut self, n: usize, input: &SliceInput) {
+        if let Some(from) = input.grab_start {
+            self.cut = Some(CutDrag {
+                view: n,
+                from,
+                to: from,
+            });
+        }
+        if let (Some(to), Some(c)) = (input.grab_to, &mut self.cut) {
+            c.to = to;
+        }
+        if !input.drag_end {
+            return;
+        }
+        let (Some(c), Some(slices), Some(o)) = (self.cut.take(), &self.slices, &self.opened) else {
+            return;
+        };
+        if (c.to - c.from).length() < 1e-3 {
+            return;
+        }
+        let normal = slice_normal(&slices[c.view]);
+        let polygon = cut_quad(c.from, c.to, normal, half_extent_mm(&o.grid));
+        self.worker.send(Command::Cut { polygon });
+    }
+
+    /// A carve click or stroke: a ball at the click, and along the drag
+    /// every half radius.
+    fn on_carve(&mut self, input: &SliceInput) {
+        if input.grab_start.is_some() {
+            self.last_carve = None;
+        }
+        let at = input.carve_click.or(input.grab_to);
+        if let Some(p) = at
+            && (input.carve_click.is_some() || carve_again(self.last_carve, p, self.brush_mm))
+        {
+            self.last_carve = Some(p);
+            self.worker.send(Command::Carve {
+                centre: p.to_array(),
+                radius: self.brush_mm,
+            });
+        }
+        if input.drag_end {
+            self.last_carve = None;
+        }
+    }
+
+    fn on_grab(&mut self, input: &SliceInput) {
         if let Some(point) = input.grab_start {
             self.grab = Some(GrabDrag { point, to: point });
         }
@@ -458,6 +593,9 @@ impl ViewerApp {
                 to: to.to_array(),
             });
         }
+    }
+
+    fn on_slice_wheel_and_window(&mut self, n: usize, input: &SliceInput) {
         if let Some(d) = input.window_drag {
             self.window = drag_window(self.window, d.x, d.y);
         }

@@ -5,6 +5,7 @@ use anyhow::Context;
 use std::path::{Path, PathBuf};
 use voxflex_core::camera::Camera;
 use voxflex_runtime::backend::BackendChoice;
+use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::scene::Scene;
 use voxflex_runtime::session::{RenderParams, Session, SessionDefaults, SessionSource};
 use voxflex_runtime::visualise::camera_for;
@@ -129,5 +130,16 @@ pub fn deformation_models(session: &Session, scene: &Scene) -> Vec<(String, Stri
                 .unwrap_or_default();
             (p.plugin.name, params)
         })
+        .collect()
+}
+
+/// Each deformation plugin's parameter schema on the session's search path.
+pub fn deformation_schemas(session: &Session) -> Vec<(String, ParamSchema)> {
+    session
+        .plugins()
+        .plugins
+        .into_iter()
+        .filter(|p| p.loads && p.plugin.deformation.is_some())
+        .map(|p| (p.plugin.name, p.plugin.params))
         .collect()
 }

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 use voxflex_core::camera::Camera;
 use voxflex_core::grid::Grid;
+use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::session::{
     GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport, Window,
 };
@@ -68,12 +69,29 @@ pub enum Command {
         /// Target, world mm.
         to: [f64; 3],
     },
+    /// Cut along a planar polygon (world mm), then step.
+    Cut {
+        /// Corners, world mm.
+        polygon: Vec<[f64; 3]>,
+    },
+    /// Remove the tissue inside a ball, then step.
+    Carve {
+        /// Centre, world mm.
+        centre: [f64; 3],
+        /// Radius, mm.
+        radius: f64,
+    },
     /// Let go of everything grabbed, then step.
     Release,
     /// Put the model back at rest (same plugin and parameters) and step.
     Reset,
     /// Run one more step (a model still settling).
     Step,
+    /// Write the session's state as a scene `voxflex run` replays (File →
+    /// Save scene).
+    SaveScene(PathBuf),
+    /// Write the current (deformed) volume as NIfTI (`.nii`, `.nii.gz`).
+    SaveVolume(PathBuf),
     /// Stop the worker.
     Quit,
 }
@@ -93,6 +111,8 @@ pub struct Opened {
     /// Deformation plugins on the search path, with the parameters the
     /// scene gives each (empty when none).
     pub models: Vec<(String, String)>,
+    /// Each deformation plugin's parameter schema.
+    pub schemas: Vec<(String, ParamSchema)>,
     /// The model in use, if any.
     pub model: Option<String>,
     /// The adapter computing (`cpu` or a GPU's name).
@@ -150,6 +170,8 @@ pub enum Reply {
     Rois(Vec<RoiRow>),
     /// The model now in use.
     Model(String),
+    /// The session refused a model's parameters (the message names the key).
+    ModelError(String),
     /// What the last step did.
     Step(StepReport),
     /// Per-stage times from the session's metrics.

@@ -17,6 +17,18 @@ pub enum ClickMode {
     SeedRoi,
     /// Grab the tissue at the point and drag it in the view plane.
     Grab,
+    /// Drag a line: the tissue is cut by the plane through it,
+    /// perpendicular to the slice.
+    Cut,
+    /// Click or drag a ball brush that removes the tissue under it.
+    Carve,
+}
+
+impl ClickMode {
+    /// The modes whose primary drag is a tool stroke, not a cursor move.
+    pub fn is_tool(self) -> bool {
+        matches!(self, Self::Grab | Self::Cut | Self::Carve)
+    }
 }
 
 /// What the user did on a slice view this frame.
@@ -28,10 +40,14 @@ pub struct SliceInput {
     pub cursor: Option<DVec3>,
     /// Seed an ROI map here (world mm).
     pub seed: Option<DVec3>,
-    /// A grab drag started at this point (world mm).
+    /// A tool drag (grab, cut, carve) started at this point (world mm).
     pub grab_start: Option<DVec3>,
-    /// The grab drag's pointer is here now (world mm, in the view plane).
+    /// The tool drag's pointer is here now (world mm, in the view plane).
     pub grab_to: Option<DVec3>,
+    /// The tool drag ended this frame.
+    pub drag_end: bool,
+    /// A click in carve mode (world mm).
+    pub carve_click: Option<DVec3>,
     /// Slices to move through (wheel; + towards the axis' far end).
     pub wheel: f32,
     /// A window/level drag (secondary button), points.
@@ -76,6 +92,7 @@ pub fn slice_view(
     tex: &TextureHandle,
     cursor: DVec3,
     mode: ClickMode,
+    brush_mm: f64,
 ) -> SliceInput {
     let avail = ui.available_rect_before_wrap();
     let (_, response) = ui.allocate_exact_size(avail.size(), Sense::click_and_drag());
@@ -102,6 +119,7 @@ pub fn slice_view(
     {
         match (mode, ctrl) {
             (ClickMode::SeedRoi, _) | (_, true) => out.seed = Some(world_at(p)),
+            (ClickMode::Carve, _) => out.carve_click = Some(world_at(p)),
             _ => {}
         }
         out.cursor = Some(world_at(p));
@@ -110,15 +128,29 @@ pub fn slice_view(
         && let Some(p) = pos
     {
         out.dragging = true;
-        if mode == ClickMode::Grab {
+        if mode.is_tool() {
+            let origin = ui.input(|i| i.pointer.press_origin()).unwrap_or(p);
             if response.drag_started() {
-                let origin = ui.input(|i| i.pointer.press_origin()).unwrap_or(p);
                 out.grab_start = Some(world_at(origin));
             }
             out.grab_to = Some(world_at(p));
+            if mode == ClickMode::Cut {
+                painter.line_segment([origin, p], Stroke::new(2.0, Color32::RED));
+            }
         } else if rect.contains(p) {
             out.cursor = Some(world_at(p));
         }
+    }
+    if response.drag_stopped_by(PointerButton::Primary) && mode.is_tool() {
+        out.drag_end = true;
+    }
+    if mode == ClickMode::Carve
+        && let Some(p) = response.hover_pos()
+    {
+        let [pw, _] = frame.slice.pixel_mm();
+        let px_per_mm = rect.width() as f64 / (frame.slice.image.width as f64 * pw);
+        let r = (brush_mm * px_per_mm) as f32;
+        painter.circle_stroke(p, r, Stroke::new(1.5, Color32::from_rgb(255, 120, 0)));
     }
     if response.dragged_by(PointerButton::Secondary) {
         out.dragging = true;

@@ -5,17 +5,21 @@
 
 use crate::compose::compose_slice;
 use crate::open::{
-    OpenRequest, OpenedSession, deformation_models, first_camera, open, render_params,
+    OpenRequest, OpenedSession, deformation_models, deformation_schemas, first_camera, open,
+    render_params,
 };
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
+use crate::scene_file::{SessionState, scene_text, write_atomic};
 use anyhow::Context;
 use std::collections::HashMap;
+use std::path::PathBuf;
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use voxflex_core::camera::Camera;
 use voxflex_core::glam::DVec3;
+use voxflex_runtime::scene::Scene;
 use voxflex_runtime::session::{
     GrowthReport, Interaction, RenderParams, RoiId, Seed, Session, StepReport,
 };
@@ -103,6 +107,11 @@ struct State {
     last_growth: HashMap<RoiId, (GrowthReport, Duration)>,
     model: Option<(String, String)>,
     render: RenderParams,
+    /// The scene opened (the built-in one for a volume file): the base of
+    /// a saved scene.
+    scene: Scene,
+    /// The volume file opened without a scene.
+    volume_file: Option<PathBuf>,
 }
 
 impl State {
@@ -116,6 +125,7 @@ impl State {
             title,
             scene_opened,
         } = opened;
+        let volume_file = req.input.clone().filter(|_| !scene_opened);
         let models = deformation_models(&session, &scene);
         // A volume file has no model until one is chosen.
         let model = scene.model.as_ref().filter(|_| scene_opened).map(|m| {
@@ -131,6 +141,7 @@ impl State {
             value_range,
             camera,
             models,
+            schemas: deformation_schemas(&session),
             model: model.as_ref().map(|(n, _)| n.clone()),
             adapter: session.adapter_name(),
         })));
@@ -141,6 +152,8 @@ impl State {
             last_growth: HashMap::new(),
             model,
             render,
+            scene,
+            volume_file,
         })
     }
 
@@ -196,7 +209,10 @@ impl State {
                 let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
             }
             Command::SwapModel { plugin, params } => {
-                s.swap_model(&plugin, &params)?;
+                if let Err(e) = s.swap_model(&plugin, &params) {
+                    let _ = out.send(Reply::ModelError(e.to_string()));
+                    return Err(e.into());
+                }
                 self.model = Some((plugin.clone(), params));
                 let _ = out.send(Reply::Model(plugin));
                 self.step(ch, out)?;
@@ -207,6 +223,14 @@ impl State {
                     to,
                     frames: 1,
                 })?;
+                self.step(ch, out)?;
+            }
+            Command::Cut { polygon } => {
+                s.interact(&Interaction::Cut { polygon })?;
+                self.step(ch, out)?;
+            }
+            Command::Carve { centre, radius } => {
+                s.interact(&Interaction::CarveBall { centre, radius })?;
                 self.step(ch, out)?;
             }
             Command::Release => {
@@ -222,6 +246,17 @@ impl State {
                 self.step(ch, out)?;
             }
             Command::Step => self.step(ch, out)?,
+            Command::SaveScene(path) => {
+                let state = SessionState::of(s);
+                let text = scene_text(&self.scene, self.volume_file.as_deref(), &state)?;
+                write_atomic(&path, &text)?;
+                let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
+            }
+            Command::SaveVolume(path) => {
+                voxflex_io::write_volume(&path, s.volume()?.view())
+                    .with_context(|| format!("writing {}", path.display()))?;
+                let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
+            }
             Command::Quit => {}
         }
         Ok(())

@@ -7,7 +7,14 @@
 //!   grows it; the map is non-empty and the 3D image changes;
 //! - a grab-drag on a slice moves the resampled volume (the voxel value at
 //!   a point next to the ventricle changes);
-//! - choosing another model in the combo box keeps the ROI maps.
+//! - choosing another model in the combo box keeps the ROI maps;
+//! - a cut line drawn across the head, then a grab on one side, opens a
+//!   gap at the cut (air where the uncut tissue stays tissue);
+//! - a carve click turns the voxel under the brush centre to air;
+//! - the parameter form files a bad TOML text and the plugin's refusal
+//!   under their key, and Apply rebuilds the model;
+//! - a scene saved after a grab, run by `voxflex run`, gives the viewer's
+//!   volume.
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
@@ -19,6 +26,7 @@ use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::session::Seed;
 use voxflex_viewer::app::ViewerApp;
 use voxflex_viewer::open::OpenRequest;
+use voxflex_viewer::protocol::Command;
 use voxflex_viewer::protocol::SliceFrame;
 use voxflex_viewer::screenshot::Screenshot;
 
@@ -258,4 +266,245 @@ fn the_sliders_regrow_the_selected_map_and_save_writes_it() {
     });
     let bytes = std::fs::read(&path).unwrap();
     assert_eq!(&bytes[..2], &[0x1f, 0x8b], "gzip-compressed NIfTI");
+}
+
+/// A primary drag on axial view from world point `from` to `to` (mm), in
+/// ten moves.
+fn drag_axial(h: &mut Harness<'static, ViewerApp>, from: DVec3, to: DVec3) {
+    let (a, b) = (screen_of(h, 0, from), screen_of(h, 0, to));
+    h.hover_at(a);
+    h.step();
+    press(h, a, true, Modifiers::NONE);
+    h.step();
+    for s in 1..=10 {
+        h.hover_at(a + (b - a) * (s as f32 / 10.0));
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    press(h, b, false, Modifiers::NONE);
+    h.step();
+}
+
+/// The probe's value after pulling the left half of the brain 20 mm to
+/// the left (−x), with or without a cut first along x = 0 across the
+/// whole axial slice.
+fn pull_left_half(cut_first: bool) -> f32 {
+    let mut h = open_phantom();
+    // Just right of the cut line, in brain, away from the ventricles.
+    let probe = DVec3::new(-2.0, 40.0, 15.0);
+    let value = put_cursor(&mut h, probe);
+    assert!((value - 30.0).abs() < 1.0, "brain at the probe: {value}");
+    if cut_first {
+        h.get_by_label("Cut").click();
+        h.step();
+        let steps = h.state().steps();
+        drag_axial(
+            &mut h,
+            DVec3::new(0.0, -118.0, 15.0),
+            DVec3::new(0.0, 118.0, 15.0),
+        );
+        wait(&mut h, "the step after the cut", |a| a.steps() > steps);
+        assert!(
+            h.state().messages().iter().all(|m| !m.starts_with("error")),
+            "{:?}",
+            h.state().messages()
+        );
+    }
+    h.get_by_label("Grab").click();
+    h.step();
+    let steps = h.state().steps();
+    drag_axial(
+        &mut h,
+        DVec3::new(-30.0, 40.0, 15.0),
+        DVec3::new(-50.0, 40.0, 15.0),
+    );
+    // A busy worker coalesces a drag's targets (the last one counts), so
+    // the drag may take fewer steps than moves.
+    wait(&mut h, "the steps of the grab", |a| a.steps() > steps);
+    // Let the model settle a few frames.
+    for _ in 0..5 {
+        let steps = h.state().steps();
+        h.get_by_label("Step").click();
+        wait(&mut h, "a step", |a| a.steps() > steps);
+    }
+    h.state().cursor_value()
+}
+
+#[test]
+fn a_cut_then_a_grab_opens_a_gap_across_the_cut_line() {
+    let joined = pull_left_half(false);
+    let cut = pull_left_half(true);
+    eprintln!("probe value after the pull: uncut {joined}, cut {cut}");
+    // Uncut, the tissue at the probe stretches and stays tissue; cut, the
+    // left half pulls away and the probe lies in the gap (air, −1000).
+    assert!(joined > -500.0, "uncut: tissue at the probe, got {joined}");
+    assert!(cut < -500.0, "cut: the gap at the probe, got {cut}");
+}
+
+#[test]
+fn a_carve_click_removes_the_tissue_under_the_brush() {
+    let mut h = open_phantom();
+    let grid = h.state().opened().expect("opened").grid;
+    let air = put_cursor(&mut h, grid.index_to_world(DVec3::ZERO));
+    let value = put_cursor(&mut h, BRAIN);
+    assert!((value - 30.0).abs() < 1.0, "brain at {BRAIN}: {value}");
+    h.get_by_label("Carve").click();
+    h.step();
+    let pos = screen_of(&h, 0, BRAIN);
+    click(&mut h, pos, Modifiers::NONE);
+    wait(&mut h, "the carved volume at the brush centre", |a| {
+        (a.cursor_value() - air).abs() < 1.0
+    });
+}
+
+/// The `voxflex` binary next to the plugins (`cargo build` puts it there).
+fn voxflex_bin() -> PathBuf {
+    let bin = plugin_dir().join(format!("voxflex{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        bin.is_file(),
+        "{} is not built: run `cargo build` first",
+        bin.display()
+    );
+    bin
+}
+
+fn read(path: &std::path::Path) -> voxflex_core::volume::Volume {
+    voxflex_io::read_volume(path, &voxflex_io::ReadOptions::default())
+        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
+}
+
+#[test]
+fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
+    let mut h = open_phantom();
+    put_cursor(&mut h, DVec3::new(-2.0, 40.0, 15.0));
+    h.get_by_label("Grab").click();
+    h.step();
+    let steps = h.state().steps();
+    drag_axial(
+        &mut h,
+        DVec3::new(-30.0, 40.0, 15.0),
+        DVec3::new(-45.0, 30.0, 15.0),
+    );
+    // Coalesced targets: at least one step; Release queues after them all.
+    wait(&mut h, "the steps of the grab", |a| a.steps() > steps);
+    h.get_by_label("Release").click();
+    let steps = h.state().steps();
+    wait(&mut h, "the step after the release", |a| a.steps() > steps);
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("saved.toml");
+    let mine = dir.path().join("viewer.nii.gz");
+    h.state().send(Command::SaveScene(scene.clone()));
+    h.state().send(Command::SaveVolume(mine.clone()));
+    wait(&mut h, "both files", |a| {
+        a.messages()
+            .iter()
+            .filter(|m| m.starts_with("wrote"))
+            .count()
+            == 2
+    });
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(text.contains("kind = \"grab\""), "{text}");
+    let out = dir.path().join("out");
+    let run = std::process::Command::new(voxflex_bin())
+        .arg("run")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .env("VOXFLEX_PLUGIN_PATH", plugin_dir())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "voxflex run {}: {}\n{text}",
+        scene.display(),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (a, b) = (read(&mine), read(&out.join("deformed.nii.gz")));
+    assert_eq!(a.grid.dims, b.grid.dims);
+    let source = voxflex_runtime::session::Session::open(
+        &voxflex_runtime::scene::Scene::parse(&text, &scene).unwrap(),
+    )
+    .unwrap()
+    .volume()
+    .unwrap()
+    .clone();
+    let (mut worst, mut moved) = (0.0f32, 0);
+    let [nx, ny, nz] = a.grid.dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let x = a.get_f32(i, j, k);
+                worst = worst.max((x - b.get_f32(i, j, k)).abs());
+                moved += usize::from(x != source.get_f32(i, j, k));
+            }
+        }
+    }
+    eprintln!("{moved} voxels moved; largest viewer/run difference {worst}");
+    assert!(moved > 100, "the grab moved the volume ({moved} voxels)");
+    assert!(worst <= 1.0, "largest voxel difference {worst} (units)");
+}
+
+/// The form's field for `key` of the model in use.
+fn form_field(h: &Harness<'static, ViewerApp>, key: &str) -> voxflex_viewer::param_form::Field {
+    let form = h.state().model_panel().form.as_ref().expect("a form");
+    form.fields
+        .iter()
+        .find(|f| f.spec.name == key)
+        .unwrap_or_else(|| panic!("no field {key}"))
+        .clone()
+}
+
+#[test]
+fn the_parameter_form_shows_problems_under_their_key_and_applies() {
+    use voxflex_viewer::param_form::FieldValue;
+    let mut h = open_phantom();
+    assert_eq!(
+        form_field(&h, "propagation_iterations").value,
+        FieldValue::Integer(10),
+        "the scene's value"
+    );
+    // Text that is not TOML: filed under the key as the user types.
+    h.get_by_role_and_label(egui::accesskit::Role::MultilineTextInput, "materials *")
+        .focus();
+    h.step();
+    h.event(Event::Text("}".into()));
+    h.run_steps(2);
+    let m = form_field(&h, "materials");
+    assert!(!m.issues.is_empty(), "{m:?}");
+    // A table the schema accepts but the plugin refuses: the session's
+    // error is filed under the key it names.
+    let bad = "[{ range = [-50, 300], constraint = 9.0 }]";
+    let panel = h.state_mut().model_panel_mut();
+    let form = panel.form.as_mut().unwrap();
+    let i = form
+        .fields
+        .iter()
+        .position(|f| f.spec.name == "materials")
+        .unwrap();
+    form.fields[i].value = FieldValue::Toml(bad.into());
+    form.check();
+    h.step();
+    h.get_by_label("Apply").click();
+    wait(&mut h, "the plugin's refusal under `materials`", |a| {
+        let f = a.model_panel().form.as_ref().unwrap();
+        f.fields
+            .iter()
+            .any(|f| f.spec.name == "materials" && !f.issues.is_empty())
+    });
+    // A good table: Apply rebuilds the model, which steps.
+    let good = "[{ range = [-50, 300], constraint = 0.5 }]";
+    let form = h.state_mut().model_panel_mut().form.as_mut().unwrap();
+    form.fields[i].value = FieldValue::Toml(good.into());
+    assert!(form.check(), "{:?}", form.fields[i].issues);
+    let (steps, errors) = (h.state().steps(), h.state().messages().len());
+    h.step();
+    h.get_by_label("Apply").click();
+    wait(&mut h, "the model rebuilt", |a| a.steps() > steps);
+    assert_eq!(
+        h.state().messages().len(),
+        errors,
+        "{:?}",
+        h.state().messages()
+    );
+    assert!(h.state().model_panel().params.contains("constraint = 0.5"));
 }

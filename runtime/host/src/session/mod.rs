@@ -71,6 +71,7 @@ mod versions;
 pub use defaults::SessionDefaults;
 pub use interaction::Interaction;
 pub use model_call::ModelCall;
+pub use model_stage::AppliedInteraction;
 pub use plugins::ScenePlugins;
 pub use report::{StageOutcome, StepReport};
 pub use roi::{RoiId, RoiInfo};
@@ -560,6 +561,10 @@ impl Session {
             .map_err(ModelCall::Interact.failed())?;
         let kind = InteractionSpec::from_toml(&text).map(|s| s.kind());
         self.topology_changed |= matches!(kind, Ok("cut" | "carve"));
+        m.received.push(AppliedInteraction {
+            frame: m.frame,
+            toml: text,
+        });
         self.pending_interaction += t.elapsed();
         Ok(())
     }
@@ -977,6 +982,32 @@ impl Session {
     /// The stage versions.
     pub fn versions(&self) -> Versions {
         self.versions
+    }
+
+    /// The interactions the current model received so far (since
+    /// [`Self::swap_model`] built it), in order, each with the frame of the
+    /// model's clock it came before: a scene with these as
+    /// `[[interaction]]` tables and [`Self::model_frames`] frames makes
+    /// `voxflex run` step the model through the same inputs. Empty without
+    /// a model.
+    pub fn interactions_so_far(&self) -> Vec<AppliedInteraction> {
+        self.model
+            .as_ref()
+            .map(|m| m.received.clone())
+            .unwrap_or_default()
+    }
+
+    /// Frames the current model has stepped (its own clock; `None`
+    /// without a model).
+    pub fn model_frames(&self) -> Option<u64> {
+        self.model.as_ref().map(|m| m.frame)
+    }
+
+    /// The current model's plugin name and parameters (TOML text).
+    pub fn model_params(&self) -> Option<(String, String)> {
+        self.model
+            .as_ref()
+            .map(|m| (m.plugin.name.clone(), m.params_toml.clone()))
     }
 
     /// The next frame the model steps (the number of steps so far).

@@ -101,6 +101,21 @@ pub(crate) struct ModelStage {
     pub(crate) source_grid: Grid,
     /// The model's own clock: frames it has stepped (0 when created).
     pub(crate) frame: u64,
+    /// The interactions it received, each with the frame of its clock it
+    /// was received before (see [`super::Session::interactions_so_far`]).
+    pub(crate) received: Vec<AppliedInteraction>,
+}
+
+/// An interaction a session's model received: what a scene's
+/// `[[interaction]]` table with `frame` replays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AppliedInteraction {
+    /// The model's frame (from 0, its own clock) the interaction was
+    /// received before: the scene's `frame` key.
+    pub frame: u64,
+    /// The interaction as the plugin received it (scene TOML, without
+    /// `frame`).
+    pub toml: String,
 }
 
 impl ModelStage {
@@ -142,6 +157,7 @@ impl ModelStage {
             mask: None,
             source_grid: source.grid,
             frame: 0,
+            received: vec![],
         })
     }
 
