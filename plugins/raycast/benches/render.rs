@@ -19,7 +19,9 @@
 //! 142 ms, MIP 130 ms per frame. After (partial-volume phantom, Sobel
 //! default, macro-cell halo), 2026-12-02 under load average 3–5 (so about
 //! 2× a quiet machine; compare rows within a run): ct-bone 142 ms,
-//! `_central` 118 ms, `_tricubic` 609 ms, ct-soft-tissue 390 ms, MIP 273 ms.
+//! `_central` 118 ms, `_tricubic` 609 ms, ct-soft-tissue 390 ms, MIP 273 ms;
+//! near-quiet (load 0.2–1.3) the same evening: ct-bone 63.4 ms, `_central`
+//! 50.9 ms, `_tricubic` 253 ms, ct-soft-tissue 184 ms, MIP 127 ms.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
