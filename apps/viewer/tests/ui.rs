@@ -285,6 +285,18 @@ fn drag_axial(h: &mut Harness<'static, ViewerApp>, from: DVec3, to: DVec3) {
     h.step();
 }
 
+/// Grab mode, a drag on the axial view from `from` to `to` (mm), and a
+/// wait for the model to step. A busy worker coalesces a drag's targets
+/// (the last one counts), so the drag may take fewer steps than moves: at
+/// least one; anything queued next (a Release) comes after them all.
+fn grab_drag_axial(h: &mut Harness<'static, ViewerApp>, from: DVec3, to: DVec3) {
+    h.get_by_label("Grab").click();
+    h.step();
+    let steps = h.state().steps();
+    drag_axial(h, from, to);
+    wait(h, "the steps of the grab", |a| a.steps() > steps);
+}
+
 /// The probe's value after pulling the left half of the brain 20 mm to
 /// the left (−x), with or without a cut first along x = 0 across the
 /// whole axial slice.
@@ -310,17 +322,11 @@ fn pull_left_half(cut_first: bool) -> f32 {
             h.state().messages()
         );
     }
-    h.get_by_label("Grab").click();
-    h.step();
-    let steps = h.state().steps();
-    drag_axial(
+    grab_drag_axial(
         &mut h,
         DVec3::new(-30.0, 40.0, 15.0),
         DVec3::new(-50.0, 40.0, 15.0),
     );
-    // A busy worker coalesces a drag's targets (the last one counts), so
-    // the drag may take fewer steps than moves.
-    wait(&mut h, "the steps of the grab", |a| a.steps() > steps);
     // Let the model settle a few frames.
     for _ in 0..5 {
         let steps = h.state().steps();
@@ -377,16 +383,11 @@ fn read(path: &std::path::Path) -> voxflex_core::volume::Volume {
 fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     let mut h = open_phantom();
     put_cursor(&mut h, DVec3::new(-2.0, 40.0, 15.0));
-    h.get_by_label("Grab").click();
-    h.step();
-    let steps = h.state().steps();
-    drag_axial(
+    grab_drag_axial(
         &mut h,
         DVec3::new(-30.0, 40.0, 15.0),
         DVec3::new(-45.0, 30.0, 15.0),
     );
-    // Coalesced targets: at least one step; Release queues after them all.
-    wait(&mut h, "the steps of the grab", |a| a.steps() > steps);
     h.get_by_label("Release").click();
     let steps = h.state().steps();
     wait(&mut h, "the step after the release", |a| a.steps() > steps);
