@@ -155,6 +155,31 @@ pub(super) struct GrabProblem<'a> {
     pub quick: bool,
 }
 
+impl<'a> GrabProblem<'a> {
+    /// The fronts' grab: the end face moved half the beam's depth in −z,
+    /// dynamic runs settling for up to 600 frames.
+    pub fn half_depth(
+        beam: &'a Beam,
+        quick: bool,
+        mesh_materials: &'a str,
+        chainmail_materials: &'a str,
+    ) -> Self {
+        Self {
+            beam,
+            by: DVec3::new(0.0, 0.0, -0.5 * beam.m as f64),
+            settle: beam.settle(quick, 600),
+            mesh_materials,
+            chainmail_materials,
+            quick,
+        }
+    }
+}
+
+/// The largest displacement of a solve, mm.
+pub(super) fn largest(u: &[DVec3]) -> f64 {
+    u.iter().map(|d| d.length()).fold(0.0, f64::max)
+}
+
 /// A run of the grab on `volume` (the beam's, or the same body's on finer
 /// voxels), tracking `points` (world mm).
 pub(super) fn grab_scene<'a>(
@@ -373,18 +398,11 @@ fn downsamples(quick: bool) -> &'static [usize] {
 /// The grab front.
 pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
     let beam = Beam::new(quick);
-    let problem = GrabProblem {
-        beam: &beam,
-        by: DVec3::new(0.0, 0.0, -0.5 * beam.m as f64),
-        settle: beam.settle(quick, 600),
-        mesh_materials: MATERIAL_MESH,
-        chainmail_materials: MATERIAL_CHAINMAIL,
-        quick,
-    };
+    let problem = GrabProblem::half_depth(&beam, quick, MATERIAL_MESH, MATERIAL_CHAINMAIL);
     let (m, l, w, by) = (beam.m, beam.length, beam.width, -problem.by.z);
     let defaults = defaults(plugins, &problem)?;
     let reference = fine_solve(plugins, &problem, &beam, "p1", 1)?;
-    let ref_max = reference.u.iter().map(|d| d.length()).fold(0.0, f64::max);
+    let ref_max = largest(&reference.u);
     let models: Vec<&ModelSpec> = MESH_MODELS.iter().collect();
     let (out, default_rows) = rows(plugins, &problem, &models, &defaults, &reference.u, &[])?;
     let settle = problem.settle;

@@ -24,7 +24,6 @@ use super::beam::{
 use super::grab::{self, GrabProblem, MESH_MODELS, ModelSpec};
 use super::runner::Plugins;
 use crate::bench::BenchError;
-use voxflex_core::glam::DVec3;
 
 /// Voxel size (mm) of the convergence check's label volume.
 const CHECK_SPACING: f64 = 0.5;
@@ -35,21 +34,15 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
     let inclusion = beam
         .inclusion
         .ok_or_else(|| BenchError("the two-material beam has no inclusion".into()))?;
-    let problem = GrabProblem {
-        beam: &beam,
-        by: DVec3::new(0.0, 0.0, -0.5 * beam.m as f64),
-        settle: beam.settle(quick, 600),
-        mesh_materials: MATERIALS_TWO_MESH,
-        chainmail_materials: MATERIALS_TWO_CHAINMAIL,
-        quick,
-    };
+    let problem =
+        GrabProblem::half_depth(&beam, quick, MATERIALS_TWO_MESH, MATERIALS_TWO_CHAINMAIL);
     let (m, l, w, by) = (beam.m, beam.length, beam.width, -problem.by.z);
     let defaults = grab::defaults(plugins, &problem)?;
     let reference = grab::fine_solve(plugins, &problem, &beam, "p2", 1)?;
     let fine = Beam::two_material(quick, CHECK_SPACING);
     let check = grab::fine_solve(plugins, &problem, &fine, "p1", 1)?;
     let (gap, gap_max) = grab::errors(&check.u, &reference.u);
-    let ref_max = reference.u.iter().map(|d| d.length()).fold(0.0, f64::max);
+    let ref_max = grab::largest(&reference.u);
     let models: Vec<&ModelSpec> = MESH_MODELS
         .iter()
         .filter(|s| s.series != "mass-spring explicit")
