@@ -3,21 +3,11 @@
 
 use super::*;
 use std::path::PathBuf;
-use voxflex_runtime::plugin_loader::{library_file_name, list};
+use voxflex_runtime::plugin_loader::list;
 
-/// `target/<profile>` (this test runs from `target/<profile>/deps`).
+/// `target/<profile>`, the built plugins checked there.
 fn plugin_dir() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable path");
-    let dir = exe
-        .parent()
-        .and_then(|d| d.parent())
-        .expect("target/<profile>");
-    assert!(
-        dir.join(library_file_name("chainmail")).is_file(),
-        "the plugins are not built in {}: run `cargo build` first",
-        dir.display()
-    );
-    dir.to_path_buf()
+    voxflex_integration_tests::plugin_dir(&["chainmail"])
 }
 
 fn schema(name: &str) -> ParamSchema {

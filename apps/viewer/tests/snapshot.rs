@@ -27,8 +27,7 @@ fn the_main_layout_matches_its_snapshot() {
         eprintln!("skipped: no GPU adapter for egui's renderer");
         return;
     }
-    let exe = std::env::current_exe().unwrap();
-    let plugins = exe.parent().and_then(|d| d.parent()).unwrap().to_path_buf();
+    let plugins = voxflex_integration_tests::plugin_dir(&["chainmail"]);
     let req = OpenRequest {
         input: None,
         backend: BackendChoice::Cpu,

@@ -33,22 +33,9 @@ use voxflex_viewer::screenshot::Screenshot;
 /// How long a test waits for the worker before failing.
 const PATIENCE: Duration = Duration::from_secs(120);
 
-/// `target/<profile>`, where the plugins are built.
+/// `target/<profile>`, where the plugins are built (checked).
 fn plugin_dir() -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable path");
-    let dir = exe
-        .parent()
-        .and_then(|d| d.parent())
-        .expect("target/<profile>");
-    assert!(
-        dir.join(voxflex_runtime::plugin_loader::library_file_name(
-            "chainmail"
-        ))
-        .is_file(),
-        "the plugins are not built in {}: run `cargo build` first",
-        dir.display()
-    );
-    dir.to_path_buf()
+    voxflex_integration_tests::plugin_dir(&["chainmail"])
 }
 
 fn open_phantom() -> Harness<'static, ViewerApp> {
@@ -363,17 +350,6 @@ fn a_carve_click_removes_the_tissue_under_the_brush() {
     });
 }
 
-/// The `voxflex` binary next to the plugins (`cargo build` puts it there).
-fn voxflex_bin() -> PathBuf {
-    let bin = plugin_dir().join(format!("voxflex{}", std::env::consts::EXE_SUFFIX));
-    assert!(
-        bin.is_file(),
-        "{} is not built: run `cargo build` first",
-        bin.display()
-    );
-    bin
-}
-
 fn read(path: &std::path::Path) -> voxflex_core::volume::Volume {
     voxflex_io::read_volume(path, &voxflex_io::ReadOptions::default())
         .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
@@ -406,7 +382,7 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     let text = std::fs::read_to_string(&scene).unwrap();
     assert!(text.contains("kind = \"grab\""), "{text}");
     let out = dir.path().join("out");
-    let run = std::process::Command::new(voxflex_bin())
+    let run = std::process::Command::new(voxflex_integration_tests::voxflex_bin())
         .arg("run")
         .arg(&scene)
         .arg("--out")
