@@ -6,8 +6,8 @@
 //! GPU-service trait ([`gpu::GpuService`]), the renderer trait
 //! ([`render::Renderer`]), the camera, the interaction vocabulary, cut
 //! polygons, opacity maps as the renderer receives them, the plain
-//! tetrahedral mesh that readers and mesh models share, and volume
-//! statistics.
+//! tetrahedral mesh that readers and mesh models share, the closed
+//! triangle surface of an actuator's cavity, and volume statistics.
 //!
 //! Everything a plugin or the ABI needs lives here; everything only some
 //! crates need lives in its own crate above this one: file formats
@@ -43,6 +43,7 @@ pub mod stats;
 #[cfg(any(test, feature = "test-support"))]
 pub mod test_data;
 pub mod tet_mesh;
+pub mod triangle_surface;
 pub mod volume;
 
 pub use glam;

@@ -1,8 +1,9 @@
 //! # voxflex-io
 //!
 //! Every file format voxflex reads or writes: volumes (NIfTI-1, NRRD,
-//! MetaImage), PNG slice snapshots, and tetrahedral meshes (VTU, Gmsh MSH,
-//! TetGen). It owns the format dependencies (`nifti`, `image`, `flate2`).
+//! MetaImage), PNG slice snapshots, tetrahedral meshes (VTU, Gmsh MSH,
+//! TetGen) and triangle surfaces (OFF). It owns the format dependencies
+//! (`nifti`, `image`, `flate2`).
 //!
 //! Its own crate because no plugin reads files: the deformation and render
 //! plugins (and the ABI) depend on voxflex-core alone, so a change to a
@@ -50,6 +51,7 @@ pub mod metaimage;
 pub mod msh;
 pub mod nifti;
 pub mod nrrd;
+pub mod off;
 pub mod orientation;
 pub mod png;
 pub mod tetgen;

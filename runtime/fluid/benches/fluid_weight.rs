@@ -1,0 +1,46 @@
+//! Fluid-weight distribution time against grid size, with parallel
+//! leveraging (α = 0.25, the paper's) and with one worker per triangle
+//! (α = 0), on the icosphere (5,120 triangles) and the bunny (75,408) of
+//! `shared/data`. The paper's CPU: 7.63 and 15.64 ms at 200²; its GPU 0.57
+//! and 1.06 ms.
+//!
+//! `cargo bench -p voxflex-fluid --bench fluid_weight`
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use glam::DVec3;
+use voxflex_fluid::{FluidWeightParams, fluid_weights};
+
+fn bench(c: &mut Criterion) {
+    let Some(dir) = voxflex_core::test_data::dir() else {
+        return;
+    };
+    for (name, file, gravity) in [
+        (
+            "sphere",
+            "sphere_ico4_5120.off",
+            DVec3::new(0.0, 0.0, -9.81),
+        ),
+        ("bunny", "bunny_75k.off", DVec3::new(0.0, -9.81, 0.0)),
+    ] {
+        let s = voxflex_io::off::read_off(&dir.join(file)).expect("shared mesh");
+        let mut g = c.benchmark_group(format!("fluid_weight/{name}"));
+        g.sample_size(20);
+        for n in [30, 50, 100, 200, 500, 1000, 1500] {
+            for (label, alpha) in [("leveraging", 0.25), ("per_triangle", 0.0)] {
+                let p = FluidWeightParams {
+                    columns_per_side: n,
+                    gravity_m_s2: gravity,
+                    leverage_alpha: alpha,
+                    ..Default::default()
+                };
+                g.bench_with_input(BenchmarkId::new(label, n), &p, |b, p| {
+                    b.iter(|| fluid_weights(&s, p).expect("weights"))
+                });
+            }
+        }
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,97 @@
+//! The grid of vertical fluid columns over a cavity.
+
+use crate::gravity_frame::GravityFrame;
+use glam::DVec2;
+
+/// `n_u × n_v` columns covering the cavity's bounding box in the plane
+/// across gravity, in the [`GravityFrame`] (mm). Column `(i, j)` has its
+/// centre at `origin + ((i + ½)·w, (j + ½)·d)` and index `i + j·n_u`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColumnGrid {
+    /// The frame (u, v across, h up).
+    pub frame: GravityFrame,
+    /// Lower corner of the grid in (u, v), mm.
+    pub origin: DVec2,
+    /// Column width `w` along u and depth `d` along v, mm.
+    pub cell: DVec2,
+    /// Columns along u and v.
+    pub n: [usize; 2],
+}
+
+impl ColumnGrid {
+    /// `columns_per_side²` columns spanning `[lo, hi]` in (u, v) (mm). A
+    /// zero extent along an axis (a cavity flat along gravity's normal
+    /// plane) gets a one-micrometre width so the grid stays finite.
+    pub fn spanning(frame: GravityFrame, lo: DVec2, hi: DVec2, columns_per_side: usize) -> Self {
+        let n = columns_per_side.max(1);
+        let extent = (hi - lo).max(DVec2::splat(1e-3));
+        Self {
+            frame,
+            origin: lo,
+            cell: extent / n as f64,
+            n: [n, n],
+        }
+    }
+
+    /// Number of columns.
+    pub fn len(&self) -> usize {
+        self.n[0] * self.n[1]
+    }
+
+    /// Whether the grid has no column (never, for a grid built by [`Self::spanning`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Cross-section `A = w·d` of every column, mm².
+    pub fn column_area(&self) -> f64 {
+        self.cell.x * self.cell.y
+    }
+
+    /// Centre of column `(i, j)` in (u, v), mm.
+    #[inline]
+    pub fn centre(&self, i: usize, j: usize) -> DVec2 {
+        self.origin + (DVec2::new(i as f64, j as f64) + 0.5) * self.cell
+    }
+
+    /// The columns whose centres may lie in the (u, v) box `[lo, hi]` (mm):
+    /// index ranges `i0..i1`, `j0..j1` (possibly empty).
+    pub fn centres_within(&self, lo: DVec2, hi: DVec2) -> ([usize; 2], [usize; 2]) {
+        let range = |lo: f64, hi: f64, o: f64, c: f64, n: usize| {
+            // centre(i) = o + (i + ½)c ≥ lo  ⇔  i ≥ (lo − o)/c − ½
+            let first = ((lo - o) / c - 0.5).ceil().max(0.0) as usize;
+            let last = (((hi - o) / c - 0.5).floor() + 1.0).clamp(0.0, n as f64) as usize;
+            [first.min(last), last]
+        };
+        let ui = range(lo.x, hi.x, self.origin.x, self.cell.x, self.n[0]);
+        let vj = range(lo.y, hi.y, self.origin.y, self.cell.y, self.n[1]);
+        (ui, vj)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    #[test]
+    fn candidate_ranges_hold_exactly_the_centres_inside_the_box() {
+        let g = ColumnGrid::spanning(
+            GravityFrame::new(DVec3::NEG_Z),
+            DVec2::ZERO,
+            DVec2::new(10.0, 5.0),
+            10,
+        );
+        assert_eq!(g.cell, DVec2::new(1.0, 0.5));
+        // centres at 0.5, 1.5, … along u; 0.25, 0.75, … along v
+        let (u, v) = g.centres_within(DVec2::new(0.5, 0.3), DVec2::new(2.4, 0.75));
+        assert_eq!(u, [0, 2]);
+        assert_eq!(v, [1, 2]);
+        let (u, _) = g.centres_within(DVec2::new(-5.0, 0.0), DVec2::new(-1.0, 1.0));
+        assert_eq!(u[0], u[1], "a box left of the grid holds no centre");
+        let (u, _) = g.centres_within(DVec2::new(9.6, 0.0), DVec2::new(20.0, 1.0));
+        assert_eq!(u[0], u[1]);
+        let (u, _) = g.centres_within(DVec2::new(-1.0, 0.0), DVec2::new(20.0, 1.0));
+        assert_eq!(u, [0, 10]);
+    }
+}
