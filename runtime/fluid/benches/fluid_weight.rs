@@ -1,28 +1,25 @@
 //! Fluid-weight distribution time against grid size, with parallel
 //! leveraging (α = 0.25, the paper's) and with one worker per triangle
-//! (α = 0), on the icosphere (5,120 triangles) and the bunny (75,408) of
-//! `shared/data`. The paper's CPU: 7.63 and 15.64 ms at 200²; its GPU 0.57
+//! (α = 0), on the icosphere (5,120 triangles) and the bunny (75,408,
+//! scaled to 2 cm) of `shared/data`. The paper's CPU: 7.63 and 15.64 ms at 200²; its GPU 0.57
 //! and 1.06 ms.
 //!
 //! `cargo bench -p voxflex-fluid --bench fluid_weight`
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::DVec3;
+use voxflex_fluid::test_surfaces::{BUNNY_GRAVITY, bunny_2cm, icosphere};
 use voxflex_fluid::{FluidWeightParams, fluid_weights};
 
 fn bench(c: &mut Criterion) {
-    let Some(dir) = voxflex_core::test_data::dir() else {
-        return;
-    };
-    for (name, file, gravity) in [
-        (
-            "sphere",
-            "sphere_ico4_5120.off",
-            DVec3::new(0.0, 0.0, -9.81),
-        ),
-        ("bunny", "bunny_75k.off", DVec3::new(0.0, -9.81, 0.0)),
-    ] {
-        let s = voxflex_io::off::read_off(&dir.join(file)).expect("shared mesh");
+    let surfaces = [
+        ("sphere", icosphere(), DVec3::new(0.0, 0.0, -9.81)),
+        ("bunny", bunny_2cm(), BUNNY_GRAVITY),
+    ];
+    for (name, surface, gravity) in surfaces {
+        let Some(s) = surface.expect("shared mesh") else {
+            return;
+        };
         let mut g = c.benchmark_group(format!("fluid_weight/{name}"));
         g.sample_size(20);
         for n in [30, 50, 100, 200, 500, 1000, 1500] {

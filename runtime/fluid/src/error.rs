@@ -1,7 +1,7 @@
 //! Why a fluid-weight computation was refused.
 
 /// A fluid-weight computation that cannot run.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum FluidError {
     /// A parameter is out of its range.
     #[error("fluid weight: `{key}` = {value}: {message}")]
@@ -13,7 +13,10 @@ pub enum FluidError {
         /// What is wrong and what to do.
         message: String,
     },
-    /// The cavity surface cannot hold fluid (e.g. it is flat along gravity).
+    /// The cavity surface cannot be weighed as given.
     #[error("fluid weight: {0}")]
     Surface(String),
+    /// A GPU call failed.
+    #[error("fluid weight on the GPU: {0}")]
+    Gpu(#[from] voxflex_core::error::GpuError),
 }

@@ -23,7 +23,8 @@
 //! `k = max(1, ⌊α·c⌋)` workers, `c` the mean number of candidate columns
 //! per triangle ("parallel leveraging", [`schedule`]); worker `j` of a
 //! triangle tests its candidates `j, j + k, j + 2k, …`. The CPU path runs
-//! the workers on rayon; `α = 0` is one worker per triangle.
+//! the workers on rayon, the WGSL path ([`gpu`]) on GPU invocations;
+//! `α = 0` is one worker per triangle.
 //!
 //! Units: lengths mm, density kg/m³, gravity m/s², weights µN (the
 //! corotational FEM's force unit: Pa · mm²).
@@ -36,16 +37,22 @@
 
 pub mod column_grid;
 pub mod error;
+pub mod gpu;
 pub mod gravity_frame;
 pub mod hits;
 pub mod params;
+#[cfg(feature = "test-support")]
+pub mod parity;
 pub mod projection;
 pub mod schedule;
 pub mod sections;
+#[cfg(feature = "test-support")]
+pub mod test_surfaces;
 pub mod weighing;
 
 pub use column_grid::ColumnGrid;
 pub use error::FluidError;
+pub use gpu::GpuFluidWeighing;
 pub use gravity_frame::GravityFrame;
 pub use params::FluidWeightParams;
 pub use weighing::{FluidWeighing, FluidWeights, fluid_weights};

@@ -104,9 +104,7 @@ impl<'a> FluidWeighing<'a> {
     pub fn distribute(self) -> FluidWeights {
         let p = &self.projected;
         let area = p.grid.column_area();
-        let rho_g = self.params.density_kg_m3
-            * self.params.gravity_m_s2.length()
-            * MICRONEWTON_PER_RHO_G_MM3;
+        let rho_g = self.rho_g();
         let mut node_weights = vec![0.0; p.surface.vertices.len()];
         let mut volume = 0.0;
         let n_u = p.grid.n[0];
@@ -122,12 +120,40 @@ impl<'a> FluidWeighing<'a> {
                 node_weights[*corner as usize] += rho_g * v * b;
             }
         }
+        let crossings = self.hits.len();
+        let count = self.count;
+        self.finish(node_weights, volume, count, crossings)
+    }
+
+    /// The projection stage's result (for the GPU twin, which uploads it).
+    pub(crate) fn projected(&self) -> &ProjectedSurface<'a> {
+        &self.projected
+    }
+
+    /// Workers per triangle (the leveraging `k`).
+    pub(crate) fn workers(&self) -> usize {
+        self.k
+    }
+
+    /// `ρ·|g|` in µN per mm³.
+    pub(crate) fn rho_g(&self) -> f64 {
+        self.params.density_kg_m3 * self.params.gravity_m_s2.length() * MICRONEWTON_PER_RHO_G_MM3
+    }
+
+    /// The result of either path's last stages.
+    pub(crate) fn finish(
+        self,
+        node_weights: Vec<f64>,
+        volume_mm3: f64,
+        count: SectionCount,
+        crossings: usize,
+    ) -> FluidWeights {
         FluidWeights {
+            total_weight: self.rho_g() * volume_mm3,
             node_weights,
-            volume_mm3: volume,
-            total_weight: rho_g * volume,
-            count: self.count,
-            crossings: self.hits.len(),
+            volume_mm3,
+            count,
+            crossings,
             workers_per_triangle: self.k,
             mean_candidates: self.projected.mean_candidates(),
             grid: self.projected.grid,

@@ -26,10 +26,10 @@ fn cuboid(s: DVec3) -> TriangleSurface {
 }
 
 fn shared(name: &str) -> Option<TriangleSurface> {
-    let dir = voxflex_core::test_data::dir()?;
-    let s = voxflex_io::off::read_off(&dir.join(name)).unwrap();
-    s.check_closed(name).unwrap();
-    Some(s)
+    match name {
+        "sphere" => crate::test_surfaces::icosphere().unwrap(),
+        _ => crate::test_surfaces::bunny_2cm().unwrap(),
+    }
 }
 
 fn params(columns: usize) -> FluidWeightParams {
@@ -70,7 +70,7 @@ fn a_box_holds_its_exact_volume_on_its_floor_at_every_grid() {
 
 #[test]
 fn weights_sum_to_the_fluids_weight_to_rounding() {
-    let Some(s) = shared("sphere_ico4_5120.off") else {
+    let Some(s) = shared("sphere") else {
         return;
     };
     for n in [30, 50, 100, 200, 500] {
@@ -91,7 +91,7 @@ fn weights_sum_to_the_fluids_weight_to_rounding() {
 /// rounding to 4 decimals (±0.05 mm³).
 #[test]
 fn the_icosphere_volume_converges_at_least_as_fast_as_the_papers() {
-    let Some(s) = shared("sphere_ico4_5120.off") else {
+    let Some(s) = shared("sphere") else {
         return;
     };
     let exact = s.signed_volume();
@@ -121,7 +121,7 @@ fn the_icosphere_volume_converges_at_least_as_fast_as_the_papers() {
 
 #[test]
 fn leveraging_finds_the_same_weights_as_one_worker_per_triangle() {
-    let Some(s) = shared("sphere_ico4_5120.off") else {
+    let Some(s) = shared("sphere") else {
         return;
     };
     let lev = fluid_weights(&s, &params(200)).unwrap();
@@ -146,7 +146,7 @@ fn leveraging_finds_the_same_weights_as_one_worker_per_triangle() {
 /// not only of how much there is.
 #[test]
 fn the_weights_balance_at_the_fluids_centroid_for_any_gravity() {
-    let Some(s) = shared("bunny_75k.off") else {
+    let Some(s) = shared("bunny") else {
         return;
     };
     let c = volume_centroid(&s);
@@ -187,14 +187,14 @@ fn the_weights_balance_at_the_fluids_centroid_for_any_gravity() {
 
 #[test]
 fn the_non_convex_bunny_holds_several_sections_per_column_and_its_volume() {
-    let Some(s) = shared("bunny_75k.off") else {
+    let Some(s) = shared("bunny") else {
         return;
     };
     let exact = s.signed_volume();
     let w = fluid_weights(
         &s,
         &FluidWeightParams {
-            gravity_m_s2: DVec3::new(0.0, -9.81, 0.0),
+            gravity_m_s2: crate::test_surfaces::BUNNY_GRAVITY,
             ..params(500)
         },
     )

@@ -20,6 +20,7 @@ use crate::validate::validate;
 pub const SHADER_OWNERS: &[(&str, &str)] = &[
     ("resample", "runtime/resample/src"),
     ("opacity", "runtime/opacity/src"),
+    ("fluid", "runtime/fluid/src"),
     ("barycentric", "runtime/mesh/src/barycentric"),
     ("mesh-model", "runtime/mesh/src/mesh_model"),
     ("affine", "plugins/affine/src"),
