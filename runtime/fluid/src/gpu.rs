@@ -84,12 +84,17 @@ pub(crate) struct Params {
 pub struct GpuFluidWeighing<'g> {
     gpu: &'g dyn GpuService,
     cap: u32,
+    scratch: crate::weighing::Scratch,
 }
 
 impl<'g> GpuFluidWeighing<'g> {
     /// A computation on `gpu` starting with 4 slots per column.
     pub fn new(gpu: &'g dyn GpuService) -> Self {
-        Self { gpu, cap: 4 }
+        Self {
+            gpu,
+            cap: 4,
+            scratch: Default::default(),
+        }
     }
 
     /// [`crate::fluid_weights`] on the GPU: the same result within f32
@@ -99,113 +104,118 @@ impl<'g> GpuFluidWeighing<'g> {
         surface: &TriangleSurface,
         params: &FluidWeightParams,
     ) -> Result<FluidWeights, FluidError> {
-        let w = FluidWeighing::project(surface, params)?;
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let w = FluidWeighing::project(surface, params, &mut scratch)?;
         let buffers = Buffers::upload(self.gpu, &w)?;
-        let result = self.run(&w, &buffers);
+        let result = run(self.gpu, &mut self.cap, &w, &buffers);
         buffers.release(self.gpu);
         let (node_weights, volume, count, crossings) = result?;
-        Ok(w.finish(node_weights, volume, count, crossings))
+        let weights = w.finish(node_weights, volume, count, crossings);
+        self.scratch = scratch;
+        Ok(weights)
     }
+}
 
-    fn run(
-        &mut self,
-        w: &FluidWeighing<'_>,
-        b: &Buffers,
-    ) -> Result<(Vec<f64>, f64, SectionCount, usize), FluidError> {
-        let gpu = self.gpu;
-        let p = w.projected();
-        let columns = p.grid.len() as u64;
-        let workers = (p.triangles.len() * w.workers()) as u64;
-        let emit = gpu.compile(WEIGHTS, "emit")?;
-        let sections = gpu.compile(WEIGHTS, "sections")?;
-        let mut status = [0u32; STATUS_HEADER];
-        let (rec_tri, rec_h) = loop {
-            let limit = gpu.limits().max_storage_buffer_binding_size;
-            let bytes = columns * self.cap as u64 * 4;
-            if bytes > limit {
-                return Err(FluidError::Param {
-                    key: "columns",
-                    value: p.grid.n[0].to_string(),
-                    message: format!(
-                        "{} crossing slots per column need a {bytes}-byte binding, above this device's {limit}; use fewer columns",
-                        self.cap
-                    ),
-                });
-            }
-            let rec_tri = gpu.create_buffer(bytes, "fluid crossing triangles")?;
-            let rec_h = gpu.create_buffer(bytes, "fluid crossing heights")?;
-            gpu.write_buffer(b.params, 0, bytemuck::bytes_of(&params(w, self.cap)))?;
-            gpu.write_buffer(b.counts, 0, &vec![0u8; (columns * 4) as usize])?;
-            gpu.write_buffer(b.status, 0, &[0u8; STATUS_HEADER * 4])?;
-            gpu.dispatch(
-                emit,
-                &b.bindings(
-                    &[rec_tri, rec_h],
-                    &[
-                        bind::PARAMS,
-                        bind::UVH,
-                        bind::TRIS,
-                        bind::INFO,
-                        bind::COUNTS,
-                        bind::STATUS,
-                    ],
+/// The kernels on the uploaded projection; grows `cap` when a column holds
+/// more crossings.
+fn run(
+    gpu: &dyn GpuService,
+    cap: &mut u32,
+    w: &FluidWeighing<'_>,
+    b: &Buffers,
+) -> Result<(Vec<f64>, f64, SectionCount, usize), FluidError> {
+    let p = w.projected();
+    let columns = p.grid.len() as u64;
+    let workers = (p.triangles.len() * w.workers()) as u64;
+    let emit = gpu.compile(WEIGHTS, "emit")?;
+    let sections = gpu.compile(WEIGHTS, "sections")?;
+    let mut status = [0u32; STATUS_HEADER];
+    let (rec_tri, rec_h) = loop {
+        let limit = gpu.limits().max_storage_buffer_binding_size;
+        let bytes = columns * *cap as u64 * 4;
+        if bytes > limit {
+            return Err(FluidError::Param {
+                key: "columns",
+                value: p.grid.n[0].to_string(),
+                message: format!(
+                    "{} crossing slots per column need a {bytes}-byte binding, above this device's {limit}; use fewer columns",
+                    *cap
                 ),
-                gpu.workgroups_for(workers, WORKGROUP)?,
-            )?;
-            gpu.download(b.status, &mut status)?;
-            if status[0] <= self.cap {
-                break (rec_tri, rec_h);
-            }
-            gpu.destroy_buffer(rec_tri);
-            gpu.destroy_buffer(rec_h);
-            if status[0] > MAX_CROSSINGS_PER_COLUMN {
-                return Err(FluidError::Surface(format!(
-                    "a column crosses the cavity surface {} times; at most {MAX_CROSSINGS_PER_COLUMN} are supported on the GPU (use backend = \"cpu\")",
-                    status[0]
-                )));
-            }
-            self.cap = status[0].next_power_of_two();
-        };
-        let groups = gpu.workgroups_for(columns, WORKGROUP)?;
-        let result = gpu.dispatch(
-            sections,
+            });
+        }
+        let rec_tri = gpu.create_buffer(bytes, "fluid crossing triangles")?;
+        let rec_h = gpu.create_buffer(bytes, "fluid crossing heights")?;
+        gpu.write_buffer(b.params, 0, bytemuck::bytes_of(&params(w, *cap)))?;
+        gpu.write_buffer(b.counts, 0, &vec![0u8; (columns * 4) as usize])?;
+        gpu.write_buffer(b.status, 0, &[0u8; STATUS_HEADER * 4])?;
+        gpu.dispatch(
+            emit,
             &b.bindings(
                 &[rec_tri, rec_h],
                 &[
                     bind::PARAMS,
                     bind::UVH,
                     bind::TRIS,
+                    bind::INFO,
                     bind::COUNTS,
-                    bind::WEIGHTS,
                     bind::STATUS,
                 ],
             ),
-            groups,
-        );
+            gpu.workgroups_for(workers, WORKGROUP)?,
+        )?;
+        gpu.download(b.status, &mut status)?;
+        if status[0] <= *cap {
+            break (rec_tri, rec_h);
+        }
         gpu.destroy_buffer(rec_tri);
         gpu.destroy_buffer(rec_h);
-        result?;
-        let n_groups = groups.iter().map(|&g| g as usize).product::<usize>();
-        let mut out = vec![0u32; STATUS_HEADER + n_groups];
-        gpu.download(b.status, &mut out)?;
-        let volume: f64 = out[STATUS_HEADER..]
-            .iter()
-            .map(|&v| f32::from_bits(v) as f64)
-            .sum();
-        let mut weights = vec![0f32; p.surface.vertices.len()];
-        gpu.download(b.weights, &mut weights)?;
-        let count = SectionCount {
-            sections: out[1] as usize,
-            columns_with_fluid: out[2] as usize,
-            irregular_columns: out[3] as usize,
-        };
-        Ok((
-            weights.iter().map(|&x| x as f64).collect(),
-            volume,
-            count,
-            out[4] as usize,
-        ))
-    }
+        if status[0] > MAX_CROSSINGS_PER_COLUMN {
+            return Err(FluidError::Surface(format!(
+                "a column crosses the cavity surface {} times; at most {MAX_CROSSINGS_PER_COLUMN} are supported on the GPU (use backend = \"cpu\")",
+                status[0]
+            )));
+        }
+        *cap = status[0].next_power_of_two();
+    };
+    let groups = gpu.workgroups_for(columns, WORKGROUP)?;
+    let result = gpu.dispatch(
+        sections,
+        &b.bindings(
+            &[rec_tri, rec_h],
+            &[
+                bind::PARAMS,
+                bind::UVH,
+                bind::TRIS,
+                bind::COUNTS,
+                bind::WEIGHTS,
+                bind::STATUS,
+            ],
+        ),
+        groups,
+    );
+    gpu.destroy_buffer(rec_tri);
+    gpu.destroy_buffer(rec_h);
+    result?;
+    let n_groups = groups.iter().map(|&g| g as usize).product::<usize>();
+    let mut out = vec![0u32; STATUS_HEADER + n_groups];
+    gpu.download(b.status, &mut out)?;
+    let volume: f64 = out[STATUS_HEADER..]
+        .iter()
+        .map(|&v| f32::from_bits(v) as f64)
+        .sum();
+    let mut weights = vec![0f32; p.surface.vertices.len()];
+    gpu.download(b.weights, &mut weights)?;
+    let count = SectionCount {
+        sections: out[1] as usize,
+        columns_with_fluid: out[2] as usize,
+        irregular_columns: out[3] as usize,
+    };
+    Ok((
+        weights.iter().map(|&x| x as f64).collect(),
+        volume,
+        count,
+        out[4] as usize,
+    ))
 }
 
 /// The kernels' `Params` for `w` with `cap` slots per column.

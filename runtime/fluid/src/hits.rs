@@ -2,6 +2,7 @@
 //! with a fill rule that gives every centre to exactly one triangle of a
 //! tiled region, and the height and barycentric coordinates there.
 
+use crate::column_grid::ColumnGrid;
 use crate::projection::{ProjectedSurface, Side};
 use crate::schedule::lane_candidates;
 use glam::{DVec2, DVec3};
@@ -40,56 +41,138 @@ impl Hit {
     }
 }
 
-/// Every crossing of every column, found by `k` workers per triangle
-/// (unordered).
-pub fn find_hits(p: &ProjectedSurface<'_>, k: usize) -> Vec<Hit> {
-    let n = p.triangles.len();
-    (0..n * k)
-        .into_par_iter()
-        .with_min_len(64)
-        .fold(Vec::new, |mut acc, worker| {
-            triangle_lane_hits(p, worker / k, worker % k, k, &mut acc);
-            acc
-        })
-        .reduce(Vec::new, |mut a, mut b| {
-            if a.len() < b.len() {
-                std::mem::swap(&mut a, &mut b);
+/// Every crossing of every column, found by `k` workers per triangle, in
+/// unordered batches (merged by [`crate::sections::bucket_by_column`]).
+///
+/// The `n·k` workers (triangle `w / k`, lane `w % k`) are cut into
+/// `batches.len()` contiguous runs of equal length, one rayon task each —
+/// leveraging evens out the work per worker, so equal runs are equal
+/// work. Each batch keeps its capacity from the previous call.
+pub fn find_hits(p: &ProjectedSurface<'_>, k: usize, batches: &mut Vec<Vec<Hit>>) {
+    let workers = p.triangles.len() * k;
+    let tasks = (4 * rayon::current_num_threads()).clamp(1, workers.max(1));
+    batches.resize_with(tasks, Vec::new);
+    let per_task = workers.div_ceil(tasks);
+    batches.par_iter_mut().enumerate().for_each(|(b, out)| {
+        out.clear();
+        // A task's workers are consecutive: set each triangle up once.
+        let mut raster: Option<(usize, Option<TriangleRaster>)> = None;
+        for worker in b * per_task..((b + 1) * per_task).min(workers) {
+            let t = worker / k;
+            if raster.as_ref().is_none_or(|(rt, _)| *rt != t) {
+                raster = Some((t, TriangleRaster::new(p, t)));
             }
-            a.append(&mut b);
-            a
-        })
+            if let Some((_, Some(r))) = &raster {
+                r.lane(&p.grid, worker % k, k, out);
+            }
+        }
+    });
 }
 
-/// The crossings worker `lane` of `k` finds for triangle `t`.
-fn triangle_lane_hits(
-    p: &ProjectedSurface<'_>,
-    t: usize,
-    lane: usize,
-    k: usize,
-    out: &mut Vec<Hit>,
-) {
-    let pt = p.triangles[t];
-    let count = pt.candidate_count();
-    if count == 0 {
-        return;
+/// One triangle set up for testing column centres: its fill-rule test,
+/// height plane and crossing tag.
+struct TriangleRaster {
+    q: [DVec2; 3],
+    test: TriangleTest,
+    height: HeightPlane,
+    tag: u32,
+    /// Candidate columns `i0..i1`, rows `j0..j1`.
+    candidates: ([usize; 2], [usize; 2]),
+}
+
+impl TriangleRaster {
+    /// `None` for a triangle with no candidate column.
+    fn new(p: &ProjectedSurface<'_>, t: usize) -> Option<Self> {
+        let pt = p.triangles[t];
+        if pt.candidate_count() == 0 {
+            return None;
+        }
+        let ids = p.surface.triangles[t];
+        let corners = ids.map(|v| p.uvh[v as usize]);
+        let q = corners.map(|c| c.truncate());
+        Some(Self {
+            q,
+            test: TriangleTest::new(ids, q),
+            height: HeightPlane::new(corners),
+            tag: t as u32 | if pt.side == Side::Top { TOP } else { 0 },
+            candidates: pt.candidates,
+        })
     }
-    let ids = p.surface.triangles[t];
-    let corners = ids.map(|v| p.uvh[v as usize]);
-    let test = TriangleTest::new(ids, corners.map(|c| c.truncate()));
-    let ([i0, i1], [j0, _]) = pt.candidates;
-    let width = i1 - i0;
-    for m in lane_candidates(lane, k, count) {
-        let (i, j) = (i0 + m % width, j0 + m / width);
-        if let Some(bary) = test.barycentric(p.grid.centre(i, j)) {
-            let h =
-                DVec3::from_array(bary).dot(DVec3::new(corners[0].z, corners[1].z, corners[2].z));
-            out.push(Hit {
-                column: (i + j * p.grid.n[0]) as u32,
-                triangle_and_side: t as u32 | if pt.side == Side::Top { TOP } else { 0 },
-                height: h,
-            });
+
+    /// The crossings worker `lane` of `k` finds: on the CPU the workers
+    /// split the triangle's candidate *rows* (`lane, lane + k, …`). In a
+    /// row, the centres the fill rule puts inside form one interval (the
+    /// rule is the triangle nudged by a fixed `(ε, ε²)`, still convex), so
+    /// the exact test runs only from each end of the row's span (one
+    /// column of margin each side, so rounding in the span loses no
+    /// centre) until it first succeeds; the centres between are inside.
+    fn lane(&self, grid: &ColumnGrid, lane: usize, k: usize, out: &mut Vec<Hit>) {
+        let ([i0, i1], [j0, j1]) = self.candidates;
+        for j in lane_candidates(lane, k, j1 - j0).map(|r| j0 + r) {
+            let v = grid.centre(0, j).y;
+            let Some((u_lo, u_hi)) = row_span(self.q, v) else {
+                continue;
+            };
+            let (span, _) = grid.centres_within(DVec2::new(u_lo, v), DVec2::new(u_hi, v));
+            let mut first = span[0].saturating_sub(1).max(i0);
+            let mut last = (span[1] + 1).min(i1);
+            while first < last && !self.test.contains(grid.centre(first, j)) {
+                first += 1;
+            }
+            while last > first && !self.test.contains(grid.centre(last - 1, j)) {
+                last -= 1;
+            }
+            let row = j * grid.n[0];
+            out.extend((first..last).map(|i| Hit {
+                column: (i + row) as u32,
+                triangle_and_side: self.tag,
+                height: self.height.at(grid.centre(i, j)),
+            }));
         }
     }
+}
+
+/// The plane through a triangle's corners as height over (u, v).
+struct HeightPlane {
+    origin: DVec3,
+    slope: DVec2,
+}
+
+impl HeightPlane {
+    fn new(c: [DVec3; 3]) -> Self {
+        let (e1, e2) = (c[1] - c[0], c[2] - c[0]);
+        let n = e1.cross(e2); // n.z ≠ 0: vertical triangles have no candidates
+        Self {
+            origin: c[0],
+            slope: DVec2::new(-n.x / n.z, -n.y / n.z),
+        }
+    }
+
+    #[inline]
+    fn at(&self, p: DVec2) -> f64 {
+        self.origin.z + self.slope.dot(p - self.origin.truncate())
+    }
+}
+
+/// Where the line `v = const` crosses the 2-D triangle `q`: `(u_min,
+/// u_max)`, or `None` when it misses it.
+fn row_span(q: [DVec2; 3], v: f64) -> Option<(f64, f64)> {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for (a, b) in [(q[0], q[1]), (q[1], q[2]), (q[2], q[0])] {
+        if (a.y - v) * (b.y - v) > 0.0 {
+            continue;
+        }
+        let u = if a.y == b.y {
+            lo = lo.min(a.x.min(b.x));
+            a.x.max(b.x)
+        } else {
+            a.x + (v - a.y) * (b.x - a.x) / (b.y - a.y)
+        };
+        lo = lo.min(u);
+        hi = hi.max(u);
+    }
+    (lo <= hi).then_some((lo, hi))
 }
 
 /// A projected triangle's inside test. Each edge function is evaluated
@@ -104,6 +187,7 @@ struct TriangleTest {
     /// whether the triangle's interior is on the canonical edge's left.
     edges: [(DVec2, DVec2, f64); 3],
     /// Twice the signed area (u, v).
+    #[cfg(test)]
     area2: f64,
 }
 
@@ -122,11 +206,30 @@ impl TriangleTest {
         Self {
             // opposite corner 0 is edge 1→2, corner 1: 2→0, corner 2: 0→1
             edges: [edge(1, 2), edge(2, 0), edge(0, 1)],
+            #[cfg(test)]
             area2,
         }
     }
 
+    /// Whether the fill rule puts `p` inside.
+    #[inline]
+    fn contains(&self, p: DVec2) -> bool {
+        self.edges.iter().all(|&(a, b, side)| {
+            let d = b - a;
+            let value = d.perp_dot(p - a);
+            let sign = if value != 0.0 {
+                value.signum()
+            } else if d.y != 0.0 {
+                -d.y.signum()
+            } else {
+                d.x.signum()
+            };
+            sign * side > 0.0
+        })
+    }
+
     /// Barycentric coordinates of `p` if the fill rule puts it inside.
+    #[cfg(test)]
     fn barycentric(&self, p: DVec2) -> Option<[f64; 3]> {
         let mut e = [0.0; 3];
         for (out, &(a, b, side)) in e.iter_mut().zip(&self.edges) {

@@ -55,4 +55,4 @@ pub use error::FluidError;
 pub use gpu::GpuFluidWeighing;
 pub use gravity_frame::GravityFrame;
 pub use params::FluidWeightParams;
-pub use weighing::{FluidWeighing, FluidWeights, fluid_weights};
+pub use weighing::{FluidWeigher, FluidWeighing, FluidWeights, Scratch, fluid_weights};

@@ -55,20 +55,39 @@ impl<'a> ProjectedSurface<'a> {
     /// Projects `surface` along `gravity` (any non-zero vector) onto a grid
     /// of `columns_per_side²` columns.
     pub fn new(surface: &'a TriangleSurface, gravity: DVec3, columns_per_side: usize) -> Self {
+        Self::new_in(surface, gravity, columns_per_side, Vec::new(), Vec::new())
+    }
+
+    /// [`Self::new`] filling the given vectors (their capacity is reused:
+    /// see [`Self::into_buffers`]).
+    pub fn new_in(
+        surface: &'a TriangleSurface,
+        gravity: DVec3,
+        columns_per_side: usize,
+        mut uvh: Vec<DVec3>,
+        mut triangles: Vec<ProjectedTriangle>,
+    ) -> Self {
         let frame = GravityFrame::new(gravity);
-        let uvh: Vec<DVec3> = surface
+        surface
             .vertices
             .par_iter()
             .map(|&p| frame.to_frame(p))
-            .collect();
-        let (lo, hi) = uvh.iter().fold(
-            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())),
-        );
+            .collect_into_vec(&mut uvh);
+        let (lo, hi) = uvh
+            .par_iter()
+            .fold(
+                || (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())),
+            )
+            .reduce(
+                || (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
         let grid = ColumnGrid::spanning(frame, lo, hi, columns_per_side);
-        let triangles = surface
+        surface
             .triangles
             .par_iter()
+            .with_min_len(1024)
             .map(|tri| {
                 let [a, b, c] = tri.map(|v| uvh[v as usize].truncate());
                 let side = match signed_area2(a, b, c) {
@@ -81,13 +100,18 @@ impl<'a> ProjectedSurface<'a> {
                     candidates: grid.centres_within(a.min(b).min(c), a.max(b).max(c)),
                 }
             })
-            .collect();
+            .collect_into_vec(&mut triangles);
         Self {
             surface,
             uvh,
             grid,
             triangles,
         }
+    }
+
+    /// The vectors this projection filled, for the next [`Self::new_in`].
+    pub fn into_buffers(self) -> (Vec<DVec3>, Vec<ProjectedTriangle>) {
+        (self.uvh, self.triangles)
     }
 
     /// Mean candidate columns per non-vertical triangle (the paper's `c`).

@@ -17,30 +17,38 @@ pub struct SectionCount {
     pub irregular_columns: usize,
 }
 
-/// Groups `hits` by column (counting sort, stable), so each column's
-/// crossings are one contiguous run.
-pub fn bucket_by_column(hits: Vec<Hit>, columns: usize) -> Vec<Hit> {
-    let mut start = vec![0u32; columns + 1];
-    for h in &hits {
+/// Groups the batches of crossings by column into `out` (counting sort,
+/// stable), so each column's crossings are one contiguous run. `start` and
+/// `out` are scratch whose capacity is reused.
+pub fn bucket_by_column(
+    batches: &[Vec<Hit>],
+    columns: usize,
+    start: &mut Vec<u32>,
+    out: &mut Vec<Hit>,
+) {
+    start.clear();
+    start.resize(columns + 1, 0);
+    for h in batches.iter().flatten() {
         start[h.column as usize + 1] += 1;
     }
     for c in 0..columns {
         start[c + 1] += start[c];
     }
-    let mut out = vec![
+    let total = start[columns] as usize;
+    out.clear();
+    out.resize(
+        total,
         Hit {
             column: 0,
             triangle_and_side: 0,
             height: 0.0,
-        };
-        hits.len()
-    ];
-    for h in hits {
+        },
+    );
+    for h in batches.iter().flatten() {
         let slot = &mut start[h.column as usize];
-        out[*slot as usize] = h;
+        out[*slot as usize] = *h;
         *slot += 1;
     }
-    out
 }
 
 /// Sorts each column's run by height and turns each bottom crossing's
@@ -87,6 +95,12 @@ fn match_column(run: &mut [Hit]) -> SectionCount {
 mod tests {
     use super::*;
 
+    fn bucket(batches: Vec<Vec<Hit>>, columns: usize) -> Vec<Hit> {
+        let (mut start, mut out) = (Vec::new(), Vec::new());
+        bucket_by_column(&batches, columns, &mut start, &mut out);
+        out
+    }
+
     fn hit(column: u32, top: bool, height: f64) -> Hit {
         Hit {
             column,
@@ -98,14 +112,10 @@ mod tests {
     #[test]
     fn a_column_through_a_u_shape_holds_two_sections() {
         // from below: bottom 0, top 1, bottom 3, top 7 (given out of order)
-        let mut hits = bucket_by_column(
+        let mut hits = bucket(
             vec![
-                hit(1, true, 7.0),
-                hit(1, false, 0.0),
-                hit(0, false, 2.0),
-                hit(1, false, 3.0),
-                hit(1, true, 1.0),
-                hit(0, true, 2.5),
+                vec![hit(1, true, 7.0), hit(1, false, 0.0), hit(0, false, 2.0)],
+                vec![hit(1, false, 3.0), hit(1, true, 1.0), hit(0, true, 2.5)],
             ],
             2,
         );
@@ -124,8 +134,12 @@ mod tests {
 
     #[test]
     fn an_unmatched_crossing_makes_the_column_irregular_and_empty() {
-        let mut hits = bucket_by_column(
-            vec![hit(0, false, 0.0), hit(0, false, 1.0), hit(0, true, 2.0)],
+        let mut hits = bucket(
+            vec![vec![
+                hit(0, false, 0.0),
+                hit(0, false, 1.0),
+                hit(0, true, 2.0),
+            ]],
             1,
         );
         let n = match_sections(&mut hits);

@@ -42,14 +42,45 @@ pub struct FluidWeights {
 /// normals out) on its vertices. Checks `params`; the surface's
 /// closedness is the caller's (see [`TriangleSurface::check_closed`]) —
 /// an open one shows up as `count.irregular_columns`.
+///
+/// Allocates its working memory on every call; a caller that weighs every
+/// frame keeps a [`FluidWeigher`].
 pub fn fluid_weights(
     surface: &TriangleSurface,
     params: &FluidWeightParams,
 ) -> Result<FluidWeights, FluidError> {
-    let mut w = FluidWeighing::project(surface, params)?;
-    w.intersect();
-    w.match_sections();
-    Ok(w.distribute())
+    FluidWeigher::default().weigh(surface, params)
+}
+
+/// The CPU fluid weighing with its working memory kept between calls, so
+/// a per-frame weighing neither allocates nor faults in fresh pages.
+#[derive(Debug, Default)]
+pub struct FluidWeigher {
+    scratch: Scratch,
+}
+
+impl FluidWeigher {
+    /// [`fluid_weights`], reusing this weigher's memory.
+    pub fn weigh(
+        &mut self,
+        surface: &TriangleSurface,
+        params: &FluidWeightParams,
+    ) -> Result<FluidWeights, FluidError> {
+        let mut w = FluidWeighing::project(surface, params, &mut self.scratch)?;
+        w.intersect();
+        w.match_sections();
+        Ok(w.distribute())
+    }
+}
+
+/// Working memory of one weighing (capacity reused between calls).
+#[derive(Debug, Default)]
+pub struct Scratch {
+    uvh: Vec<glam::DVec3>,
+    triangles: Vec<crate::projection::ProjectedTriangle>,
+    batches: Vec<Vec<Hit>>,
+    hits: Vec<Hit>,
+    start: Vec<u32>,
 }
 
 /// The pipeline's state between stages.
@@ -58,8 +89,8 @@ pub struct FluidWeighing<'a> {
     params: FluidWeightParams,
     projected: ProjectedSurface<'a>,
     k: usize,
-    hits: Vec<Hit>,
     count: SectionCount,
+    scratch: &'a mut Scratch,
 }
 
 impl<'a> FluidWeighing<'a> {
@@ -68,6 +99,7 @@ impl<'a> FluidWeighing<'a> {
     pub fn project(
         surface: &'a TriangleSurface,
         params: &FluidWeightParams,
+        scratch: &'a mut Scratch,
     ) -> Result<Self, FluidError> {
         params.check()?;
         if surface.triangles.len() >= crate::hits::TOP as usize {
@@ -76,27 +108,38 @@ impl<'a> FluidWeighing<'a> {
                 surface.triangles.len()
             )));
         }
-        let projected =
-            ProjectedSurface::new(surface, params.gravity_m_s2, params.columns_per_side);
+        let projected = ProjectedSurface::new_in(
+            surface,
+            params.gravity_m_s2,
+            params.columns_per_side,
+            std::mem::take(&mut scratch.uvh),
+            std::mem::take(&mut scratch.triangles),
+        );
         let k = workers_per_triangle(params.leverage_alpha, projected.mean_candidates());
         Ok(Self {
             params: *params,
             projected,
             k,
-            hits: Vec::new(),
             count: SectionCount::default(),
+            scratch,
         })
     }
 
     /// Stage 2: every column–triangle crossing, grouped by column.
     pub fn intersect(&mut self) {
-        let hits = find_hits(&self.projected, self.k);
-        self.hits = bucket_by_column(hits, self.projected.grid.len());
+        let s = &mut *self.scratch;
+        find_hits(&self.projected, self.k, &mut s.batches);
+        bucket_by_column(
+            &s.batches,
+            self.projected.grid.len(),
+            &mut s.start,
+            &mut s.hits,
+        );
     }
 
     /// Stage 3: per column, the sections of fluid.
     pub fn match_sections(&mut self) {
-        self.count = match_sections(&mut self.hits);
+        self.count = match_sections(&mut self.scratch.hits);
     }
 
     /// Stage 4: each section's weight `A·h·ρ·g` onto its bottom triangle's
@@ -109,7 +152,12 @@ impl<'a> FluidWeighing<'a> {
         let mut volume = 0.0;
         let n_u = p.grid.n[0];
         // Bottom crossings carry the height of fluid above them (sections pass).
-        for h in self.hits.iter().filter(|h| !h.top() && h.height > 0.0) {
+        for h in self
+            .scratch
+            .hits
+            .iter()
+            .filter(|h| !h.top() && h.height > 0.0)
+        {
             let v = area * h.height;
             volume += v;
             let tri = p.surface.triangles[h.triangle()];
@@ -120,7 +168,7 @@ impl<'a> FluidWeighing<'a> {
                 node_weights[*corner as usize] += rho_g * v * b;
             }
         }
-        let crossings = self.hits.len();
+        let crossings = self.scratch.hits.len();
         let count = self.count;
         self.finish(node_weights, volume, count, crossings)
     }
@@ -148,7 +196,7 @@ impl<'a> FluidWeighing<'a> {
         count: SectionCount,
         crossings: usize,
     ) -> FluidWeights {
-        FluidWeights {
+        let weights = FluidWeights {
             total_weight: self.rho_g() * volume_mm3,
             node_weights,
             volume_mm3,
@@ -157,7 +205,9 @@ impl<'a> FluidWeighing<'a> {
             workers_per_triangle: self.k,
             mean_candidates: self.projected.mean_candidates(),
             grid: self.projected.grid,
-        }
+        };
+        (self.scratch.uvh, self.scratch.triangles) = self.projected.into_buffers();
+        weights
     }
 }
 
