@@ -2,7 +2,8 @@
 //!
 //! The mesh-model framework: tetrahedral proxies generated from a volume
 //! ([`proxy`]), barycentric binding of rest points to a proxy
-//! ([`barycentric`]), and [`mesh_model::MeshModel<S>`], the whole
+//! ([`barycentric`]), closed surfaces of label regions
+//! ([`label_surface`], an actuator's cavity), and [`mesh_model::MeshModel<S>`], the whole
 //! deformation model around a [`mesh_model::MeshSolver`] (boundary
 //! conditions, PCG/AMG/incomplete-Cholesky solvers, cuts, carving, mesh
 //! files) — with its plugin implementation, so a plugin crate that
@@ -21,6 +22,7 @@
 #![warn(missing_docs)]
 
 pub mod barycentric;
+pub mod label_surface;
 pub mod mesh_model;
 mod plugin;
 pub mod proxy;
