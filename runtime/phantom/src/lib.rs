@@ -21,6 +21,9 @@
 //! | `rings` | u8 | 100 × 100 × 100 | annulus, soft half 100 / hard half 200 (see [`rings`]) |
 //! | `ramp` | f32 | 100 × 100 × 100 | linear field `a·x + b·y + c·z` (see [`ramp`]) |
 //! | `abdomen` | i16 (HU) | 360 × 280 × 240 | labelled portal-venous contrast CT of the upper abdomen, with noise (see [`abdomen`]) |
+//! | `finger` | u8 labels | 96 × 24 × 24 | soft finger: silicone bar with one off-centre cavity (see [`soft_robot`]) |
+//! | `cylinder` | u8 labels | 48 × 48 × 68 | the hydraulics paper's cylinder specimen with one cavity (see [`soft_robot`]) |
+//! | `pendulum` | u8 labels | 36 × 36 × 88 | column with four cavities (the paper's Fig. 6, see [`soft_robot`]) |
 //!
 //! Axes follow DICOM/LPS: +x toward the patient's left, +y posterior, +z
 //! superior — what [`voxflex_io::png`] displays upright.
@@ -44,6 +47,7 @@ use std::path::PathBuf;
 use voxflex_io::ReadOptions;
 
 pub mod abdomen;
+pub mod soft_robot;
 pub use abdomen::{LabelledVolume, abdomen_labelled};
 
 /// The built-in phantoms.
@@ -59,16 +63,25 @@ pub enum PhantomKind {
     Ramp,
     /// Labelled abdominal contrast CT, i16 Hounsfield units ([`abdomen`]).
     Abdomen,
+    /// Soft finger with one cavity, u8 labels ([`soft_robot::finger`]).
+    Finger,
+    /// The paper's cylinder specimen with one cavity, u8 labels ([`soft_robot::cylinder`]).
+    Cylinder,
+    /// The four-cavity pendulum, u8 labels ([`soft_robot::pendulum`]).
+    Pendulum,
 }
 
 impl PhantomKind {
     /// Every phantom, in documentation order.
-    pub const ALL: [PhantomKind; 5] = [
+    pub const ALL: [PhantomKind; 8] = [
         PhantomKind::Head,
         PhantomKind::Cube,
         PhantomKind::Rings,
         PhantomKind::Ramp,
         PhantomKind::Abdomen,
+        PhantomKind::Finger,
+        PhantomKind::Cylinder,
+        PhantomKind::Pendulum,
     ];
 
     /// The name used in `phantom:<name>` sources.
@@ -79,6 +92,9 @@ impl PhantomKind {
             PhantomKind::Rings => "rings",
             PhantomKind::Ramp => "ramp",
             PhantomKind::Abdomen => "abdomen",
+            PhantomKind::Finger => "finger",
+            PhantomKind::Cylinder => "cylinder",
+            PhantomKind::Pendulum => "pendulum",
         }
     }
 
@@ -87,6 +103,9 @@ impl PhantomKind {
         match self {
             PhantomKind::Head => HEAD_SIZE_MM,
             PhantomKind::Abdomen => abdomen::ABDOMEN_SIZE_MM,
+            PhantomKind::Finger => soft_robot::FINGER_SIZE_MM,
+            PhantomKind::Cylinder => soft_robot::CYLINDER_SIZE_MM,
+            PhantomKind::Pendulum => soft_robot::PENDULUM_SIZE_MM,
             PhantomKind::Cube | PhantomKind::Rings | PhantomKind::Ramp => DVec3::splat(100.0),
         }
     }
@@ -107,6 +126,9 @@ impl PhantomKind {
             PhantomKind::Rings => rings(dims),
             PhantomKind::Ramp => ramp(dims),
             PhantomKind::Abdomen => abdomen::abdomen(dims),
+            PhantomKind::Finger => soft_robot::finger(self.grid(dims)),
+            PhantomKind::Cylinder => soft_robot::cylinder(self.grid(dims)),
+            PhantomKind::Pendulum => soft_robot::pendulum(self.grid(dims)),
         })
     }
 }
@@ -137,7 +159,7 @@ impl std::str::FromStr for PhantomKind {
 pub enum PhantomError {
     /// No built-in phantom has this name.
     #[error(
-        "unknown phantom `{name}`; built-in phantoms: head, cube, rings, ramp, abdomen (e.g. `phantom:head`)"
+        "unknown phantom `{name}`; built-in phantoms: head, cube, rings, ramp, abdomen, finger, cylinder, pendulum (e.g. `phantom:head`)"
     )]
     UnknownName {
         /// The name asked for.
@@ -675,7 +697,7 @@ mod tests {
     fn names_dims_and_sources() {
         assert_eq!(
             phantom("skull", [4, 4, 4]).unwrap_err().to_string(),
-            "unknown phantom `skull`; built-in phantoms: head, cube, rings, ramp, abdomen (e.g. `phantom:head`)"
+            "unknown phantom `skull`; built-in phantoms: head, cube, rings, ramp, abdomen, finger, cylinder, pendulum (e.g. `phantom:head`)"
         );
         assert_eq!(
             phantom("head", [4, 0, 4]).unwrap_err(),
