@@ -110,16 +110,29 @@ impl TriangleRaster {
         let ([i0, i1], [j0, j1]) = self.candidates;
         for j in lane_candidates(lane, k, j1 - j0).map(|r| j0 + r) {
             let v = grid.centre(0, j).y;
-            let Some((u_lo, u_hi)) = row_span(self.q, v) else {
+            let Some(span) = row_span(self.q, v) else {
                 continue;
             };
-            let (span, _) = grid.centres_within(DVec2::new(u_lo, v), DVec2::new(u_hi, v));
-            let mut first = span[0].saturating_sub(1).max(i0);
-            let mut last = (span[1] + 1).min(i1);
-            while first < last && !self.test.contains(grid.centre(first, j)) {
+            let within =
+                |lo: f64, hi: f64| grid.centres_within(DVec2::new(lo, v), DVec2::new(hi, v)).0;
+            let all = within(span.lo - span.err, span.hi + span.err);
+            let (mut first, mut last) = (all[0].saturating_sub(1).max(i0), (all[1] + 1).min(i1));
+            // Centres farther than the span's rounding error inside it are
+            // strictly inside the triangle: only the ends need the exact test.
+            let sure = if span.on_edge {
+                [last, last]
+            } else {
+                within(span.lo + span.err, span.hi - span.err)
+            };
+            let (stop_left, stop_right) = if sure[0] < sure[1] {
+                (sure[0], sure[1])
+            } else {
+                (last, first)
+            };
+            while first < stop_left && !self.test.contains(grid.centre(first, j)) {
                 first += 1;
             }
-            while last > first && !self.test.contains(grid.centre(last - 1, j)) {
+            while last > first.max(stop_right) && !self.test.contains(grid.centre(last - 1, j)) {
                 last -= 1;
             }
             let row = j * grid.n[0];
@@ -154,25 +167,47 @@ impl HeightPlane {
     }
 }
 
-/// Where the line `v = const` crosses the 2-D triangle `q`: `(u_min,
-/// u_max)`, or `None` when it misses it.
-fn row_span(q: [DVec2; 3], v: f64) -> Option<(f64, f64)> {
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
+/// Where a row's centre line crosses a projected triangle.
+struct RowSpan {
+    /// Lowest and highest u of the crossing, mm.
+    lo: f64,
+    hi: f64,
+    /// A bound on the rounding error of `lo` and `hi`, mm (generous: 128
+    /// ulps of the interpolation's largest term).
+    err: f64,
+    /// The line runs along an edge: the span is boundary, not interior.
+    on_edge: bool,
+}
+
+/// Where the line `v = const` crosses the 2-D triangle `q`, or `None` when
+/// it misses it.
+fn row_span(q: [DVec2; 3], v: f64) -> Option<RowSpan> {
+    let mut s = RowSpan {
+        lo: f64::INFINITY,
+        hi: f64::NEG_INFINITY,
+        err: 0.0,
+        on_edge: false,
+    };
     for (a, b) in [(q[0], q[1]), (q[1], q[2]), (q[2], q[0])] {
         if (a.y - v) * (b.y - v) > 0.0 {
             continue;
         }
-        let u = if a.y == b.y {
-            lo = lo.min(a.x.min(b.x));
-            a.x.max(b.x)
-        } else {
-            a.x + (v - a.y) * (b.x - a.x) / (b.y - a.y)
-        };
-        lo = lo.min(u);
-        hi = hi.max(u);
+        if a.y == b.y {
+            s.on_edge = true;
+            s.lo = s.lo.min(a.x.min(b.x));
+            s.hi = s.hi.max(a.x.max(b.x));
+            continue;
+        }
+        let dx = b.x - a.x;
+        let dy = b.y - a.y;
+        let u = a.x + (v - a.y) * dx / dy;
+        let scale =
+            a.x.abs() + b.x.abs() + dx.abs() * (1.0 + (v.abs() + a.y.abs() + b.y.abs()) / dy.abs());
+        s.err = s.err.max(128.0 * f64::EPSILON * scale);
+        s.lo = s.lo.min(u);
+        s.hi = s.hi.max(u);
     }
-    (lo <= hi).then_some((lo, hi))
+    (s.lo <= s.hi).then_some(s)
 }
 
 /// A projected triangle's inside test. Each edge function is evaluated
@@ -231,22 +266,12 @@ impl TriangleTest {
     /// Barycentric coordinates of `p` if the fill rule puts it inside.
     #[cfg(test)]
     fn barycentric(&self, p: DVec2) -> Option<[f64; 3]> {
-        let mut e = [0.0; 3];
-        for (out, &(a, b, side)) in e.iter_mut().zip(&self.edges) {
-            let d = b - a;
-            let value = d.perp_dot(p - a);
-            let sign = if value != 0.0 {
-                value.signum()
-            } else if d.y != 0.0 {
-                -d.y.signum()
-            } else {
-                d.x.signum()
-            };
-            if sign * side <= 0.0 {
-                return None;
-            }
-            *out = value * side;
+        if !self.contains(p) {
+            return None;
         }
+        let e = self
+            .edges
+            .map(|(a, b, side)| (b - a).perp_dot(p - a) * side);
         let total = self.area2.abs();
         let (b0, b1) = (e[0] / total, e[1] / total);
         Some([b0, b1, 1.0 - b0 - b1])
@@ -284,6 +309,40 @@ mod tests {
                 } else {
                     assert!(inside <= 1, "{p}");
                 }
+            }
+        }
+    }
+
+    /// A fan of triangles around a shared vertex (integer coordinates, so
+    /// the vertex and the spokes' midpoints lie exactly on the edges), with
+    /// every rotation of the vertex numbering: the centre vertex and each
+    /// spoke's midpoint belong to exactly one triangle.
+    #[test]
+    fn a_shared_vertex_and_its_spokes_belong_to_exactly_one_triangle() {
+        let rim = [
+            DVec2::new(2.0, 0.0),
+            DVec2::new(2.0, 2.0),
+            DVec2::new(-1.0, 2.0),
+            DVec2::new(-2.0, 0.0),
+            DVec2::new(-2.0, -2.0),
+            DVec2::new(1.0, -2.0),
+        ];
+        for shift in 0..7u32 {
+            // vertex ids: the centre gets `shift`, the rim the others in turn
+            let id = |v: usize| ((v as u32 + shift) % 7);
+            let points: Vec<DVec2> = std::iter::once(DVec2::ZERO).chain(rim).collect();
+            let fan: Vec<TriangleTest> = (0..6)
+                .map(|r| {
+                    let ids = [0, 1 + r, 1 + (r + 1) % 6].map(id);
+                    let q = [0, 1 + r, 1 + (r + 1) % 6].map(|v| points[v]);
+                    TriangleTest::new(ids, q)
+                })
+                .collect();
+            let mut probes = vec![DVec2::ZERO];
+            probes.extend(rim.iter().map(|&p| p / 2.0));
+            for p in probes {
+                let claims = fan.iter().filter(|t| t.contains(p)).count();
+                assert_eq!(claims, 1, "{p} (numbering shift {shift})");
             }
         }
     }
