@@ -329,7 +329,7 @@ mod tests {
         ];
         for shift in 0..7u32 {
             // vertex ids: the centre gets `shift`, the rim the others in turn
-            let id = |v: usize| ((v as u32 + shift) % 7);
+            let id = |v: usize| (v as u32 + shift) % 7;
             let points: Vec<DVec2> = std::iter::once(DVec2::ZERO).chain(rim).collect();
             let fan: Vec<TriangleTest> = (0..6)
                 .map(|r| {
