@@ -4,12 +4,15 @@
 //! scaled to 2 cm) of `shared/data`. The paper's CPU: 7.63 and 15.64 ms at 200²; its GPU 0.57
 //! and 1.06 ms.
 //!
+//! The weigher is reused across iterations (its working memory kept), as
+//! an actuator weighing its cavity every frame does.
+//!
 //! `cargo bench -p voxflex-fluid --bench fluid_weight`
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::DVec3;
 use voxflex_fluid::test_surfaces::{BUNNY_GRAVITY, bunny_2cm, icosphere};
-use voxflex_fluid::{FluidWeightParams, fluid_weights};
+use voxflex_fluid::{FluidWeigher, FluidWeightParams};
 
 fn bench(c: &mut Criterion) {
     let surfaces = [
@@ -30,8 +33,10 @@ fn bench(c: &mut Criterion) {
                     leverage_alpha: alpha,
                     ..Default::default()
                 };
+                // one weigher per series, as an actuator keeps one per cavity
+                let mut weigher = FluidWeigher::default();
                 g.bench_with_input(BenchmarkId::new(label, n), &p, |b, p| {
-                    b.iter(|| fluid_weights(&s, p).expect("weights"))
+                    b.iter(|| weigher.weigh(&s, p).expect("weights"))
                 });
             }
         }
