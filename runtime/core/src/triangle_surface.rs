@@ -158,6 +158,52 @@ impl TriangleSurface {
         }
     }
 
+    /// The surface of the box `[lo, hi]` (mm), normals out, each face split
+    /// into `m × m` equal quads of two triangles (`m ≥ 1`), vertices shared:
+    /// a closed test and primitive cavity whose inner edges and vertices
+    /// sit on known coordinates.
+    pub fn tiled_box(lo: DVec3, hi: DVec3, m: usize) -> Self {
+        let m = m.max(1);
+        let mut index = HashMap::new();
+        let mut vertices = Vec::new();
+        let mut id = |p: [usize; 3]| -> u32 {
+            *index.entry(p).or_insert_with(|| {
+                let t = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64) / m as f64;
+                vertices.push(lo + t * (hi - lo));
+                (vertices.len() - 1) as u32
+            })
+        };
+        let mut triangles = Vec::with_capacity(12 * m * m);
+        // Face at `at` across axis a, spanned by (b, c) with e_b × e_c = e_a.
+        for a in 0..3 {
+            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+            for (at, outward) in [(0, false), (m, true)] {
+                for i in 0..m {
+                    for j in 0..m {
+                        let corner = |di: usize, dj: usize| {
+                            let mut p = [at; 3];
+                            p[b] = i + di;
+                            p[c] = j + dj;
+                            p
+                        };
+                        let q =
+                            [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)].map(&mut id);
+                        let (t0, t1) = ([q[0], q[1], q[2]], [q[0], q[2], q[3]]);
+                        if outward {
+                            triangles.extend([t0, t1]);
+                        } else {
+                            triangles.extend([[t0[0], t0[2], t0[1]], [t1[0], t1[2], t1[1]]]);
+                        }
+                    }
+                }
+            }
+        }
+        Self {
+            vertices,
+            triangles,
+        }
+    }
+
     /// Copy with every vertex moved by `f` (e.g. a rigid motion, or the
     /// deformation model's map), same triangles.
     pub fn mapped(&self, f: impl Fn(DVec3) -> DVec3) -> Self {
@@ -173,23 +219,27 @@ mod tests {
     use super::*;
 
     /// The unit cube's surface, normals out.
-    pub(crate) fn cube() -> TriangleSurface {
-        let v: Vec<DVec3> = (0..8)
-            .map(|i| DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64))
-            .collect();
-        let quads = [
-            [0, 2, 3, 1], // z = 0, normal −z
-            [4, 5, 7, 6], // z = 1, +z
-            [0, 1, 5, 4], // y = 0, −y
-            [2, 6, 7, 3], // y = 1, +y
-            [0, 4, 6, 2], // x = 0, −x
-            [1, 3, 7, 5], // x = 1, +x
-        ];
-        let tris = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        TriangleSurface::new("cube", v, tris).unwrap()
+    fn cube() -> TriangleSurface {
+        TriangleSurface::tiled_box(DVec3::ZERO, DVec3::ONE, 1)
+    }
+
+    #[test]
+    fn tiled_boxes_are_closed_and_enclose_their_volume() {
+        for m in [1, 2, 5] {
+            let s = TriangleSurface::tiled_box(
+                DVec3::new(-1.0, 2.0, 0.0),
+                DVec3::new(3.0, 4.0, 5.0),
+                m,
+            );
+            s.check_closed("tiled box").unwrap();
+            assert_eq!(s.triangles.len(), 12 * m * m);
+            assert_eq!(s.vertices.len(), 6 * m * m + 2);
+            assert!(
+                (s.signed_volume() - 40.0).abs() < 1e-9,
+                "{m}: {}",
+                s.signed_volume()
+            );
+        }
     }
 
     #[test]

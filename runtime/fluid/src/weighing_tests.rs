@@ -5,24 +5,9 @@ use super::*;
 use glam::DVec3;
 use voxflex_core::triangle_surface::TriangleSurface;
 
-/// The box `[0, sx] × [0, sy] × [0, sz]` (mm), normals out.
+/// The box `[0, s]` (mm), normals out.
 fn cuboid(s: DVec3) -> TriangleSurface {
-    let v: Vec<DVec3> = (0..8)
-        .map(|i| DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64) * s)
-        .collect();
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let tris = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
-    TriangleSurface::new("cuboid", v, tris).unwrap()
+    TriangleSurface::tiled_box(DVec3::ZERO, s, 1)
 }
 
 fn shared(name: &str) -> Option<TriangleSurface> {
@@ -265,68 +250,27 @@ fn an_open_surface_is_reported_not_silently_weighed() {
     assert!(w.count.irregular_columns > 0, "{:?}", w.count);
 }
 
-/// The box `[0, s]` with every face split into `m × m` quads (2 triangles
-/// each), vertices shared: rows of the grid can run exactly along its
-/// inner edges.
-fn subdivided_cuboid(s: DVec3, m: usize) -> TriangleSurface {
-    let mut index = std::collections::HashMap::new();
-    let mut vertices = Vec::new();
-    let mut id = |p: [usize; 3]| -> u32 {
-        *index.entry(p).or_insert_with(|| {
-            vertices.push(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64) / m as f64 * s);
-            (vertices.len() - 1) as u32
-        })
-    };
-    let mut tris = Vec::new();
-    // each face: fixed axis a at 0 or m, spanning axes (b, c) with b × c = ±e_a
-    for a in 0..3 {
-        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-        for (at, outward) in [(0, false), (m, true)] {
-            for i in 0..m {
-                for j in 0..m {
-                    let corner = |di: usize, dj: usize| {
-                        let mut p = [0; 3];
-                        p[a] = at;
-                        p[b] = i + di;
-                        p[c] = j + dj;
-                        p
-                    };
-                    let q = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)].map(&mut id);
-                    let (t0, t1) = ([q[0], q[1], q[2]], [q[0], q[2], q[3]]);
-                    if outward {
-                        tris.extend([t0, t1]);
-                    } else {
-                        tris.extend([[t0[0], t0[2], t0[1]], [t1[0], t1[2], t1[1]]]);
-                    }
-                }
-            }
-        }
-    }
-    let surface = TriangleSurface::new("subdivided cuboid", vertices, tris).unwrap();
-    surface.check_closed("subdivided cuboid").unwrap();
-    surface
-}
-
-/// Grid rows and columns through the faces' inner edges and vertices (odd
-/// grids put centres on y = 1 and on the diagonals): every column is still
-/// counted exactly once, so the box's volume is exact.
+/// Column centres exactly on the faces' diagonals (a 4 × 4 mm box split
+/// into 1 mm quads: grids of 4 and 8 columns put centres on the quads'
+/// diagonals in exact floating point), exactly on vertices (split into
+/// 0.5 mm quads) and on other grids: every column is still counted exactly
+/// once, so the box's volume is exact.
 #[test]
 fn centres_on_edges_and_vertices_are_counted_once() {
-    let s = subdivided_cuboid(DVec3::new(3.0, 2.0, 5.0), 2);
-    assert!((s.signed_volume() - 30.0).abs() < 1e-12);
-    for n in [1, 3, 5, 7, 31, 201] {
-        for alpha in [0.25, 0.0] {
-            let w = fluid_weights(
-                &s,
-                &FluidWeightParams {
+    for m in [4, 8] {
+        let s = TriangleSurface::tiled_box(DVec3::ZERO, DVec3::new(4.0, 4.0, 5.0), m);
+        for n in [4, 8, 1, 3, 7, 31] {
+            for alpha in [0.25, 0.0] {
+                let p = FluidWeightParams {
                     leverage_alpha: alpha,
                     ..params(n)
-                },
-            )
-            .unwrap();
-            assert_eq!(w.count.irregular_columns, 0, "{n}²");
-            assert_eq!(w.count.columns_with_fluid, n * n, "{n}²");
-            assert!((w.volume_mm3 - 30.0).abs() < 1e-9, "{n}²: {}", w.volume_mm3);
+                };
+                let w = fluid_weights(&s, &p).unwrap();
+                let at = format!("{m}-split box, {n}², α {alpha}");
+                assert_eq!(w.count.irregular_columns, 0, "{at}");
+                assert_eq!(w.count.columns_with_fluid, n * n, "{at}");
+                assert!((w.volume_mm3 - 80.0).abs() < 1e-9, "{at}: {}", w.volume_mm3);
+            }
         }
     }
 }
