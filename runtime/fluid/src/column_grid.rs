@@ -54,6 +54,18 @@ impl ColumnGrid {
         self.origin + (DVec2::new(i as f64, j as f64) + 0.5) * self.cell
     }
 
+    /// The columns (index range `i0..i1` along u) whose centres lie in
+    /// `[lo, hi]` along u (mm), up to about an ulp of the coordinates at
+    /// the ends; possibly empty. The row scan's 1-D range.
+    #[inline]
+    pub fn columns_within(&self, lo: f64, hi: f64) -> [usize; 2] {
+        let inv = 1.0 / self.cell.x;
+        let first = ((lo - self.origin.x) * inv - 0.5).ceil().max(0.0) as usize;
+        let last = (((hi - self.origin.x) * inv - 0.5).floor() + 1.0).clamp(0.0, self.n[0] as f64)
+            as usize;
+        [first.min(last), last]
+    }
+
     /// The columns whose centres may lie in the (u, v) box `[lo, hi]` (mm):
     /// index ranges `i0..i1`, `j0..j1` (possibly empty).
     pub fn centres_within(&self, lo: DVec2, hi: DVec2) -> ([usize; 2], [usize; 2]) {

@@ -113,16 +113,22 @@ impl TriangleRaster {
             let Some(span) = row_span(self.q, v) else {
                 continue;
             };
-            let within =
-                |lo: f64, hi: f64| grid.centres_within(DVec2::new(lo, v), DVec2::new(hi, v)).0;
-            let all = within(span.lo - span.err, span.hi + span.err);
-            let (mut first, mut last) = (all[0].saturating_sub(1).max(i0), (all[1] + 1).min(i1));
-            // Centres farther than the span's rounding error inside it are
-            // strictly inside the triangle: only the ends need the exact test.
+            // Index ranges carry their own rounding (about an ulp of the
+            // coordinates): widen the span's error bound by it.
+            let err = span.err
+                + 64.0 * f64::EPSILON * (span.lo.abs() + span.hi.abs() + grid.origin.x.abs());
+            let within = |lo: f64, hi: f64| {
+                let [a, b] = grid.columns_within(lo, hi);
+                [a.max(i0), b.min(i1)]
+            };
+            // Centres outside [lo − err, hi + err] are outside the triangle;
+            // centres inside [lo + err, hi − err] strictly inside it: only
+            // those between (rare) need the exact fill-rule test.
+            let [mut first, mut last] = within(span.lo - err, span.hi + err);
             let sure = if span.on_edge {
                 [last, last]
             } else {
-                within(span.lo + span.err, span.hi - span.err)
+                within(span.lo + err, span.hi - err)
             };
             let (stop_left, stop_right) = if sure[0] < sure[1] {
                 (sure[0], sure[1])
