@@ -8,6 +8,7 @@
 
 #![warn(missing_docs)]
 
+pub mod adaptive;
 pub mod app;
 pub mod cli;
 pub mod compose;
