@@ -10,6 +10,7 @@
 
 pub mod adaptive;
 pub mod app;
+pub mod bench;
 pub mod cli;
 pub mod compose;
 pub mod model_panel;
