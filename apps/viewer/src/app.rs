@@ -190,6 +190,11 @@ impl ViewerApp {
         self.render.as_ref().map(|(_, s, w)| (*s, *w))
     }
 
+    /// What the session's last step re-ran, and why (benchmarks).
+    pub fn last_step(&self) -> Option<&StepReport> {
+        self.last_step.as_ref()
+    }
+
     /// The session's per-stage times as last reported (benchmarks).
     pub fn stages(&self) -> &[StageTime] {
         &self.stages

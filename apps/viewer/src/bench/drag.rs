@@ -20,10 +20,9 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Report> {
         &format!(
             "UI-thread time of every frame (the app's update and egui's tessellation, headless, \
              60 Hz) during a {:.1} s scripted grab drag on the {n}³ head phantom, ChainMail on \
-             the CPU, 3D view {px}² ({half}² while dragging).",
+             the CPU, 3D view {px}² (an adaptive ¼–½ of that while dragging).",
             opts.seconds,
             px = opts.render_size,
-            half = opts.render_size / 2
         ),
     );
     let mut h = open_head(&opts.out, n, opts.render_size, opts.plugin_dirs.clone())?;

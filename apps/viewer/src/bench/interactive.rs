@@ -1,13 +1,13 @@
 //! `--bench interactive`: the interactive loop — completed deform +
 //! resample + render cycles per second during a scripted grab drag with
-//! adaptive quality (the 3D view at half resolution while dragging), and
+//! adaptive quality (the 3D view at ¼–½ resolution while dragging), and
 //! the full-quality render once idle (issue 15: ≥ 10 cycles/s at 512² on
 //! 2 cores, 128³ head phantom, ChainMail on the CPU).
 
 use super::BenchOptions;
 use super::headless::Headless;
 use super::report::{Report, verdict};
-use super::script::{DragRun, PATIENCE, open_head, scripted_drag, stage_deltas};
+use super::script::{DragRun, FrameRecord, PATIENCE, open_head, scripted_drag, stage_deltas};
 use super::stats::Stats;
 use serde_json::json;
 use std::time::Duration;
@@ -17,20 +17,26 @@ pub const REQUIRED_HZ: f64 = 10.0;
 /// Full-quality renders timed once idle.
 const IDLE_RENDERS: usize = 5;
 
-/// The times (since the press) at which a 3D image arrived at the UI
-/// that shows a model step newer than the previous counted image's:
-/// each one a completed deform + resample + render cycle.
-pub fn cycle_times(drag: &DragRun) -> Vec<Duration> {
+/// The frames at which a 3D image arrived at the UI that shows a model
+/// step newer than the previous counted image's: each one a completed
+/// deform + resample + render cycle.
+pub fn cycle_frames(drag: &DragRun) -> Vec<FrameRecord> {
     let (mut steps, mut renders) = (drag.before.steps, drag.before.renders);
-    let mut at = vec![];
+    let mut cycles = vec![];
     for f in &drag.frames {
         if f.renders > renders && f.steps > steps {
-            at.push(f.at);
+            cycles.push(*f);
             steps = f.steps;
         }
         renders = f.renders;
     }
-    at
+    cycles
+}
+
+/// The median (upper middle) of `v`, if any.
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied()
 }
 
 /// Runs the benchmark and returns its report.
@@ -42,19 +48,25 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Report> {
         &format!(
             "Completed deform + resample + render cycles (a 3D image showing a new model step \
              arriving at the UI) during a {:.1} s scripted grab drag on the {n}³ head phantom, \
-             ChainMail on the CPU, 3D view {px}² rendered at {}² while dragging; then the \
-             full-quality {px}² render once idle (median of {IDLE_RENDERS}).",
+             ChainMail on the CPU, 3D view {px}² rendered at an adaptive ¼–½ of that while \
+             dragging; then the full-quality {px}² render once idle (median of {IDLE_RENDERS}).",
             opts.seconds,
-            px / 2
         ),
     );
     let mut h = open_head(&opts.out, n, px, opts.plugin_dirs.clone())?;
     let drag = scripted_drag(&mut h, opts.seconds)?;
-    let cycles = cycle_times(&drag);
+    let frames = cycle_frames(&drag);
+    let cycles: Vec<Duration> = frames.iter().map(|f| f.at).collect();
     let span = drag.frames.last().map_or(Duration::ZERO, |f| f.at);
     let hz = cycles.len() as f64 / span.as_secs_f64().max(1e-9);
     let gaps: Vec<Duration> = cycles.windows(2).map(|w| w[1] - w[0]).collect();
     let per_stage = stage_deltas(&drag.stages.0, &drag.stages.1);
+    let refilled = median(frames.iter().map(|f| f.refilled as f64).collect());
+    let scales = frames
+        .iter()
+        .filter_map(|f| f.render.map(|(s, _)| s as f64));
+    let scale = median(scales.collect());
+    let voxels = h.app.opened().map_or(0, |o| o.grid.len()) as f64;
     let idle = idle_renders(&mut h)?;
     let idle_stats = Stats::of(&idle);
     report.row(
@@ -73,6 +85,19 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Report> {
             "",
         );
         report.field("cycle_gap_ms", g.json());
+    }
+    if let (Some(r), Some(sc)) = (refilled, scale) {
+        report.row(
+            "per cycle: voxels re-filled (median) / 3D scale (median)",
+            format!(
+                "{r:.0} ({:.0} % of the volume) / {sc:.3} ({:.0}²)",
+                100.0 * r / voxels.max(1.0),
+                sc * px as f64
+            ),
+            "",
+        );
+        report.field("refilled_voxels_median", json!(r));
+        report.field("drag_scale_median", json!(sc));
     }
     for d in &per_stage {
         report.row(

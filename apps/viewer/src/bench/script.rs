@@ -29,6 +29,8 @@ pub struct FrameRecord {
     pub renders: u64,
     /// The last image's resolution scale and render time.
     pub render: Option<(f32, Duration)>,
+    /// Voxels the last step's resample re-filled (0 when it did not run).
+    pub refilled: u64,
 }
 
 /// A scripted drag's record.
@@ -108,6 +110,11 @@ pub fn scripted_drag(h: &mut Headless, seconds: f64) -> anyhow::Result<DragRun> 
         steps: h.app.steps(),
         renders: h.app.render_image().1,
         render: h.app.render_timing(),
+        refilled: h
+            .app
+            .last_step()
+            .and_then(|r| r.stage("resample"))
+            .map_or(0, |s| s.voxels),
     };
     let before = FrameRecord {
         at: Duration::ZERO,
