@@ -184,6 +184,30 @@ impl ViewerApp {
         (self.render.as_ref().map(|(i, _, _)| i), self.renders)
     }
 
+    /// The last 3D image's resolution scale (1 = full) and render wall
+    /// time, as the worker reported (benchmarks).
+    pub fn render_timing(&self) -> Option<(f32, Duration)> {
+        self.render.as_ref().map(|(_, s, w)| (*s, *w))
+    }
+
+    /// What the session's last step re-ran, and why (benchmarks).
+    pub fn last_step(&self) -> Option<&StepReport> {
+        self.last_step.as_ref()
+    }
+
+    /// The session's per-stage times as last reported (benchmarks).
+    pub fn stages(&self) -> &[StageTime] {
+        &self.stages
+    }
+
+    /// Sets the 3D view's full-quality size, pixels a side (once the
+    /// session is open; benchmarks).
+    pub fn set_render_size(&mut self, px: u32) {
+        if let Some(c) = &mut self.camera {
+            (c.width, c.height) = (px, px);
+        }
+    }
+
     /// The slices last received, in axial, coronal, sagittal order.
     pub fn slices(&self) -> Option<&[SliceFrame; 3]> {
         self.slices.as_deref()

@@ -1,5 +1,7 @@
-//! The command line: what to open and the screenshot mode for CI.
+//! The command line: what to open, the screenshot mode for CI and the
+//! performance benchmarks (`--bench`).
 
+use crate::bench::BenchKind;
 use clap::Parser;
 use std::path::PathBuf;
 
@@ -30,6 +32,30 @@ pub struct Args {
     /// Backend the session computes on: cpu, gpu or auto.
     #[arg(long, default_value = "cpu")]
     pub backend: String,
+    /// Run a performance benchmark headless (no window) through the real
+    /// viewer (its update loop, worker and session), write its tables
+    /// (JSON and Markdown) into `--out` and exit: `drag` (UI-thread frame
+    /// times during a scripted grab drag), `interactive` (deform +
+    /// resample + render cycles per second while dragging, and the idle
+    /// full-quality frame) or `open` (a CT-like volume file to the first
+    /// rendered 3D frame). See docs/BENCHMARKS.md.
+    #[arg(long, value_name = "KIND")]
+    pub bench: Option<BenchKind>,
+    /// Folder the benchmark writes its tables into (created).
+    #[arg(long, value_name = "DIR", default_value = "out/viewer-bench")]
+    pub out: PathBuf,
+    /// Length of the benchmark's scripted drag, seconds.
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Benchmark volume size, voxels a side: the head phantom N³ for
+    /// `drag` and `interactive`; N × N × (N·133/512) for `open`
+    /// (default 128 and 512).
+    #[arg(long, value_name = "N")]
+    pub size: Option<usize>,
+    /// Pixels a side of the 3D view at full quality during `drag` and
+    /// `interactive` (it renders at half while dragging).
+    #[arg(long, value_name = "PX", default_value_t = 512)]
+    pub render_size: u32,
 }
 
 /// Parses `X,Y,Z` (mm).

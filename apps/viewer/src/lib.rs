@@ -8,7 +8,9 @@
 
 #![warn(missing_docs)]
 
+pub mod adaptive;
 pub mod app;
+pub mod bench;
 pub mod cli;
 pub mod compose;
 pub mod model_panel;

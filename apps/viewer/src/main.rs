@@ -21,6 +21,16 @@ fn main() -> anyhow::Result<()> {
         println!("{}: {n} distinct colours: not blank", png.display());
         return Ok(());
     }
+    if let Some(kind) = args.bench {
+        let opts = voxflex_viewer::bench::BenchOptions {
+            out: args.out.clone(),
+            seconds: args.seconds,
+            size: args.size,
+            render_size: args.render_size,
+            plugin_dirs: vec![],
+        };
+        return voxflex_viewer::bench::run(kind, &opts);
+    }
     let backend = args
         .backend
         .parse()

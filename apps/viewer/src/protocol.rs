@@ -161,7 +161,8 @@ pub enum Reply {
     Render {
         /// The image.
         image: RgbaImage,
-        /// Resolution scale (0.5 while interacting).
+        /// Resolution scale (1 = full; lower while interacting, see
+        /// [`crate::adaptive`]).
         scale: f32,
         /// Wall time of the render.
         wall: Duration,

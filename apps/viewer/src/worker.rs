@@ -3,6 +3,7 @@
 //! 3D image, ROI rows and stage times, so the UI thread never waits on the
 //! pipeline.
 
+use crate::adaptive::AdaptiveScale;
 use crate::compose::compose_slice;
 use crate::open::{
     OpenRequest, OpenedSession, deformation_models, deformation_schemas, first_camera, open,
@@ -112,6 +113,8 @@ struct State {
     scene: Scene,
     /// The volume file opened without a scene.
     volume_file: Option<PathBuf>,
+    /// The 3D view's resolution while dragging.
+    adaptive: AdaptiveScale,
 }
 
 impl State {
@@ -154,6 +157,7 @@ impl State {
             render,
             scene,
             volume_file,
+            adaptive: AdaptiveScale::default(),
         })
     }
 
@@ -303,13 +307,20 @@ impl State {
         if ch.view || ch.volume || ch.rois {
             self.send_slices(&view, out)?;
         }
-        let scale = if view.interacting { 0.5 } else { 1.0 };
+        let scale = if view.interacting {
+            self.adaptive.scale()
+        } else {
+            1.0
+        };
         let camera = scaled(&view.camera, scale);
         let due = self.rendered != Some((camera, scale)) || ch.volume || ch.rois;
         if due {
             let t = Instant::now();
             let image = self.session.render(&camera, &self.render)?;
             self.rendered = Some((camera, scale));
+            if view.interacting {
+                self.adaptive.observe(t.elapsed());
+            }
             let _ = out.send(Reply::Render {
                 image,
                 scale,
