@@ -280,9 +280,7 @@ impl RenderStage {
     /// an RGBA8 image in memory (row-major, top row first).
     pub fn render_image(&mut self, camera: &Camera) -> Result<(RgbaImage, RenderStats), RunError> {
         let mut pixels = vec![0u8; camera.width as usize * camera.height as usize * 4];
-        let stats = self
-            .renderer
-            .render(camera, ImageTarget::Cpu(&mut pixels))?;
+        let stats = self.render_into(camera, ImageTarget::Cpu(&mut pixels))?;
         Ok((
             RgbaImage {
                 width: camera.width,
@@ -291,6 +289,17 @@ impl RenderStage {
             },
             stats,
         ))
+    }
+
+    /// Renders what [`Self::set_scene`] handed over through `camera` into
+    /// `target` (`camera.width × camera.height` RGBA8 pixels, sRGB,
+    /// straight alpha, top row first).
+    pub fn render_into(
+        &mut self,
+        camera: &Camera,
+        target: ImageTarget<'_>,
+    ) -> Result<RenderStats, RunError> {
+        Ok(self.renderer.render(camera, target)?)
     }
 
     /// Renders `volume` with `maps` and writes the image(s); returns the files.
