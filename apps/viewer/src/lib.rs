@@ -9,8 +9,10 @@
 #![warn(missing_docs)]
 
 pub mod app;
+pub mod backend_panel;
 pub mod cli;
 pub mod compose;
+pub mod gpu_image;
 pub mod model_panel;
 pub mod open;
 pub mod orientation;
