@@ -67,7 +67,10 @@ fn render_to_gpu_writes_the_image_render_returns() {
     assert_eq!(on_gpu, s.render(&camera, &params).unwrap().pixels);
     let lit = on_gpu.chunks(4).filter(|p| p[3] > 0).count();
     let alpha = on_gpu.chunks(4).map(|p| p[3]).max();
-    assert!(lit > 100, "the cube shows: {lit} pixels, largest alpha {alpha:?}");
+    assert!(
+        lit > 100,
+        "the cube shows: {lit} pixels, largest alpha {alpha:?}"
+    );
     let d = max_diff(&on_gpu, &on_cpu.pixels);
     assert!(d <= 2, "GPU vs CPU render: largest difference {d}");
     // The buffer is the session's: reused at the same size, replaced at another.
@@ -90,6 +93,24 @@ fn render_to_gpu_writes_the_image_render_returns() {
     let (last, moved) = read(&mut s, 64, 48);
     assert_ne!(moved, on_gpu, "the drag shows");
     assert_eq!(moved, s.render(&camera, &params).unwrap().pixels);
+    // Drawn from the resampler's GPU buffer, it is the image of the same
+    // volume read back and uploaded by a fresh GPU session.
+    let volume = s.volume().unwrap().clone();
+    let mut fresh = Session::from_volume(
+        volume,
+        SessionDefaults {
+            backend: BackendChoice::Gpu,
+            plugin_dirs: vec![plugin_dir(&["raycast"])],
+            gpu: Some(gpu.clone()),
+            ..SessionDefaults::default()
+        },
+    )
+    .unwrap();
+    let d = max_diff(&moved, &fresh.render(&camera, &params).unwrap().pixels);
+    assert!(
+        d <= 1,
+        "from the GPU buffer vs uploaded: largest difference {d}"
+    );
     // A backend switch frees the buffer; the CPU path refuses again.
     s.set_backend(BackendChoice::Cpu).unwrap();
     assert!(gpu.buffer_size(last).is_err(), "the image buffer was freed");

@@ -270,8 +270,19 @@ impl RenderStage {
         dirty: DirtyRegion,
         maps: &[OpacityMap],
     ) -> Result<(), RunError> {
-        self.renderer
-            .set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
+        self.set_scene_on(RenderVolume::Cpu(volume.view()), dirty, maps)
+    }
+
+    /// [`Self::set_scene`] with the volume where it lives: in memory, or in
+    /// a GPU buffer of the renderer's device (the resampler's output, bound
+    /// as is by a GPU renderer).
+    pub fn set_scene_on(
+        &mut self,
+        volume: RenderVolume<'_>,
+        dirty: DirtyRegion,
+        maps: &[OpacityMap],
+    ) -> Result<(), RunError> {
+        self.renderer.set_volume(volume, dirty)?;
         self.renderer.set_opacity_maps(maps)?;
         Ok(())
     }

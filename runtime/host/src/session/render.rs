@@ -3,6 +3,7 @@
 //! session's device. Both go through one function with the target as a
 //! parameter.
 
+use super::model_stage::Displacements;
 use super::{RenderParams, Session};
 use crate::gpu_context::WgpuService;
 use crate::pipeline::RunError;
@@ -10,10 +11,11 @@ use crate::visualise::RgbaImage;
 use std::sync::Arc;
 use std::time::Instant;
 use voxflex_core::camera::Camera;
-use voxflex_core::deformation::DirtyRegion;
+use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::gpu::{BufferId, GpuService};
+use voxflex_core::grid::Grid;
 use voxflex_core::opacity_map::OpacityMap;
-use voxflex_core::render::ImageTarget;
+use voxflex_core::render::{ImageTarget, RenderVolume};
 
 impl Session {
     /// Renders the current volume with the session's ROI maps through
@@ -93,8 +95,26 @@ impl Session {
         Ok(id)
     }
 
+    /// The current volume in the resampler's GPU output buffer (grid, mm,
+    /// and buffer of f32), when the session computes on the GPU and has
+    /// resampled: the renderer binds it as is, so rendering reads nothing
+    /// back. `None` on the CPU and before the first resample (the source).
+    fn gpu_volume(&self) -> Option<(Grid, BufferId)> {
+        if self.resolved.backend != ExecutionBackend::Gpu || self.versions.resample.version == 0 {
+            return None;
+        }
+        let (Some(res), Some(Displacements::Gpu { .. })) = (&self.resample, &self.displacements)
+        else {
+            return None;
+        };
+        res.resampler
+            .output_grid()
+            .zip(res.resampler.gpu_output_buffer())
+    }
+
     /// The render stage into `target`: builds or reconfigures the renderer,
-    /// hands it the current volume's changed region and the ROI maps,
+    /// hands it the current volume's changed region (from the GPU buffer on
+    /// the GPU path, see [`Self::gpu_volume`]) and the ROI maps,
     /// renders and records the stage's metrics.
     fn render_into(
         &mut self,
@@ -115,14 +135,18 @@ impl Session {
             }
         }
         let t = Instant::now();
-        self.ensure_volume()?;
+        let on_gpu = self.gpu_volume();
+        if on_gpu.is_none() {
+            self.ensure_volume()?;
+        }
         let maps: Vec<OpacityMap> = self.rois.iter().map(|r| r.map().clone()).collect();
-        let volume = match &self.resampled {
-            Some((_, v)) => v,
-            None => &self.source,
+        let volume = match (on_gpu, &self.resampled) {
+            (Some((grid, values)), _) => RenderVolume::Gpu { grid, values },
+            (None, Some((_, v))) => RenderVolume::Cpu(v.view()),
+            (None, None) => RenderVolume::Cpu(self.source.view()),
         };
         let slot = self.renderer.as_mut().expect("built above");
-        slot.stage.set_scene(volume, self.render_dirty, &maps)?;
+        slot.stage.set_scene_on(volume, self.render_dirty, &maps)?;
         let stats = slot.stage.render_into(camera, target)?;
         self.render_dirty = DirtyRegion::None;
         self.versions.render.ran_on(self.versions.resample.version);
