@@ -220,7 +220,8 @@ impl ViewerApp {
         &self.rois
     }
 
-    /// The last 3D image received and how many have been received.
+    /// The last 3D image received in memory (`None` while the GPU path
+    /// draws from its texture) and how many images have been received.
     pub fn render_image(&self) -> (Option<&RgbaImage>, u64) {
         (self.render.as_ref().map(|(i, _, _)| i), self.renders)
     }
@@ -315,6 +316,8 @@ impl ViewerApp {
                 Reply::GpuRender { frame, scale, wall } => {
                     match self.gpu_image.as_mut().map(|g| g.show(&frame)) {
                         Some(Ok(())) => {
+                            // The image is on the GPU only; no stale CPU copy.
+                            self.render = None;
                             self.gpu_render = Some((scale, wall));
                             self.renders += 1;
                         }

@@ -211,6 +211,26 @@ fn switching_to_gpu_draws_the_sessions_texture_equal_to_the_cpu_render() {
     // The warning shows exactly on a software adapter.
     let warned = h.query_by_label_contains(SOFTWARE_WARNING).is_some();
     assert_eq!(warned, shared.software, "{shared}");
+    assert!(
+        app.render_image().0.is_none(),
+        "no image came back to the CPU"
+    );
     // egui's renderer draws the frame with the native texture.
     h.render().expect("egui draws the shared texture");
+
+    // Back to the CPU: the image is uploaded again and drawn from there.
+    h.get_by_role_and_label(egui::accesskit::Role::ComboBox, "Backend")
+        .click();
+    h.run_steps(3);
+    h.get_by_label("CPU").click();
+    wait(&mut h, "the CPU image again", |a| {
+        a.render_image().0.is_some() && a.ready()
+    });
+    let app = h.state();
+    assert!(app.gpu_image().and_then(GpuImage::texture_id).is_none());
+    assert!(matches!(
+        app.view3d_texture(),
+        Some(egui::TextureId::Managed(_))
+    ));
+    assert_eq!(app.render_image().0, Some(&cpu), "the same CPU render");
 }
