@@ -165,6 +165,48 @@ mod tests {
         }
     }
 
+    /// The box in a harness; the commands it returned so far.
+    fn harness(
+        panel: BackendPanel,
+    ) -> egui_kittest::Harness<'static, (BackendPanel, Vec<Command>)> {
+        egui_kittest::Harness::builder().build_ui_state(
+            |ui, (panel, sent): &mut (BackendPanel, Vec<Command>)| {
+                ui.horizontal(|ui| sent.extend(panel.ui(ui)));
+            },
+            (panel, vec![]),
+        )
+    }
+
+    #[test]
+    fn the_combo_box_asks_for_a_switch_and_a_failed_one_shows_inline() {
+        let lavapipe = info("llvmpipe (LLVM 15.0.6, 256 bits)", wgpu::DeviceType::Cpu);
+        let mut panel = BackendPanel::default();
+        panel.on_status(BackendStatus {
+            choice: BackendChoice::Cpu,
+            computing: None,
+            shared: Some(lavapipe),
+        });
+        let mut h = harness(panel);
+        use egui_kittest::kittest::Queryable;
+        assert!(h.query_by_label_contains("GPU: llvmpipe").is_some());
+        assert!(h.query_by_label(SOFTWARE_WARNING).is_some());
+        h.get_by_role_and_label(egui::accesskit::Role::ComboBox, "Backend")
+            .click();
+        h.run();
+        h.get_by_label("GPU").click();
+        h.run();
+        let sent = &h.state().1;
+        assert!(
+            matches!(sent.as_slice(), [Command::SetBackend(BackendChoice::Gpu)]),
+            "{sent:?}"
+        );
+        assert!(h.query_by_label("switching…").is_some());
+        h.state_mut().0.on_error("gpu: no GPU adapter found".into());
+        h.run();
+        assert!(h.query_by_label("gpu: no GPU adapter found").is_some());
+        assert!(h.query_by_label("switching…").is_none());
+    }
+
     #[test]
     fn software_adapters_get_the_warning_and_hardware_ones_do_not() {
         let lavapipe = info("llvmpipe (LLVM 15.0.6, 256 bits)", wgpu::DeviceType::Cpu);
