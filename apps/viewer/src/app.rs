@@ -2,6 +2,8 @@
 //! sent last, the cursor, window and camera — and the layout: toolbar,
 //! three slice views and the 3D view, the ROI and deformation panels.
 
+use crate::backend_panel::BackendPanel;
+use crate::gpu_image::GpuImage;
 use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
 use crate::orientation::normal_axis;
@@ -10,10 +12,10 @@ use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
 use crate::tools::{carve_again, cut_quad, half_extent_mm, slice_normal};
-use crate::view3d::view3d;
+use crate::view3d::view3d_texture;
 use crate::window_level::{Preset, drag_window};
 use crate::worker::Worker;
-use egui::{ColorImage, Rect, TextureHandle, TextureOptions};
+use egui::{ColorImage, Rect, TextureHandle, TextureId, TextureOptions};
 use std::time::{Duration, Instant};
 use voxflex_core::camera::Camera;
 use voxflex_core::glam::DVec3;
@@ -66,6 +68,12 @@ pub struct ViewerApp {
     render: Option<(RgbaImage, f32, Duration)>,
     renders: u64,
     render_tex: Option<TextureHandle>,
+    /// The GPU path's 3D texture (with a wgpu renderer whose device the
+    /// session shares).
+    gpu_image: Option<GpuImage>,
+    /// Scale and wall time of the last GPU-path image (`None` after a CPU one).
+    gpu_render: Option<(f32, Duration)>,
+    backend_panel: BackendPanel,
     rois: Vec<RoiRow>,
     roi_panel: RoiPanel,
     model_panel: ModelPanel,
@@ -118,6 +126,9 @@ impl ViewerApp {
             render: None,
             renders: 0,
             render_tex: None,
+            gpu_image: None,
+            gpu_render: None,
+            backend_panel: BackendPanel::default(),
             rois: vec![],
             roi_panel: RoiPanel::default(),
             model_panel: ModelPanel::default(),
@@ -146,6 +157,36 @@ impl ViewerApp {
     pub fn with_startup_seed(mut self, p: Option<DVec3>) -> Self {
         self.startup_seed = p;
         self
+    }
+
+    /// Draws the GPU path's 3D images through `g` (see
+    /// [`GpuImage::share`]; the session must compute on its device).
+    pub fn with_gpu_image(mut self, g: Option<GpuImage>) -> Self {
+        self.gpu_image = g;
+        self
+    }
+
+    /// The GPU path's texture, if the viewer has one.
+    pub fn gpu_image(&self) -> Option<&GpuImage> {
+        self.gpu_image.as_ref()
+    }
+
+    /// The texture the 3D view draws: the GPU path's while its images
+    /// arrive, else the CPU image's.
+    pub fn view3d_texture(&self) -> Option<TextureId> {
+        let gpu = self.gpu_image.as_ref().and_then(GpuImage::texture_id);
+        gpu.or(self.render_tex.as_ref().map(TextureHandle::id))
+    }
+
+    /// The *Backend* box (where the session computes, as last reported).
+    pub fn backend_panel(&self) -> &BackendPanel {
+        &self.backend_panel
+    }
+
+    /// Scale and wall time of the last 3D image, on either path.
+    fn render_quality(&self) -> Option<(f32, Duration)> {
+        let cpu = self.render.as_ref().map(|(_, s, w)| (*s, *w));
+        self.gpu_render.or(cpu)
     }
 
     /// Mutable access to the ROI panel (its growth constants, styles and
@@ -179,7 +220,8 @@ impl ViewerApp {
         &self.rois
     }
 
-    /// The last 3D image received and how many have been received.
+    /// The last 3D image received in memory (`None` while the GPU path
+    /// draws from its texture) and how many images have been received.
     pub fn render_image(&self) -> (Option<&RgbaImage>, u64) {
         (self.render.as_ref().map(|(i, _, _)| i), self.renders)
     }
@@ -255,7 +297,7 @@ impl ViewerApp {
             || (self.rois.iter().all(|r| r.info.converged)
                 && !self.rois.is_empty()
                 && self.renders > self.renders_at_rois);
-        seeded && self.slices.is_some() && self.render.as_ref().is_some_and(|(_, s, _)| *s >= 1.0)
+        seeded && self.slices.is_some() && self.render_quality().is_some_and(|(s, _)| s >= 1.0)
     }
 
     fn receive(&mut self, ctx: &egui::Context) {
@@ -290,7 +332,33 @@ impl ViewerApp {
                     );
                     self.render = Some((image, scale, wall));
                     self.renders += 1;
+                    self.gpu_render = None;
+                    if let Some(g) = &mut self.gpu_image {
+                        g.set_stale();
+                    }
                 }
+                Reply::GpuRender { frame, scale, wall } => {
+                    match self.gpu_image.as_mut().map(|g| g.show(&frame)) {
+                        Some(Ok(())) => {
+                            // The image is on the GPU only; no stale CPU copy.
+                            self.render = None;
+                            self.gpu_render = Some((scale, wall));
+                            self.renders += 1;
+                        }
+                        Some(Err(e)) => self.messages.push(format!("error: {e}")),
+                        None => self
+                            .messages
+                            .push("error: a GPU image arrived without a wgpu renderer".into()),
+                    }
+                }
+                Reply::Backend(b) => {
+                    self.model_panel.adapter = b
+                        .computing
+                        .as_ref()
+                        .map_or("cpu".into(), |a| a.name.clone());
+                    self.backend_panel.on_status(b);
+                }
+                Reply::BackendError(e) => self.backend_panel.on_error(e),
                 Reply::Rois(r) => {
                     self.rois = r;
                     self.renders_at_rois = self.renders;
@@ -475,7 +543,10 @@ impl ViewerApp {
 
     fn status(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
-            if let Some((_, scale, wall)) = &self.render {
+            if let Some(c) = self.backend_panel.ui(ui) {
+                self.worker.send(c);
+            }
+            if let Some((scale, wall)) = self.render_quality() {
                 ui.label(format!(
                     "3D: {:.0} % res, {:.0} ms",
                     scale * 100.0,
@@ -526,7 +597,8 @@ impl ViewerApp {
         let cell = cells[3].shrink(2.0);
         let mut child = ui.new_child(egui::UiBuilder::new().max_rect(cell).id_salt("3d"));
         if let Some(camera) = self.camera {
-            let (c, dragging) = view3d(&mut child, self.render_tex.as_ref(), &camera);
+            let tex = self.view3d_texture();
+            let (c, dragging) = view3d_texture(&mut child, tex, &camera);
             if dragging {
                 self.last_drag = Some(Instant::now());
             }

@@ -11,8 +11,10 @@
 pub mod adaptive;
 pub mod app;
 pub mod bench;
+pub mod backend_panel;
 pub mod cli;
 pub mod compose;
+pub mod gpu_image;
 pub mod model_panel;
 pub mod open;
 pub mod orientation;

@@ -5,6 +5,7 @@ use clap::Parser;
 use voxflex_core::glam::DVec3;
 use voxflex_viewer::app::ViewerApp;
 use voxflex_viewer::cli::Args;
+use voxflex_viewer::gpu_image::{self, GpuImage};
 use voxflex_viewer::open::OpenRequest;
 use voxflex_viewer::screenshot::Screenshot;
 
@@ -39,6 +40,7 @@ fn main() -> anyhow::Result<()> {
         input: args.input.clone(),
         backend,
         plugin_dirs: vec![],
+        gpu: None,
     };
     let screenshot = Screenshot::new(args.screenshot.clone(), args.exit_after_frames);
     let outcome = screenshot.outcome();
@@ -47,13 +49,21 @@ fn main() -> anyhow::Result<()> {
         viewport: egui::ViewportBuilder::default()
             .with_title("voxflex viewer")
             .with_inner_size([1280.0, 860.0]),
+        // The session computes on eframe's device: the adapter's own limits.
+        wgpu_options: eframe::egui_wgpu::WgpuConfiguration {
+            wgpu_setup: gpu_image::wgpu_setup(),
+            ..Default::default()
+        },
         ..Default::default()
     };
     eframe::run_native(
         "voxflex-viewer",
         options,
         Box::new(move |cc| {
+            let mut req = req;
+            let gpu = GpuImage::share(cc.wgpu_render_state.as_ref(), &mut req);
             let app = ViewerApp::new(&cc.egui_ctx, req, screenshot)?
+                .with_gpu_image(gpu)
                 .with_startup_seed(seed.map(DVec3::from_array));
             Ok(Box::new(app))
         }),

@@ -3,8 +3,10 @@
 
 use anyhow::Context;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use voxflex_core::camera::Camera;
 use voxflex_runtime::backend::BackendChoice;
+use voxflex_runtime::gpu_context::WgpuService;
 use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::scene::Scene;
 use voxflex_runtime::session::{RenderParams, Session, SessionDefaults, SessionSource};
@@ -23,6 +25,9 @@ pub struct OpenRequest {
     pub backend: BackendChoice,
     /// Directories searched for plugins before the usual search path.
     pub plugin_dirs: Vec<PathBuf>,
+    /// The UI's wgpu device as a GPU service, for the session to compute
+    /// on (see [`crate::gpu_image`]); `None`: it opens its own.
+    pub gpu: Option<Arc<WgpuService>>,
 }
 
 /// A session and the scene that gives the plugins their parameters.
@@ -58,6 +63,7 @@ pub fn open(req: &OpenRequest) -> anyhow::Result<OpenedSession> {
                 backend: req.backend,
                 plugin_dirs: req.plugin_dirs.clone(),
                 background: None,
+                gpu: req.gpu.clone(),
                 ..SessionDefaults::default()
             };
             let session = Session::from_volume(SessionSource::File(path.clone()), defaults)
@@ -82,7 +88,8 @@ pub fn open(req: &OpenRequest) -> anyhow::Result<OpenedSession> {
                 .settings
                 .plugin_dirs
                 .splice(0..0, req.plugin_dirs.iter().cloned());
-            let session = Session::open(&scene).with_context(|| format!("opening {title}"))?;
+            let session = Session::open_on(&scene, req.gpu.clone())
+                .with_context(|| format!("opening {title}"))?;
             Ok(OpenedSession {
                 session,
                 scene,

@@ -2,10 +2,13 @@
 //! to the [`voxflex_runtime::session::Session`] the worker owns, and the
 //! images and reports it sends back.
 
+use crate::backend_panel::BackendStatus;
+use crate::gpu_image::GpuFrame;
 use std::path::PathBuf;
 use std::time::Duration;
 use voxflex_core::camera::Camera;
 use voxflex_core::grid::Grid;
+use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::session::{
     GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport, Window,
@@ -92,6 +95,8 @@ pub enum Command {
     SaveScene(PathBuf),
     /// Write the current (deformed) volume as NIfTI (`.nii`, `.nii.gz`).
     SaveVolume(PathBuf),
+    /// Move the session to another backend (the *Backend* combo box).
+    SetBackend(BackendChoice),
     /// Stop the worker.
     Quit,
 }
@@ -167,6 +172,21 @@ pub enum Reply {
         /// Wall time of the render.
         wall: Duration,
     },
+    /// The 3D view rendered into the session's buffer on the device the
+    /// UI shares (the GPU path: no read-back).
+    GpuRender {
+        /// The image on the GPU.
+        frame: GpuFrame,
+        /// Resolution scale (1 = full; lower while interacting, see
+        /// [`crate::adaptive`]).
+        scale: f32,
+        /// Wall time of the render.
+        wall: Duration,
+    },
+    /// Where the session computes (after opening and after a switch).
+    Backend(BackendStatus),
+    /// A backend switch failed; the session stays where it was.
+    BackendError(String),
     /// The ROI maps.
     Rois(Vec<RoiRow>),
     /// The model now in use.

@@ -1,7 +1,7 @@
 //! The 3D view: the ray-cast image, and the camera's orbit (primary
 //! drag), pan (secondary or middle drag) and zoom (wheel).
 
-use egui::{Color32, PointerButton, Pos2, Rect, Sense, TextureHandle, Vec2};
+use egui::{Color32, PointerButton, Pos2, Rect, Sense, TextureHandle, TextureId, Vec2};
 use voxflex_core::camera::{Camera, Projection};
 
 /// Degrees of orbit per point dragged.
@@ -56,6 +56,17 @@ pub fn pan(camera: &Camera, dx: f32, dy: f32, height_points: f32) -> Camera {
 /// returns the camera after the mouse's orbit, pan and zoom, and whether
 /// a drag is under way.
 pub fn view3d(ui: &mut egui::Ui, tex: Option<&TextureHandle>, camera: &Camera) -> (Camera, bool) {
+    view3d_texture(ui, tex.map(TextureHandle::id), camera)
+}
+
+/// [`view3d`] drawing the texture `tex` by id: a CPU image uploaded to
+/// egui, or the GPU path's texture on the device the session shares
+/// ([`crate::gpu_image::GpuImage`]).
+pub fn view3d_texture(
+    ui: &mut egui::Ui,
+    tex: Option<TextureId>,
+    camera: &Camera,
+) -> (Camera, bool) {
     let avail = ui.available_rect_before_wrap();
     let (_, response) = ui.allocate_exact_size(avail.size(), Sense::click_and_drag());
     let painter = ui.painter_at(avail);
@@ -65,7 +76,7 @@ pub fn view3d(ui: &mut egui::Ui, tex: Option<&TextureHandle>, camera: &Camera) -
     let rect = Rect::from_center_size(avail.center(), Vec2::new(h * aspect, h));
     if let Some(tex) = tex {
         let uv = Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
-        painter.image(tex.id(), rect, uv, Color32::WHITE);
+        painter.image(tex, rect, uv, Color32::WHITE);
     }
     let mut c = *camera;
     let d = response.drag_delta();

@@ -4,7 +4,9 @@
 //! pipeline.
 
 use crate::adaptive::AdaptiveScale;
+use crate::backend_panel::BackendStatus;
 use crate::compose::compose_slice;
+use crate::gpu_image::GpuFrame;
 use crate::open::{
     OpenRequest, OpenedSession, deformation_models, deformation_schemas, first_camera, open,
     render_params,
@@ -15,11 +17,13 @@ use crate::scene_file::{SessionState, scene_text, write_atomic};
 use anyhow::Context;
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use voxflex_core::camera::Camera;
 use voxflex_core::glam::DVec3;
+use voxflex_runtime::gpu_context::WgpuService;
 use voxflex_runtime::scene::Scene;
 use voxflex_runtime::session::{
     GrowthReport, Interaction, RenderParams, RoiId, Seed, Session, StepReport,
@@ -115,6 +119,8 @@ struct State {
     volume_file: Option<PathBuf>,
     /// The 3D view's resolution while dragging.
     adaptive: AdaptiveScale,
+    /// The UI's device, when shared: the 3D image then stays on it.
+    shared: Option<Arc<WgpuService>>,
 }
 
 impl State {
@@ -148,6 +154,8 @@ impl State {
             model: model.as_ref().map(|(n, _)| n.clone()),
             adapter: session.adapter_name(),
         })));
+        let status = BackendStatus::of(&session, req.backend, req.gpu.as_ref());
+        let _ = out.send(Reply::Backend(status));
         Ok(Self {
             session,
             view: None,
@@ -158,6 +166,7 @@ impl State {
             scene,
             volume_file,
             adaptive: AdaptiveScale::default(),
+            shared: req.gpu.clone(),
         })
     }
 
@@ -261,6 +270,18 @@ impl State {
                     .with_context(|| format!("writing {}", path.display()))?;
                 let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
             }
+            Command::SetBackend(choice) => match s.set_backend(choice) {
+                Ok(_) => {
+                    let status = BackendStatus::of(s, choice, self.shared.as_ref());
+                    let _ = out.send(Reply::Backend(status));
+                    // Maps re-grown, and the image is due on the new backend.
+                    ch.rois = true;
+                    self.rendered = None;
+                }
+                Err(e) => {
+                    let _ = out.send(Reply::BackendError(format!("{choice}: {e}")));
+                }
+            },
             Command::Quit => {}
         }
         Ok(())
@@ -316,16 +337,24 @@ impl State {
         let due = self.rendered != Some((camera, scale)) || ch.volume || ch.rois;
         if due {
             let t = Instant::now();
-            let image = self.session.render(&camera, &self.render)?;
+            let shared = self.shared.as_ref();
+            let reply = match GpuFrame::render(&mut self.session, shared, &camera, &self.render)? {
+                Some(frame) => Reply::GpuRender {
+                    frame,
+                    scale,
+                    wall: t.elapsed(),
+                },
+                None => Reply::Render {
+                    image: self.session.render(&camera, &self.render)?,
+                    scale,
+                    wall: t.elapsed(),
+                },
+            };
             self.rendered = Some((camera, scale));
             if view.interacting {
                 self.adaptive.observe(t.elapsed());
             }
-            let _ = out.send(Reply::Render {
-                image,
-                scale,
-                wall: t.elapsed(),
-            });
+            let _ = out.send(reply);
         }
         if ch.stepped || ch.rois || due {
             let _ = out.send(Reply::Stages(stage_times(&mut self.session)?));

@@ -43,6 +43,7 @@ fn open_phantom() -> Harness<'static, ViewerApp> {
         input: None,
         backend: BackendChoice::Cpu,
         plugin_dirs: vec![plugin_dir()],
+        gpu: None,
     };
     let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
         .expect("start the viewer");

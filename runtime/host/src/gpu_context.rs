@@ -150,7 +150,10 @@ pub struct AdapterSummary {
 }
 
 impl AdapterSummary {
-    fn from_info(info: &wgpu::AdapterInfo) -> Self {
+    /// The summary of wgpu's description of an adapter (`software` set as
+    /// [`AdapterPolicy::HardwareOnly`] decides: device type `Cpu`, or a
+    /// name or driver naming llvmpipe, lavapipe, SwiftShader or WARP).
+    pub fn from_info(info: &wgpu::AdapterInfo) -> Self {
         let driver = match (info.driver.is_empty(), info.driver_info.is_empty()) {
             (false, false) => format!("{} ({})", info.driver, info.driver_info),
             (false, true) => info.driver.clone(),
@@ -208,10 +211,16 @@ fn software_reason(info: &wgpu::AdapterInfo) -> Option<String> {
         return Some("software rasteriser (device type Cpu)".to_owned());
     }
     let hay = format!("{} {} {}", info.name, info.driver, info.driver_info).to_lowercase();
-    ["llvmpipe", "lavapipe", "swiftshader"]
-        .into_iter()
-        .find(|s| hay.contains(s))
-        .map(|s| format!("software rasteriser (name mentions {s})"))
+    // WARP, Direct3D's rasteriser, is "Microsoft Basic Render Driver".
+    [
+        "llvmpipe",
+        "lavapipe",
+        "swiftshader",
+        "microsoft basic render",
+    ]
+    .into_iter()
+    .find(|s| hay.contains(s))
+    .map(|s| format!("software rasteriser (name mentions {s})"))
 }
 
 /// Why `policy` refuses an adapter, or `None` when it is acceptable.
@@ -516,6 +525,23 @@ impl WgpuService {
             dispatches: s.dispatches.load(Ordering::Relaxed),
             submissions: s.submissions.load(Ordering::Relaxed),
         }
+    }
+
+    /// The wgpu buffer behind `id`, for the host's front ends only (the
+    /// viewer copies a rendered image from it into the texture it draws;
+    /// plugins see [`BufferId`]s and never the wgpu objects). The handle
+    /// keeps the buffer alive after [`GpuService::destroy_buffer`]. Work on
+    /// it submitted by the caller on this device's queue runs after every
+    /// call to this service that returned before the submission, once
+    /// [`Self::flush`] has submitted the queued dispatches.
+    pub fn raw_buffer(&self, id: BufferId) -> Result<wgpu::Buffer, GpuError> {
+        self.buffer(id)
+    }
+
+    /// Whether `other` is a view of the same device (so buffers of one are
+    /// buffers of the other).
+    pub fn same_device(&self, other: &WgpuService) -> bool {
+        Arc::ptr_eq(&self.shared, &other.shared)
     }
 
     /// Submits every queued dispatch now (reads and writes do this anyway).
@@ -1502,6 +1528,14 @@ fn inc(@builtin(global_invocation_id) gid: vec3<u32>) {
             ..hw.clone()
         };
         assert!(software_reason(&swiftshader).is_some());
+        let warp = wgpu::AdapterInfo {
+            name: "Microsoft Basic Render Driver".into(),
+            device_type: wgpu::DeviceType::Other,
+            backend: wgpu::Backend::Dx12,
+            ..hw.clone()
+        };
+        assert!(AdapterSummary::from_info(&warp).software);
+        assert!(!AdapterSummary::from_info(&hw).software);
         assert!(rank(&hw, None) < rank(&info, None));
         assert!(rank(&swiftshader, None) > rank(&hw, None));
     }

@@ -270,8 +270,19 @@ impl RenderStage {
         dirty: DirtyRegion,
         maps: &[OpacityMap],
     ) -> Result<(), RunError> {
-        self.renderer
-            .set_volume(RenderVolume::Cpu(volume.view()), dirty)?;
+        self.set_scene_on(RenderVolume::Cpu(volume.view()), dirty, maps)
+    }
+
+    /// [`Self::set_scene`] with the volume where it lives: in memory, or in
+    /// a GPU buffer of the renderer's device (the resampler's output, bound
+    /// as is by a GPU renderer).
+    pub fn set_scene_on(
+        &mut self,
+        volume: RenderVolume<'_>,
+        dirty: DirtyRegion,
+        maps: &[OpacityMap],
+    ) -> Result<(), RunError> {
+        self.renderer.set_volume(volume, dirty)?;
         self.renderer.set_opacity_maps(maps)?;
         Ok(())
     }
@@ -280,9 +291,7 @@ impl RenderStage {
     /// an RGBA8 image in memory (row-major, top row first).
     pub fn render_image(&mut self, camera: &Camera) -> Result<(RgbaImage, RenderStats), RunError> {
         let mut pixels = vec![0u8; camera.width as usize * camera.height as usize * 4];
-        let stats = self
-            .renderer
-            .render(camera, ImageTarget::Cpu(&mut pixels))?;
+        let stats = self.render_into(camera, ImageTarget::Cpu(&mut pixels))?;
         Ok((
             RgbaImage {
                 width: camera.width,
@@ -291,6 +300,17 @@ impl RenderStage {
             },
             stats,
         ))
+    }
+
+    /// Renders what [`Self::set_scene`] handed over through `camera` into
+    /// `target` (`camera.width × camera.height` RGBA8 pixels, sRGB,
+    /// straight alpha, top row first).
+    pub fn render_into(
+        &mut self,
+        camera: &Camera,
+        target: ImageTarget<'_>,
+    ) -> Result<RenderStats, RunError> {
+        Ok(self.renderer.render(camera, target)?)
     }
 
     /// Renders `volume` with `maps` and writes the image(s); returns the files.

@@ -28,6 +28,7 @@ pub const SHADER_OWNERS: &[(&str, &str)] = &[
     ("chainmail", "plugins/chainmail/src"),
     ("mass-spring", "plugins/mass-spring/src"),
     ("template", "plugins/template/src"),
+    ("viewer", "apps/viewer/src"),
 ];
 
 /// The repository's `shaders/` directory.

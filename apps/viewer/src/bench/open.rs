@@ -46,6 +46,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Report> {
         input: Some(input.clone()),
         backend: BackendChoice::Cpu,
         plugin_dirs: opts.plugin_dirs.clone(),
+        gpu: None,
     })?;
     let mut m = Milestones::default();
     h.wait_for("the first 3D image", PATIENCE, |a| {

@@ -62,6 +62,7 @@ pub fn open_head(
         input: Some(scene),
         backend: BackendChoice::Cpu,
         plugin_dirs,
+        gpu: None,
     })?;
     h.wait_for("the session to open", PATIENCE, |a| a.opened().is_some())?;
     h.app.set_render_size(render_px);

@@ -61,6 +61,7 @@ mod interaction;
 mod model_call;
 mod model_stage;
 mod plugins;
+mod render;
 mod report;
 mod roi;
 mod roi_edit;
@@ -91,7 +92,7 @@ use crate::metrics::{PluginReport, RunMetrics};
 use crate::pipeline::{RunError, load_source};
 use crate::plugin_loader::{self, LoadedPlugin, PluginListing};
 use crate::scene::{CameraSettings, RenderSettings, Scene};
-use crate::visualise::{RenderStage, RgbaImage, camera_for};
+use crate::visualise::{RenderStage, camera_for};
 use model_stage::{Displacements, ModelStage, ResampleStage, refilled_region};
 use roi::{RoiDevice, SessionRoi};
 use std::path::PathBuf;
@@ -100,7 +101,7 @@ use std::time::{Duration, Instant};
 use voxflex_abi::host_side::HostServices;
 use voxflex_core::camera::Camera;
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend, FrameInfo, ModelNotes};
-use voxflex_core::gpu::GpuService;
+use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::interaction::InteractionSpec;
 use voxflex_core::volume::{Volume, VoxelData};
 use voxflex_io::png::render_slice;
@@ -182,6 +183,8 @@ pub struct Session {
     resample_params: ResampleParams,
     wait_for_gpu: bool,
     renderer: Option<RendererSlot>,
+    /// The image buffer of [`Self::render_to_gpu`] and its size in bytes.
+    gpu_image: Option<(BufferId, u64)>,
     rois: Vec<SessionRoi>,
     next_roi: u64,
     /// Tracked point sets, bound on every model (see `tracked.rs`).
@@ -294,13 +297,31 @@ impl Session {
     /// `metrics.stages_not_built`); the GPU is not initialised for a CPU
     /// scene or one with nothing to compute.
     pub fn open_loaded(scene: &Scene, plugins: &ScenePlugins) -> Result<Self, RunError> {
+        Self::open_loaded_on(scene, plugins, None)
+    }
+
+    /// [`Self::open`] computing on `gpu` — a device a front end opened
+    /// (the viewer's eframe device) — instead of opening one, as
+    /// [`SessionDefaults::gpu`] does for [`Self::from_volume`]: the scene's
+    /// `gpu` takes it, `auto` takes it when it is a hardware adapter, and
+    /// [`Self::set_backend`] uses it later.
+    pub fn open_on(scene: &Scene, gpu: Option<Arc<WgpuService>>) -> Result<Self, RunError> {
+        let plugins = ScenePlugins::load(scene)?;
+        Self::open_loaded_on(scene, &plugins, gpu)
+    }
+
+    fn open_loaded_on(
+        scene: &Scene,
+        plugins: &ScenePlugins,
+        gpu: Option<Arc<WgpuService>>,
+    ) -> Result<Self, RunError> {
         let opened = Instant::now();
         let context = scene.path.display().to_string();
         configure_threads(scene.settings.threads);
         let choice = choice_for(&context, scene.settings.backend, plugins.model.as_ref())?;
         let mut resolved =
             if scene.model.is_some() || scene.render.is_some() || !scene.rois.is_empty() {
-                backend::resolve(choice)?
+                backend::resolve_on(choice, gpu.as_ref())?
             } else {
                 // Nothing to compute: never initialise a GPU.
                 backend::resolve(BackendChoice::Cpu)?
@@ -347,7 +368,7 @@ impl Session {
             threads: scene.settings.threads,
             choice: scene.settings.backend,
             resolved,
-            offered_gpu: None,
+            offered_gpu: gpu,
             source,
             source_wall,
             frames: scene.settings.frames,
@@ -463,6 +484,7 @@ impl Session {
             resample_params: o.resample_params,
             wait_for_gpu: o.wait_for_gpu,
             renderer: None,
+            gpu_image: None,
             rois: vec![],
             next_roi: 0,
             tracked: vec![],
@@ -918,6 +940,9 @@ impl Session {
         if let (Some(r), Some(gpu)) = (self.resample.as_mut(), &self.gpu) {
             r.resampler.release_gpu(gpu.as_ref());
         }
+        if let (Some((id, _)), Some(gpu)) = (self.gpu_image.take(), &self.gpu) {
+            gpu.destroy_buffer(id);
+        }
     }
 
     /// Reads the resampled volume back when the cached copy is older than
@@ -1030,50 +1055,6 @@ impl Session {
             params: Default::default(),
         };
         Ok(camera_for(&settings, &self.volume_ref().grid, 0.0))
-    }
-
-    /// Renders the current volume with the session's ROI maps through
-    /// `camera` into an RGBA8 image in memory. The renderer is built on
-    /// first use (and rebuilt when `params` names another plugin); changed
-    /// parameters are handed to it. Only the region the resampler re-filled
-    /// since the last render is handed over as changed.
-    pub fn render(
-        &mut self,
-        camera: &Camera,
-        params: &RenderParams,
-    ) -> Result<RgbaImage, RunError> {
-        match &mut self.renderer {
-            Some(slot) if slot.plugin.name == params.plugin => {
-                if slot.params_toml != params.params_toml {
-                    slot.stage.configure(&params.params_toml)?;
-                    slot.params_toml = params.params_toml.clone();
-                }
-            }
-            _ => {
-                let p = self.load_plugin(&params.plugin)?;
-                self.build_renderer(&p, &params.params_toml)?;
-            }
-        }
-        let t = Instant::now();
-        self.ensure_volume()?;
-        let maps: Vec<OpacityMap> = self.rois.iter().map(|r| r.map().clone()).collect();
-        let volume = match &self.resampled {
-            Some((_, v)) => v,
-            None => &self.source,
-        };
-        let slot = self.renderer.as_mut().expect("built above");
-        slot.stage.set_scene(volume, self.render_dirty, &maps)?;
-        let (image, stats) = slot.stage.render_image(camera)?;
-        self.render_dirty = DirtyRegion::None;
-        self.versions.render.ran_on(self.versions.resample.version);
-        let stage = self.metrics.stage("render");
-        stage.record_run(t.elapsed(), stats.rays);
-        let samples = stage.notes.get("samples").and_then(|v| v.as_u64());
-        stage.notes.insert(
-            "samples".into(),
-            (samples.unwrap_or(0) + stats.samples).into(),
-        );
-        Ok(image)
     }
 
     /// Slice `index` (voxel index along `axis`) of the current volume as an
