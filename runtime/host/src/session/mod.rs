@@ -57,6 +57,7 @@
 //! ```
 
 mod defaults;
+mod histogram;
 mod interaction;
 mod model_call;
 mod model_stage;
@@ -64,11 +65,13 @@ mod plugins;
 mod report;
 mod roi;
 mod roi_edit;
+mod roi_visibility;
 mod slice;
 mod tracked;
 mod versions;
 
 pub use defaults::SessionDefaults;
+pub use histogram::MAX_HISTOGRAM_BINS;
 pub use interaction::Interaction;
 pub use model_call::ModelCall;
 pub use model_stage::AppliedInteraction;
@@ -82,6 +85,7 @@ pub use versions::{StageVersion, Versions};
 // needs the host (and voxflex-core) only.
 pub use voxflex_core::opacity_map::OpacityMap;
 pub use voxflex_core::slice_axis::SliceAxis;
+pub use voxflex_core::stats::Histogram;
 pub use voxflex_io::png::{GrayImage, Window};
 pub use voxflex_opacity::{GrowthParams, GrowthReport, Seed};
 
@@ -1056,7 +1060,12 @@ impl Session {
         }
         let t = Instant::now();
         self.ensure_volume()?;
-        let maps: Vec<OpacityMap> = self.rois.iter().map(|r| r.map().clone()).collect();
+        let maps: Vec<OpacityMap> = self
+            .rois
+            .iter()
+            .filter(|r| r.shown)
+            .map(|r| r.map().clone())
+            .collect();
         let volume = match &self.resampled {
             Some((_, v)) => v,
             None => &self.source,
