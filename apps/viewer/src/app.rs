@@ -6,6 +6,7 @@ use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
+use crate::render_panel::RenderPanel;
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
@@ -50,6 +51,15 @@ struct CutDrag {
 /// Carve brush radius range, mm.
 const BRUSH_MM: std::ops::RangeInclusive<f64> = 1.0..=50.0;
 
+/// Which panel the right-hand side shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SideTab {
+    /// The ROI and deformation panels.
+    MapsAndModel,
+    /// The *Rendering* panel (transfer function, MIP, clip, crop).
+    Rendering,
+}
+
 /// The viewer.
 pub struct ViewerApp {
     worker: Worker,
@@ -69,6 +79,10 @@ pub struct ViewerApp {
     rois: Vec<RoiRow>,
     roi_panel: RoiPanel,
     model_panel: ModelPanel,
+    render_panel: RenderPanel,
+    side_tab: SideTab,
+    /// File → Save view as PNG's path.
+    save_png_path: String,
     stages: Vec<StageTime>,
     last_step: Option<StepReport>,
     steps: u64,
@@ -121,6 +135,9 @@ impl ViewerApp {
             rois: vec![],
             roi_panel: RoiPanel::default(),
             model_panel: ModelPanel::default(),
+            render_panel: RenderPanel::default(),
+            side_tab: SideTab::MapsAndModel,
+            save_png_path: "viewer-view.png".into(),
             stages: vec![],
             last_step: None,
             steps: 0,
@@ -162,6 +179,21 @@ impl ViewerApp {
     /// Mutable access to the deformation panel (its parameter form).
     pub fn model_panel_mut(&mut self) -> &mut ModelPanel {
         &mut self.model_panel
+    }
+
+    /// The *Rendering* panel (transfer function and render options).
+    pub fn render_panel(&self) -> &RenderPanel {
+        &self.render_panel
+    }
+
+    /// Mutable access to the *Rendering* panel.
+    pub fn render_panel_mut(&mut self) -> &mut RenderPanel {
+        &mut self.render_panel
+    }
+
+    /// Shows `tab` on the right-hand side.
+    pub fn set_side_tab(&mut self, tab: SideTab) {
+        self.side_tab = tab;
     }
 
     /// Queues a command to the session.
@@ -280,6 +312,8 @@ impl ViewerApp {
                 Reply::Stages(s) => self.stages = s,
                 Reply::Error(e) => self.messages.push(format!("error: {e}")),
                 Reply::Status(s) => self.messages.push(s),
+                Reply::RenderInfo(i) => self.render_panel.on_info(*i),
+                Reply::RenderApplied(seq) => self.render_panel.applied(seq),
             }
         }
         let extra = self.messages.len().saturating_sub(MAX_MESSAGES);
@@ -343,6 +377,7 @@ impl ViewerApp {
             camera,
             interacting: self.interacting(),
             overlays: self.roi_panel.overlays(&self.rois),
+            hidden: self.roi_panel.hidden(),
         };
         if self.sent.as_ref() != Some(&view) {
             self.sent = Some(view.clone());
@@ -360,7 +395,16 @@ impl ViewerApp {
         egui::Panel::right("panels")
             .default_size(330.0)
             .show(ui, |ui| {
+                ui.horizontal(|ui| {
+                    let tab = &mut self.side_tab;
+                    ui.selectable_value(tab, SideTab::MapsAndModel, "Maps & model");
+                    ui.selectable_value(tab, SideTab::Rendering, "Rendering");
+                });
                 egui::ScrollArea::vertical().show(ui, |ui| {
+                    if self.side_tab == SideTab::Rendering {
+                        self.render_panel.ui(ui);
+                        return;
+                    }
                     for c in self.roi_panel.ui(ui, &self.rois) {
                         self.worker.send(c);
                     }
@@ -374,6 +418,9 @@ impl ViewerApp {
                 });
             });
         egui::CentralPanel::default().show(ui, |ui| self.views(ui));
+        if let Some(c) = self.render_panel.take_command() {
+            self.worker.send(c);
+        }
         self.sync_view();
         if self.interacting() {
             ctx.request_repaint_after(IDLE_AFTER);
@@ -446,6 +493,10 @@ impl ViewerApp {
                 });
                 ui.close();
             }
+        }
+        if let Some(c) = crate::save_png::menu_item(ui, &mut self.save_png_path) {
+            self.worker.send(c);
+            ui.close();
         }
     }
 

@@ -29,6 +29,9 @@ pub struct ViewRequest {
     pub interacting: bool,
     /// ROI maps drawn over the slices, with their RGB colour.
     pub overlays: Vec<(RoiId, [u8; 3])>,
+    /// ROI maps hidden (not handed to the renderer; not drawn on the
+    /// slices either).
+    pub hidden: Vec<RoiId>,
 }
 
 /// A command to the worker.
@@ -92,6 +95,17 @@ pub enum Command {
     SaveScene(PathBuf),
     /// Write the current (deformed) volume as NIfTI (`.nii`, `.nii.gz`).
     SaveVolume(PathBuf),
+    /// Reconfigure the renderer with these `[render.params]` (TOML); the
+    /// worker answers [`Reply::RenderApplied`] with `seq`, applied or not.
+    RenderParams {
+        /// Sequence number, echoed back.
+        seq: u64,
+        /// The renderer's parameters as TOML text.
+        params_toml: String,
+    },
+    /// Render the 3D view at full quality and write it as PNG (File → Save
+    /// view as PNG).
+    SaveViewPng(PathBuf),
     /// Stop the worker.
     Quit,
 }
@@ -180,4 +194,8 @@ pub enum Reply {
     Error(String),
     /// A one-line status (e.g. a file written).
     Status(String),
+    /// What the *Rendering* panel starts from (after [`Reply::Opened`]).
+    RenderInfo(Box<crate::render_info::RenderInfo>),
+    /// Reconfigure `seq` was applied (or refused, with a [`Reply::Error`]).
+    RenderApplied(u64),
 }
