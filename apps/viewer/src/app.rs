@@ -191,11 +191,6 @@ impl ViewerApp {
         &mut self.render_panel
     }
 
-    /// Shows `tab` on the right-hand side.
-    pub fn set_side_tab(&mut self, tab: SideTab) {
-        self.side_tab = tab;
-    }
-
     /// Queues a command to the session.
     pub fn send(&self, c: Command) {
         self.worker.send(c);

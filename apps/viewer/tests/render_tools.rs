@@ -3,9 +3,10 @@
 //! (egui_kittest) on the built-in head phantom scene on the CPU, with the
 //! real `.so` plugins from `target/<profile>/` (build them first).
 //!
-//! - MIP, a dragged transfer-function point and a hidden map each change
-//!   the 3D image's pixels; back to composite and showing the map again
-//!   give the earlier images back exactly;
+//! - MIP, a dragged transfer-function point and a map hidden with its
+//!   ROI-panel checkbox each change the 3D image's pixels; back to
+//!   composite and ticking the map again give the earlier images back
+//!   exactly;
 //! - Save view as PNG writes the 3D view at the camera's size, not blank;
 //!   the scene saved with it holds the camera and transfer function, and
 //!   `voxflex run` of it renders the same image (within 2/255 on 99 % of
@@ -18,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::session::GrowthParams;
-use voxflex_viewer::app::{SideTab, ViewerApp};
+use voxflex_viewer::app::ViewerApp;
 use voxflex_viewer::open::OpenRequest;
 use voxflex_viewer::protocol::Command;
 use voxflex_viewer::render_options::TfSource;
@@ -114,6 +115,14 @@ fn drag(h: &mut Harness<'static, ViewerApp>, from: Pos2, to: Pos2) {
         modifiers: Modifiers::NONE,
     });
     h.step();
+}
+
+/// The ROI row's visibility checkbox: the first checkbox of the Maps &
+/// model tab (the ROI panel is above the parameter form).
+fn roi_checkbox<'a>(h: &'a Harness<'static, ViewerApp>) -> egui_kittest::Node<'a> {
+    h.get_all_by_role(egui::accesskit::Role::CheckBox)
+        .next()
+        .expect("the map's checkbox")
 }
 
 /// A primary click at `pos` (pressed a frame before it is let go).
@@ -213,28 +222,27 @@ fn mip_a_dragged_tf_point_and_a_hidden_map_each_change_the_3d_image() {
         "the dragged point changes the image"
     );
 
-    // Hide the map in 3D, then show it again.
+    // Hide the map in 3D with its checkbox in the ROI panel (the first
+    // checkbox of the Maps & model tab), then show it again.
     let id = h.state().rois()[0].info.id;
-    h.state_mut().set_side_tab(SideTab::MapsAndModel);
+    h.get_by_label("Maps & model").click();
+    for _ in 0..6 {
+        h.step();
+    }
     let n = renders(&h);
-    h.state_mut()
-        .roi_panel_mut()
-        .styles
-        .get_mut(&id)
-        .unwrap()
-        .visible = false;
+    roi_checkbox(&h).click();
+    h.step();
+    assert!(
+        !h.state_mut().roi_panel_mut().style(id).visible,
+        "the click unticked the map"
+    );
     let hidden = image_after(&mut h, n, "the image without the map");
     assert!(
         differing(&hidden, &dragged) > 1000,
         "hiding the map changes the 3D image"
     );
     let n = renders(&h);
-    h.state_mut()
-        .roi_panel_mut()
-        .styles
-        .get_mut(&id)
-        .unwrap()
-        .visible = true;
+    roi_checkbox(&h).click();
     let shown = image_after(&mut h, n, "the image with the map again");
     assert_eq!(
         differing(&shown, &dragged),
