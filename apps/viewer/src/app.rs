@@ -8,6 +8,7 @@ use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
+use crate::render_panel::RenderPanel;
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
@@ -52,6 +53,15 @@ struct CutDrag {
 /// Carve brush radius range, mm.
 const BRUSH_MM: std::ops::RangeInclusive<f64> = 1.0..=50.0;
 
+/// Which panel the right-hand side shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SideTab {
+    /// The ROI and deformation panels.
+    MapsAndModel,
+    /// The *Rendering* panel (transfer function, MIP, clip, crop).
+    Rendering,
+}
+
 /// The viewer.
 pub struct ViewerApp {
     worker: Worker,
@@ -77,6 +87,10 @@ pub struct ViewerApp {
     rois: Vec<RoiRow>,
     roi_panel: RoiPanel,
     model_panel: ModelPanel,
+    render_panel: RenderPanel,
+    side_tab: SideTab,
+    /// File → Save view as PNG's path.
+    save_png_path: String,
     stages: Vec<StageTime>,
     last_step: Option<StepReport>,
     steps: u64,
@@ -132,6 +146,9 @@ impl ViewerApp {
             rois: vec![],
             roi_panel: RoiPanel::default(),
             model_panel: ModelPanel::default(),
+            render_panel: RenderPanel::default(),
+            side_tab: SideTab::MapsAndModel,
+            save_png_path: "viewer-view.png".into(),
             stages: vec![],
             last_step: None,
             steps: 0,
@@ -203,6 +220,16 @@ impl ViewerApp {
     /// Mutable access to the deformation panel (its parameter form).
     pub fn model_panel_mut(&mut self) -> &mut ModelPanel {
         &mut self.model_panel
+    }
+
+    /// The *Rendering* panel (transfer function and render options).
+    pub fn render_panel(&self) -> &RenderPanel {
+        &self.render_panel
+    }
+
+    /// Mutable access to the *Rendering* panel.
+    pub fn render_panel_mut(&mut self) -> &mut RenderPanel {
+        &mut self.render_panel
     }
 
     /// Queues a command to the session.
@@ -372,6 +399,8 @@ impl ViewerApp {
                 Reply::Stages(s) => self.stages = s,
                 Reply::Error(e) => self.messages.push(format!("error: {e}")),
                 Reply::Status(s) => self.messages.push(s),
+                Reply::RenderInfo(i) => self.render_panel.on_info(*i),
+                Reply::RenderApplied(seq) => self.render_panel.applied(seq),
             }
         }
         let extra = self.messages.len().saturating_sub(MAX_MESSAGES);
@@ -435,6 +464,7 @@ impl ViewerApp {
             camera,
             interacting: self.interacting(),
             overlays: self.roi_panel.overlays(&self.rois),
+            hidden: self.roi_panel.hidden(),
         };
         if self.sent.as_ref() != Some(&view) {
             self.sent = Some(view.clone());
@@ -452,7 +482,16 @@ impl ViewerApp {
         egui::Panel::right("panels")
             .default_size(330.0)
             .show(ui, |ui| {
+                ui.horizontal(|ui| {
+                    let tab = &mut self.side_tab;
+                    ui.selectable_value(tab, SideTab::MapsAndModel, "Maps & model");
+                    ui.selectable_value(tab, SideTab::Rendering, "Rendering");
+                });
                 egui::ScrollArea::vertical().show(ui, |ui| {
+                    if self.side_tab == SideTab::Rendering {
+                        self.render_panel.ui(ui);
+                        return;
+                    }
                     for c in self.roi_panel.ui(ui, &self.rois) {
                         self.worker.send(c);
                     }
@@ -466,6 +505,9 @@ impl ViewerApp {
                 });
             });
         egui::CentralPanel::default().show(ui, |ui| self.views(ui));
+        if let Some(c) = self.render_panel.take_command() {
+            self.worker.send(c);
+        }
         self.sync_view();
         if self.interacting() {
             ctx.request_repaint_after(IDLE_AFTER);
@@ -538,6 +580,10 @@ impl ViewerApp {
                 });
                 ui.close();
             }
+        }
+        if let Some(c) = crate::save_png::menu_item(ui, &mut self.save_png_path) {
+            self.worker.send(c);
+            ui.close();
         }
     }
 

@@ -32,6 +32,9 @@ pub struct ViewRequest {
     pub interacting: bool,
     /// ROI maps drawn over the slices, with their RGB colour.
     pub overlays: Vec<(RoiId, [u8; 3])>,
+    /// ROI maps hidden (not handed to the renderer; not drawn on the
+    /// slices either).
+    pub hidden: Vec<RoiId>,
 }
 
 /// A command to the worker.
@@ -97,6 +100,17 @@ pub enum Command {
     SaveVolume(PathBuf),
     /// Move the session to another backend (the *Backend* combo box).
     SetBackend(BackendChoice),
+    /// Reconfigure the renderer with these `[render.params]` (TOML); the
+    /// worker answers [`Reply::RenderApplied`] with `seq`, applied or not.
+    RenderParams {
+        /// Sequence number, echoed back.
+        seq: u64,
+        /// The renderer's parameters as TOML text.
+        params_toml: String,
+    },
+    /// Render the 3D view at full quality and write it as PNG (File → Save
+    /// view as PNG).
+    SaveViewPng(PathBuf),
     /// Stop the worker.
     Quit,
 }
@@ -201,4 +215,8 @@ pub enum Reply {
     Error(String),
     /// A one-line status (e.g. a file written).
     Status(String),
+    /// What the *Rendering* panel starts from (after [`Reply::Opened`]).
+    RenderInfo(Box<crate::render_info::RenderInfo>),
+    /// Reconfigure `seq` was applied (or refused, with a [`Reply::Error`]).
+    RenderApplied(u64),
 }

@@ -23,7 +23,7 @@ const PALETTE: [[u8; 3]; 6] = [
 pub struct RoiStyle {
     /// Overlay colour (sRGB).
     pub colour: [u8; 3],
-    /// Drawn over the slices.
+    /// Drawn over the slices and in the 3D view.
     pub visible: bool,
 }
 
@@ -70,6 +70,18 @@ impl RoiPanel {
             .collect()
     }
 
+    /// The hidden maps (checkbox off): not handed to the renderer.
+    pub fn hidden(&self) -> Vec<RoiId> {
+        let mut ids: Vec<RoiId> = self
+            .styles
+            .iter()
+            .filter(|(_, s)| !s.visible)
+            .map(|(id, _)| *id)
+            .collect();
+        ids.sort();
+        ids
+    }
+
     /// Draws the panel; returns the commands its buttons and sliders gave.
     pub fn ui(&mut self, ui: &mut egui::Ui, rows: &[RoiRow]) -> Vec<Command> {
         let mut out = vec![];
@@ -114,7 +126,8 @@ impl RoiPanel {
         let mut style = self.style(id);
         ui.horizontal(|ui| {
             ui.color_edit_button_srgb(&mut style.colour);
-            ui.checkbox(&mut style.visible, "");
+            ui.checkbox(&mut style.visible, "")
+                .on_hover_text("show on the slices and in the 3D view");
             let selected = self.selected == Some(id);
             let text = format!("map {}", id.0);
             if ui.selectable_label(selected, text).clicked() {

@@ -7,6 +7,7 @@
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use voxflex_core::camera::{Camera, Projection};
 use voxflex_runtime::scene::Scene;
 use voxflex_runtime::session::{AppliedInteraction, RoiInfo, Seed, Session};
 
@@ -23,6 +24,20 @@ pub struct SessionState {
     pub rois: Vec<RoiInfo>,
     /// The backend computing: `cpu` or `gpu`.
     pub backend: &'static str,
+    /// The 3D view: renderer, its parameters and camera (`None`: keep the
+    /// opened scene's `[render]`).
+    pub render: Option<SavedRender>,
+}
+
+/// The 3D view as the saved scene's `[render]` table gives it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SavedRender {
+    /// Renderer plugin.
+    pub plugin: String,
+    /// Its parameters (`[render.params]`) as TOML text.
+    pub params_toml: String,
+    /// The 3D view's camera at full quality (its size is the image's).
+    pub camera: Camera,
 }
 
 impl SessionState {
@@ -38,6 +53,7 @@ impl SessionState {
             } else {
                 "gpu"
             },
+            render: None,
         }
     }
 }
@@ -50,9 +66,10 @@ fn table_of(text: &str, what: &str) -> anyhow::Result<toml::Table> {
 /// The scene text: `base` (the scene opened, or the built-in one for a
 /// volume file, whose `[volume]` is then `volume_file`) with `[scene]
 /// frames` and `backend`, `[model]`, `[[interaction]]` and `[[roi]]` from
-/// `state`. A relative volume path is made absolute (the saved file may lie
-/// elsewhere); everything else (`[resample]`, `[output]`, `[render]`) is
-/// kept as the base scene has it.
+/// `state`, and `[render]` from `state.render` when set (renderer,
+/// parameters, image size and camera, one image). A relative volume path
+/// is made absolute (the saved file may lie elsewhere); everything else
+/// (`[resample]`, `[output]`) is kept as the base scene has it.
 pub fn scene_text(
     base: &Scene,
     volume_file: Option<&Path>,
@@ -94,12 +111,53 @@ pub fn scene_text(
             doc.insert("interaction".into(), list.into());
         }
     }
+    if let Some(r) = &state.render {
+        let render = entry_table(&mut doc, "render");
+        render_table(render, r)?;
+    }
     let rois: Vec<toml::Value> = state.rois.iter().filter_map(roi_table).collect();
     if !rois.is_empty() {
         doc.insert("roi".into(), rois.into());
     }
     let header = "# Saved by voxflex-viewer: `voxflex run` on this file replays the session.\n";
     Ok(format!("{header}{}", toml::to_string(&doc)?))
+}
+
+/// Sets `[render]`'s renderer, parameters, size and camera from `r` (one
+/// image: no turntable; `file` as the base scene has it).
+fn render_table(render: &mut toml::Table, r: &SavedRender) -> anyhow::Result<()> {
+    let c = &r.camera;
+    render.insert("plugin".into(), r.plugin.clone().into());
+    render.insert("width".into(), i64::from(c.width).into());
+    render.insert("height".into(), i64::from(c.height).into());
+    render.remove("turntable");
+    render.insert("camera".into(), camera_table(c).into());
+    render.insert(
+        "params".into(),
+        table_of(&r.params_toml, "the renderer's parameters")?.into(),
+    );
+    Ok(())
+}
+
+/// `[render.camera]` for `c`: angles, distance, projection and target.
+pub fn camera_table(c: &Camera) -> toml::Table {
+    let mut t = toml::Table::new();
+    t.insert("azimuth_deg".into(), c.azimuth_deg.into());
+    t.insert("elevation_deg".into(), c.elevation_deg.into());
+    t.insert("distance_mm".into(), c.distance_mm.into());
+    match c.projection {
+        Projection::Orthographic { height_mm } => {
+            t.insert("projection".into(), "orthographic".into());
+            t.insert("height_mm".into(), height_mm.into());
+        }
+        Projection::Perspective { fov_y_deg } => {
+            t.insert("projection".into(), "perspective".into());
+            t.insert("fov_deg".into(), fov_y_deg.into());
+        }
+    }
+    let target: Vec<toml::Value> = c.target.to_array().iter().map(|&v| v.into()).collect();
+    t.insert("target_mm".into(), target.into());
+    t
 }
 
 /// `doc[key]` as a table (made when absent or not a table).
@@ -184,6 +242,7 @@ mod tests {
             }],
             rois: vec![],
             backend: "cpu",
+            render: None,
         };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.toml");
@@ -199,5 +258,51 @@ mod tests {
         assert_eq!(saved.volume.source, "phantom:head");
         // Only the scene is left in the directory (the temporary file was renamed).
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    /// The saved `[render]` gives back the viewer's camera (through the
+    /// scene's own `camera_for`) and the renderer parameters.
+    #[test]
+    fn the_saved_scene_renders_the_viewers_camera_and_parameters() {
+        use voxflex_core::glam::DVec3;
+        let base = Scene::parse(BUILT_IN_SCENE, Path::new("configs/chainmail-head.toml")).unwrap();
+        for projection in [
+            Projection::Orthographic { height_mm: 123.5 },
+            Projection::Perspective { fov_y_deg: 40.0 },
+        ] {
+            let camera = Camera {
+                target: DVec3::new(3.0, -4.5, 6.25),
+                azimuth_deg: 33.0,
+                elevation_deg: -12.5,
+                distance_mm: 700.0,
+                projection,
+                width: 384,
+                height: 256,
+            };
+            let state = SessionState {
+                render: Some(SavedRender {
+                    plugin: "raycast".into(),
+                    params_toml: "mode = \"mip\"\ntransfer_function = { points = [[0, 0, 0, 0, 0], [100, 1, 1, 1, 1]] }\n".into(),
+                    camera,
+                }),
+                backend: "cpu",
+                ..SessionState::default()
+            };
+            let text = scene_text(&base, None, &state).unwrap();
+            let saved = Scene::parse(&text, Path::new("s.toml")).unwrap();
+            let r = saved.render.as_ref().unwrap();
+            assert_eq!((r.width, r.height, r.turntable), (384, 256, 0));
+            // The camera does not depend on the grid it is rendered on.
+            let grid = voxflex_core::grid::Grid::new([5, 6, 7], DVec3::ONE, DVec3::splat(-90.0));
+            assert_eq!(
+                voxflex_runtime::visualise::camera_for(r, &grid, 0.0),
+                camera
+            );
+            let params = saved.render_params_toml();
+            assert!(
+                params.contains("mip") && params.contains("points"),
+                "{params}"
+            );
+        }
     }
 }

@@ -13,7 +13,9 @@ use crate::open::{
 };
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
-use crate::scene_file::{SessionState, scene_text, write_atomic};
+use crate::render_info::{render_info, sync_shown};
+use crate::save_png::save_view_png;
+use crate::scene_file::{SavedRender, SessionState, scene_text, write_atomic};
 use anyhow::Context;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -102,6 +104,8 @@ struct Changes {
     volume: bool,
     rois: bool,
     stepped: bool,
+    /// The renderer was reconfigured.
+    render: bool,
 }
 
 struct State {
@@ -112,6 +116,11 @@ struct State {
     last_growth: HashMap<RoiId, (GrowthReport, Duration)>,
     model: Option<(String, String)>,
     render: RenderParams,
+    /// The last renderer parameters that rendered (restored when new ones
+    /// are refused).
+    good_render: RenderParams,
+    /// Reconfigures received in this batch, acknowledged after it.
+    render_acks: Vec<u64>,
     /// The scene opened (the built-in one for a volume file): the base of
     /// a saved scene.
     scene: Scene,
@@ -156,12 +165,15 @@ impl State {
         })));
         let status = BackendStatus::of(&session, req.backend, req.gpu.as_ref());
         let _ = out.send(Reply::Backend(status));
+        let _ = out.send(Reply::RenderInfo(Box::new(render_info(&session, &render)?)));
         Ok(Self {
             session,
             view: None,
             rendered: None,
             last_growth: HashMap::new(),
             model,
+            good_render: render.clone(),
+            render_acks: vec![],
             render,
             scene,
             volume_file,
@@ -188,6 +200,11 @@ impl State {
         if let Err(e) = self.publish(&changes, out) {
             tracing::warn!("{e:#}");
             let _ = out.send(Reply::Error(format!("{e:#}")));
+            // Parameters the renderer refused give way to the last good ones.
+            self.render = self.good_render.clone();
+        }
+        for seq in self.render_acks.drain(..) {
+            let _ = out.send(Reply::RenderApplied(seq));
         }
     }
 
@@ -260,7 +277,12 @@ impl State {
             }
             Command::Step => self.step(ch, out)?,
             Command::SaveScene(path) => {
-                let state = SessionState::of(s);
+                let mut state = SessionState::of(s);
+                state.render = self.view.as_ref().map(|v| SavedRender {
+                    plugin: self.render.plugin.clone(),
+                    params_toml: self.render.params_toml.clone(),
+                    camera: v.camera,
+                });
                 let text = scene_text(&self.scene, self.volume_file.as_deref(), &state)?;
                 write_atomic(&path, &text)?;
                 let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
@@ -282,6 +304,16 @@ impl State {
                     let _ = out.send(Reply::BackendError(format!("{choice}: {e}")));
                 }
             },
+            Command::RenderParams { seq, params_toml } => {
+                self.render_acks.push(seq);
+                self.render.params_toml = params_toml;
+                ch.render = true;
+            }
+            Command::SaveViewPng(path) => {
+                let view = self.view.as_ref().context("save view: no 3D view yet")?;
+                save_view_png(s, &view.camera, &self.render, &path)?;
+                let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
+            }
             Command::Quit => {}
         }
         Ok(())
@@ -334,7 +366,12 @@ impl State {
             1.0
         };
         let camera = scaled(&view.camera, scale);
-        let due = self.rendered != Some((camera, scale)) || ch.volume || ch.rois;
+        let shown_changed = sync_shown(&mut self.session, &view.hidden);
+        let due = self.rendered != Some((camera, scale))
+            || ch.volume
+            || ch.rois
+            || ch.render
+            || shown_changed;
         if due {
             let t = Instant::now();
             let shared = self.shared.as_ref();
@@ -350,6 +387,7 @@ impl State {
                     wall: t.elapsed(),
                 },
             };
+            self.good_render = self.render.clone();
             self.rendered = Some((camera, scale));
             if view.interacting {
                 self.adaptive.observe(t.elapsed());

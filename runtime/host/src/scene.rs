@@ -289,6 +289,10 @@ pub struct CameraSettings {
     /// Orthographic image height, mm (default: the volume's diagonal).
     #[serde(default)]
     pub height_mm: Option<f64>,
+    /// Point looked at and orbited, world mm (default: the centre of the
+    /// rendered volume's grid).
+    #[serde(default)]
+    pub target_mm: Option<[f64; 3]>,
 }
 
 fn default_fov() -> f64 {
@@ -304,6 +308,7 @@ impl Default for CameraSettings {
             projection: ProjectionName::Orthographic,
             fov_deg: default_fov(),
             height_mm: None,
+            target_mm: None,
         }
     }
 }
@@ -600,11 +605,12 @@ impl Scene {
                 .iter()
                 .all(|v| v.is_finite())
                 && c.distance_mm.is_none_or(|d| d.is_finite() && d > 0.0)
-                && c.height_mm.is_none_or(|h| h.is_finite() && h > 0.0);
+                && c.height_mm.is_none_or(|h| h.is_finite() && h > 0.0)
+                && c.target_mm.is_none_or(|t| t.iter().all(|v| v.is_finite()));
             if !finite || c.elevation_deg.abs() >= 90.0 || !(c.fov_deg > 0.0 && c.fov_deg < 180.0) {
                 return Err(invalid(
                     "camera",
-                    "needs finite angles, |elevation_deg| < 90, 0 < fov_deg < 180, and positive distance_mm / height_mm".into(),
+                    "needs finite angles, |elevation_deg| < 90, 0 < fov_deg < 180, positive distance_mm / height_mm and a finite target_mm".into(),
                 ));
             }
             if r.turntable > MAX_TURNTABLE_FRAMES {
@@ -966,6 +972,24 @@ kind = "release"
             }]
         );
         assert!(s.resample.is_some(), "a model implies the resample stage");
+    }
+
+    /// `[render.camera] target_mm` moves the orbit's centre; a non-finite
+    /// one is refused naming `camera`.
+    #[test]
+    fn the_render_camera_takes_a_finite_target() {
+        let table = "[render]\ncamera = { azimuth_deg = 30, target_mm = [1.5, -2, 3] }";
+        let s = Scene::parse(&format!("{GOOD}\n{table}\n"), Path::new("t.toml")).unwrap();
+        let r = s.render.as_ref().unwrap();
+        assert_eq!(r.camera.target_mm, Some([1.5, -2.0, 3.0]));
+        let grid = voxflex_core::grid::Grid::new([4, 4, 4], glam::DVec3::ONE, glam::DVec3::ZERO);
+        let c = crate::visualise::camera_for(r, &grid, 0.0);
+        assert_eq!(c.target, glam::DVec3::new(1.5, -2.0, 3.0));
+        let bad = "[render]\ncamera = { target_mm = [0, nan, 0] }";
+        let e = Scene::parse(&format!("{GOOD}\n{bad}\n"), Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("camera") && e.contains("target_mm"), "{e}");
     }
 
     #[test]

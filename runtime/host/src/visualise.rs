@@ -209,7 +209,7 @@ pub fn camera_for(settings: &RenderSettings, grid: &Grid, extra_azimuth: f64) ->
     let diagonal = (hi - lo).length().max(1.0);
     let c = settings.camera;
     Camera {
-        target: grid.centre(),
+        target: c.target_mm.map_or(grid.centre(), DVec3::from_array),
         azimuth_deg: c.azimuth_deg + extra_azimuth,
         elevation_deg: c.elevation_deg,
         distance_mm: c.distance_mm.unwrap_or(2.0 * diagonal),

@@ -57,6 +57,7 @@
 //! ```
 
 mod defaults;
+mod histogram;
 mod interaction;
 mod model_call;
 mod model_stage;
@@ -65,11 +66,13 @@ mod render;
 mod report;
 mod roi;
 mod roi_edit;
+mod roi_visibility;
 mod slice;
 mod tracked;
 mod versions;
 
 pub use defaults::SessionDefaults;
+pub use histogram::MAX_HISTOGRAM_BINS;
 pub use interaction::Interaction;
 pub use model_call::ModelCall;
 pub use model_stage::AppliedInteraction;
@@ -83,6 +86,7 @@ pub use versions::{StageVersion, Versions};
 // needs the host (and voxflex-core) only.
 pub use voxflex_core::opacity_map::OpacityMap;
 pub use voxflex_core::slice_axis::SliceAxis;
+pub use voxflex_core::stats::Histogram;
 pub use voxflex_io::png::{GrayImage, Window};
 pub use voxflex_opacity::{GrowthParams, GrowthReport, Seed};
 

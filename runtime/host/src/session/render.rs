@@ -139,7 +139,12 @@ impl Session {
         if on_gpu.is_none() {
             self.ensure_volume()?;
         }
-        let maps: Vec<OpacityMap> = self.rois.iter().map(|r| r.map().clone()).collect();
+        let maps: Vec<OpacityMap> = self
+            .rois
+            .iter()
+            .filter(|r| r.shown)
+            .map(|r| r.map().clone())
+            .collect();
         let volume = match (on_gpu, &self.resampled) {
             (Some((grid, values)), _) => RenderVolume::Gpu { grid, values },
             (None, Some((_, v))) => RenderVolume::Cpu(v.view()),

@@ -137,6 +137,8 @@ pub(crate) struct SessionRoi {
     to_end: bool,
     converged: bool,
     map: OpacityMap,
+    /// Handed to the renderer ([`super::Session::set_roi_shown`]).
+    pub(crate) shown: bool,
 }
 
 impl SessionRoi {
@@ -165,6 +167,7 @@ impl SessionRoi {
             steps: 0,
             to_end: false,
             map,
+            shown: true,
         })
     }
 

@@ -325,3 +325,41 @@ fn a_session_opens_a_volume_file_or_names_it_in_its_error() {
         .to_string();
     assert!(e.contains("missing.nii"), "{e}");
 }
+
+/// The source histogram counts every finite voxel once, agrees with
+/// `voxflex info`'s 64-bin histogram, and refuses 0 bins.
+#[test]
+fn the_histogram_counts_the_source_values_like_volume_stats() {
+    let s = cube_session(16);
+    let stats = voxflex_core::stats::VolumeStats::compute(s.source().view());
+    let h = s.histogram(stats.histogram.counts.len()).unwrap();
+    assert_eq!(h, stats.histogram);
+    let h = s.histogram(4).unwrap();
+    assert_eq!((h.min, h.max), (stats.min, stats.max));
+    assert_eq!(h.counts.iter().sum::<u64>(), 16 * 16 * 16);
+    // The cube (8³ voxels at the top value) fills the last bin.
+    assert_eq!(h.counts[3], 8 * 8 * 8);
+    let e = s.histogram(0).unwrap_err().to_string();
+    assert!(e.contains("0 bins"), "{e}");
+    assert!(s.histogram(MAX_HISTOGRAM_BINS + 1).is_err());
+}
+
+/// A hidden map stays in the session but is not handed to the renderer;
+/// an unknown map is an error.
+#[test]
+fn a_hidden_roi_map_is_kept_but_not_shown() {
+    let mut s = cube_session(12);
+    let centre = s.source().grid.centre();
+    let a = s
+        .add_roi(Seed::World(centre), GrowthParams::default())
+        .unwrap();
+    assert!(s.roi_shown(a));
+    s.set_roi_shown(a, false).unwrap();
+    assert!(!s.roi_shown(a));
+    assert_eq!(s.rois().len(), 1);
+    s.set_roi_shown(a, true).unwrap();
+    assert!(s.roi_shown(a));
+    s.remove_roi(a);
+    assert!(s.set_roi_shown(a, false).is_err());
+    assert!(!s.roi_shown(a));
+}
