@@ -32,6 +32,9 @@ pub struct RoiInfo {
     pub converged: bool,
     /// Voxels at opacity ≥ 0.5.
     pub voxels_above_half: usize,
+    /// True when `params.lambda` was chosen by the plateau rule
+    /// ([`super::Session::roi_auto_lambda`]) rather than given.
+    pub lambda_auto: bool,
 }
 
 /// Where a session's ROI maps grow: on the CPU, or on the session's GPU
@@ -134,7 +137,9 @@ pub(crate) struct SessionRoi {
     /// Steps grown on the current volume.
     steps: u64,
     /// Run to convergence (re-grown to convergence on a new volume).
-    to_end: bool,
+    pub(crate) to_end: bool,
+    /// λ chosen by the plateau rule (see [`RoiInfo::lambda_auto`]).
+    pub(crate) lambda_auto: bool,
     converged: bool,
     map: OpacityMap,
 }
@@ -164,6 +169,7 @@ impl SessionRoi {
             growth: Some(growth),
             steps: 0,
             to_end: false,
+            lambda_auto: false,
             map,
         })
     }
@@ -275,6 +281,7 @@ impl SessionRoi {
             steps: self.steps,
             converged: self.converged,
             voxels_above_half: voxflex_opacity::runner::voxels_above_half(&self.map),
+            lambda_auto: self.lambda_auto,
         }
     }
 }

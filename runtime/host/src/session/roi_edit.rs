@@ -12,7 +12,8 @@ use voxflex_opacity::{GrowthParams, GrowthReport};
 impl Session {
     /// Gives ROI map `id` new growth constants and grows it again from its
     /// seed on the current volume as far as before (the same number of
-    /// steps, or to convergence if it was run to the end). Errors, leaving
+    /// steps, or to convergence if it was run to the end). Its λ is then
+    /// the one given (no longer automatic). Errors, leaving
     /// the map as it was, when `params` is invalid (the message names the
     /// value) or there is no map `id`.
     pub fn set_roi_params(
@@ -26,10 +27,13 @@ impl Session {
         self.ensure_roi_values()?;
         let (rois, volume, device) = self.roi_parts();
         let old = rois[i].params;
+        let old_auto = rois[i].lambda_auto;
         rois[i].params = params;
+        rois[i].lambda_auto = false;
         let report = rois[i].regrow(volume, device);
         if report.is_err() {
             rois[i].params = old;
+            rois[i].lambda_auto = old_auto;
         }
         report
     }
