@@ -2,15 +2,19 @@
 //! sent last, the cursor, window and camera — and the layout: toolbar,
 //! three slice views and the 3D view, the ROI and deformation panels.
 
+use crate::dialogs::DialogPurpose;
+use crate::file_menu::{FileAction, FileMenu};
+use crate::grab3d::Grab3d;
 use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
+use crate::recent::{RecentFiles, default_store};
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
 use crate::tools::{carve_again, cut_quad, half_extent_mm, slice_normal};
-use crate::view3d::view3d;
+use crate::view3d::{image_rect, view3d};
 use crate::window_level::{Preset, drag_window};
 use crate::worker::Worker;
 use egui::{ColorImage, Rect, TextureHandle, TextureOptions};
@@ -78,10 +82,15 @@ pub struct ViewerApp {
     brush_mm: f64,
     /// Where the carve stroke last carved (world mm).
     last_carve: Option<DVec3>,
-    /// File → Save scene's path.
-    save_scene_path: String,
-    /// File → Save volume's path.
-    save_volume_path: String,
+    /// The File menu: open, recent files, save paths and dialogs.
+    files: FileMenu,
+    /// What was asked to open at start (its backend and plugin folders
+    /// serve every later open).
+    req: OpenRequest,
+    /// A grab on the 3D view under way.
+    grab3d: Grab3d,
+    /// Where the 3D image was drawn last frame.
+    view3d_rect: Option<Rect>,
     last_drag: Option<Instant>,
     wheel: [f32; 3],
     sent: Option<ViewRequest>,
@@ -102,7 +111,7 @@ impl ViewerApp {
         screenshot: Screenshot,
     ) -> anyhow::Result<Self> {
         let waker = ctx.clone();
-        let worker = Worker::spawn(req, move || waker.request_repaint())?;
+        let worker = Worker::spawn(req.clone(), move || waker.request_repaint())?;
         Ok(Self {
             worker,
             opened: None,
@@ -128,8 +137,10 @@ impl ViewerApp {
             cut: None,
             brush_mm: 8.0,
             last_carve: None,
-            save_scene_path: "viewer-scene.toml".into(),
-            save_volume_path: "viewer-volume.nii.gz".into(),
+            files: FileMenu::new(RecentFiles::load(default_store())),
+            req,
+            grab3d: Grab3d::default(),
+            view3d_rect: None,
             last_drag: None,
             wheel: [0.0; 3],
             sent: None,
@@ -146,6 +157,40 @@ impl ViewerApp {
     pub fn with_startup_seed(mut self, p: Option<DVec3>) -> Self {
         self.startup_seed = p;
         self
+    }
+
+    /// Keeps File → Open recent in `store` instead of the config folder's
+    /// file (`None`: only for this run), read now.
+    pub fn with_recent_store(mut self, store: Option<std::path::PathBuf>) -> Self {
+        self.files.recent = RecentFiles::load(store);
+        self
+    }
+
+    /// The point (world mm) the last press on the 3D view picked in
+    /// *Grab* mode.
+    pub fn last_3d_pick(&self) -> Option<DVec3> {
+        self.grab3d.last_pick()
+    }
+
+    /// Where the 3D image was drawn last frame (screen points).
+    pub fn view3d_rect(&self) -> Option<Rect> {
+        self.view3d_rect
+    }
+
+    /// File → Open recent's files, newest first.
+    pub fn recent(&self) -> &RecentFiles {
+        &self.files.recent
+    }
+
+    /// Opens a volume or scene file, replacing the session (with the
+    /// backend and plugin folders the viewer started with); errors come
+    /// back as messages naming the file.
+    pub fn open_file(&mut self, path: std::path::PathBuf) {
+        self.messages.push(format!("opening {}…", path.display()));
+        self.worker.send(Command::Open(OpenRequest {
+            input: Some(path),
+            ..self.req.clone()
+        }));
     }
 
     /// Mutable access to the ROI panel (its growth constants, styles and
@@ -280,6 +325,15 @@ impl ViewerApp {
                 Reply::Stages(s) => self.stages = s,
                 Reply::Error(e) => self.messages.push(format!("error: {e}")),
                 Reply::Status(s) => self.messages.push(s),
+                Reply::Picked(p) => {
+                    if p.is_none() {
+                        self.messages
+                            .push("grab: nothing under the pointer in the 3D view".into());
+                    }
+                    if let Some(c) = self.grab3d.on_picked(p) {
+                        self.worker.send(c);
+                    }
+                }
             }
         }
         let extra = self.messages.len().saturating_sub(MAX_MESSAGES);
@@ -287,6 +341,13 @@ impl ViewerApp {
     }
 
     fn on_opened(&mut self, o: Opened) {
+        self.forget_session();
+        if let Some(p) = &o.path
+            && let Err(e) = self.files.recent.push(p)
+        {
+            self.messages
+                .push(format!("error: updating the recent files: {e}"));
+        }
         self.cursor = o.grid.centre();
         self.preset = Preset::default_for(o.value_range);
         self.window = self.preset.window(o.value_range);
@@ -316,6 +377,49 @@ impl ViewerApp {
             });
         }
         self.opened = Some(o);
+    }
+
+    /// Drops what the UI held of the previous session (a new one opened).
+    fn forget_session(&mut self) {
+        self.slices = None;
+        self.render = None;
+        self.rois.clear();
+        self.roi_panel.selected = None;
+        self.roi_panel.styles.clear();
+        self.model_panel = ModelPanel::default();
+        self.stages.clear();
+        self.last_step = None;
+        self.steps = 0;
+        self.grab = None;
+        self.cut = None;
+        self.grab3d = Grab3d::default();
+        self.sent = None;
+    }
+
+    /// Files dropped on the window (the first is opened) and the file
+    /// dialogs' answers.
+    fn on_files(&mut self, ctx: &egui::Context) {
+        let dropped = ctx.input(|i| i.raw.dropped_files.first().map(|f| f.path().to_path_buf()));
+        if let Some(p) = dropped {
+            self.open_file(p);
+        }
+        if self.roi_panel.browse_save_dir {
+            self.roi_panel.browse_save_dir = false;
+            let start = Some(std::path::PathBuf::from(&self.roi_panel.save_dir));
+            self.files.dialog(ctx, DialogPurpose::MapsFolder, start);
+        }
+        if let Some(a) = self.files.poll() {
+            self.on_file_action(a);
+        }
+    }
+
+    fn on_file_action(&mut self, a: FileAction) {
+        match a {
+            FileAction::Open(p) => self.open_file(p),
+            FileAction::Send(c) => self.worker.send(c),
+            FileAction::MapsFolder(p) => self.roi_panel.save_dir = p.display().to_string(),
+            FileAction::Say(m) => self.messages.push(m),
+        }
     }
 
     /// The cursor's voxel index (clamped into the grid).
@@ -354,6 +458,7 @@ impl ViewerApp {
     pub fn show(&mut self, ui: &mut egui::Ui) {
         let ctx = ui.ctx().clone();
         self.receive(&ctx);
+        self.on_files(&ctx);
         self.frames += 1;
         egui::Panel::top("toolbar").show(ui, |ui| self.toolbar(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status(ui));
@@ -427,25 +532,10 @@ impl ViewerApp {
         });
     }
 
-    /// File → Save scene / Save volume, each to the path typed above it.
+    /// File → Open…, Open recent, Save scene / Save volume.
     fn file_menu(&mut self, ui: &mut egui::Ui) {
-        for (what, path) in [
-            ("Save scene", &mut self.save_scene_path),
-            ("Save volume", &mut self.save_volume_path),
-        ] {
-            ui.horizontal(|ui| {
-                let label = ui.label(format!("{what} to"));
-                ui.text_edit_singleline(path).labelled_by(label.id);
-            });
-            if ui.button(what).clicked() {
-                let p = std::path::PathBuf::from(path.as_str());
-                self.worker.send(if what == "Save scene" {
-                    Command::SaveScene(p)
-                } else {
-                    Command::SaveVolume(p)
-                });
-                ui.close();
-            }
+        for a in self.files.ui(ui) {
+            self.on_file_action(a);
         }
     }
 
@@ -502,7 +592,22 @@ impl ViewerApp {
         let cell = cells[3].shrink(2.0);
         let mut child = ui.new_child(egui::UiBuilder::new().max_rect(cell).id_salt("3d"));
         if let Some(camera) = self.camera {
-            let (c, dragging) = view3d(&mut child, self.render_tex.as_ref(), &camera);
+            let avail = child.available_rect_before_wrap();
+            let (mut c, mut dragging) = view3d(&mut child, self.render_tex.as_ref(), &camera);
+            self.view3d_rect = Some(image_rect(avail, &camera));
+            if self.mode == ClickMode::Grab {
+                let floor = self.window.level - 0.5 * self.window.width;
+                let image = image_rect(avail, &camera);
+                let g = self.grab3d.input(&mut child, avail, image, &camera, floor);
+                // The pan and zoom of whichever of the two took them.
+                if c == camera {
+                    c = g.camera;
+                }
+                dragging |= g.dragging;
+                for cmd in g.commands {
+                    self.worker.send(cmd);
+                }
+            }
             if dragging {
                 self.last_drag = Some(Instant::now());
             }

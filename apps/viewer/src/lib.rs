@@ -11,11 +11,15 @@
 pub mod app;
 pub mod cli;
 pub mod compose;
+pub mod dialogs;
+pub mod file_menu;
+pub mod grab3d;
 pub mod model_panel;
 pub mod open;
 pub mod orientation;
 pub mod param_form;
 pub mod protocol;
+pub mod recent;
 pub mod roi_panel;
 pub mod scene_file;
 pub mod screenshot;

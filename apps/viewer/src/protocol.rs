@@ -2,6 +2,7 @@
 //! to the [`voxflex_runtime::session::Session`] the worker owns, and the
 //! images and reports it sends back.
 
+use crate::open::OpenRequest;
 use std::path::PathBuf;
 use std::time::Duration;
 use voxflex_core::camera::Camera;
@@ -92,6 +93,22 @@ pub enum Command {
     SaveScene(PathBuf),
     /// Write the current (deformed) volume as NIfTI (`.nii`, `.nii.gz`).
     SaveVolume(PathBuf),
+    /// Open a volume or scene, replacing the session (the old one is kept
+    /// when this fails; the error names the file and the reason).
+    Open(OpenRequest),
+    /// Choose a map's λ by the plateau rule and grow it to the end at it.
+    RoiAutoLambda(RoiId),
+    /// Find the world point under pixel `pixel` of `camera`'s image: the
+    /// first sample along its ray at or above `min_value` (answered by
+    /// [`Reply::Picked`]).
+    Pick {
+        /// The 3D view's camera (its image size gives the pixel units).
+        camera: Camera,
+        /// Pixel (x, y), top-left origin.
+        pixel: [f64; 2],
+        /// Value a sample must reach, volume units.
+        min_value: f32,
+    },
     /// Stop the worker.
     Quit,
 }
@@ -117,6 +134,8 @@ pub struct Opened {
     pub model: Option<String>,
     /// The adapter computing (`cpu` or a GPU's name).
     pub adapter: String,
+    /// The file opened (`None`: the built-in phantom).
+    pub path: Option<PathBuf>,
 }
 
 /// One slice as shown: gray pixels with ROI overlays as RGBA, and where its
@@ -180,4 +199,7 @@ pub enum Reply {
     Error(String),
     /// A one-line status (e.g. a file written).
     Status(String),
+    /// The answer to [`Command::Pick`]: the world point (mm), or `None`
+    /// when the ray hit nothing.
+    Picked(Option<[f64; 3]>),
 }

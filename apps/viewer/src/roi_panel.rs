@@ -38,6 +38,9 @@ pub struct RoiPanel {
     pub styles: HashMap<RoiId, RoiStyle>,
     /// Where Save writes maps (`roi-<id>.nii.gz` in it).
     pub save_dir: String,
+    /// Set when *Browse…* next to `save_dir` was clicked (the app opens
+    /// the folder dialog and clears it).
+    pub browse_save_dir: bool,
 }
 
 impl Default for RoiPanel {
@@ -47,6 +50,7 @@ impl Default for RoiPanel {
             selected: None,
             styles: HashMap::new(),
             save_dir: ".".into(),
+            browse_save_dir: false,
         }
     }
 }
@@ -101,6 +105,7 @@ impl RoiPanel {
             let label = ui.label("Save to");
             ui.text_edit_singleline(&mut self.save_dir)
                 .labelled_by(label.id);
+            self.browse_save_dir |= ui.button("Browse…").clicked();
         });
         ui.separator();
         for row in rows {
@@ -129,6 +134,7 @@ impl RoiPanel {
             "{} steps, {} voxels ≥ ½, {state}",
             i.steps, i.voxels_above_half
         ));
+        auto_lambda_ui(ui, row, out);
         if let Some((report, wall)) = row.last {
             ui.label(
                 RichText::new(format!(
@@ -161,4 +167,30 @@ impl RoiPanel {
         });
         ui.separator();
     }
+}
+
+/// The map's *auto λ* box and the λ in use: ticking it has the session
+/// choose λ by the plateau rule and grow the map to the end; unticking
+/// keeps that λ as a fixed one.
+fn auto_lambda_ui(ui: &mut egui::Ui, row: &RoiRow, out: &mut Vec<Command>) {
+    let i = &row.info;
+    ui.horizontal(|ui| {
+        let mut auto = i.lambda_auto;
+        let label = format!("auto λ (map {})", i.id.0);
+        if ui
+            .checkbox(&mut auto, label)
+            .on_hover_text(
+                "choose λ where the map's size is flattest in λ (the scene's lambda = \"auto\")",
+            )
+            .changed()
+        {
+            out.push(if auto {
+                Command::RoiAutoLambda(i.id)
+            } else {
+                Command::RoiParams(i.id, i.params)
+            });
+        }
+        let how = if i.lambda_auto { "chosen" } else { "set" };
+        ui.label(format!("λ = {:.2} ({how})", i.params.lambda));
+    });
 }
