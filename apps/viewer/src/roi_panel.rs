@@ -18,6 +18,9 @@ const PALETTE: [[u8; 3]; 6] = [
     [255, 140, 200],
 ];
 
+/// Room left for the *Browse…* button after the *Save to* field, points.
+const BROWSE_WIDTH: f32 = 80.0;
+
 /// How the viewer draws one map.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RoiStyle {
@@ -103,8 +106,10 @@ impl RoiPanel {
         }
         ui.horizontal(|ui| {
             let label = ui.label("Save to");
-            ui.text_edit_singleline(&mut self.save_dir)
-                .labelled_by(label.id);
+            // The field leaves room for Browse… (the panel keeps its width).
+            let field = egui::TextEdit::singleline(&mut self.save_dir)
+                .desired_width(ui.available_width() - BROWSE_WIDTH);
+            ui.add(field).labelled_by(label.id);
             self.browse_save_dir |= ui.button("Browse…").clicked();
         });
         ui.separator();
