@@ -2,8 +2,7 @@
 //! sent last, the cursor, window and camera — and the layout: toolbar,
 //! three slice views and the 3D view, the ROI and deformation panels.
 
-use crate::dialogs::DialogPurpose;
-use crate::file_menu::{FileAction, FileMenu};
+use crate::file_menu::FileMenu;
 use crate::grab3d::Grab3d;
 use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
@@ -14,7 +13,7 @@ use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
 use crate::tools::{carve_again, cut_quad, half_extent_mm, slice_normal};
-use crate::view3d::{image_rect, view3d};
+use crate::view3d::view3d;
 use crate::window_level::{Preset, drag_window};
 use crate::worker::Worker;
 use egui::{ColorImage, Rect, TextureHandle, TextureOptions};
@@ -24,6 +23,8 @@ use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
 use voxflex_runtime::session::{StepReport, Window};
 use voxflex_runtime::visualise::RgbaImage;
+
+mod files;
 
 /// Idle time after the last drag before the 3D view renders at full quality.
 const IDLE_AFTER: Duration = Duration::from_millis(200);
@@ -159,40 +160,6 @@ impl ViewerApp {
         self
     }
 
-    /// Keeps File → Open recent in `store` instead of the config folder's
-    /// file (`None`: only for this run), read now.
-    pub fn with_recent_store(mut self, store: Option<std::path::PathBuf>) -> Self {
-        self.files.recent = RecentFiles::load(store);
-        self
-    }
-
-    /// The point (world mm) the last press on the 3D view picked in
-    /// *Grab* mode.
-    pub fn last_3d_pick(&self) -> Option<DVec3> {
-        self.grab3d.last_pick()
-    }
-
-    /// Where the 3D image was drawn last frame (screen points).
-    pub fn view3d_rect(&self) -> Option<Rect> {
-        self.view3d_rect
-    }
-
-    /// File → Open recent's files, newest first.
-    pub fn recent(&self) -> &RecentFiles {
-        &self.files.recent
-    }
-
-    /// Opens a volume or scene file, replacing the session (with the
-    /// backend and plugin folders the viewer started with); errors come
-    /// back as messages naming the file.
-    pub fn open_file(&mut self, path: std::path::PathBuf) {
-        self.messages.push(format!("opening {}…", path.display()));
-        self.worker.send(Command::Open(OpenRequest {
-            input: Some(path),
-            ..self.req.clone()
-        }));
-    }
-
     /// Mutable access to the ROI panel (its growth constants, styles and
     /// save folder).
     pub fn roi_panel_mut(&mut self) -> &mut RoiPanel {
@@ -325,15 +292,7 @@ impl ViewerApp {
                 Reply::Stages(s) => self.stages = s,
                 Reply::Error(e) => self.messages.push(format!("error: {e}")),
                 Reply::Status(s) => self.messages.push(s),
-                Reply::Picked(p) => {
-                    if p.is_none() {
-                        self.messages
-                            .push("grab: nothing under the pointer in the 3D view".into());
-                    }
-                    if let Some(c) = self.grab3d.on_picked(p) {
-                        self.worker.send(c);
-                    }
-                }
+                Reply::Picked(p) => self.on_picked(p),
             }
         }
         let extra = self.messages.len().saturating_sub(MAX_MESSAGES);
@@ -377,49 +336,6 @@ impl ViewerApp {
             });
         }
         self.opened = Some(o);
-    }
-
-    /// Drops what the UI held of the previous session (a new one opened).
-    fn forget_session(&mut self) {
-        self.slices = None;
-        self.render = None;
-        self.rois.clear();
-        self.roi_panel.selected = None;
-        self.roi_panel.styles.clear();
-        self.model_panel = ModelPanel::default();
-        self.stages.clear();
-        self.last_step = None;
-        self.steps = 0;
-        self.grab = None;
-        self.cut = None;
-        self.grab3d = Grab3d::default();
-        self.sent = None;
-    }
-
-    /// Files dropped on the window (the first is opened) and the file
-    /// dialogs' answers.
-    fn on_files(&mut self, ctx: &egui::Context) {
-        let dropped = ctx.input(|i| i.raw.dropped_files.first().map(|f| f.path().to_path_buf()));
-        if let Some(p) = dropped {
-            self.open_file(p);
-        }
-        if self.roi_panel.browse_save_dir {
-            self.roi_panel.browse_save_dir = false;
-            let start = Some(std::path::PathBuf::from(&self.roi_panel.save_dir));
-            self.files.dialog(ctx, DialogPurpose::MapsFolder, start);
-        }
-        if let Some(a) = self.files.poll() {
-            self.on_file_action(a);
-        }
-    }
-
-    fn on_file_action(&mut self, a: FileAction) {
-        match a {
-            FileAction::Open(p) => self.open_file(p),
-            FileAction::Send(c) => self.worker.send(c),
-            FileAction::MapsFolder(p) => self.roi_panel.save_dir = p.display().to_string(),
-            FileAction::Say(m) => self.messages.push(m),
-        }
     }
 
     /// The cursor's voxel index (clamped into the grid).
@@ -593,21 +509,8 @@ impl ViewerApp {
         let mut child = ui.new_child(egui::UiBuilder::new().max_rect(cell).id_salt("3d"));
         if let Some(camera) = self.camera {
             let avail = child.available_rect_before_wrap();
-            let (mut c, mut dragging) = view3d(&mut child, self.render_tex.as_ref(), &camera);
-            self.view3d_rect = Some(image_rect(avail, &camera));
-            if self.mode == ClickMode::Grab {
-                let floor = self.window.level - 0.5 * self.window.width;
-                let image = image_rect(avail, &camera);
-                let g = self.grab3d.input(&mut child, avail, image, &camera, floor);
-                // The pan and zoom of whichever of the two took them.
-                if c == camera {
-                    c = g.camera;
-                }
-                dragging |= g.dragging;
-                for cmd in g.commands {
-                    self.worker.send(cmd);
-                }
-            }
+            let (c, dragging) = view3d(&mut child, self.render_tex.as_ref(), &camera);
+            let (c, dragging) = self.grab_on_3d(&mut child, avail, camera, (c, dragging));
             if dragging {
                 self.last_drag = Some(Instant::now());
             }
