@@ -38,11 +38,13 @@ impl Session {
         let (rois, volume, device) = self.roi_parts();
         let (seed, params) = (rois[i].seed, rois[i].params);
         let view = volume.view();
-        let found = match device {
+        // Bounded, the trials read the bounded values, as the map does.
+        let (values, on) = rois[i].reads(volume, device);
+        let found = match on {
             RoiDevice::Cpu => auto_lambda(
                 &mut CpuRunner {
                     volume: view,
-                    values: view,
+                    values,
                     seed,
                 },
                 params,
