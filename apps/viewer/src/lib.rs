@@ -20,6 +20,7 @@ pub mod orientation;
 pub mod param_form;
 pub mod protocol;
 pub mod recent;
+pub mod roi_bounds;
 pub mod roi_panel;
 pub mod scene_file;
 pub mod screenshot;

@@ -9,7 +9,8 @@ use voxflex_core::camera::Camera;
 use voxflex_core::grid::Grid;
 use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::session::{
-    GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport, Window,
+    GrowthLimits, GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport,
+    Window,
 };
 use voxflex_runtime::visualise::RgbaImage;
 
@@ -98,6 +99,8 @@ pub enum Command {
     Open(OpenRequest),
     /// Choose a map's λ by the plateau rule and grow it to the end at it.
     RoiAutoLambda(RoiId),
+    /// New growth bounds for a map (re-grown as far as before within them).
+    RoiLimits(RoiId, GrowthLimits),
     /// Find the world point under pixel `pixel` of `camera`'s image: the
     /// first sample along its ray at or above `min_value` (answered by
     /// [`Reply::Picked`]).

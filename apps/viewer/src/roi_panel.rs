@@ -3,6 +3,7 @@
 //! Delete, and each map's last growth (useful-visit fraction, time).
 
 use crate::protocol::{Command, RoiRow};
+use crate::roi_bounds::{BoundsEdit, bounds_ui};
 use egui::{Color32, RichText, Slider};
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -44,6 +45,8 @@ pub struct RoiPanel {
     /// Set when *Browse…* next to `save_dir` was clicked (the app opens
     /// the folder dialog and clears it).
     pub browse_save_dir: bool,
+    /// Each map's growth bounds being edited.
+    pub bounds: HashMap<RoiId, BoundsEdit>,
 }
 
 impl Default for RoiPanel {
@@ -54,6 +57,7 @@ impl Default for RoiPanel {
             styles: HashMap::new(),
             save_dir: ".".into(),
             browse_save_dir: false,
+            bounds: HashMap::new(),
         }
     }
 }
@@ -140,6 +144,11 @@ impl RoiPanel {
             i.steps, i.voxels_above_half
         ));
         auto_lambda_ui(ui, row, out);
+        let edit = self
+            .bounds
+            .entry(id)
+            .or_insert_with(|| BoundsEdit::of(row.info.limits));
+        bounds_ui(ui, row, edit, out);
         if let Some((report, wall)) = row.last {
             ui.label(
                 RichText::new(format!(
@@ -165,6 +174,7 @@ impl RoiPanel {
             if ui.button("Delete").clicked() {
                 out.push(Command::RemoveRoi(id));
                 self.styles.remove(&id);
+                self.bounds.remove(&id);
                 if self.selected == Some(id) {
                     self.selected = None;
                 }

@@ -287,6 +287,7 @@ impl State {
                     auto.trials.len()
                 )));
             }
+            Command::RoiLimits(id, l) => self.grow(id, ch, |s| s.set_roi_limits(id, l))?,
             Command::Pick {
                 camera,
                 pixel,

@@ -19,7 +19,7 @@
 //!   one is refused naming the file; Open recent lists the files newest
 //!   first, across runs, and opens them;
 //! - the *auto λ* box grows a map at the λ the plateau rule chose and
-//!   shows it;
+//!   shows it; bounds applied in the panel hold a map in;
 //! - a grab-drag on the 3D view picks the face and moves the volume.
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
@@ -614,6 +614,32 @@ fn the_auto_lambda_box_grows_the_map_at_the_chosen_lambda_and_shows_it() {
         !a.rois()[0].info.lambda_auto
     });
     assert_eq!(h.state().rois()[0].info.params.lambda, auto.params.lambda);
+}
+
+#[test]
+fn bounds_applied_in_the_panel_hold_the_map_within_them() {
+    use voxflex_viewer::roi_bounds::BoundsEdit;
+    let mut h = open_phantom();
+    seed_and_grow(&mut h);
+    let free = h.state().rois()[0].info.clone();
+    h.get_by_label(&format!("bounds (map {})", free.id.0))
+        .click();
+    h.run_steps(2);
+    let mut edit = BoundsEdit::of(free.limits);
+    edit.distance_on = true;
+    edit.distance_mm = 12.0;
+    h.state_mut().roi_panel_mut().bounds.insert(free.id, edit);
+    h.step();
+    h.get_by_label(&format!("Apply bounds (map {})", free.id.0))
+        .click();
+    wait(&mut h, "the map within 12 mm of its seed", |a| {
+        a.rois()[0].info.limits.max_distance_mm == Some(12.0) && a.rois()[0].info.converged
+    });
+    let bounded = &h.state().rois()[0].info;
+    assert!(
+        bounded.voxels_above_half < free.voxels_above_half / 4,
+        "{bounded:?} vs {free:?}"
+    );
 }
 
 #[test]

@@ -58,6 +58,7 @@ impl ViewerApp {
         self.rois.clear();
         self.roi_panel.selected = None;
         self.roi_panel.styles.clear();
+        self.roi_panel.bounds.clear();
         self.model_panel = ModelPanel::default();
         self.stages.clear();
         self.last_step = None;
