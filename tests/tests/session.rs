@@ -427,3 +427,43 @@ fn the_session_records_the_interactions_its_model_received() {
     );
     assert_eq!(s.model_frames(), Some(0));
 }
+
+/// Mass-spring on the same proxy as [`FEM`].
+const SPRINGS: &str = "proxy = { kind = \"uniform\", step = 2 }\n\
+                       integrator = \"implicit\"\n\
+                       materials = [{ range = [50, 200], youngs_modulus = 3000 }]\n";
+
+/// A drag re-sends the grab with the pressed point and a new target each
+/// call; every model takes the element or node whose *rest* position is
+/// nearest the point, so the same one all along. [`GRAB`] is a voxel
+/// centre (a ChainMail element) and a node of the step-2 proxy, so the
+/// point tracked there is the grabbed one: it ends at the last target.
+/// Taken by its position *now*, a mesh model would let go of nothing and
+/// take a second node once the first had moved past a neighbour's rest,
+/// leaving the first held behind at an earlier target.
+#[test]
+fn a_drag_keeps_the_element_or_node_it_first_took_in_every_model() {
+    let by = 20.0;
+    for (model, params) in [
+        ("chainmail", CHAINMAIL),
+        ("corotational-fem", FEM),
+        ("mass-spring", SPRINGS),
+    ] {
+        let mut s = Session::from_volume(
+            two_tone_cube(),
+            SessionDefaults {
+                plugin_dirs: vec![plugin_dir(&[model])],
+                ..defaults(BackendChoice::Cpu)
+            },
+        )
+        .unwrap();
+        s.swap_model(model, params).unwrap();
+        let id = s.track_points(&[GRAB.map(|x| x as f32)]).unwrap();
+        drag(&mut s, GRAB, by);
+        let u = s.tracked_displacements(id).unwrap()[0];
+        assert!(
+            (u - DVec3::new(by, 0.0, 0.0)).length() < 0.05,
+            "{model}: the grabbed point moved {u} mm, not the drag's {by} mm along x"
+        );
+    }
+}

@@ -249,3 +249,37 @@ fn an_offered_device_is_the_one_the_session_computes_on() {
         assert_eq!(auto.adapter_name(), offered.info().name);
     }
 }
+
+/// A bounded map (intensity window and distance) and its automatic λ on
+/// the GPU, over its own upload of the bounded values: the CPU's map and
+/// λ, bit for bit.
+#[test]
+fn bounded_and_auto_lambda_maps_on_the_gpu_equal_the_cpus() {
+    if voxflex_runtime::gpu_context::testing::test_gpu().is_none() {
+        return;
+    }
+    let mut cpu = session(BackendChoice::Cpu);
+    let mut gpu = session(BackendChoice::Gpu);
+    let limits = voxflex_opacity::GrowthLimits {
+        intensity: Some([80.0, 120.0]),
+        max_distance_mm: Some(30.0),
+    };
+    let mut unbounded = 0;
+    for s in [&mut cpu, &mut gpu] {
+        let id = s.add_roi(seed(), GrowthParams::default()).unwrap();
+        s.roi_run_to_end(id).unwrap();
+        unbounded = s.rois()[0].voxels_above_half;
+        s.set_roi_limits(id, limits).unwrap();
+    }
+    assert!(
+        cpu.rois()[0].voxels_above_half < unbounded,
+        "the bounds hold the map in"
+    );
+    assert_same_maps(&cpu, &gpu, &[RoiId(0)], "bounded");
+    let (a, b) = (
+        cpu.roi_auto_lambda(RoiId(0)).unwrap(),
+        gpu.roi_auto_lambda(RoiId(0)).unwrap(),
+    );
+    assert_eq!(a, b);
+    assert_same_maps(&cpu, &gpu, &[RoiId(0)], "auto λ, bounded");
+}

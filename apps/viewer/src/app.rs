@@ -4,11 +4,14 @@
 
 use crate::backend_panel::BackendPanel;
 use crate::gpu_image::GpuImage;
+use crate::file_menu::FileMenu;
+use crate::grab3d::Grab3d;
 use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
 use crate::render_panel::RenderPanel;
+use crate::recent::{RecentFiles, default_store};
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};
@@ -23,6 +26,8 @@ use voxflex_core::glam::DVec3;
 use voxflex_core::grid::Grid;
 use voxflex_runtime::session::{StepReport, Window};
 use voxflex_runtime::visualise::RgbaImage;
+
+mod files;
 
 /// Idle time after the last drag before the 3D view renders at full quality.
 const IDLE_AFTER: Duration = Duration::from_millis(200);
@@ -100,10 +105,15 @@ pub struct ViewerApp {
     brush_mm: f64,
     /// Where the carve stroke last carved (world mm).
     last_carve: Option<DVec3>,
-    /// File → Save scene's path.
-    save_scene_path: String,
-    /// File → Save volume's path.
-    save_volume_path: String,
+    /// The File menu: open, recent files, save paths and dialogs.
+    files: FileMenu,
+    /// What was asked to open at start (its backend and plugin folders
+    /// serve every later open).
+    req: OpenRequest,
+    /// A grab on the 3D view under way.
+    grab3d: Grab3d,
+    /// Where the 3D image was drawn last frame.
+    view3d_rect: Option<Rect>,
     last_drag: Option<Instant>,
     wheel: [f32; 3],
     sent: Option<ViewRequest>,
@@ -124,7 +134,7 @@ impl ViewerApp {
         screenshot: Screenshot,
     ) -> anyhow::Result<Self> {
         let waker = ctx.clone();
-        let worker = Worker::spawn(req, move || waker.request_repaint())?;
+        let worker = Worker::spawn(req.clone(), move || waker.request_repaint())?;
         Ok(Self {
             worker,
             opened: None,
@@ -156,8 +166,10 @@ impl ViewerApp {
             cut: None,
             brush_mm: 8.0,
             last_carve: None,
-            save_scene_path: "viewer-scene.toml".into(),
-            save_volume_path: "viewer-volume.nii.gz".into(),
+            files: FileMenu::new(RecentFiles::load(default_store())),
+            req,
+            grab3d: Grab3d::default(),
+            view3d_rect: None,
             last_drag: None,
             wheel: [0.0; 3],
             sent: None,
@@ -401,6 +413,7 @@ impl ViewerApp {
                 Reply::Status(s) => self.messages.push(s),
                 Reply::RenderInfo(i) => self.render_panel.on_info(*i),
                 Reply::RenderApplied(seq) => self.render_panel.applied(seq),
+                Reply::Picked(p) => self.on_picked(p),
             }
         }
         let extra = self.messages.len().saturating_sub(MAX_MESSAGES);
@@ -408,6 +421,13 @@ impl ViewerApp {
     }
 
     fn on_opened(&mut self, o: Opened) {
+        self.forget_session();
+        if let Some(p) = &o.path
+            && let Err(e) = self.files.recent.push(p)
+        {
+            self.messages
+                .push(format!("error: updating the recent files: {e}"));
+        }
         self.cursor = o.grid.centre();
         self.preset = Preset::default_for(o.value_range);
         self.window = self.preset.window(o.value_range);
@@ -476,6 +496,7 @@ impl ViewerApp {
     pub fn show(&mut self, ui: &mut egui::Ui) {
         let ctx = ui.ctx().clone();
         self.receive(&ctx);
+        self.on_files(&ctx);
         self.frames += 1;
         egui::Panel::top("toolbar").show(ui, |ui| self.toolbar(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status(ui));
@@ -561,25 +582,10 @@ impl ViewerApp {
         });
     }
 
-    /// File → Save scene / Save volume, each to the path typed above it.
+    /// File → Open…, Open recent, Save scene / Save volume.
     fn file_menu(&mut self, ui: &mut egui::Ui) {
-        for (what, path) in [
-            ("Save scene", &mut self.save_scene_path),
-            ("Save volume", &mut self.save_volume_path),
-        ] {
-            ui.horizontal(|ui| {
-                let label = ui.label(format!("{what} to"));
-                ui.text_edit_singleline(path).labelled_by(label.id);
-            });
-            if ui.button(what).clicked() {
-                let p = std::path::PathBuf::from(path.as_str());
-                self.worker.send(if what == "Save scene" {
-                    Command::SaveScene(p)
-                } else {
-                    Command::SaveVolume(p)
-                });
-                ui.close();
-            }
+        for a in self.files.ui(ui) {
+            self.on_file_action(a);
         }
         if let Some(c) = crate::save_png::menu_item(ui, &mut self.save_png_path) {
             self.worker.send(c);
@@ -643,8 +649,10 @@ impl ViewerApp {
         let cell = cells[3].shrink(2.0);
         let mut child = ui.new_child(egui::UiBuilder::new().max_rect(cell).id_salt("3d"));
         if let Some(camera) = self.camera {
+            let avail = child.available_rect_before_wrap();
             let tex = self.view3d_texture();
             let (c, dragging) = view3d_texture(&mut child, tex, &camera);
+            let (c, dragging) = self.grab_on_3d(&mut child, avail, camera, (c, dragging));
             if dragging {
                 self.last_drag = Some(Instant::now());
             }

@@ -4,6 +4,7 @@
 
 use crate::backend_panel::BackendStatus;
 use crate::gpu_image::GpuFrame;
+use crate::open::OpenRequest;
 use std::path::PathBuf;
 use std::time::Duration;
 use voxflex_core::camera::Camera;
@@ -11,7 +12,8 @@ use voxflex_core::grid::Grid;
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::session::{
-    GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport, Window,
+    GrowthLimits, GrowthParams, GrowthReport, RoiId, RoiInfo, SliceAxis, SliceImage, StepReport,
+    Window,
 };
 use voxflex_runtime::visualise::RgbaImage;
 
@@ -111,6 +113,24 @@ pub enum Command {
     /// Render the 3D view at full quality and write it as PNG (File → Save
     /// view as PNG).
     SaveViewPng(PathBuf),
+    /// Open a volume or scene, replacing the session (the old one is kept
+    /// when this fails; the error names the file and the reason).
+    Open(OpenRequest),
+    /// Choose a map's λ by the plateau rule and grow it to the end at it.
+    RoiAutoLambda(RoiId),
+    /// New growth bounds for a map (re-grown as far as before within them).
+    RoiLimits(RoiId, GrowthLimits),
+    /// Find the world point under pixel `pixel` of `camera`'s image: the
+    /// first sample along its ray at or above `min_value` (answered by
+    /// [`Reply::Picked`]).
+    Pick {
+        /// The 3D view's camera (its image size gives the pixel units).
+        camera: Camera,
+        /// Pixel (x, y), top-left origin.
+        pixel: [f64; 2],
+        /// Value a sample must reach, volume units.
+        min_value: f32,
+    },
     /// Stop the worker.
     Quit,
 }
@@ -136,6 +156,8 @@ pub struct Opened {
     pub model: Option<String>,
     /// The adapter computing (`cpu` or a GPU's name).
     pub adapter: String,
+    /// The file opened (`None`: the built-in phantom).
+    pub path: Option<PathBuf>,
 }
 
 /// One slice as shown: gray pixels with ROI overlays as RGBA, and where its
@@ -219,4 +241,7 @@ pub enum Reply {
     RenderInfo(Box<crate::render_info::RenderInfo>),
     /// Reconfigure `seq` was applied (or refused, with a [`Reply::Error`]).
     RenderApplied(u64),
+    /// The answer to [`Command::Pick`]: the world point (mm), or `None`
+    /// when the ray hit nothing.
+    Picked(Option<[f64; 3]>),
 }

@@ -3,6 +3,7 @@
 //! Delete, and each map's last growth (useful-visit fraction, time).
 
 use crate::protocol::{Command, RoiRow};
+use crate::roi_bounds::{BoundsEdit, bounds_ui};
 use egui::{Color32, RichText, Slider};
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -17,6 +18,9 @@ const PALETTE: [[u8; 3]; 6] = [
     [220, 120, 255],
     [255, 140, 200],
 ];
+
+/// Room left for the *Browse…* button after the *Save to* field, points.
+const BROWSE_WIDTH: f32 = 80.0;
 
 /// How the viewer draws one map.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,6 +42,11 @@ pub struct RoiPanel {
     pub styles: HashMap<RoiId, RoiStyle>,
     /// Where Save writes maps (`roi-<id>.nii.gz` in it).
     pub save_dir: String,
+    /// Set when *Browse…* next to `save_dir` was clicked (the app opens
+    /// the folder dialog and clears it).
+    pub browse_save_dir: bool,
+    /// Each map's growth bounds being edited.
+    pub bounds: HashMap<RoiId, BoundsEdit>,
 }
 
 impl Default for RoiPanel {
@@ -47,6 +56,8 @@ impl Default for RoiPanel {
             selected: None,
             styles: HashMap::new(),
             save_dir: ".".into(),
+            browse_save_dir: false,
+            bounds: HashMap::new(),
         }
     }
 }
@@ -111,8 +122,11 @@ impl RoiPanel {
         }
         ui.horizontal(|ui| {
             let label = ui.label("Save to");
-            ui.text_edit_singleline(&mut self.save_dir)
-                .labelled_by(label.id);
+            // The field leaves room for Browse… (the panel keeps its width).
+            let field = egui::TextEdit::singleline(&mut self.save_dir)
+                .desired_width(ui.available_width() - BROWSE_WIDTH);
+            ui.add(field).labelled_by(label.id);
+            self.browse_save_dir |= ui.button("Browse…").clicked();
         });
         ui.separator();
         for row in rows {
@@ -142,6 +156,12 @@ impl RoiPanel {
             "{} steps, {} voxels ≥ ½, {state}",
             i.steps, i.voxels_above_half
         ));
+        auto_lambda_ui(ui, row, out);
+        let edit = self
+            .bounds
+            .entry(id)
+            .or_insert_with(|| BoundsEdit::of(row.info.limits));
+        bounds_ui(ui, row, edit, out);
         if let Some((report, wall)) = row.last {
             ui.label(
                 RichText::new(format!(
@@ -167,6 +187,7 @@ impl RoiPanel {
             if ui.button("Delete").clicked() {
                 out.push(Command::RemoveRoi(id));
                 self.styles.remove(&id);
+                self.bounds.remove(&id);
                 if self.selected == Some(id) {
                     self.selected = None;
                 }
@@ -174,4 +195,30 @@ impl RoiPanel {
         });
         ui.separator();
     }
+}
+
+/// The map's *auto λ* box and the λ in use: ticking it has the session
+/// choose λ by the plateau rule and grow the map to the end; unticking
+/// keeps that λ as a fixed one.
+fn auto_lambda_ui(ui: &mut egui::Ui, row: &RoiRow, out: &mut Vec<Command>) {
+    let i = &row.info;
+    ui.horizontal(|ui| {
+        let mut auto = i.lambda_auto;
+        let label = format!("auto λ (map {})", i.id.0);
+        if ui
+            .checkbox(&mut auto, label)
+            .on_hover_text(
+                "choose λ where the map's size is flattest in λ (the scene's lambda = \"auto\")",
+            )
+            .changed()
+        {
+            out.push(if auto {
+                Command::RoiAutoLambda(i.id)
+            } else {
+                Command::RoiParams(i.id, i.params)
+            });
+        }
+        let how = if i.lambda_auto { "chosen" } else { "set" };
+        ui.label(format!("λ = {:.2} ({how})", i.params.lambda));
+    });
 }

@@ -52,6 +52,14 @@ pub fn pan(camera: &Camera, dx: f32, dy: f32, height_points: f32) -> Camera {
     }
 }
 
+/// Where the 3D image of `camera` is drawn in the view `avail`: centred,
+/// as large as fits with square pixels.
+pub fn image_rect(avail: Rect, camera: &Camera) -> Rect {
+    let aspect = camera.width as f32 / camera.height.max(1) as f32;
+    let h = avail.height().min(avail.width() / aspect);
+    Rect::from_center_size(avail.center(), Vec2::new(h * aspect, h))
+}
+
 /// Draws the 3D image `tex` in the space left in `ui` (square pixels) and
 /// returns the camera after the mouse's orbit, pan and zoom, and whether
 /// a drag is under way.
@@ -71,9 +79,7 @@ pub fn view3d_texture(
     let (_, response) = ui.allocate_exact_size(avail.size(), Sense::click_and_drag());
     let painter = ui.painter_at(avail);
     painter.rect_filled(avail, 0.0, Color32::BLACK);
-    let aspect = camera.width as f32 / camera.height.max(1) as f32;
-    let h = avail.height().min(avail.width() / aspect);
-    let rect = Rect::from_center_size(avail.center(), Vec2::new(h * aspect, h));
+    let rect = image_rect(avail, camera);
     if let Some(tex) = tex {
         let uv = Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
         painter.image(tex, rect, uv, Color32::WHITE);

@@ -76,15 +76,7 @@ impl Drop for Worker {
 }
 
 fn run(req: OpenRequest, commands: Receiver<Command>, out: Sender<Reply>, wake: impl Fn()) {
-    let mut state = match State::open(&req, &out) {
-        Ok(s) => s,
-        Err(e) => {
-            tracing::error!("{e:#}");
-            let _ = out.send(Reply::Error(format!("{e:#}")));
-            wake();
-            return;
-        }
-    };
+    let mut state = open_or_report(&req, &out);
     wake();
     while let Ok(first) = commands.recv() {
         let mut batch = vec![first];
@@ -92,8 +84,33 @@ fn run(req: OpenRequest, commands: Receiver<Command>, out: Sender<Reply>, wake: 
         if batch.iter().any(|c| matches!(c, Command::Quit)) {
             return;
         }
-        state.apply_batch(batch, &out);
+        // An Open replaces the session: the commands before it were for
+        // the old one.
+        if let Some(i) = batch.iter().rposition(|c| matches!(c, Command::Open(_))) {
+            let rest = batch.split_off(i + 1);
+            if let Some(Command::Open(req)) = batch.pop()
+                && let Some(s) = open_or_report(&req, &out)
+            {
+                state = Some(s);
+            }
+            batch = rest;
+        }
+        if let Some(s) = &mut state {
+            s.apply_batch(batch, &out);
+        }
         wake();
+    }
+}
+
+/// Opens `req`, or sends the error (naming the file and the reason).
+fn open_or_report(req: &OpenRequest, out: &Sender<Reply>) -> Option<State> {
+    match State::open(req, out) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            tracing::error!("{e:#}");
+            let _ = out.send(Reply::Error(format!("{e:#}")));
+            None
+        }
     }
 }
 
@@ -162,6 +179,7 @@ impl State {
             schemas: deformation_schemas(&session),
             model: model.as_ref().map(|(n, _)| n.clone()),
             adapter: session.adapter_name(),
+            path: req.input.clone(),
         })));
         let status = BackendStatus::of(&session, req.backend, req.gpu.as_ref());
         let _ = out.send(Reply::Backend(status));
@@ -314,7 +332,28 @@ impl State {
                 save_view_png(s, &view.camera, &self.render, &path)?;
                 let _ = out.send(Reply::Status(format!("wrote {}", path.display())));
             }
-            Command::Quit => {}
+            Command::RoiAutoLambda(id) => {
+                let t = Instant::now();
+                let auto = s.roi_auto_lambda(id)?;
+                self.last_growth.insert(id, (auto.report, t.elapsed()));
+                ch.rois = true;
+                let _ = out.send(Reply::Status(format!(
+                    "map {}: auto λ = {} ({} trials)",
+                    id.0,
+                    auto.lambda,
+                    auto.trials.len()
+                )));
+            }
+            Command::RoiLimits(id, l) => self.grow(id, ch, |s| s.set_roi_limits(id, l))?,
+            Command::Pick {
+                camera,
+                pixel,
+                min_value,
+            } => {
+                let p = s.pick(&camera, pixel, min_value)?;
+                let _ = out.send(Reply::Picked(p.map(|p| p.to_array())));
+            }
+            Command::Open(_) | Command::Quit => {}
         }
         Ok(())
     }

@@ -34,6 +34,7 @@ fn plugin_dir() -> PathBuf {
 
 fn open_phantom() -> Harness<'static, ViewerApp> {
     let req = OpenRequest {
+        gpu: None,
         input: None,
         backend: BackendChoice::Cpu,
         plugin_dirs: vec![plugin_dir()],

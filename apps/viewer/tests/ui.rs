@@ -14,7 +14,13 @@
 //! - the parameter form files a bad TOML text and the plugin's refusal
 //!   under their key, and Apply rebuilds the model;
 //! - a scene saved after a grab, run by `voxflex run`, gives the viewer's
-//!   volume.
+//!   volume;
+//! - a NIfTI dropped on the window opens in place of the session, a bad
+//!   one is refused naming the file; Open recent lists the files newest
+//!   first, across runs, and opens them;
+//! - the *auto λ* box grows a map at the λ the plateau rule chose and
+//!   shows it; bounds applied in the panel hold a map in;
+//! - a grab-drag on the 3D view picks the face and moves the volume.
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
@@ -39,6 +45,12 @@ fn plugin_dir() -> PathBuf {
 }
 
 fn open_phantom() -> Harness<'static, ViewerApp> {
+    // File → Open recent in no file: the tests never touch the user's list.
+    open_phantom_recent(None)
+}
+
+/// The built-in phantom with File → Open recent kept in `store`.
+fn open_phantom_recent(store: Option<PathBuf>) -> Harness<'static, ViewerApp> {
     let req = OpenRequest {
         input: None,
         backend: BackendChoice::Cpu,
@@ -46,7 +58,8 @@ fn open_phantom() -> Harness<'static, ViewerApp> {
         gpu: None,
     };
     let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
-        .expect("start the viewer");
+        .expect("start the viewer")
+        .with_recent_store(store);
     let mut h = Harness::builder()
         .with_size([1280.0, 860.0])
         .build_ui_state(|ui, app: &mut ViewerApp| app.show(ui), app);
@@ -485,4 +498,186 @@ fn the_parameter_form_shows_problems_under_their_key_and_applies() {
         h.state().messages()
     );
     assert!(h.state().model_panel().params.contains("constraint = 0.5"));
+}
+
+/// Writes phantom `name` at `dims` as a NIfTI file in `dir`.
+fn phantom_file(dir: &std::path::Path, name: &str, dims: [usize; 3]) -> PathBuf {
+    let path = dir.join(format!("{name}.nii.gz"));
+    let v = voxflex_phantom::phantom(name, dims).unwrap();
+    voxflex_io::write_volume(&path, v.view()).unwrap();
+    path
+}
+
+/// A file dropped on the window, as the windowing layer hands it over.
+#[derive(Debug)]
+struct Dropped(PathBuf);
+
+impl egui::DroppedFile for Dropped {
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+fn drop_file(h: &mut Harness<'static, ViewerApp>, path: &std::path::Path) {
+    h.input_mut()
+        .dropped_files
+        .push(std::sync::Arc::new(Dropped(path.to_path_buf())));
+    h.step();
+}
+
+/// Waits until `path` is the session open, with its first images.
+fn wait_opened(h: &mut Harness<'static, ViewerApp>, path: &std::path::Path, dims: [usize; 3]) {
+    let title = path.display().to_string();
+    wait(h, &format!("{title} open"), |a| {
+        a.opened()
+            .is_some_and(|o| o.title == title && o.grid.dims == dims)
+            && a.ready()
+    });
+}
+
+#[test]
+fn a_dropped_file_opens_in_place_and_open_recent_keeps_it_newest_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("config/voxflex/viewer-recent.txt");
+    let cube = phantom_file(dir.path(), "cube", [24, 24, 24]);
+    let rings = phantom_file(dir.path(), "rings", [20, 22, 18]);
+    let mut h = open_phantom_recent(Some(store.clone()));
+    drop_file(&mut h, &cube);
+    wait_opened(&mut h, &cube, [24, 24, 24]);
+    assert!(h.state().rois().is_empty() && h.state().model().is_none());
+    drop_file(&mut h, &rings);
+    wait_opened(&mut h, &rings, [20, 22, 18]);
+    // A file that is not a volume: refused, naming it; the session stays.
+    let bad = dir.path().join("bad.nii");
+    std::fs::write(&bad, "not a volume").unwrap();
+    drop_file(&mut h, &bad);
+    wait(&mut h, "the refusal", |a| {
+        a.messages()
+            .iter()
+            .any(|m| m.starts_with("error") && m.contains("bad.nii"))
+    });
+    assert_eq!(
+        h.state().opened().unwrap().title,
+        rings.display().to_string()
+    );
+    let newest_first = [rings.clone(), cube.clone()];
+    assert_eq!(h.state().recent().files(), &newest_first[..]);
+    // The next run reads the list back and opens from it.
+    drop(h);
+    let mut h = open_phantom_recent(Some(store.clone()));
+    assert_eq!(h.state().recent().files(), &newest_first[..]);
+    h.get_by_label("File").click();
+    h.run_steps(3);
+    h.get_by_label("Open recent").click();
+    h.run_steps(3);
+    let dirname = dir
+        .path()
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    h.get_by_label(&format!("cube.nii.gz — {dirname}")).click();
+    wait_opened(&mut h, &cube, [24, 24, 24]);
+    assert_eq!(
+        voxflex_viewer::recent::RecentFiles::load(Some(store)).files(),
+        &[cube, rings][..]
+    );
+}
+
+#[test]
+fn the_auto_lambda_box_grows_the_map_at_the_chosen_lambda_and_shows_it() {
+    let mut h = open_phantom();
+    seed_and_grow(&mut h);
+    let fixed = h.state().rois()[0].info.clone();
+    assert!(!fixed.lambda_auto);
+    h.get_by_label(&format!("auto λ (map {})", fixed.id.0))
+        .click();
+    wait(&mut h, "the map at the automatic λ", |a| {
+        a.rois()[0].info.lambda_auto && a.rois()[0].info.converged
+    });
+    let auto = h.state().rois()[0].info.clone();
+    assert!(
+        voxflex_opacity::auto_lambda::CANDIDATES.contains(&auto.params.lambda),
+        "{auto:?}"
+    );
+    assert!(auto.voxels_above_half > 1000, "{auto:?}");
+    let (report, _) = h.state().rois()[0].last.expect("the growth at auto λ");
+    assert!(report.converged && report.steps > 1, "{report:?}");
+    h.get_by_label(&format!("λ = {:.2} (chosen)", auto.params.lambda));
+    // Unticked, the λ chosen stays, as a given one.
+    h.get_by_label(&format!("auto λ (map {})", fixed.id.0))
+        .click();
+    wait(&mut h, "a fixed λ again", |a| {
+        !a.rois()[0].info.lambda_auto
+    });
+    assert_eq!(h.state().rois()[0].info.params.lambda, auto.params.lambda);
+}
+
+#[test]
+fn bounds_applied_in_the_panel_hold_the_map_within_them() {
+    use voxflex_viewer::roi_bounds::BoundsEdit;
+    let mut h = open_phantom();
+    seed_and_grow(&mut h);
+    let free = h.state().rois()[0].info.clone();
+    h.get_by_label(&format!("bounds (map {})", free.id.0))
+        .click();
+    h.run_steps(2);
+    let mut edit = BoundsEdit::of(free.limits);
+    edit.distance_on = true;
+    edit.distance_mm = 12.0;
+    h.state_mut().roi_panel_mut().bounds.insert(free.id, edit);
+    h.step();
+    h.get_by_label(&format!("Apply bounds (map {})", free.id.0))
+        .click();
+    wait(&mut h, "the map within 12 mm of its seed", |a| {
+        a.rois()[0].info.limits.max_distance_mm == Some(12.0) && a.rois()[0].info.converged
+    });
+    let bounded = &h.state().rois()[0].info;
+    assert!(
+        bounded.voxels_above_half < free.voxels_above_half / 4,
+        "{bounded:?} vs {free:?}"
+    );
+}
+
+#[test]
+fn a_grab_drag_on_the_3d_view_picks_the_face_and_moves_the_volume() {
+    let mut h = open_phantom();
+    // The axial slice through the head's centre (z = 0).
+    put_cursor(&mut h, DVec3::new(0.0, -60.0, 0.0));
+    let before = h.state().slices().unwrap()[0].slice.image.pixels.clone();
+    h.get_by_label("Grab").click();
+    h.step();
+    // The scene's camera looks at the face from the front (−y), its
+    // target the head's centre: the image centre's ray runs along +y
+    // through x = z = 0 and meets the skin at y = −112 mm.
+    let rect = h.state().view3d_rect().expect("the 3D view drawn");
+    let (from, to) = (
+        rect.center(),
+        rect.center() + egui::vec2(rect.width() / 8.0, 0.0),
+    );
+    h.hover_at(from);
+    h.step();
+    press(&h, from, true, Modifiers::NONE);
+    h.step();
+    for s in 1..=10 {
+        h.hover_at(from + (to - from) * (s as f32 / 10.0));
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Held until the pick came back and the model stepped.
+    wait(&mut h, "the grab's first step", |a| a.steps() > 0);
+    press(&h, to, false, Modifiers::NONE);
+    h.step();
+    let p = h.state().last_3d_pick().expect("a point picked");
+    // The first sample at or above the window floor (−160 HU) lies
+    // between the skin's outer surface and the skull, 7 mm deeper.
+    assert!((p - DVec3::new(0.0, -112.0, 0.0)).length() < 8.0, "{p}");
+    wait(&mut h, "the moved face on the axial slice", |a| {
+        let now = &a.slices().unwrap()[0].slice.image.pixels;
+        now.len() == before.len() && now.iter().zip(&before).filter(|(x, y)| x != y).count() >= 5
+    });
 }

@@ -10,11 +10,12 @@
 #[derive(Clone, Debug, PartialEq)]
 pub enum Interaction {
     /// Grab the tissue at `point` (mm) and move it to `to` (mm) over
-    /// `frames` steps; it stays held afterwards. A drag is this same grab
-    /// sent again with a new `to` each call: the model re-targets the
-    /// element it holds (ChainMail picks the element whose rest position is
-    /// nearest `point`; the mesh models pick the node nearest `point` where
-    /// it is now, so a drag there passes the last `to` as the next `point`).
+    /// `frames` steps; it stays held afterwards. Every model takes the
+    /// element (ChainMail) or node (corotational-fem, mass-spring) whose
+    /// *rest* position is nearest `point`. A drag is this same grab sent
+    /// again with the point first pressed and a new `to` each call: it
+    /// takes the same element or node each time, however far it has moved,
+    /// and re-targets it.
     Grab {
         /// World point, mm.
         point: [f64; 3],

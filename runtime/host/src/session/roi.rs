@@ -6,8 +6,10 @@
 
 use voxflex_core::gpu::GpuService;
 use voxflex_core::volume::Volume;
+use voxflex_core::volume::VolumeView;
 use voxflex_opacity::{
-    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthParams, GrowthReport, OpacityMap, Seed,
+    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthLimits, GrowthParams, GrowthReport, OpacityMap,
+    Seed,
 };
 
 use super::roi_err;
@@ -32,6 +34,12 @@ pub struct RoiInfo {
     pub converged: bool,
     /// Voxels at opacity ≥ 0.5.
     pub voxels_above_half: usize,
+    /// True when `params.lambda` was chosen by the plateau rule
+    /// ([`super::Session::roi_auto_lambda`]) rather than given.
+    pub lambda_auto: bool,
+    /// Its growth bounds (intensity window, distance from the seed;
+    /// [`super::Session::set_roi_limits`]).
+    pub limits: GrowthLimits,
 }
 
 /// Where a session's ROI maps grow: on the CPU, or on the session's GPU
@@ -122,6 +130,32 @@ impl RoiGrowth {
     }
 }
 
+/// A bounded map's values — the current volume with its [`GrowthLimits`]
+/// applied (blocked voxels raised so opacity never enters them) — on the
+/// device it grows on.
+#[derive(Debug)]
+enum BoundedValues {
+    Cpu(Volume),
+    Gpu(GpuOpacityVolume),
+}
+
+/// The values a map's growth reads: the CPU view (`volume`'s, or its
+/// bounded copy's) and `device` with its bounded upload in place of the
+/// shared one.
+fn reads<'a>(
+    bounded: &'a Option<BoundedValues>,
+    volume: &'a Volume,
+    device: RoiDevice<'a>,
+) -> (VolumeView<'a>, RoiDevice<'a>) {
+    match (bounded, device) {
+        (Some(BoundedValues::Cpu(b)), d) => (b.view(), d),
+        (Some(BoundedValues::Gpu(values)), RoiDevice::Gpu { gpu, .. }) => {
+            (volume.view(), RoiDevice::Gpu { gpu, values })
+        }
+        (_, d) => (volume.view(), d),
+    }
+}
+
 /// One ROI map: its request, its growth on the current volume and the map
 /// as it stands.
 #[derive(Debug)]
@@ -134,7 +168,13 @@ pub(crate) struct SessionRoi {
     /// Steps grown on the current volume.
     steps: u64,
     /// Run to convergence (re-grown to convergence on a new volume).
-    to_end: bool,
+    pub(crate) to_end: bool,
+    /// λ chosen by the plateau rule (see [`RoiInfo::lambda_auto`]).
+    pub(crate) lambda_auto: bool,
+    /// Its growth bounds.
+    pub(crate) limits: GrowthLimits,
+    /// The values its growth reads when bounded (made on each re-growth).
+    bounded: Option<BoundedValues>,
     converged: bool,
     map: OpacityMap,
     /// Handed to the renderer ([`super::Session::set_roi_shown`]).
@@ -166,6 +206,9 @@ impl SessionRoi {
             growth: Some(growth),
             steps: 0,
             to_end: false,
+            lambda_auto: false,
+            limits: GrowthLimits::default(),
+            bounded: None,
             map,
             shown: true,
         })
@@ -181,8 +224,9 @@ impl SessionRoi {
         n: usize,
     ) -> Result<GrowthReport, RunError> {
         self.follow(volume, device)?;
-        let report = match (&mut self.growth, device) {
-            (Some(RoiGrowth::Cpu(g)), RoiDevice::Cpu) => g.step(volume.view(), n),
+        let (view, on) = reads(&self.bounded, volume, device);
+        let report = match (&mut self.growth, on) {
+            (Some(RoiGrowth::Cpu(g)), RoiDevice::Cpu) => g.step(view, n),
             (Some(RoiGrowth::Gpu(g)), RoiDevice::Gpu { gpu, values }) => g.step(gpu, values, n),
             _ => {
                 return Err(roi_err(format!(
@@ -224,10 +268,38 @@ impl SessionRoi {
             self.steps as usize
         };
         self.release(device.gpu());
-        self.growth =
-            Some(RoiGrowth::seed(volume, device, &self.seed, self.params).map_err(roi_err)?);
+        self.bound(volume, device)?;
+        let (_, on) = reads(&self.bounded, volume, device);
+        let growth = RoiGrowth::seed(volume, on, &self.seed, self.params).map_err(roi_err)?;
+        self.growth = Some(growth);
         self.steps = 0;
         self.step(volume, device, steps)
+    }
+
+    /// Applies its bounds to `volume` for a growth on `device` (nothing
+    /// when unbounded; errors when the seed's value lies outside the
+    /// intensity window).
+    fn bound(&mut self, volume: &Volume, device: RoiDevice<'_>) -> Result<(), RunError> {
+        let seed = self.seed.resolve(&volume.grid).map_err(roi_err)?;
+        let Some(b) = self.limits.apply(volume.view(), seed).map_err(roi_err)? else {
+            return Ok(());
+        };
+        self.bounded = Some(match device {
+            RoiDevice::Cpu => BoundedValues::Cpu(b),
+            RoiDevice::Gpu { gpu, .. } => {
+                BoundedValues::Gpu(GpuOpacityVolume::upload(gpu, b.view()).map_err(roi_err)?)
+            }
+        });
+        Ok(())
+    }
+
+    /// The values its growth reads on `device` (see [`reads`]).
+    pub(crate) fn reads<'a>(
+        &'a self,
+        volume: &'a Volume,
+        device: RoiDevice<'a>,
+    ) -> (VolumeView<'a>, RoiDevice<'a>) {
+        reads(&self.bounded, volume, device)
     }
 
     /// Re-grows on `device` as far as before when its growth is released
@@ -249,6 +321,9 @@ impl SessionRoi {
     pub(crate) fn release(&mut self, gpu: Option<&dyn GpuService>) {
         if let Some(g) = self.growth.take() {
             g.release(gpu);
+        }
+        if let (Some(BoundedValues::Gpu(v)), Some(gpu)) = (self.bounded.take(), gpu) {
+            v.release(gpu);
         }
     }
 
@@ -278,6 +353,8 @@ impl SessionRoi {
             steps: self.steps,
             converged: self.converged,
             voxels_above_half: voxflex_opacity::runner::voxels_above_half(&self.map),
+            lambda_auto: self.lambda_auto,
+            limits: self.limits,
         }
     }
 }

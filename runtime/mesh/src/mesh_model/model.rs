@@ -460,18 +460,32 @@ impl<S: MeshSolver> MeshModel<S> {
         let b = built_mut(&mut self.built)?;
         match spec {
             InteractionSpec::Grab { point, .. } => {
-                // The node nearest the point where it is now.
+                // The node whose *rest* position is nearest the point (the
+                // rule of every model: a drag re-sends the same point with a
+                // new target and keeps the same node however far it moved).
+                // A cut's duplicates share a rest position: among them the
+                // one already held (a drag goes on with it), then the one
+                // nearest the point now.
                 let p = DVec3::from_array(*point);
+                let held: Vec<u32> = self.grabs.iter().map(|g| g.node).collect();
+                let key = |n: usize| {
+                    (
+                        (b.mesh.nodes[n] - p).length_squared(),
+                        !held.contains(&(n as u32)),
+                        (b.mesh.nodes[n] + b.state.u[n] - p).length_squared(),
+                    )
+                };
                 let node = (0..b.mesh.nodes.len())
                     .min_by(|&x, &y| {
-                        let dx = (b.mesh.nodes[x] + b.state.u[x] - p).length_squared();
-                        let dy = (b.mesh.nodes[y] + b.state.u[y] - p).length_squared();
-                        dx.total_cmp(&dy)
+                        let (kx, ky) = (key(x), key(y));
+                        kx.0.total_cmp(&ky.0)
+                            .then(kx.1.cmp(&ky.1))
+                            .then(kx.2.total_cmp(&ky.2))
                     })
                     .ok_or_else(|| ModelError(format!("{name} grab: the proxy has no node")))?;
                 let now = b.mesh.nodes[node] + b.state.u[node];
                 self.far_grabs
-                    .check(name, p, now, reach_at(&b.mesh, node as u32));
+                    .check(name, p, b.mesh.nodes[node], reach_at(&b.mesh, node as u32));
                 let motion = GrabMotion::new(spec, now).expect("a grab has a motion");
                 let held = b.state.u[node];
                 self.grabs.retain(|g| g.node != node as u32);

@@ -1,0 +1,151 @@
+//! [`Session::roi_auto_lambda`]: an ROI map's λ chosen by the plateau rule
+//! of `voxflex_opacity::auto_lambda` (the scene's `lambda = "auto"`) on
+//! the session's current volume — what the viewer's *auto λ* box drives.
+
+use super::roi::RoiDevice;
+use super::{RoiId, Session, roi_err};
+use crate::pipeline::RunError;
+use std::time::Instant;
+use voxflex_opacity::auto_lambda::{Trial, auto_lambda};
+use voxflex_opacity::{CpuRunner, GpuRunner, GrowthParams, GrowthReport};
+
+/// What [`Session::roi_auto_lambda`] chose and tried.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AutoLambdaReport {
+    /// The λ chosen, now the map's λ.
+    pub lambda: f32,
+    /// Every candidate λ tried, in increasing order (the last may have
+    /// jumped: see `voxflex_opacity::auto_lambda`).
+    pub trials: Vec<Trial>,
+    /// The map's growth to convergence at the chosen λ.
+    pub report: GrowthReport,
+}
+
+impl Session {
+    /// Chooses ROI map `id`'s λ by the plateau rule (the scene's
+    /// `lambda = "auto"`: trial growths from its seed at λ = 1 … 32, √2
+    /// apart, on the current volume with its o_min, o_max and σ floor),
+    /// makes it the map's λ and grows the map to convergence at it (and
+    /// to convergence again on every new volume, at the same λ: the rule
+    /// is not re-run when the volume changes; call this again for that).
+    /// Runs on the session's backend. Errors when there is no map `id`,
+    /// leaving the maps as they were.
+    pub fn roi_auto_lambda(&mut self, id: RoiId) -> Result<AutoLambdaReport, RunError> {
+        let i = self.roi_index(id)?;
+        self.ensure_volume()?;
+        self.ensure_roi_values()?;
+        let t = Instant::now();
+        let (rois, volume, device) = self.roi_parts();
+        let (seed, params) = (rois[i].seed, rois[i].params);
+        let view = volume.view();
+        // Bounded, the trials read the bounded values, as the map does.
+        let (values, on) = rois[i].reads(volume, device);
+        let found = match on {
+            RoiDevice::Cpu => auto_lambda(
+                &mut CpuRunner {
+                    volume: view,
+                    values,
+                    seed,
+                },
+                params,
+                None,
+            ),
+            RoiDevice::Gpu { gpu, values } => auto_lambda(
+                &mut GpuRunner {
+                    gpu,
+                    values,
+                    volume: view,
+                    seed,
+                },
+                params,
+                None,
+            ),
+        }
+        .map_err(roi_err)?;
+        let roi = &mut rois[i];
+        let was = (roi.params, roi.lambda_auto, roi.to_end);
+        roi.params = GrowthParams {
+            lambda: found.lambda,
+            ..params
+        };
+        roi.lambda_auto = true;
+        roi.to_end = true;
+        let report = match roi.regrow(volume, device) {
+            Ok(r) => r,
+            Err(e) => {
+                (roi.params, roi.lambda_auto, roi.to_end) = was;
+                return Err(e);
+            }
+        };
+        self.metrics
+            .stage("roi")
+            .record_run(t.elapsed(), report.visits);
+        Ok(AutoLambdaReport {
+            lambda: found.lambda,
+            trials: found.trials,
+            report,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::backend::BackendChoice;
+    use crate::session::{RoiId, Seed, Session, SessionDefaults, SessionSource};
+    use voxflex_core::glam::DVec3;
+    use voxflex_opacity::auto_lambda::CANDIDATES;
+    use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, grow_roi};
+
+    #[test]
+    fn auto_lambda_grows_the_map_the_scene_rule_grows_and_a_given_lambda_ends_it() {
+        let mut s = Session::from_volume(
+            SessionSource::Phantom {
+                name: "head".into(),
+                dims: [50, 60, 55],
+            },
+            SessionDefaults {
+                backend: BackendChoice::Cpu,
+                ..SessionDefaults::default()
+            },
+        )
+        .unwrap();
+        // In the brain, away from the ventricles.
+        let seed = Seed::World(DVec3::new(40.0, 0.0, 15.0));
+        let params = GrowthParams::default();
+        let id = s.add_roi(seed, params).unwrap();
+        let auto = s.roi_auto_lambda(id).unwrap();
+        assert!(CANDIDATES.contains(&auto.lambda), "{auto:?}");
+        assert!(auto.report.converged && auto.trials.len() > 1, "{auto:?}");
+        let info = &s.rois()[0];
+        assert!(info.lambda_auto && info.converged, "{info:?}");
+        assert_eq!(info.params.lambda, auto.lambda);
+        // The scene's `lambda = "auto"` on the same volume and seed: the
+        // same λ and the same map, voxel for voxel.
+        let scene = grow_roi(
+            s.volume().unwrap().view(),
+            &RoiRequest {
+                seed,
+                params,
+                lambda: LambdaChoice::Auto,
+                limits: GrowthLimits::default(),
+                steps: None,
+            },
+            None,
+        )
+        .unwrap();
+        assert_eq!(scene.lambda, auto.lambda);
+        assert_eq!(s.roi_map(id).unwrap(), &scene.grown.map);
+        // A λ given again makes it a fixed-λ map.
+        s.set_roi_params(
+            id,
+            GrowthParams {
+                lambda: 8.0,
+                ..params
+            },
+        )
+        .unwrap();
+        assert!(!s.rois()[0].lambda_auto);
+        let e = s.roi_auto_lambda(RoiId(99)).unwrap_err().to_string();
+        assert!(e.contains("no ROI map 99"), "{e}");
+    }
+}
