@@ -3,15 +3,15 @@
 //! three slice views and the 3D view, the ROI and deformation panels.
 
 use crate::backend_panel::BackendPanel;
-use crate::gpu_image::GpuImage;
 use crate::file_menu::FileMenu;
+use crate::gpu_image::GpuImage;
 use crate::grab3d::Grab3d;
 use crate::model_panel::ModelPanel;
 use crate::open::OpenRequest;
 use crate::orientation::normal_axis;
 use crate::protocol::{AXES, Command, Opened, Reply, RoiRow, SliceFrame, StageTime, ViewRequest};
-use crate::render_panel::RenderPanel;
 use crate::recent::{RecentFiles, default_store};
+use crate::render_panel::RenderPanel;
 use crate::roi_panel::RoiPanel;
 use crate::screenshot::Screenshot;
 use crate::slice_view::{ClickMode, SliceInput, slice_view};

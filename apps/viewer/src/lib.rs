@@ -10,8 +10,8 @@
 
 pub mod adaptive;
 pub mod app;
-pub mod bench;
 pub mod backend_panel;
+pub mod bench;
 pub mod cli;
 pub mod compose;
 pub mod dialogs;
