@@ -78,7 +78,8 @@ impl RecentFiles {
     }
 
     /// Writes the list to its file (nothing without one), creating the
-    /// folder; the file is replaced atomically (written beside, renamed).
+    /// folder; the file is replaced atomically (written beside under a
+    /// name of its own, renamed).
     fn save(&self) -> std::io::Result<()> {
         let Some(store) = &self.store else {
             return Ok(());
@@ -91,9 +92,9 @@ impl RecentFiles {
             text += &p.to_string_lossy();
             text.push('\n');
         }
-        let tmp = store.with_extension("txt.tmp");
-        std::fs::write(&tmp, text)?;
-        std::fs::rename(&tmp, store)
+        // A temporary file of its own (several viewers may save at once).
+        voxflex_io::write_atomically(store, |w| w.write_all(text.as_bytes()))
+            .map_err(std::io::Error::other)
     }
 }
 
