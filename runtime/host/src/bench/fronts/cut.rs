@@ -20,8 +20,9 @@
 //! more than 1e-3 mm over 10 frames (capped); its time is the whole run.
 
 use super::beam::{Beam, GRAB_FRAMES, MATERIAL_CHAINMAIL, MATERIAL_MESH};
+use super::fem;
 use super::runner::{self, Plugins, Scene};
-use super::{Front, Point};
+use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
 use voxflex_mesh::mesh_model::params::ProxySpec;
@@ -160,6 +161,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                         config: String,
                         run: &runner::Outcome,
                         is_default: bool,
+                        tuning: Option<Tuning>,
                         mut extra: Vec<(&'static str, String)>| {
             let e = cut_error(points, &run.u, c, d);
             let mut ex = vec![
@@ -180,6 +182,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                 is_default,
                 group: group.clone(),
                 extra: ex,
+                tuning,
             });
         };
         let default_step = default_step();
@@ -207,6 +210,8 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     format!("step {step}"),
                     &run,
                     default_step == Some(step),
+                    // The plugin's default element (no `element` key).
+                    Some(Tuning::new(spec.plugin, fem::DEFAULT_ELEMENT, step)),
                     extra,
                 );
             }
@@ -250,6 +255,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                 format!("downsample {ds}"),
                 run,
                 ds == default_downsample,
+                None,
                 extra,
             );
         }

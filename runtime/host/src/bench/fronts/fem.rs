@@ -16,7 +16,7 @@
 //! tolerance (or load), so another element order is one more entry there.
 
 use super::runner::{self, Plugins, Scene};
-use super::{Front, Point};
+use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
 
@@ -63,6 +63,8 @@ impl Family {
     }
 }
 
+/// The plugin both fronts run.
+const PLUGIN: &str = "corotational-fem";
 /// Young's modulus (Pa) and Poisson ratio of both beams.
 const E: f64 = 1000.0;
 const NU: f64 = 0.3;
@@ -140,7 +142,7 @@ fn solve(
     let run = runner::run(
         plugins,
         &Scene {
-            plugin: "corotational-fem",
+            plugin: PLUGIN,
             params,
             volume,
             points: &tip,
@@ -250,6 +252,7 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
                         && step == DEFAULT_STEP,
                     group: String::new(),
                     extra: ex,
+                    tuning: (tol == DEFAULT_TOL).then(|| Tuning::new(PLUGIN, name, step)),
                 });
             }
         }
@@ -279,7 +282,9 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
 pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
     let (l, w, h): (f64, f64, f64) = (8.0, 1.0, 0.5);
     let n: usize = if quick { 4 } else { 8 };
-    let steps: &[usize] = if quick { &[2, 1] } else { &[8, 4, 2, 1] };
+    // The grab fronts' P1 steps (6, 4, 3, 2) among them, so that the
+    // combined front ([`super::combined`]) compares those.
+    let steps: &[usize] = if quick { &[2, 1] } else { &[8, 6, 4, 3, 2, 1] };
     let dims = [8 * n + 1, n + 1, n / 2 + 1];
     let volume = runner::block(dims, 1.0 / n as f64, 100);
     let ei = E * w * h.powi(3) / 12.0;
@@ -320,6 +325,7 @@ pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchErr
                     is_default: name == DEFAULT_ELEMENT && step == DEFAULT_STEP,
                     group: format!("PL²/EI = {alpha}"),
                     extra,
+                    tuning: Some(Tuning::new(PLUGIN, name, step)),
                 });
             }
         }

@@ -17,7 +17,7 @@
 use super::beam::{Beam, GRAB_FRAMES, MATERIAL_CHAINMAIL, MATERIAL_MESH};
 use super::fem;
 use super::runner::{self, Plugins, Scene, Settle};
-use super::{Front, Point};
+use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::volume::Volume;
@@ -37,6 +37,9 @@ pub(super) struct ModelSpec {
     /// Proxy steps measured (voxels), full run and `--quick`, within the
     /// family's cap on tetrahedra ([`fem::Family::steps`]).
     steps: [&'static [usize]; 2],
+    /// Its rows enter the plugin's combined front ([`super::Tuning`]): it
+    /// runs the plugin's default solver or integrator.
+    combined: bool,
 }
 
 /// P1 proxy steps (voxels): full run, `--quick`.
@@ -62,6 +65,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: false,
         element: "P1",
         steps: P1_STEPS,
+        combined: false,
     },
     ModelSpec {
         series: "FEM dynamic",
@@ -70,6 +74,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P1",
         steps: P1_STEPS,
+        combined: true,
     },
     ModelSpec {
         series: "FEM static P2",
@@ -78,6 +83,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: false,
         element: "P2",
         steps: P2_STEPS,
+        combined: false,
     },
     ModelSpec {
         series: "FEM dynamic P2",
@@ -86,6 +92,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P2",
         steps: P2_STEPS,
+        combined: true,
     },
     ModelSpec {
         series: "mass-spring explicit",
@@ -94,6 +101,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P1",
         steps: P1_STEPS,
+        combined: false,
     },
     ModelSpec {
         series: "mass-spring implicit",
@@ -102,6 +110,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P1",
         steps: P1_STEPS,
+        combined: true,
     },
 ];
 
@@ -300,6 +309,7 @@ pub(super) fn rows(
                     config: String,
                     run: &runner::Outcome,
                     is_default: bool,
+                    tuning: Option<Tuning>,
                     mut extra: Vec<(&'static str, String)>| {
         let (rms, max) = errors(&run.u, reference);
         let mut ex = vec![
@@ -321,6 +331,7 @@ pub(super) fn rows(
             is_default,
             group: String::new(),
             extra: ex,
+            tuning,
         });
     };
     for spec in models {
@@ -357,7 +368,17 @@ pub(super) fn rows(
                     runner::note(&run.notes, "unconverged_solves"),
                 ),
             ];
-            push(spec.series, format!("step {step}"), &run, is_default, extra);
+            let tuning = spec
+                .combined
+                .then(|| Tuning::new(spec.plugin, spec.element, step));
+            push(
+                spec.series,
+                format!("step {step}"),
+                &run,
+                is_default,
+                tuning,
+                extra,
+            );
         }
     }
     for &d in downsamples(problem.quick) {
@@ -375,6 +396,7 @@ pub(super) fn rows(
             format!("downsample {d}"),
             &run,
             d == 1,
+            None,
             extra,
         );
     }
