@@ -25,7 +25,6 @@ use super::runner::{self, Plugins, Scene};
 use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
-use voxflex_mesh::mesh_model::params::ProxySpec;
 
 /// The cut planes' offsets from the beam's middle, mm: fractions that put
 /// them on no voxel centre, element layer or proxy node plane, one either
@@ -115,17 +114,20 @@ fn cut_error(points: &[[f32; 3]], u: &[DVec3], c: f64, d: DVec3) -> CutError {
     }
 }
 
-/// The proxy step the mesh models use when the params name none.
-fn default_step() -> Option<usize> {
-    match ProxySpec::default() {
-        ProxySpec::Uniform { step } => Some(step),
-        _ => None,
-    }
+/// The proxy a run built, as the plugin reports it (nodes, tetrahedra):
+/// a row is the plugin's default when its proxy is the one the plugin
+/// builds with no `proxy` key (each plugin has its own default spacing).
+fn proxy_of(run: &runner::Outcome) -> (String, String) {
+    (
+        runner::note(&run.notes, "proxy_nodes"),
+        runner::note(&run.notes, "proxy_tetrahedra"),
+    )
 }
 
 /// The cut front.
 pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
-    let steps: &[usize] = if quick { &[4, 2] } else { &[6, 4, 3, 2] };
+    // The quick steps hold both mesh plugins' defaults (3 and 4).
+    let steps: &[usize] = if quick { &[4, 3, 2] } else { &[6, 4, 3, 2] };
     let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
     let beam = Beam::new(quick);
     let settle = beam.settle(quick, 1500);
@@ -185,8 +187,11 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                 tuning,
             });
         };
-        let default_step = default_step();
         for spec in MESH_MODELS {
+            let default_proxy = proxy_of(&runner::run(
+                plugins,
+                &scene(spec.plugin, MATERIAL_MESH.into()),
+            )?);
             for &step in steps {
                 let params = format!(
                     "proxy = {{ kind = \"uniform\", step = {step} }}\n{}",
@@ -209,7 +214,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     spec.series,
                     format!("step {step}"),
                     &run,
-                    default_step == Some(step),
+                    proxy_of(&run) == default_proxy,
                     // The plugin's default element (no `element` key).
                     Some(Tuning::new(spec.plugin, fem::DEFAULT_ELEMENT, step)),
                     extra,
