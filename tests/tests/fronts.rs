@@ -323,6 +323,55 @@ fn quick_fronts_are_written_finite_and_converge() {
         );
     }
     render_converges_and_filters_help(&out);
+    combined_fronts_are_ratios_over_the_models_fronts(&out, &md);
+}
+
+/// The combined fronts: one per mesh model, over every front it appears
+/// in; each row's time and error are geometric means of ratios to each
+/// front's best (so ≥ 1), with a ratio pair from every front combined;
+/// the configurations some front lacks are listed as left out.
+fn combined_fronts_are_ratios_over_the_models_fronts(out: &std::path::Path, md: &str) {
+    for (key, fronts) in [
+        (
+            "combined_fem",
+            &[
+                "fem_cantilever",
+                "fem_elastica",
+                "grab",
+                "two_material",
+                "cut",
+            ][..],
+        ),
+        ("combined_mass_spring", &["grab", "two_material", "cut"][..]),
+    ] {
+        assert!(md.contains(&format!("(`{key}`)")), "front.md lacks {key}");
+        let section = &md[md.find(&format!("(`{key}`)")).unwrap()..];
+        assert!(
+            section.contains(&format!("combined over {}", fronts.join(", "))),
+            "{key}: {}",
+            &section[..section.len().min(600)]
+        );
+        let svg = std::fs::read_to_string(out.join(format!("{key}.svg"))).expect("svg");
+        assert!(svg.contains("time / front"), "{key}.svg");
+        let rows = rows(out, key);
+        assert!(!rows.is_empty(), "{key}: no configuration in every front");
+        for r in &rows {
+            let (e, t) = (num(r, "error"), num(r, "time_ms"));
+            assert!(e >= 1.0 - 1e-9 && t >= 1.0 - 1e-9, "{key}: {r:?}");
+            let by = &r["time_error_by_front"];
+            for f in fronts {
+                assert!(
+                    by.contains(&format!("{f} ×")),
+                    "{key}: {f} missing in {r:?}"
+                );
+            }
+        }
+    }
+    // FEM P2 is not in the cut front: left out, and said so.
+    assert!(
+        md.contains("P2 step 8 (not in") || md.contains("P2 step 4 (not in"),
+        "front.md does not list the P2 configurations left out"
+    );
 }
 
 /// The render front: every error finite; for each option set the error

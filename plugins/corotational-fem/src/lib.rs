@@ -24,7 +24,7 @@
 //! [model]
 //! plugin = "corotational-fem"
 //! [model.params.corotational-fem]
-//! proxy = { kind = "uniform", step = 4 }   # the P1 default; or { kind = "octree", max_cell = 8 }, { kind = "file", path = "m.msh" }
+//! proxy = { kind = "uniform", step = 3 }   # the P1 default; or { kind = "octree", max_cell = 8 }, { kind = "file", path = "m.msh" }
 //! materials = [
 //!   { name = "soft tissue", range = [-50, 300], youngs_modulus = 3000, poisson_ratio = 0.45 },
 //!   { name = "bone", range = [300, 4000], youngs_modulus = 1e7, poisson_ratio = 0.3, density = 1900 },

@@ -43,8 +43,8 @@ use voxflex_mesh::mesh_model::amg::Amg;
 use voxflex_mesh::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_mesh::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_mesh::mesh_model::{
-    BlockMatrix, Boundary, DEFAULT_NODE_SPACING, EdgeLayer, ElasticMaterial, MeshSolver, NodeState,
-    ProxySpec, SolveReport, lumped_masses,
+    BlockMatrix, Boundary, EdgeLayer, ElasticMaterial, MeshSolver, NodeState, ProxySpec,
+    SolveReport, lumped_masses,
 };
 
 /// Which solve runs each frame.
@@ -601,15 +601,21 @@ impl MeshSolver for CorotationalFem {
         "corotational linear FEM on a tetrahedral proxy (static or implicit backward Euler, PCG)";
     type Params = FemParams;
 
-    /// Uniform cells of [`DEFAULT_NODE_SPACING`] voxels with P1; twice
-    /// that with P2, whose mid-edge nodes keep the nodes as far apart.
+    /// 3 voxels: the knee of the combined front over the cantilever,
+    /// elastica, grab, two-material and cut fronts (docs/BENCHMARKS.md,
+    /// "Combined fronts").
+    const DEFAULT_NODE_SPACING: usize = 3;
+
+    /// Uniform cells of [`MeshSolver::DEFAULT_NODE_SPACING`] voxels with
+    /// P1; twice that with P2, whose mid-edge nodes keep the nodes as far
+    /// apart.
     fn default_proxy(params: &FemParams) -> ProxySpec {
         let cells_per_spacing = match params.element {
             ElementKind::P1 => 1,
             ElementKind::P2 => 2,
         };
         ProxySpec::Uniform {
-            step: cells_per_spacing * DEFAULT_NODE_SPACING,
+            step: cells_per_spacing * Self::DEFAULT_NODE_SPACING,
         }
     }
 

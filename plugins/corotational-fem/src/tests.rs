@@ -604,13 +604,14 @@ fn one_voxel_objects_and_slabs_survive_at_every_offset() {
         .unwrap_or_else(|e| panic!("{e}"));
 }
 
-/// With no `proxy` key the proxy's nodes lie `DEFAULT_NODE_SPACING` voxels
-/// apart whatever the element: P1 on uniform cells of that many voxels,
+/// With no `proxy` key the proxy's nodes lie the solver's
+/// `MeshSolver::DEFAULT_NODE_SPACING` voxels apart whatever the element: P1 on uniform cells of that many voxels,
 /// P2 (a node mid-edge) on cells twice that size.
 #[test]
 fn the_default_proxy_keeps_the_node_spacing_of_each_element() {
     use voxflex_core::deformation::ExecutionBackend;
-    use voxflex_mesh::mesh_model::DEFAULT_NODE_SPACING;
+    use voxflex_mesh::mesh_model::MeshSolver;
+    const DEFAULT_NODE_SPACING: usize = <CorotationalFem as MeshSolver>::DEFAULT_NODE_SPACING;
     let volume = voxflex_phantom::phantom("cube", [33, 33, 33]).unwrap();
     let tetrahedra = |params: &str| {
         let mut m = Fem::from_toml(&format!(
@@ -629,7 +630,7 @@ fn the_default_proxy_keeps_the_node_spacing_of_each_element() {
         ));
         let other = tetrahedra(&format!(
             "{}element = \"{element}\"",
-            step(cells_per_spacing * DEFAULT_NODE_SPACING / 2)
+            step(cells_per_spacing * (DEFAULT_NODE_SPACING - 1).max(1))
         ));
         assert_eq!(by_default, explicit, "{element}");
         assert_ne!(

@@ -488,6 +488,10 @@ impl MeshSolver for MassSpring {
     const NAME: &'static str = "mass-spring";
     const DESCRIPTION: &'static str = "mass-spring model on a tetrahedral proxy's edges (implicit backward Euler, or explicit with stable sub-steps)";
     type Params = SpringParams;
+    /// 4 voxels: the knee of the combined front over the grab,
+    /// two-material and cut fronts (docs/BENCHMARKS.md, "Combined
+    /// fronts").
+    const DEFAULT_NODE_SPACING: usize = 4;
 
     fn new(
         mesh: &TetMesh,

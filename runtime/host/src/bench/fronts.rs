@@ -29,6 +29,10 @@
 //! - `render`: the `raycast` plugin's image error against a converged
 //!   reference, per ray step and filter option (sampling, gradient, jitter).
 //!
+//! Per mesh model, a combined front ([`combined`]) over every front it
+//! appears in: per configuration, its error and time ratios to each
+//! front's best, geometric mean across fronts, and that front's knee.
+//!
 //! The knee ([`knee`]): among the Pareto-optimal points, the one farthest
 //! from the chord between the fastest and the most accurate, in log–log
 //! coordinates, per problem where a front holds several ([`Point::group`]:
@@ -36,6 +40,7 @@
 //! configuration is the knee, Pareto-optimal, or dominated.
 
 mod beam;
+mod combined;
 mod cut;
 mod fem;
 mod grab;
@@ -68,6 +73,35 @@ pub(crate) struct Point {
     pub group: String,
     /// Further CSV columns (same keys for every point of a front).
     pub extra: Vec<(&'static str, String)>,
+    /// Its place in its model's combined front ([`combined`]); `None` for
+    /// the rows that do not enter one.
+    pub tuning: Option<Tuning>,
+}
+
+/// A row's place in its model's combined front ([`combined`]): set on the
+/// rows that run a mesh plugin with its defaults but for the knobs the
+/// combined front compares (element and proxy step) — the default CG
+/// tolerance, the default dynamic solver or integrator where a front
+/// measures several (the FEM fronts that measure the static solve alone
+/// tag it: static and dynamic reach the same rest).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Tuning {
+    /// The plugin (`corotational-fem`, `mass-spring`).
+    pub model: &'static str,
+    /// The configuration, the same label in every front (`P1 step 4`).
+    pub config: String,
+}
+
+impl Tuning {
+    /// The tag of `model` at element `element` (a [`fem::ELEMENTS`] name;
+    /// `P1` for the springs, which lie on the proxy's edges) and proxy
+    /// step `step` (voxels).
+    pub(crate) fn new(model: &'static str, element: &str, step: usize) -> Self {
+        Self {
+            model,
+            config: format!("{element} step {step}"),
+        }
+    }
 }
 
 impl Point {
@@ -155,7 +189,14 @@ pub(super) fn run(args: &BenchOptions) -> Result<String, BenchError> {
         }
         fronts.append(&mut f);
     }
-    let md = markdown(&fronts, args.quick);
+    let mut md = markdown(&fronts, args.quick);
+    for c in combined::all(&fronts)? {
+        write_csv_svg(out, &c.front, combined::TIME_LABEL)?;
+        md.push_str(&c.markdown());
+        for line in c.summary().lines() {
+            let _ = writeln!(report, "{line}");
+        }
+    }
     write(&out.join("front.md"), &md)?;
     let _ = writeln!(report, "summary → {}/front.md", out.display());
     Ok(report)
@@ -181,8 +222,14 @@ fn write(path: &Path, text: &str) -> Result<(), BenchError> {
 }
 
 fn write_front(out: &Path, front: &Front) -> Result<(), BenchError> {
+    write_csv_svg(out, front, "run time, ms")
+}
+
+/// `<key>.csv` and `<key>.svg` (time axis labelled `time_label`).
+fn write_csv_svg(out: &Path, front: &Front, time_label: &str) -> Result<(), BenchError> {
     write(&out.join(format!("{}.csv", front.key)), &csv(front))?;
-    let svg = plot::svg(front).map_err(|e| err(format!("plotting {}: {e}", front.key)))?;
+    let svg =
+        plot::svg(front, time_label).map_err(|e| err(format!("plotting {}: {e}", front.key)))?;
     write(&out.join(format!("{}.svg", front.key)), &svg)
 }
 
@@ -245,13 +292,14 @@ pub(crate) fn pareto(points: &[Point]) -> Vec<usize> {
 /// logarithm).
 pub(crate) const ERROR_FLOOR: f64 = 1e-12;
 
-/// The knee of the Pareto front: the Pareto point farthest below the chord
-/// from the fastest to the most accurate one, in log10(time), log10(error)
-/// normalised to the front's span. `None` with fewer than three points.
-pub(crate) fn knee(points: &[Point]) -> Option<usize> {
+/// The Pareto points of `points` (fastest first), each with its distance
+/// below the chord from the fastest to the most accurate one, in
+/// log10(time), log10(error) normalised to the front's span (positive:
+/// towards fast and accurate); 0 for each with fewer than three.
+pub(crate) fn below_chord(points: &[Point]) -> Vec<(usize, f64)> {
     let front = pareto(points);
     if front.len() < 3 {
-        return front.first().copied();
+        return front.into_iter().map(|i| (i, 0.0)).collect();
     }
     let xy = |i: usize| {
         (
@@ -264,14 +312,28 @@ pub(crate) fn knee(points: &[Point]) -> Option<usize> {
     let n = |p: (f64, f64)| ((p.0 - a.0) / sx, (p.1 - a.1) / sy);
     let (bx, by) = n(b);
     let len = (bx * bx + by * by).sqrt().max(1e-12);
-    front.iter().copied().max_by(|&i, &j| {
-        let d = |k: usize| {
+    front
+        .into_iter()
+        .map(|k| {
             let (x, y) = n(xy(k));
-            // Distance below the chord (towards fast and accurate).
-            (by * x - bx * y) / len
-        };
-        d(i).total_cmp(&d(j))
-    })
+            (k, (by * x - bx * y) / len)
+        })
+        .collect()
+}
+
+/// The knee of the Pareto front: the Pareto point farthest below the chord
+/// from the fastest to the most accurate one ([`below_chord`]; the last
+/// of equals, so a front with no point below its chord has its most
+/// accurate point as knee); the fastest with fewer than three points,
+/// `None` with none.
+pub(crate) fn knee(points: &[Point]) -> Option<usize> {
+    let d = below_chord(points);
+    if d.len() < 3 {
+        return d.first().map(|&(i, _)| i);
+    }
+    d.into_iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
 }
 
 /// The groups of a front, in order of first appearance, each with the
@@ -415,6 +477,7 @@ mod tests {
             is_default: false,
             group: String::new(),
             extra: vec![],
+            tuning: None,
         }
     }
 

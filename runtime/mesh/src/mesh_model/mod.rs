@@ -40,7 +40,7 @@ pub use boundary::Boundary;
 pub use edge_layer::EdgeLayer;
 pub use material::{ElasticMaterial, lumped_masses};
 pub use model::MeshModel;
-pub use params::{DEFAULT_NODE_SPACING, MaterialSpec, MeshModelParams, ProxySpec};
+pub use params::{MaterialSpec, MeshModelParams, ProxySpec};
 pub use pcg::{CgOutcome, CgSettings};
 
 use crate::deformation::ModelNotes;
@@ -152,14 +152,21 @@ pub trait MeshSolver: Send + Sized + 'static {
         params: Self::Params,
     ) -> Result<Self, ModelError>;
 
+    /// The default spacing between the solver's nodes, voxels: each
+    /// solver's own, at the knee of its combined run-time/error front
+    /// (`voxflex bench --fronts`, docs/BENCHMARKS.md).
+    const DEFAULT_NODE_SPACING: usize;
+
     /// The proxy of a scene that names none (no `proxy` key), given the
-    /// solver's keys; by default [`ProxySpec::default`], uniform cells of
-    /// [`params::DEFAULT_NODE_SPACING`] voxels. A solver whose elements
-    /// add nodes inside a cell (quadratic elements) returns larger cells
-    /// with the same node spacing.
+    /// solver's keys; by default uniform cells of
+    /// [`MeshSolver::DEFAULT_NODE_SPACING`] voxels. A solver whose
+    /// elements add nodes inside a cell (quadratic elements) returns
+    /// larger cells with the same node spacing.
     fn default_proxy(params: &Self::Params) -> ProxySpec {
         let _ = params;
-        ProxySpec::default()
+        ProxySpec::Uniform {
+            step: Self::DEFAULT_NODE_SPACING,
+        }
     }
 
     /// True when [`MeshSolver::use_gpu`] can move the solver onto a GPU.

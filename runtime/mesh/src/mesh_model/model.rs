@@ -197,7 +197,7 @@ impl<S: MeshSolver> MeshModel<S> {
     ) -> Result<Self, ModelError> {
         let mut m = Self::new(
             MeshModelParams {
-                proxy: Some(ProxySpec::default()),
+                proxy: Some(S::default_proxy(&solver_params)),
                 materials: Vec::new(),
                 gravity: gravity.to_array(),
                 vtu: None,
@@ -318,7 +318,12 @@ impl<S: MeshSolver> MeshModel<S> {
         let materials: Vec<ElasticMaterial> =
             specs.iter().map(ElasticMaterial::from_spec).collect();
         let mesh_error = |e: crate::error::MeshError| ModelError(format!("{name}: {e}"));
-        let spec = self.params.proxy.clone().unwrap_or_default();
+        let spec = self
+            .params
+            .proxy
+            .clone()
+            .or_else(|| self.solver_params.as_ref().map(S::default_proxy))
+            .ok_or_else(|| ModelError(format!("{name}: no proxy and no solver keys")))?;
         match &spec {
             ProxySpec::File { path } => {
                 let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");

@@ -39,21 +39,6 @@ pub enum ProxySpec {
     },
 }
 
-/// The default cell size of a uniform proxy, voxels: also the default
-/// spacing between a mesh model's nodes (a solver with nodes inside its
-/// cells, such as quadratic elements, takes larger cells for the same
-/// spacing: [`crate::mesh_model::MeshSolver::default_proxy`]).
-pub const DEFAULT_NODE_SPACING: usize = 4;
-
-impl Default for ProxySpec {
-    /// Uniform cells of [`DEFAULT_NODE_SPACING`] voxels.
-    fn default() -> Self {
-        ProxySpec::Uniform {
-            step: DEFAULT_NODE_SPACING,
-        }
-    }
-}
-
 /// One material of the material transfer function.
 #[derive(Clone, Debug, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -95,7 +80,8 @@ fn default_density() -> f64 {
 pub struct MeshModelParams {
     /// The proxy; `None` (no `proxy` key) takes the solver's default
     /// ([`crate::mesh_model::MeshSolver::default_proxy`]: uniform cells
-    /// with nodes [`DEFAULT_NODE_SPACING`] voxels apart).
+    /// with nodes [`crate::mesh_model::MeshSolver::DEFAULT_NODE_SPACING`]
+    /// voxels apart).
     #[serde(default)]
     pub proxy: Option<ProxySpec>,
     /// The material transfer function: intensity ranges (or mesh-file

@@ -20,11 +20,11 @@
 //! more than 1e-3 mm over 10 frames (capped); its time is the whole run.
 
 use super::beam::{Beam, GRAB_FRAMES, MATERIAL_CHAINMAIL, MATERIAL_MESH};
+use super::fem;
 use super::runner::{self, Plugins, Scene};
-use super::{Front, Point};
+use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
-use voxflex_mesh::mesh_model::params::ProxySpec;
 
 /// The cut planes' offsets from the beam's middle, mm: fractions that put
 /// them on no voxel centre, element layer or proxy node plane, one either
@@ -114,17 +114,20 @@ fn cut_error(points: &[[f32; 3]], u: &[DVec3], c: f64, d: DVec3) -> CutError {
     }
 }
 
-/// The proxy step the mesh models use when the params name none.
-fn default_step() -> Option<usize> {
-    match ProxySpec::default() {
-        ProxySpec::Uniform { step } => Some(step),
-        _ => None,
-    }
+/// The proxy a run built, as the plugin reports it (nodes, tetrahedra):
+/// a row is the plugin's default when its proxy is the one the plugin
+/// builds with no `proxy` key (each plugin has its own default spacing).
+fn proxy_of(run: &runner::Outcome) -> (String, String) {
+    (
+        runner::note(&run.notes, "proxy_nodes"),
+        runner::note(&run.notes, "proxy_tetrahedra"),
+    )
 }
 
 /// The cut front.
 pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
-    let steps: &[usize] = if quick { &[4, 2] } else { &[6, 4, 3, 2] };
+    // The quick steps hold both mesh plugins' defaults (3 and 4).
+    let steps: &[usize] = if quick { &[4, 3, 2] } else { &[6, 4, 3, 2] };
     let downsamples: &[usize] = if quick { &[2, 1] } else { &[4, 3, 2, 1] };
     let beam = Beam::new(quick);
     let settle = beam.settle(quick, 1500);
@@ -160,6 +163,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                         config: String,
                         run: &runner::Outcome,
                         is_default: bool,
+                        tuning: Option<Tuning>,
                         mut extra: Vec<(&'static str, String)>| {
             let e = cut_error(points, &run.u, c, d);
             let mut ex = vec![
@@ -180,10 +184,14 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                 is_default,
                 group: group.clone(),
                 extra: ex,
+                tuning,
             });
         };
-        let default_step = default_step();
         for spec in MESH_MODELS {
+            let default_proxy = proxy_of(&runner::run(
+                plugins,
+                &scene(spec.plugin, MATERIAL_MESH.into()),
+            )?);
             for &step in steps {
                 let params = format!(
                     "proxy = {{ kind = \"uniform\", step = {step} }}\n{}",
@@ -206,7 +214,9 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     spec.series,
                     format!("step {step}"),
                     &run,
-                    default_step == Some(step),
+                    proxy_of(&run) == default_proxy,
+                    // The plugin's default element (no `element` key).
+                    Some(Tuning::new(spec.plugin, fem::DEFAULT_ELEMENT, step)),
                     extra,
                 );
             }
@@ -250,6 +260,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                 format!("downsample {ds}"),
                 run,
                 ds == default_downsample,
+                None,
                 extra,
             );
         }

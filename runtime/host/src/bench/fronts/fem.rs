@@ -16,7 +16,7 @@
 //! tolerance (or load), so another element order is one more entry there.
 
 use super::runner::{self, Plugins, Scene};
-use super::{Front, Point};
+use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
 
@@ -63,20 +63,26 @@ impl Family {
     }
 }
 
+/// The plugin both fronts run.
+const PLUGIN: &str = "corotational-fem";
 /// Young's modulus (Pa) and Poisson ratio of both beams.
 const E: f64 = 1000.0;
 const NU: f64 = 0.3;
 /// The default CG tolerance of `corotational-fem`.
 const DEFAULT_TOL: f64 = 1e-6;
-/// The default element family of `corotational-fem` (an [`ELEMENTS`] name)
-/// and its default proxy step with it, voxels.
+/// The default element family of `corotational-fem` (an [`ELEMENTS`] name).
+/// Its default proxy is the plugin's own: the rows ringed are those whose
+/// proxy has as many tetrahedra as the one the plugin builds with no
+/// `proxy` key ([`default_tetrahedra`]).
 pub(super) const DEFAULT_ELEMENT: &str = "P1";
-pub(super) const DEFAULT_STEP: usize = 4;
 
-fn params(element: &str, step: usize, tol: f64, tight: bool) -> String {
-    let mut p = format!(
-        "proxy = {{ kind = \"uniform\", step = {step} }}\n\
-         materials = [{{ range = [50, 200], youngs_modulus = {E}, poisson_ratio = {NU} }}]\n\
+/// The params of a static solve; no `proxy` key without `step`.
+fn params(element: &str, step: Option<usize>, tol: f64, tight: bool) -> String {
+    let mut p = step.map_or(String::new(), |step| {
+        format!("proxy = {{ kind = \"uniform\", step = {step} }}\n")
+    });
+    p += &format!(
+        "materials = [{{ range = [50, 200], youngs_modulus = {E}, poisson_ratio = {NU} }}]\n\
          solver = \"static\"\ncg_tolerance = {tol:e}\n"
     );
     if tight {
@@ -140,7 +146,7 @@ fn solve(
     let run = runner::run(
         plugins,
         &Scene {
-            plugin: "corotational-fem",
+            plugin: PLUGIN,
             params,
             volume,
             points: &tip,
@@ -178,6 +184,35 @@ fn fem_notes(run: &runner::Outcome) -> Vec<(&'static str, String)> {
     ]
 }
 
+/// The tetrahedra of the proxy `corotational-fem` builds on `volume` with
+/// no `proxy` key (its default element and node spacing), as the plugin
+/// reports them.
+fn default_tetrahedra(
+    plugins: &Plugins,
+    volume: &voxflex_core::volume::Volume,
+    (l, w, h): (f64, f64, f64),
+) -> Result<String, BenchError> {
+    let (_, _, run) = solve(
+        plugins,
+        volume,
+        params("", None, DEFAULT_TOL, false),
+        l,
+        w,
+        h,
+        1e-3,
+    )?;
+    Ok(runner::note(&run.notes, "proxy_tetrahedra"))
+}
+
+/// The step (voxels) of the ringed rows of `points` ("?" when none is).
+fn default_step(points: &[Point]) -> String {
+    points
+        .iter()
+        .find(|p| p.is_default)
+        .and_then(|p| p.extra.iter().find(|(k, _)| *k == "step"))
+        .map_or("?".into(), |(_, v)| v.clone())
+}
+
 /// The cantilever front.
 pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
     let (l, w, h): (f64, f64, f64) = (10.0, 1.0, 1.0);
@@ -206,7 +241,7 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
     let (_, finest, _) = solve(
         plugins,
         &volume,
-        params(last.params, finest_step, 1e-10, true),
+        params(last.params, Some(finest_step), 1e-10, true),
         l,
         w,
         h,
@@ -214,6 +249,7 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
     )?;
     let finest = -finest.z / p;
     let last = last.name;
+    let default_tets = default_tetrahedra(plugins, &volume, (l, w, h))?;
     let mut points = vec![];
     for family in ELEMENTS {
         let (name, extra) = (family.name, family.params);
@@ -222,7 +258,7 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
                 let (_, u, run) = solve(
                     plugins,
                     &volume,
-                    params(extra, step, tol, false),
+                    params(extra, Some(step), tol, false),
                     l,
                     w,
                     h,
@@ -247,13 +283,15 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
                     error: (got - theory).abs() / theory,
                     is_default: name == DEFAULT_ELEMENT
                         && tol == DEFAULT_TOL
-                        && step == DEFAULT_STEP,
+                        && runner::note(&run.notes, "proxy_tetrahedra") == default_tets,
                     group: String::new(),
                     extra: ex,
+                    tuning: (tol == DEFAULT_TOL).then(|| Tuning::new(PLUGIN, name, step)),
                 });
             }
         }
     }
+    let default_step = default_step(&points);
     Ok(Front {
         key: "fem_cantilever",
         title: "corotational FEM: cantilever tip vs Timoshenko".into(),
@@ -267,9 +305,11 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
              Timoshenko beam theory {theory:.4} mm/µN (bending + shear, Cowper's κ); \
              `error_vs_finest` against the {last} solve at step {finest_step} with CG 1e-10 and static \
              tolerance 1e-8, block Jacobi (`u/P` = {finest:.6}). The default ({DEFAULT_ELEMENT} at proxy step \
-             {DEFAULT_STEP}, CG {DEFAULT_TOL:e}) is relative to the voxel size: here {} cells per \
-             mm.",
-            n as f64 / DEFAULT_STEP as f64
+             {default_step}, CG {DEFAULT_TOL:e}, the plugin's with no `proxy` key) is relative to \
+             the voxel size: here {} cells per mm.",
+            default_step
+                .parse::<f64>()
+                .map_or("?".into(), |s| format!("{}", n as f64 / s))
         ),
         points,
     })
@@ -279,10 +319,13 @@ pub(super) fn cantilever(plugins: &Plugins, quick: bool) -> Result<Front, BenchE
 pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchError> {
     let (l, w, h): (f64, f64, f64) = (8.0, 1.0, 0.5);
     let n: usize = if quick { 4 } else { 8 };
-    let steps: &[usize] = if quick { &[2, 1] } else { &[8, 4, 2, 1] };
+    // The grab fronts' P1 steps (6, 4, 3, 2) among them, so that the
+    // combined front ([`super::combined`]) compares those.
+    let steps: &[usize] = if quick { &[2, 1] } else { &[8, 6, 4, 3, 2, 1] };
     let dims = [8 * n + 1, n + 1, n / 2 + 1];
     let volume = runner::block(dims, 1.0 / n as f64, 100);
     let ei = E * w * h.powi(3) / 12.0;
+    let default_tets = default_tetrahedra(plugins, &volume, (l, w, h))?;
     let mut points = vec![];
     for family in ELEMENTS {
         let (name, extra) = (family.name, family.params);
@@ -293,7 +336,7 @@ pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchErr
                 let (rest, u, run) = solve(
                     plugins,
                     &volume,
-                    params(extra, step, DEFAULT_TOL, false),
+                    params(extra, Some(step), DEFAULT_TOL, false),
                     l,
                     w,
                     h,
@@ -317,9 +360,11 @@ pub(super) fn elastica(plugins: &Plugins, quick: bool) -> Result<Front, BenchErr
                     config: format!("step {step}"),
                     time_ms: run.time_ms,
                     error,
-                    is_default: name == DEFAULT_ELEMENT && step == DEFAULT_STEP,
+                    is_default: name == DEFAULT_ELEMENT
+                        && runner::note(&run.notes, "proxy_tetrahedra") == default_tets,
                     group: format!("PL²/EI = {alpha}"),
                     extra,
+                    tuning: Some(Tuning::new(PLUGIN, name, step)),
                 });
             }
         }

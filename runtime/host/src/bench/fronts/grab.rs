@@ -17,7 +17,7 @@
 use super::beam::{Beam, GRAB_FRAMES, MATERIAL_CHAINMAIL, MATERIAL_MESH};
 use super::fem;
 use super::runner::{self, Plugins, Scene, Settle};
-use super::{Front, Point};
+use super::{Front, Point, Tuning};
 use crate::bench::BenchError;
 use voxflex_core::glam::DVec3;
 use voxflex_core::volume::Volume;
@@ -37,10 +37,15 @@ pub(super) struct ModelSpec {
     /// Proxy steps measured (voxels), full run and `--quick`, within the
     /// family's cap on tetrahedra ([`fem::Family::steps`]).
     steps: [&'static [usize]; 2],
+    /// Its rows enter the plugin's combined front ([`super::Tuning`]): it
+    /// runs the plugin's default solver or integrator.
+    combined: bool,
 }
 
-/// P1 proxy steps (voxels): full run, `--quick`.
-const P1_STEPS: [&[usize]; 2] = [&[6, 4, 3, 2], &[4, 2]];
+/// P1 proxy steps (voxels): full run, `--quick` (both with the mesh
+/// plugins' default spacings, 3 for the FEM and 4 for the springs, so
+/// the quick fronts ring them too).
+const P1_STEPS: [&[usize]; 2] = [&[6, 4, 3, 2], &[4, 3, 2]];
 /// P2 proxy steps: its mid-edge nodes halve the node spacing, so a P2
 /// step `s` has the nodes of a P1 step `s/2` (`--quick` leaves out step 2,
 /// whose static solve would take most of the quick front in a debug build).
@@ -62,6 +67,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: false,
         element: "P1",
         steps: P1_STEPS,
+        combined: false,
     },
     ModelSpec {
         series: "FEM dynamic",
@@ -70,6 +76,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P1",
         steps: P1_STEPS,
+        combined: true,
     },
     ModelSpec {
         series: "FEM static P2",
@@ -78,6 +85,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: false,
         element: "P2",
         steps: P2_STEPS,
+        combined: false,
     },
     ModelSpec {
         series: "FEM dynamic P2",
@@ -86,6 +94,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P2",
         steps: P2_STEPS,
+        combined: true,
     },
     ModelSpec {
         series: "mass-spring explicit",
@@ -94,6 +103,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P1",
         steps: P1_STEPS,
+        combined: false,
     },
     ModelSpec {
         series: "mass-spring implicit",
@@ -102,6 +112,7 @@ pub(super) const MESH_MODELS: &[ModelSpec] = &[
         dynamic: true,
         element: "P1",
         steps: P1_STEPS,
+        combined: true,
     },
 ];
 
@@ -300,6 +311,7 @@ pub(super) fn rows(
                     config: String,
                     run: &runner::Outcome,
                     is_default: bool,
+                    tuning: Option<Tuning>,
                     mut extra: Vec<(&'static str, String)>| {
         let (rms, max) = errors(&run.u, reference);
         let mut ex = vec![
@@ -321,6 +333,7 @@ pub(super) fn rows(
             is_default,
             group: String::new(),
             extra: ex,
+            tuning,
         });
     };
     for spec in models {
@@ -357,7 +370,17 @@ pub(super) fn rows(
                     runner::note(&run.notes, "unconverged_solves"),
                 ),
             ];
-            push(spec.series, format!("step {step}"), &run, is_default, extra);
+            let tuning = spec
+                .combined
+                .then(|| Tuning::new(spec.plugin, spec.element, step));
+            push(
+                spec.series,
+                format!("step {step}"),
+                &run,
+                is_default,
+                tuning,
+                extra,
+            );
         }
     }
     for &d in downsamples(problem.quick) {
@@ -375,6 +398,7 @@ pub(super) fn rows(
             format!("downsample {d}"),
             &run,
             d == 1,
+            None,
             extra,
         );
     }

@@ -1,4 +1,4 @@
-//! The SVG plot of a front: run time (ms) on x, error on y, both on log
+//! The SVG plot of a front: run time (ms, or a ratio) on x, error on y, both on log
 //! scales, one coloured series per model/configuration family (points
 //! joined in order of time), the default configuration ringed in black.
 //! Drawn with `plotters`' SVG backend (text as SVG `<text>`, no fonts).
@@ -30,8 +30,8 @@ fn range(v: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     lo..hi
 }
 
-/// The front as an SVG document.
-pub(super) fn svg(front: &Front) -> Result<String, Box<dyn std::error::Error>> {
+/// The front as an SVG document, its time axis labelled `time_label`.
+pub(super) fn svg(front: &Front, time_label: &str) -> Result<String, Box<dyn std::error::Error>> {
     let mut text = String::new();
     {
         let root = SVGBackend::with_string(&mut text, (760, 480)).into_drawing_area();
@@ -47,7 +47,7 @@ pub(super) fn svg(front: &Front) -> Result<String, Box<dyn std::error::Error>> {
             .build_cartesian_2d(xr.log_scale(), yr.log_scale())?;
         chart
             .configure_mesh()
-            .x_desc("run time, ms")
+            .x_desc(time_label)
             .y_desc(front.error_label.as_str())
             .x_label_formatter(&|v| format!("{v:.0e}"))
             .y_label_formatter(&|v| format!("{v:.0e}"))

@@ -149,6 +149,7 @@ pub(super) fn front(plugins: &Plugins, quick: bool) -> Result<Front, BenchError>
                     ("max_abs", format!("{max:.4}")),
                     ("samples", samples.to_string()),
                 ],
+                tuning: None,
             });
         }
     }

@@ -48,6 +48,7 @@ pub(super) fn front(quick: bool) -> Result<Front, BenchError> {
                         ("max_abs_hu", format!("{:.4}", e.max_abs)),
                         ("voxels_compared", e.compared.to_string()),
                     ],
+                    tuning: None,
                 });
             }
         }

@@ -65,6 +65,7 @@ pub(super) fn front(quick: bool) -> Result<Front, BenchError> {
                     ("label_voxels", ph.count(lab).to_string()),
                     ("steps", o.grown.report.steps.to_string()),
                 ],
+                tuning: None,
             });
         }
     }
