@@ -317,19 +317,14 @@ fn a_saved_view_and_scene_render_the_same_image_with_voxflex_run() {
         assert!(text.contains(key), "{key} in the saved scene:\n{text}");
     }
     let out = dir.path().join("out");
-    let run = std::process::Command::new(voxflex_integration_tests::voxflex_bin())
-        .arg("run")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out)
-        .env("VOXFLEX_PLUGIN_PATH", plugin_dir())
-        .output()
-        .unwrap();
+    let (scene_arg, out_arg) = (scene.to_string_lossy(), out.to_string_lossy());
+    let run =
+        voxflex_integration_tests::voxflex(&["run", &scene_arg, "--out", &out_arg], dir.path());
     assert!(
         run.status.success(),
-        "voxflex run {}: {}\n{text}",
-        scene.display(),
-        String::from_utf8_lossy(&run.stderr)
+        "voxflex run {scene_arg}: {}
+{text}",
+        voxflex_integration_tests::text(&run)
     );
     let theirs = read_png(&out.join("render.png"));
     assert_eq!(theirs.dimensions(), mine.dimensions());

@@ -396,19 +396,14 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     let text = std::fs::read_to_string(&scene).unwrap();
     assert!(text.contains("kind = \"grab\""), "{text}");
     let out = dir.path().join("out");
-    let run = std::process::Command::new(voxflex_integration_tests::voxflex_bin())
-        .arg("run")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out)
-        .env("VOXFLEX_PLUGIN_PATH", plugin_dir())
-        .output()
-        .unwrap();
+    let (scene_arg, out_arg) = (scene.to_string_lossy(), out.to_string_lossy());
+    let run =
+        voxflex_integration_tests::voxflex(&["run", &scene_arg, "--out", &out_arg], dir.path());
     assert!(
         run.status.success(),
-        "voxflex run {}: {}\n{text}",
-        scene.display(),
-        String::from_utf8_lossy(&run.stderr)
+        "voxflex run {scene_arg}: {}
+{text}",
+        voxflex_integration_tests::text(&run)
     );
     let (a, b) = (read(&mine), read(&out.join("deformed.nii.gz")));
     assert_eq!(a.grid.dims, b.grid.dims);

@@ -90,29 +90,16 @@ impl Session {
 
 #[cfg(test)]
 mod tests {
-    use crate::backend::BackendChoice;
-    use crate::session::{RoiId, Seed, Session, SessionDefaults, SessionSource};
+    use crate::session::{RoiId, Seed};
     use voxflex_core::glam::DVec3;
     use voxflex_opacity::auto_lambda::CANDIDATES;
     use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, grow_roi};
 
     #[test]
     fn auto_lambda_grows_the_map_the_scene_rule_grows_and_a_given_lambda_ends_it() {
-        let mut s = Session::from_volume(
-            SessionSource::Phantom {
-                name: "head".into(),
-                dims: [50, 60, 55],
-            },
-            SessionDefaults {
-                backend: BackendChoice::Cpu,
-                ..SessionDefaults::default()
-            },
-        )
-        .unwrap();
-        // In the brain, away from the ventricles.
+        let (mut s, id) = crate::session::tests::head_session_with_brain_roi();
         let seed = Seed::World(DVec3::new(40.0, 0.0, 15.0));
         let params = GrowthParams::default();
-        let id = s.add_roi(seed, params).unwrap();
         let auto = s.roi_auto_lambda(id).unwrap();
         assert!(CANDIDATES.contains(&auto.lambda), "{auto:?}");
         assert!(auto.report.converged && auto.trials.len() > 1, "{auto:?}");

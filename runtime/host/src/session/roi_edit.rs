@@ -87,27 +87,15 @@ impl Session {
 
 #[cfg(test)]
 mod tests {
-    use crate::backend::BackendChoice;
-    use crate::session::{Seed, Session, SessionDefaults, SessionSource};
+    use crate::session::Seed;
     use voxflex_core::glam::DVec3;
     use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, grow_roi};
 
     #[test]
     fn bounds_hold_a_map_in_and_are_the_scene_paths_bounds() {
-        let mut s = Session::from_volume(
-            SessionSource::Phantom {
-                name: "head".into(),
-                dims: [50, 60, 55],
-            },
-            SessionDefaults {
-                backend: BackendChoice::Cpu,
-                ..SessionDefaults::default()
-            },
-        )
-        .unwrap();
+        let (mut s, id) = crate::session::tests::head_session_with_brain_roi();
         let seed = Seed::World(DVec3::new(40.0, 0.0, 15.0));
         let params = GrowthParams::default();
-        let id = s.add_roi(seed, params).unwrap();
         s.roi_run_to_end(id).unwrap();
         let free = s.rois()[0].voxels_above_half;
         let limits = GrowthLimits {

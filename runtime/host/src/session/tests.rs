@@ -12,6 +12,23 @@ fn cpu() -> SessionDefaults {
     }
 }
 
+/// The head phantom at 4 mm on the CPU with one default map seeded in the
+/// brain, away from the ventricles (not grown): the ROI-editing tests'
+/// common start.
+pub(super) fn head_session_with_brain_roi() -> (Session, RoiId) {
+    let mut s = Session::from_volume(
+        SessionSource::Phantom {
+            name: "head".into(),
+            dims: [50, 60, 55],
+        },
+        cpu(),
+    )
+    .unwrap();
+    let seed = Seed::World(DVec3::new(40.0, 0.0, 15.0));
+    let id = s.add_roi(seed, GrowthParams::default()).unwrap();
+    (s, id)
+}
+
 fn cube_session(n: usize) -> Session {
     Session::from_volume(
         SessionSource::Phantom {
