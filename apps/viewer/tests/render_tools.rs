@@ -13,56 +13,23 @@
 //!   the pixels).
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
+mod common;
+
+use common::wait;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
-use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
-use voxflex_runtime::backend::BackendChoice;
+use std::path::Path;
 use voxflex_runtime::session::GrowthParams;
 use voxflex_viewer::app::ViewerApp;
-use voxflex_viewer::open::OpenRequest;
 use voxflex_viewer::protocol::Command;
 use voxflex_viewer::render_options::TfSource;
-use voxflex_viewer::screenshot::Screenshot;
-
-/// How long a test waits for the worker before failing.
-const PATIENCE: Duration = Duration::from_secs(120);
-
-fn plugin_dir() -> PathBuf {
-    voxflex_integration_tests::plugin_dir(&["chainmail", "raycast"])
-}
 
 fn open_phantom() -> Harness<'static, ViewerApp> {
-    let req = OpenRequest {
-        gpu: None,
-        input: None,
-        backend: BackendChoice::Cpu,
-        plugin_dirs: vec![plugin_dir()],
-    };
-    let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
-        .expect("start the viewer");
-    let mut h = Harness::builder()
-        .with_size([1280.0, 860.0])
-        .build_ui_state(|ui, app: &mut ViewerApp| app.show(ui), app);
+    let mut h = common::phantom_viewer(&["chainmail", "raycast"], None);
     wait(&mut h, "the first images", |a| {
         a.ready() && a.render_panel().options().is_some()
     });
     h
-}
-
-/// Steps frames until `done` holds (failing after [`PATIENCE`]).
-fn wait(h: &mut Harness<'static, ViewerApp>, what: &str, done: impl Fn(&ViewerApp) -> bool) {
-    let t = Instant::now();
-    while !done(h.state()) {
-        assert!(
-            t.elapsed() < PATIENCE,
-            "timed out waiting for {what}; viewer messages: {:?}",
-            h.state().messages()
-        );
-        h.step();
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    h.step();
 }
 
 /// The 3D image once every change was applied and a full-quality image

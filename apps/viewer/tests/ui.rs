@@ -23,26 +23,18 @@
 //! - a grab-drag on the 3D view picks the face and moves the volume.
 
 use egui::{Event, Modifiers, PointerButton, Pos2};
+mod common;
+
+use common::wait;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use voxflex_core::glam::DVec3;
-use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::session::Seed;
 use voxflex_viewer::app::ViewerApp;
-use voxflex_viewer::open::OpenRequest;
 use voxflex_viewer::protocol::Command;
 use voxflex_viewer::protocol::SliceFrame;
-use voxflex_viewer::screenshot::Screenshot;
-
-/// How long a test waits for the worker before failing.
-const PATIENCE: Duration = Duration::from_secs(120);
-
-/// `target/<profile>`, where the plugins are built (checked).
-fn plugin_dir() -> PathBuf {
-    voxflex_integration_tests::plugin_dir(&["chainmail"])
-}
 
 fn open_phantom() -> Harness<'static, ViewerApp> {
     // File → Open recent in no file: the tests never touch the user's list.
@@ -51,36 +43,9 @@ fn open_phantom() -> Harness<'static, ViewerApp> {
 
 /// The built-in phantom with File → Open recent kept in `store`.
 fn open_phantom_recent(store: Option<PathBuf>) -> Harness<'static, ViewerApp> {
-    let req = OpenRequest {
-        input: None,
-        backend: BackendChoice::Cpu,
-        plugin_dirs: vec![plugin_dir()],
-        gpu: None,
-    };
-    let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
-        .expect("start the viewer")
-        .with_recent_store(store);
-    let mut h = Harness::builder()
-        .with_size([1280.0, 860.0])
-        .build_ui_state(|ui, app: &mut ViewerApp| app.show(ui), app);
+    let mut h = common::phantom_viewer(&["chainmail"], store);
     wait(&mut h, "the first images", |a| a.ready());
     h
-}
-
-/// Steps frames until `done` holds (failing after [`PATIENCE`], with the
-/// viewer's messages).
-fn wait(h: &mut Harness<'static, ViewerApp>, what: &str, done: impl Fn(&ViewerApp) -> bool) {
-    let t = Instant::now();
-    while !done(h.state()) {
-        assert!(
-            t.elapsed() < PATIENCE,
-            "timed out waiting for {what}; viewer messages: {:?}",
-            h.state().messages()
-        );
-        h.step();
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    h.step();
 }
 
 /// The screen point of world point `p` (mm) on slice view `n`.
