@@ -15,7 +15,7 @@
 use egui::{Event, Modifiers, PointerButton, Pos2};
 mod common;
 
-use common::wait;
+use common::{wait, wait_for_writes};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use std::path::Path;
@@ -251,13 +251,7 @@ fn a_saved_view_and_scene_render_the_same_image_with_voxflex_run() {
     let scene = dir.path().join("saved.toml");
     h.state().send(Command::SaveViewPng(png.clone()));
     h.state().send(Command::SaveScene(scene.clone()));
-    wait(&mut h, "both files", |a| {
-        a.messages()
-            .iter()
-            .filter(|m| m.starts_with("wrote"))
-            .count()
-            == 2
-    });
+    wait_for_writes(&mut h, 2);
     let mine = read_png(&png);
     assert_eq!(
         (mine.width(), mine.height()),

@@ -25,7 +25,7 @@
 use egui::{Event, Modifiers, PointerButton, Pos2};
 mod common;
 
-use common::wait;
+use common::{wait, wait_for_writes};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use std::path::PathBuf;
@@ -351,13 +351,7 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     let mine = dir.path().join("viewer.nii.gz");
     h.state().send(Command::SaveScene(scene.clone()));
     h.state().send(Command::SaveVolume(mine.clone()));
-    wait(&mut h, "both files", |a| {
-        a.messages()
-            .iter()
-            .filter(|m| m.starts_with("wrote"))
-            .count()
-            == 2
-    });
+    wait_for_writes(&mut h, 2);
     let text = std::fs::read_to_string(&scene).unwrap();
     assert!(text.contains("kind = \"grab\""), "{text}");
     let out = dir.path().join("out");

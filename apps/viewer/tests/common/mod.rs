@@ -52,3 +52,15 @@ pub fn wait(h: &mut Harness<'static, ViewerApp>, what: &str, done: impl Fn(&View
     }
     h.step();
 }
+
+/// Waits until the viewer has said "wrote …" `count` times (the worker
+/// finished that many saves).
+pub fn wait_for_writes(h: &mut Harness<'static, ViewerApp>, count: usize) {
+    wait(h, &format!("{count} files written"), |a| {
+        a.messages()
+            .iter()
+            .filter(|m| m.starts_with("wrote"))
+            .count()
+            == count
+    });
+}
