@@ -9,7 +9,9 @@ use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::gpu_context::WgpuService;
 use voxflex_runtime::param_schema::ParamSchema;
 use voxflex_runtime::scene::Scene;
-use voxflex_runtime::session::{RenderParams, Session, SessionDefaults, SessionSource};
+use voxflex_runtime::session::{
+    Interaction, RenderParams, Session, SessionDefaults, SessionSource,
+};
 use voxflex_runtime::visualise::camera_for;
 
 /// The scene opened without an argument: the head phantom (4 mm voxels)
@@ -53,6 +55,30 @@ fn built_in_scene() -> anyhow::Result<Scene> {
         .context("the built-in head phantom scene")
 }
 
+/// The scene's frame-0 `fix` interactions, handed to the model: they are
+/// part of the model's set-up (the skull held still), not of the scripted
+/// motion a `voxflex run` replays, which the viewer's user drives instead.
+/// Returns how many were applied.
+fn apply_scene_constraints(session: &mut Session, scene: &Scene) -> anyhow::Result<usize> {
+    let mut applied = 0;
+    for i in scene.interactions.iter().filter(|i| i.frame == 0) {
+        let kind = i
+            .toml
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|t| t.get("kind").and_then(|k| k.as_str()).map(str::to_owned));
+        if kind.as_deref() == Some("fix") {
+            session
+                .interact(&Interaction::Toml(i.toml.clone()))
+                .with_context(|| {
+                    format!("applying the scene's [[interaction]] {} (fix)", i.index)
+                })?;
+            applied += 1;
+        }
+    }
+    Ok(applied)
+}
+
 /// Opens `req`: a scene with its model, a volume file with no model yet
 /// (the built-in scene's parameters serve its plugin choices), or the
 /// built-in head phantom scene.
@@ -88,7 +114,9 @@ pub fn open(req: &OpenRequest) -> anyhow::Result<OpenedSession> {
                 .settings
                 .plugin_dirs
                 .splice(0..0, req.plugin_dirs.iter().cloned());
-            let session = Session::open_on(&scene, req.gpu.clone())
+            let mut session = Session::open_on(&scene, req.gpu.clone())
+                .with_context(|| format!("opening {title}"))?;
+            apply_scene_constraints(&mut session, &scene)
                 .with_context(|| format!("opening {title}"))?;
             Ok(OpenedSession {
                 session,
@@ -149,4 +177,31 @@ pub fn deformation_schemas(session: &Session) -> Vec<(String, ParamSchema)> {
         .filter(|p| p.loads && p.plugin.deformation.is_some())
         .map(|p| (p.plugin.name, p.plugin.params))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The built-in head scene holds its skull still (a frame-0 `fix` on
+    /// bone) and pulls the scalp (a scripted grab): the viewer applies
+    /// the first, leaves the second to the user.
+    #[test]
+    fn a_scene_opens_with_its_frame_zero_fixes_and_without_its_script() {
+        let req = OpenRequest {
+            input: None,
+            backend: BackendChoice::Cpu,
+            plugin_dirs: vec![voxflex_integration_tests::plugin_dir(&["chainmail"])],
+            gpu: None,
+        };
+        let opened = open(&req).unwrap();
+        let applied = opened.session.interactions_so_far();
+        let kinds: Vec<&str> = applied.iter().map(|a| a.toml.as_str()).collect();
+        assert_eq!(applied.len(), 1, "{kinds:?}");
+        assert!(
+            kinds[0].contains("fix") && kinds[0].contains("bone"),
+            "{kinds:?}"
+        );
+        assert_eq!(applied[0].frame, 0);
+    }
 }
