@@ -283,8 +283,7 @@ fn a_saved_view_and_scene_render_the_same_image_with_voxflex_run() {
         voxflex_integration_tests::voxflex(&["run", &scene_arg, "--out", &out_arg], dir.path());
     assert!(
         run.status.success(),
-        "voxflex run {scene_arg}: {}
-{text}",
+        "voxflex run {scene_arg}: {}\n{text}",
         voxflex_integration_tests::text(&run)
     );
     let theirs = read_png(&out.join("render.png"));

@@ -360,8 +360,7 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
         voxflex_integration_tests::voxflex(&["run", &scene_arg, "--out", &out_arg], dir.path());
     assert!(
         run.status.success(),
-        "voxflex run {scene_arg}: {}
-{text}",
+        "voxflex run {scene_arg}: {}\n{text}",
         voxflex_integration_tests::text(&run)
     );
     let (a, b) = (read(&mine), read(&out.join("deformed.nii.gz")));
