@@ -15,7 +15,7 @@
 use egui::{Event, Modifiers, PointerButton, Pos2};
 mod common;
 
-use common::{wait, wait_for_writes};
+use common::{run_saved_scene, wait, wait_for_writes};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use std::path::Path;
@@ -278,14 +278,7 @@ fn a_saved_view_and_scene_render_the_same_image_with_voxflex_run() {
         assert!(text.contains(key), "{key} in the saved scene:\n{text}");
     }
     let out = dir.path().join("out");
-    let (scene_arg, out_arg) = (scene.to_string_lossy(), out.to_string_lossy());
-    let run =
-        voxflex_integration_tests::voxflex(&["run", &scene_arg, "--out", &out_arg], dir.path());
-    assert!(
-        run.status.success(),
-        "voxflex run {scene_arg}: {}\n{text}",
-        voxflex_integration_tests::text(&run)
-    );
+    run_saved_scene(&scene, &out, dir.path(), &text);
     let theirs = read_png(&out.join("render.png"));
     assert_eq!(theirs.dimensions(), mine.dimensions());
     let close = mine

@@ -25,7 +25,7 @@
 use egui::{Event, Modifiers, PointerButton, Pos2};
 mod common;
 
-use common::{wait, wait_for_writes};
+use common::{run_saved_scene, wait, wait_for_writes};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use std::path::PathBuf;
@@ -355,14 +355,7 @@ fn a_saved_scene_run_by_the_cli_reproduces_the_viewers_volume() {
     let text = std::fs::read_to_string(&scene).unwrap();
     assert!(text.contains("kind = \"grab\""), "{text}");
     let out = dir.path().join("out");
-    let (scene_arg, out_arg) = (scene.to_string_lossy(), out.to_string_lossy());
-    let run =
-        voxflex_integration_tests::voxflex(&["run", &scene_arg, "--out", &out_arg], dir.path());
-    assert!(
-        run.status.success(),
-        "voxflex run {scene_arg}: {}\n{text}",
-        voxflex_integration_tests::text(&run)
-    );
+    run_saved_scene(&scene, &out, dir.path(), &text);
     let (a, b) = (read(&mine), read(&out.join("deformed.nii.gz")));
     assert_eq!(a.grid.dims, b.grid.dims);
     let source = voxflex_runtime::session::Session::open(

@@ -89,6 +89,8 @@ pub struct FluidWeighing<'a> {
     params: FluidWeightParams,
     projected: ProjectedSurface<'a>,
     k: usize,
+    /// The paper's `c`, from the projection (it sets `k`).
+    mean_candidates: f64,
     count: SectionCount,
     scratch: &'a mut Scratch,
 }
@@ -115,11 +117,13 @@ impl<'a> FluidWeighing<'a> {
             std::mem::take(&mut scratch.uvh),
             std::mem::take(&mut scratch.triangles),
         );
-        let k = workers_per_triangle(params.leverage_alpha, projected.mean_candidates());
+        let mean_candidates = projected.mean_candidates();
+        let k = workers_per_triangle(params.leverage_alpha, mean_candidates);
         Ok(Self {
             params: *params,
             projected,
             k,
+            mean_candidates,
             count: SectionCount::default(),
             scratch,
         })
@@ -203,7 +207,7 @@ impl<'a> FluidWeighing<'a> {
             count,
             crossings,
             workers_per_triangle: self.k,
-            mean_candidates: self.projected.mean_candidates(),
+            mean_candidates: self.mean_candidates,
             grid: self.projected.grid,
         };
         (self.scratch.uvh, self.scratch.triangles) = self.projected.into_buffers();

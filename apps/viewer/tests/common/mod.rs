@@ -4,7 +4,7 @@
 #![allow(dead_code)] // each test binary uses its own subset
 
 use egui_kittest::Harness;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_viewer::app::ViewerApp;
@@ -63,4 +63,17 @@ pub fn wait_for_writes(h: &mut Harness<'static, ViewerApp>, count: usize) {
             .count()
             == count
     });
+}
+
+/// Runs `voxflex run scene --out out` (in `cwd`, with the built plugins)
+/// and fails with its output and `context` (the saved scene's text) unless
+/// it succeeds.
+pub fn run_saved_scene(scene: &Path, out: &Path, cwd: &Path, context: &str) {
+    let (scene, out) = (scene.to_string_lossy(), out.to_string_lossy());
+    let run = voxflex_integration_tests::voxflex(&["run", &scene, "--out", &out], cwd);
+    assert!(
+        run.status.success(),
+        "voxflex run {scene}: {}\n{context}",
+        voxflex_integration_tests::text(&run)
+    );
 }
