@@ -399,6 +399,7 @@ fn plugin_params(name: &str, dirs: Vec<PathBuf>) -> Result<()> {
     let p = plugin_loader::load_by_name(name, &plugin_loader::search_path(&dirs))?;
     let table = match p.kind_name() {
         "renderer" => "[render.params]",
+        "actuator" => "[actuator.params]",
         _ => "[model.params]",
     };
     println!(

@@ -37,6 +37,8 @@
 #![warn(missing_docs)]
 
 #[cfg(test)]
+mod actuation_tests;
+#[cfg(test)]
 mod amg_tests;
 #[cfg(test)]
 mod convergence_tests;

@@ -755,4 +755,47 @@ impl MeshSolver for CorotationalFem {
     fn edge_layer(&self) -> Option<EdgeLayer<'_>> {
         self.edge_nodes.as_ref().map(EdgeNodes::layer)
     }
+
+    /// `K⁻¹ f` with the static Newton solve's tangent at `state` (the
+    /// warped stiffness plus the positive part of the rotations' own
+    /// stiffness, [`Twist::Clamped`], so it is positive definite), by the
+    /// same PCG as the steps. With P2 the forces act on the corners and the
+    /// mid-edge nodes take none.
+    fn compliance(
+        &mut self,
+        bc: &Boundary,
+        state: &NodeState,
+        forces: &[DVec3],
+    ) -> Result<(Vec<DVec3>, SolveReport), ModelError> {
+        let Some(mut layer) = self.edge_nodes.take() else {
+            return self.compliance_nodes(bc, &state.u, forces);
+        };
+        layer.sync(state);
+        let full_bc = layer.boundary(bc);
+        let u = layer.state.u.clone();
+        let mut full = forces.to_vec();
+        full.resize(u.len(), DVec3::ZERO);
+        let out = self.compliance_nodes(&full_bc, &u, &full);
+        self.edge_nodes = Some(layer);
+        let (mut x, report) = out?;
+        x.truncate(forces.len());
+        Ok((x, report))
+    }
+}
+
+impl CorotationalFem {
+    /// [`MeshSolver::compliance`] on the solver's own nodes.
+    fn compliance_nodes(
+        &mut self,
+        bc: &Boundary,
+        u: &[DVec3],
+        forces: &[DVec3],
+    ) -> Result<(Vec<DVec3>, SolveReport), ModelError> {
+        self.linearise(u, 1.0, None, Twist::Clamped);
+        let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
+        let mut x = vec![DVec3::ZERO; forces.len()];
+        let mut report = SolveReport::default();
+        self.solve(bc, &free, forces, &mut x, &mut report)?;
+        Ok((x, report))
+    }
 }

@@ -122,7 +122,7 @@ pub enum PluginKind {
     Deformation = 0,
     /// A renderer (vtable defined by the renderer issue; reserved).
     Renderer = 1,
-    /// An actuator model (vtable defined by the actuator issue; reserved).
+    /// An actuator model ([`ActuatorVTable`]).
     Actuator = 2,
 }
 
@@ -186,8 +186,8 @@ pub struct PluginDeclaration {
     pub deformation: *const DeformationVTable,
     /// The renderer vtable when `kind == Renderer`, else null.
     pub renderer: *const RendererVTable,
-    /// Reserved for the actuator vtable, null.
-    pub actuator: *const c_void,
+    /// The actuator vtable when `kind == Actuator`, else null.
+    pub actuator: *const ActuatorVTable,
     /// Writes the plugin's parameter schema (JSON Schema text, UTF-8) into
     /// `out` (a host buffer of `cap` bytes); 0 on success, else an error
     /// in `err` ([`crate::params_schema`]).
@@ -356,6 +356,125 @@ pub struct DeformationVTable {
     /// `DeformationModel::notes`, written into the host's `out` buffer as
     /// UTF-8 lines `name<TAB>value` (value as Rust prints an `f64`); fails
     /// with an error instead of truncating when they do not fit.
+    pub notes:
+        unsafe extern "C" fn(instance: Instance, out: *mut ErrorBuf, err: *mut ErrorBuf) -> i32,
+    /// `DeformationModel::set_point_loads`: `len` forces `[x, y, z]` (µN)
+    /// on the binding's points.
+    pub set_point_loads: unsafe extern "C" fn(
+        instance: Instance,
+        binding: u64,
+        forces: *const [f64; 3],
+        len: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `DeformationModel::compliance`: `len` forces (µN) on the binding's
+    /// points in, `len` displacements (mm) into the host's array `out`.
+    pub compliance: unsafe extern "C" fn(
+        instance: Instance,
+        binding: u64,
+        forces: *const [f64; 3],
+        len: u64,
+        out: *mut [f64; 3],
+        err: *mut ErrorBuf,
+    ) -> i32,
+}
+
+/// An actuator's points at rest (mirror of
+/// `voxflex_core::actuator::ActuatorGeometry`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ActuatorGeometryDesc {
+    /// `len` points `[x, y, z]`, world mm.
+    pub points: *const [f64; 3],
+    /// Number of points.
+    pub len: u64,
+    /// `triangle_count` triangles (indices into `points`).
+    pub triangles: *const [u32; 3],
+    /// Number of triangles (0 for an actuator that is not a surface).
+    pub triangle_count: u64,
+    /// Gravity, m/s², world axes.
+    pub gravity_m_s2: [f64; 3],
+}
+
+/// A frame's command (mirror of `voxflex_core::actuator::ActuatorCommand`):
+/// [`COMMAND_FREE`], [`COMMAND_EFFORT`] or [`COMMAND_MEASURE`] with `value`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ActuatorCommandDesc {
+    /// Which command.
+    pub tag: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// The effort or measure.
+    pub value: f64,
+}
+
+/// [`ActuatorCommandDesc::tag`]: the inverse solve chooses the effort.
+pub const COMMAND_FREE: u32 = 0;
+/// [`ActuatorCommandDesc::tag`]: the effort is given.
+pub const COMMAND_EFFORT: u32 = 1;
+/// [`ActuatorCommandDesc::tag`]: the measure is given.
+pub const COMMAND_MEASURE: u32 = 2;
+
+/// The scalars of a linearisation (mirror of
+/// `voxflex_core::actuator::ActuatorLinearisation` without its arrays,
+/// which go into host arrays).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ActuatorScalarsDesc {
+    /// The measure now, relative to rest.
+    pub measure: f64,
+    /// Effort interval.
+    pub effort_bounds: [f64; 2],
+    /// Measure interval, relative to rest.
+    pub measure_bounds: [f64; 2],
+    /// 1 when `loads` was written.
+    pub has_loads: u32,
+    /// 1 when `load_growth` was written.
+    pub has_load_growth: u32,
+}
+
+/// The functions of an actuator plugin; mirrors
+/// `voxflex_core::actuator::ActuatorModel` one to one.
+#[repr(C)]
+#[derive(Debug)]
+pub struct ActuatorVTable {
+    /// Creates an instance from the TOML text of the scene's
+    /// `[actuator.params]`.
+    pub create: unsafe extern "C" fn(
+        params_toml: StrRef,
+        host: *const HostApi,
+        out: *mut Instance,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// Destroys an instance made by `create`.
+    pub destroy: unsafe extern "C" fn(instance: Instance),
+    /// `ActuatorModel::init`.
+    pub init: unsafe extern "C" fn(
+        instance: Instance,
+        geometry: *const ActuatorGeometryDesc,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `ActuatorModel::command`.
+    pub command: unsafe extern "C" fn(
+        instance: Instance,
+        frame: *const FrameDesc,
+        out: *mut ActuatorCommandDesc,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `ActuatorModel::linearise` at `len` positions (mm): directions,
+    /// loads and load growth into three host arrays of `len` entries.
+    pub linearise: unsafe extern "C" fn(
+        instance: Instance,
+        positions: *const [f64; 3],
+        len: u64,
+        directions: *mut [f64; 3],
+        loads: *mut [f64; 3],
+        load_growth: *mut [f64; 3],
+        out: *mut ActuatorScalarsDesc,
+        err: *mut ErrorBuf,
+    ) -> i32,
+    /// `ActuatorModel::notes`, as the deformation vtable's `notes`.
     pub notes:
         unsafe extern "C" fn(instance: Instance, out: *mut ErrorBuf, err: *mut ErrorBuf) -> i32,
 }

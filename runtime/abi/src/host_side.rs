@@ -14,6 +14,7 @@ use voxflex_core::deformation::{
     ModelNotes, RestPoints, StepOutcome,
 };
 use voxflex_core::error::ModelError;
+use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, PipelineId};
 use voxflex_core::volume::VolumeView;
 
@@ -494,5 +495,50 @@ impl DeformationModel for DeformationProxy {
         storage.truncate(out.len.min(storage.len()));
         crate::notes_text::decode(&storage)
             .map_err(|e| ModelError(format!("plugin '{}': its notes: {e}", self.name)))
+    }
+
+    fn set_point_loads(&mut self, binding: BindingId, forces: &[DVec3]) -> Result<(), ModelError> {
+        let raw: Vec<[f64; 3]> = forces.iter().map(|f| f.to_array()).collect();
+        let (vt, inst) = (self.vtable, self.instance);
+        // SAFETY: `raw` alive during the call.
+        self.call(|err| unsafe {
+            (vt.set_point_loads)(inst, binding.0, raw.as_ptr(), raw.len() as u64, err)
+        })
+    }
+
+    fn compliance(
+        &mut self,
+        binding: BindingId,
+        forces: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), ModelError> {
+        if out.len() != forces.len() {
+            return Err(plugin_error(
+                &self.name,
+                &format!(
+                    "compliance: {} forces but {} outputs",
+                    forces.len(),
+                    out.len()
+                ),
+            ));
+        }
+        let raw: Vec<[f64; 3]> = forces.iter().map(|f| f.to_array()).collect();
+        let mut u = vec![[0.0f64; 3]; raw.len()];
+        let (vt, inst) = (self.vtable, self.instance);
+        // SAFETY: both arrays alive and `len` long during the call.
+        self.call(|err| unsafe {
+            (vt.compliance)(
+                inst,
+                binding.0,
+                raw.as_ptr(),
+                raw.len() as u64,
+                u.as_mut_ptr(),
+                err,
+            )
+        })?;
+        for (o, v) in out.iter_mut().zip(u) {
+            *o = DVec3::from_array(v);
+        }
+        Ok(())
     }
 }

@@ -119,6 +119,47 @@ pub const fn compute() -> u64 {
             map_cpu,
             map_gpu,
             removed_tetrahedra,
+            notes,
+            set_point_loads,
+            compliance
+        }
+    );
+    hash_type!(
+        h,
+        ActuatorGeometryDesc {
+            points,
+            len,
+            triangles,
+            triangle_count,
+            gravity_m_s2
+        }
+    );
+    hash_type!(
+        h,
+        ActuatorCommandDesc {
+            tag,
+            reserved,
+            value
+        }
+    );
+    hash_type!(
+        h,
+        ActuatorScalarsDesc {
+            measure,
+            effort_bounds,
+            measure_bounds,
+            has_loads,
+            has_load_growth
+        }
+    );
+    hash_type!(
+        h,
+        ActuatorVTable {
+            create,
+            destroy,
+            init,
+            command,
+            linearise,
             notes
         }
     );

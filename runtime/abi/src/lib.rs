@@ -17,6 +17,7 @@
 
 #![warn(missing_docs)]
 
+pub mod actuator;
 pub mod convert;
 pub mod ffi;
 pub mod guard;
@@ -30,7 +31,7 @@ pub mod renderer;
 
 /// Version of the boundary. Bump on any change to a function signature or
 /// to the meaning of a field; the layout hash catches layout changes.
-pub const ABI_VERSION: u32 = 2;
+pub const ABI_VERSION: u32 = 3;
 
 /// Fingerprint of every `#[repr(C)]` boundary type (see [`layout`]).
 pub const LAYOUT_HASH: u64 = layout::compute();
@@ -38,6 +39,7 @@ pub const LAYOUT_HASH: u64 = layout::compute();
 /// Name of the symbol every plugin library exports.
 pub const ENTRY_SYMBOL: &str = "voxflex_plugin_v1";
 
+pub use actuator::ActuatorPlugin;
 pub use params_schema::DeclaresParams;
 pub use plugin::{DeformationPlugin, HostContext};
 pub use renderer::RendererPlugin;

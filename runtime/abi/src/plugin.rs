@@ -18,6 +18,7 @@ use voxflex_core::deformation::{
     DeformationModel, DisplacementTarget, ExecutionBackend, FrameInfo,
 };
 use voxflex_core::error::{GpuError, ModelError};
+use voxflex_core::glam::DVec3;
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuLimits, GpuService, PipelineId};
 
 /// What the host hands a plugin instance at creation.
@@ -487,6 +488,92 @@ unsafe extern "C" fn notes<P: DeformationPlugin>(
     })
 }
 
+/// `len` triples at `ptr` as vectors (an empty slice for `len == 0`).
+///
+/// # Safety
+/// `ptr` is null only with `len == 0`, else valid for `len` reads.
+pub(crate) unsafe fn vectors_in(ptr: *const [f64; 3], len: u64) -> Result<Vec<DVec3>, String> {
+    if len == 0 {
+        return Ok(Vec::new());
+    }
+    if ptr.is_null() {
+        return Err("null array".into());
+    }
+    // SAFETY: caller contract.
+    let raw = unsafe { std::slice::from_raw_parts(ptr, len as usize) };
+    Ok(raw.iter().map(|v| DVec3::from_array(*v)).collect())
+}
+
+/// Writes `values` into the host's array of `len` triples at `ptr`.
+///
+/// # Safety
+/// `ptr` is null only with `len == 0`, else valid for `len` writes.
+pub(crate) unsafe fn vectors_out(
+    values: &[DVec3],
+    ptr: *mut [f64; 3],
+    len: u64,
+) -> Result<(), String> {
+    if values.len() as u64 != len {
+        return Err(format!("{} values for an array of {len}", values.len()));
+    }
+    if len == 0 {
+        return Ok(());
+    }
+    if ptr.is_null() {
+        return Err("null output array".into());
+    }
+    // SAFETY: caller contract.
+    let out = unsafe { std::slice::from_raw_parts_mut(ptr, len as usize) };
+    for (o, v) in out.iter_mut().zip(values) {
+        *o = v.to_array();
+    }
+    Ok(())
+}
+
+unsafe extern "C" fn set_point_loads<P: DeformationPlugin>(
+    instance: Instance,
+    binding: u64,
+    forces: *const [f64; 3],
+    len: u64,
+    err: *mut ErrorBuf,
+) -> i32 {
+    guard(err, || {
+        // SAFETY: host contract.
+        let s = unsafe { state::<P>(instance) }?;
+        // SAFETY: host contract: `len` forces at `forces`.
+        let forces = unsafe { vectors_in(forces, len) }?;
+        s.model
+            .set_point_loads(voxflex_core::deformation::BindingId(binding), &forces)
+            .map_err(|e| e.to_string())
+    })
+}
+
+unsafe extern "C" fn compliance<P: DeformationPlugin>(
+    instance: Instance,
+    binding: u64,
+    forces: *const [f64; 3],
+    len: u64,
+    out: *mut [f64; 3],
+    err: *mut ErrorBuf,
+) -> i32 {
+    guard(err, || {
+        // SAFETY: host contract.
+        let s = unsafe { state::<P>(instance) }?;
+        // SAFETY: host contract: `len` forces at `forces`.
+        let forces = unsafe { vectors_in(forces, len) }?;
+        let mut u = vec![DVec3::ZERO; forces.len()];
+        s.model
+            .compliance(
+                voxflex_core::deformation::BindingId(binding),
+                &forces,
+                &mut u,
+            )
+            .map_err(|e| e.to_string())?;
+        // SAFETY: host contract: `len` entries at `out`.
+        unsafe { vectors_out(&u, out, len) }
+    })
+}
+
 /// The vtable of plugin type `P` (used by [`crate::export_deformation_plugin!`]).
 pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
     DeformationVTable {
@@ -501,6 +588,8 @@ pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
         map_gpu: map_gpu::<P>,
         removed_tetrahedra: removed_tetrahedra::<P>,
         notes: notes::<P>,
+        set_point_loads: set_point_loads::<P>,
+        compliance: compliance::<P>,
     }
 }
 

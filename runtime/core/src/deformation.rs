@@ -214,7 +214,44 @@ pub trait DeformationModel: Send {
     fn notes(&mut self) -> Result<ModelNotes, ModelError> {
         Ok(ModelNotes::new())
     }
+
+    /// **Optional capability (actuators):** sets the external forces (µN,
+    /// world axes) on a binding's points, one per point, replacing what
+    /// this binding had; they act from the next [`DeformationModel::step`]
+    /// on, until set again. A mesh model spreads each force over the
+    /// corners of the element holding the point by the point's
+    /// barycentric weights — the transpose of its `map`, so the work a
+    /// force does is the work of the nodal forces. Models that cannot take
+    /// loads keep the default, which refuses ([`NO_ACTUATION`]).
+    fn set_point_loads(&mut self, binding: BindingId, forces: &[DVec3]) -> Result<(), ModelError> {
+        let _ = (binding, forces);
+        Err(ModelError::new(NO_ACTUATION))
+    }
+
+    /// **Optional capability (actuators):** the compliance `C f = K⁻¹ f`
+    /// with the current tangent stiffness `K` and the current constraints
+    /// (fixed and grabbed nodes do not move): the displacements (mm) of a
+    /// binding's points under forces (µN) on the same points, written
+    /// into `out` (one per point). One linear solve; the state does not
+    /// change. Pairs with [`DeformationModel::set_point_loads`]: the
+    /// forces are spread and the displacements read by the same weights,
+    /// so `C` is symmetric. The default refuses ([`NO_ACTUATION`]).
+    fn compliance(
+        &mut self,
+        binding: BindingId,
+        forces: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), ModelError> {
+        let _ = (binding, forces, out);
+        Err(ModelError::new(NO_ACTUATION))
+    }
 }
+
+/// What a model without the actuation capability answers
+/// [`DeformationModel::set_point_loads`] and
+/// [`DeformationModel::compliance`] with (the host names the plugin).
+pub const NO_ACTUATION: &str = "this deformation model cannot be actuated (it takes no point loads \
+     and has no compliance solve); use a mesh model such as corotational-fem";
 
 #[cfg(test)]
 mod tests {

@@ -7,7 +7,8 @@
 //! ([`render::Renderer`]), the camera, the interaction vocabulary, cut
 //! polygons, opacity maps as the renderer receives them, the plain
 //! tetrahedral mesh that readers and mesh models share, the closed
-//! triangle surface of an actuator's cavity, and volume statistics.
+//! triangle surface of an actuator's cavity, the actuator trait
+//! ([`actuator::ActuatorModel`]), and volume statistics.
 //!
 //! Everything a plugin or the ABI needs lives here; everything only some
 //! crates need lives in its own crate above this one: file formats
@@ -27,6 +28,7 @@
 
 #![warn(missing_docs)]
 
+pub mod actuator;
 pub mod camera;
 pub mod cut_polygon;
 pub mod deformation;
@@ -35,6 +37,7 @@ pub mod fast_div;
 pub mod gpu;
 pub mod grid;
 pub mod interaction;
+pub mod keyframes;
 pub mod non_finite;
 pub mod opacity_map;
 pub mod render;

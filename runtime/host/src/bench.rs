@@ -21,6 +21,7 @@
 
 mod accuracy;
 mod fronts;
+pub mod lame;
 pub mod stress;
 
 use crate::backend::BackendChoice;

@@ -11,6 +11,7 @@
 
 #![warn(missing_docs)]
 
+pub mod actuation;
 pub mod backend;
 pub mod bench;
 pub mod fingerprint;

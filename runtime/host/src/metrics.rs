@@ -70,6 +70,11 @@ pub struct RunMetrics {
     pub warnings: Vec<String>,
     /// Total wall time, milliseconds.
     pub total_wall_ms: f64,
+    /// The actuation stage (scenes with `[[actuator]]`): per actuator
+    /// its effort and measure per frame, per effector its distance to the
+    /// target.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub actuation: Option<crate::actuation::ActuationReport>,
 }
 
 /// Which plugin ran.

@@ -12,8 +12,8 @@
 
 use std::path::{Path, PathBuf};
 use voxflex_abi::ffi::{
-    CAPABILITY_CPU, CAPABILITY_GPU, DeformationVTable, PLUGIN_MAGIC, PluginEntry, PluginHeader,
-    PluginKind, RendererVTable,
+    ActuatorVTable, CAPABILITY_CPU, CAPABILITY_GPU, DeformationVTable, PLUGIN_MAGIC, PluginEntry,
+    PluginHeader, PluginKind, RendererVTable,
 };
 use voxflex_core::error::ModelError;
 
@@ -87,6 +87,8 @@ pub struct LoadedPlugin {
     pub deformation: Option<&'static DeformationVTable>,
     /// The renderer vtable (kind = renderer).
     pub renderer: Option<&'static RendererVTable>,
+    /// The actuator vtable (kind = actuator).
+    pub actuator: Option<&'static ActuatorVTable>,
     /// The keys of its parameter table, as the plugin declared them
     /// ([`crate::param_schema`]).
     pub params: crate::param_schema::ParamSchema,
@@ -347,7 +349,7 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
     }
     let kind = PluginKind::from_code(decl.kind)
         .ok_or_else(|| invalid(format!("declares unknown plugin kind code {}", decl.kind)))?;
-    let (mut deformation, mut renderer) = (None, None);
+    let (mut deformation, mut renderer, mut actuator) = (None, None, None);
     match kind {
         PluginKind::Deformation if decl.deformation.is_null() => {
             return Err(invalid(
@@ -361,7 +363,11 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
         }
         // SAFETY: static vtable in a never-unloaded library.
         PluginKind::Renderer => renderer = Some(unsafe { &*decl.renderer }),
-        PluginKind::Actuator => {}
+        PluginKind::Actuator if decl.actuator.is_null() => {
+            return Err(invalid("actuator plugin without an actuator vtable".into()));
+        }
+        // SAFETY: static vtable in a never-unloaded library.
+        PluginKind::Actuator => actuator = Some(unsafe { &*decl.actuator }),
     }
     // SAFETY: the entry of a checked, never-unloaded library.
     let schema = unsafe { voxflex_abi::params_schema::read(&name, decl.params_schema) }
@@ -379,6 +385,7 @@ pub fn load_file(path: &Path) -> Result<LoadedPlugin, PluginError> {
         abi_version: header.abi_version,
         deformation,
         renderer,
+        actuator,
         params,
     })
 }

@@ -16,7 +16,9 @@
 //! [`load_source`] `run` uses: unknown phantom, unreadable or damaged
 //! file, refused non-finite voxels); and it checks each `[[roi]]`'s growth
 //! parameters and, when no model moves the volume, its seed (inside the
-//! volume, inside its intensity window).
+//! volume, inside its intensity window). Each `[[actuator]]`'s plugin is
+//! created with its table and initialised on its geometry (the cavity
+//! file or label surface, the cable's points).
 //!
 //! Each error reads as `run`'s, with the scene location in front where
 //! `run` has none. Not checked (they need a frame or the volume in the
@@ -26,12 +28,15 @@
 //! mesh-file proxy), and, with a model, ROI seeds (the deformed grid they
 //! are looked up in is only known after the run).
 
+use crate::actuation::geometry::rest_geometry;
 use crate::pipeline::{RunError, load_source};
 use crate::plugin_loader;
 use crate::scene::{Scene, SceneError, locate_in_array};
 use crate::visualise::roi_request;
+use voxflex_abi::actuator::ActuatorProxy;
 use voxflex_abi::host_side::{DeformationProxy, HostServices};
 use voxflex_abi::renderer::RendererProxy;
+use voxflex_core::actuator::{ActuatorGeometry, ActuatorModel};
 use voxflex_core::deformation::DeformationModel;
 use voxflex_core::volume::Volume;
 use voxflex_opacity::{LambdaChoice, OpacityError};
@@ -52,6 +57,14 @@ pub fn check(scene: &Scene) -> Result<Volume, RunError> {
             .map_err(|e| at_table(scene, &["[render.params]", "[render]"], e))?;
     }
     let source = load_source(scene).map_err(|e| at_table(scene, &["[volume]"], e))?;
+    for n in 0..scene.actuators.len() {
+        check_actuator(scene, n, &dirs, &services, &source).map_err(|e| {
+            RunError::Scene(SceneError::Invalid {
+                location: locate_in_array(&scene.text, &scene.path, "actuator", n, ""),
+                message: format!("[[actuator]]: {e}"),
+            })
+        })?;
+    }
     for (n, roi) in scene.rois.iter().enumerate() {
         let req = roi_request(roi);
         check_roi(&req, scene.model.is_none().then_some(&source)).map_err(|e| {
@@ -62,6 +75,40 @@ pub fn check(scene: &Scene) -> Result<Volume, RunError> {
         })?;
     }
     Ok(source)
+}
+
+/// Actuator `n`: its plugin found and an actuator, its parameters accepted
+/// (schema, then the plugin's `create`), its geometry loaded (the cavity
+/// file or label) and accepted by the plugin's `init` (a closed, outward
+/// cavity; a cable of distinct points).
+fn check_actuator(
+    scene: &Scene,
+    n: usize,
+    dirs: &[std::path::PathBuf],
+    services: &std::sync::Arc<HostServices>,
+    source: &Volume,
+) -> Result<(), RunError> {
+    let a = &scene.actuators[n];
+    let p = plugin_loader::load_by_name(&a.plugin, dirs)?;
+    let vtable = p.actuator.ok_or_else(|| {
+        RunError::Other(format!(
+            "plugin `{}` is a {} plugin, not an actuator",
+            p.name,
+            p.kind_name()
+        ))
+    })?;
+    let params = a.params_toml();
+    p.check_params(&params)?;
+    let geometry = rest_geometry(a, &scene.base_dir(), source).map_err(RunError::Other)?;
+    // SAFETY: the vtable comes from a checked, never-unloaded library.
+    let mut actuator =
+        unsafe { ActuatorProxy::create(&p.name, vtable, &params, services.clone()) }?;
+    actuator.init(ActuatorGeometry {
+        points: &geometry.points,
+        triangles: &geometry.triangles,
+        gravity_m_s2: voxflex_core::glam::DVec3::from_array(a.gravity_m_s2),
+    })?;
+    Ok(())
 }
 
 /// The model plugin: found, a deformation plugin, able to run on the

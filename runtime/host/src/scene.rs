@@ -34,6 +34,7 @@
 //! nifti = "deformed.nii.gz"
 //! ```
 
+use crate::actuation::{ActuatorSettings, EffectorSettings};
 use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -450,6 +451,46 @@ struct SceneFile {
     render: Option<RenderSettings>,
     #[serde(default)]
     roi: Vec<RoiSettings>,
+    #[serde(default)]
+    actuator: Vec<ActuatorSettings>,
+    #[serde(default)]
+    effector: Vec<EffectorSettings>,
+}
+
+/// The `[[actuator]]` and `[[effector]]` tables' own checks, errors
+/// pointing into the offending table.
+fn check_actuation(file: &SceneFile, text: &str, path: &Path) -> Result<(), SceneError> {
+    let at = |array: &str, n: usize, (key, message): (String, String)| SceneError::Invalid {
+        location: locate_in_array(text, path, array, n, &key),
+        message: format!("`{key}`: {message}"),
+    };
+    if !file.actuator.is_empty() && file.model.is_none() {
+        return Err(at(
+            "actuator",
+            0,
+            (
+                "plugin".into(),
+                "actuators act on a deformation model: add a [model] (corotational-fem)".into(),
+            ),
+        ));
+    }
+    if !file.effector.is_empty() && file.actuator.is_empty() {
+        return Err(at(
+            "effector",
+            0,
+            (
+                "point".into(),
+                "an effector is driven by actuators: add an [[actuator]]".into(),
+            ),
+        ));
+    }
+    for (n, a) in file.actuator.iter().enumerate() {
+        a.check().map_err(|e| at("actuator", n, e))?;
+    }
+    for (n, e) in file.effector.iter().enumerate() {
+        e.targets().map_err(|e| at("effector", n, e))?;
+    }
+    Ok(())
 }
 
 /// A parsed, validated scene.
@@ -475,6 +516,10 @@ pub struct Scene {
     pub render: Option<RenderSettings>,
     /// `[[roi]]` opacity maps.
     pub rois: Vec<RoiSettings>,
+    /// `[[actuator]]` soft-robot actuators (need a `[model]`).
+    pub actuators: Vec<ActuatorSettings>,
+    /// `[[effector]]` inverse-control targets (need an actuator).
+    pub effectors: Vec<EffectorSettings>,
 }
 
 impl Scene {
@@ -686,6 +731,7 @@ impl Scene {
                 "at most one [[roi]] may set it".into(),
             ));
         }
+        check_actuation(&file, text, path)?;
         let mut interactions = vec![];
         for (n, mut table) in file.interaction.into_iter().enumerate() {
             // Errors point into this [[interaction]] table, not the first.
@@ -740,6 +786,8 @@ impl Scene {
             output: file.output,
             render: file.render,
             rois: file.roi,
+            actuators: file.actuator,
+            effectors: file.effector,
         })
     }
 

@@ -10,8 +10,11 @@
 //! Shapes (world millimetres, grid centred on the origin):
 //!
 //! - [`finger`] — a bar 80 × 16 × 16 mm along x, with one cavity
-//!   (68 × 8 × 5 mm) off-centre toward +z: inflating it lengthens the +z
-//!   side and the finger bends toward −z. Clamp the face x = −40.
+//!   (68 × 8 × 6 mm, z from −1 to 5) off-centre toward +z, under a 3 mm
+//!   wall: inflating it lengthens the +z side and the finger bends toward
+//!   −z. Clamp the face x = −40. The cavity is 3 cells tall and its wall
+//!   1.5 cells thick on a 2 mm proxy (a proxy keeps every cell holding a
+//!   silicone voxel, so a cavity thinner than two cells is meshed over).
 //! - [`cylinder`] — the paper's fabricated specimen: a silicone cylinder
 //!   (radius 20 mm, height 60 mm, axis z) around one cylindrical cavity
 //!   (radius 12 mm, height 40 mm), inflated by 15 ml of air or water.
@@ -53,7 +56,7 @@ pub fn finger(grid: Grid) -> Volume {
     label_volume(grid, |p| {
         if !in_box(p, DVec3::new(-40.0, -8.0, -8.0), DVec3::new(40.0, 8.0, 8.0)) {
             AIR
-        } else if in_box(p, DVec3::new(-32.0, -4.0, 1.0), DVec3::new(36.0, 4.0, 6.0)) {
+        } else if in_box(p, DVec3::new(-32.0, -4.0, -1.0), DVec3::new(36.0, 4.0, 5.0)) {
             FIRST_CAVITY
         } else {
             SILICONE
@@ -125,7 +128,7 @@ mod tests {
             (
                 PhantomKind::Finger,
                 80.0 * 16.0 * 16.0,
-                vec![68.0 * 8.0 * 5.0],
+                vec![68.0 * 8.0 * 6.0],
             ),
             (
                 PhantomKind::Cylinder,
@@ -166,14 +169,19 @@ mod tests {
     fn the_fingers_cavity_is_off_centre_toward_plus_z() {
         let v = PhantomKind::Finger.generate([48, 12, 12]).unwrap();
         let g = v.grid;
-        let (mut up, mut down) = (0, 0);
+        let (mut sum, mut n) = (0.0, 0);
         for l in 0..g.len() {
             let [i, j, k] = g.unlinear(l);
             if v.get_f32(i, j, k) as u8 == FIRST_CAVITY {
-                let z = g.index_to_world(DVec3::new(i as f64, j as f64, k as f64)).z;
-                if z > 0.0 { up += 1 } else { down += 1 }
+                sum += g.index_to_world(DVec3::new(i as f64, j as f64, k as f64)).z;
+                n += 1;
             }
         }
-        assert!(up > 0 && down == 0, "{up} above, {down} below the axis");
+        // z from −1 to 5 mm: its centroid 2 mm above the axis (±1 voxel).
+        let centroid = sum / n as f64;
+        assert!(
+            (centroid - 2.0).abs() <= 1.0,
+            "cavity centroid at z = {centroid}"
+        );
     }
 }

@@ -56,6 +56,7 @@
 //! # Ok::<(), voxflex_runtime::pipeline::RunError>(())
 //! ```
 
+mod actuation;
 mod defaults;
 mod histogram;
 mod interaction;
@@ -196,6 +197,8 @@ pub struct Session {
     next_roi: u64,
     /// Tracked point sets, bound on every model (see `tracked.rs`).
     tracked: Vec<tracked::TrackedSet>,
+    /// The scene's actuators and effectors, bound on the model.
+    actuation: Option<crate::actuation::stage::ActuationStage>,
     next_track: u64,
     /// The current volume uploaded for the ROI maps growing on the GPU,
     /// with the resample version it holds (0: the source); `None` on the
@@ -393,6 +396,7 @@ impl Session {
                     vec!["model".into(), "map".into(), "resample".into()]
             }
         }
+        session.build_actuation(scene, plugins)?;
         match (&scene.render, &plugins.renderer) {
             (Some(_), Some(p)) => session.build_renderer(p, &scene.render_params_toml())?,
             _ => session.metrics.stages_not_built.push("render".into()),
@@ -495,6 +499,7 @@ impl Session {
             rois: vec![],
             next_roi: 0,
             tracked: vec![],
+            actuation: None,
             next_track: 0,
             roi_values: None,
             versions: Versions::default(),
@@ -528,6 +533,9 @@ impl Session {
         )?;
         for set in &self.tracked {
             tracked::bind(&mut stage, set)?;
+        }
+        if let Some(a) = &mut self.actuation {
+            a.bind(stage.model.as_mut())?;
         }
         if self.displacements.is_none() {
             self.displacements = Some(Displacements::new(
@@ -673,14 +681,18 @@ impl Session {
     fn model_stage(&mut self) -> Result<StageOutcome, RunError> {
         let m = self.model.as_mut().ok_or_else(no_model)?;
         let t = Instant::now();
-        let outcome = m
-            .model
-            .step(FrameInfo {
-                frame: m.frame,
-                frames: self.frames,
-                dt_s: self.dt_s,
-            })
-            .map_err(ModelCall::Step.failed())?;
+        let frame = FrameInfo {
+            frame: m.frame,
+            frames: self.frames,
+            dt_s: self.dt_s,
+        };
+        if let Some(a) = &mut self.actuation {
+            a.before_step(m.model.as_mut(), frame)?;
+        }
+        let outcome = m.model.step(frame).map_err(ModelCall::Step.failed())?;
+        if let Some(a) = &mut self.actuation {
+            a.after_step(m.model.as_mut(), frame)?;
+        }
         m.frame += 1;
         let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);
         self.metrics.stage("model").record_run(wall, 0);
@@ -1191,6 +1203,9 @@ impl Session {
     pub fn metrics(&mut self) -> Result<RunMetrics, RunError> {
         let notes = self.model_notes()?;
         let mut m = self.metrics.clone();
+        if let Some(a) = &mut self.actuation {
+            m.actuation = Some(a.report()?);
+        }
         if self.model.is_some() {
             let stage = m.stage("model");
             for (name, value) in notes {

@@ -13,6 +13,8 @@ pub struct ScenePlugins {
     pub model: Option<LoadedPlugin>,
     /// `[render] plugin`, when the scene renders.
     pub renderer: Option<LoadedPlugin>,
+    /// Each `[[actuator]] plugin`, in scene order.
+    pub actuators: Vec<LoadedPlugin>,
 }
 
 impl ScenePlugins {
@@ -27,7 +29,16 @@ impl ScenePlugins {
             Some(r) => Some(plugin_loader::load_by_name(&r.plugin, &dirs)?),
             None => None,
         };
-        Ok(Self { model, renderer })
+        let actuators = scene
+            .actuators
+            .iter()
+            .map(|a| plugin_loader::load_by_name(&a.plugin, &dirs))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            model,
+            renderer,
+            actuators,
+        })
     }
 
     /// The library files, model first (for fingerprints).
@@ -35,6 +46,7 @@ impl ScenePlugins {
         self.model
             .iter()
             .chain(self.renderer.iter())
+            .chain(self.actuators.iter())
             .map(|p| p.path.as_path())
             .collect()
     }

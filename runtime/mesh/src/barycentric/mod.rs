@@ -178,6 +178,34 @@ impl BarycentricBinding {
         self.tet.is_empty()
     }
 
+    /// Adds point forces to the nodes (`nodes += Bᵀ forces`): each point's
+    /// force spread over its tetrahedron's corners by its barycentric
+    /// weights, the transpose of [`BarycentricBinding::gather`], so the
+    /// nodal forces do the work the point forces do. One force per point;
+    /// µN (any unit: the map is linear).
+    pub fn spread(&self, mesh: &TetMesh, forces: &[DVec3], nodes: &mut [DVec3]) {
+        for ((&t, &q), f) in self.tet.iter().zip(&self.weights).zip(forces) {
+            let w = unpack(q);
+            for (k, &n) in mesh.tets[t as usize].iter().enumerate() {
+                nodes[n as usize] += w[k] as f64 * *f;
+            }
+        }
+    }
+
+    /// The bound points' values interpolated from per-node values
+    /// (`out = B node_values`), in f64: the map of
+    /// [`BarycentricBinding::map`] without its f32 arrays.
+    pub fn gather(&self, mesh: &TetMesh, node_values: &[DVec3], out: &mut [DVec3]) {
+        for ((o, &t), &q) in out.iter_mut().zip(&self.tet).zip(&self.weights) {
+            let w = unpack(q);
+            *o = mesh.tets[t as usize]
+                .iter()
+                .enumerate()
+                .map(|(k, &n)| w[k] as f64 * node_values[n as usize])
+                .sum();
+        }
+    }
+
     /// The bound points' displacements (mm) from the nodes' `node_u` (mm,
     /// x/y/z arrays), written into `out`.
     pub fn map(&self, mesh: &TetMesh, node_u: [&[f32]; 3], out: [&mut [f32]; 3]) {

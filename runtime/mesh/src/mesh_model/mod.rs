@@ -200,6 +200,26 @@ pub trait MeshSolver: Send + Sized + 'static {
         let _ = notes;
     }
 
+    /// The compliance `K⁻¹ f` at `state` with the tangent stiffness `K`
+    /// and `bc`'s constraints (imposed and hanging nodes do not move):
+    /// node displacements (mm) under node forces `forces` (µN, one per
+    /// model node), and the linear solve's report. The actuators' inverse
+    /// solve asks for it; the state does not change. The default refuses.
+    fn compliance(
+        &mut self,
+        bc: &Boundary,
+        state: &NodeState,
+        forces: &[DVec3],
+    ) -> Result<(Vec<DVec3>, SolveReport), ModelError> {
+        let _ = (bc, state, forces);
+        Err(ModelError(format!(
+            "{}: no compliance solve, so it cannot drive an actuator to an effector target \
+             (inverse control) or to a scripted measure (volume, shortening); script the \
+             effort (pressure, tension) or use corotational-fem",
+            Self::NAME
+        )))
+    }
+
     /// Advances `state` by `dt_s` seconds under `bc` (a static solver finds
     /// the equilibrium instead). On return the imposed displacements of
     /// `bc` hold exactly and every value is finite.

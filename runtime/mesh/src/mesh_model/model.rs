@@ -86,6 +86,8 @@ struct SolveTotals {
     steps: u64,
     substeps: u64,
     iterations: u64,
+    /// Compliance solves asked for by actuators.
+    compliance_solves: u64,
     /// Linear solves that stopped above their tolerance, and the largest
     /// relative residual of any solve.
     unconverged: u64,
@@ -113,6 +115,9 @@ struct Bound {
     removed: Vec<(usize, u8)>,
     /// Removed tetrahedra not yet reported to the host.
     unreported: bool,
+    /// External forces on the points (µN; empty: none), set by
+    /// `set_point_loads` and spread onto the nodes every step.
+    loads: Vec<DVec3>,
 }
 
 /// What `init` builds.
@@ -832,6 +837,9 @@ impl<S: MeshSolver> MeshModel<S> {
             b.bc.faces
                 .extend(load.faces.iter().map(|&(f, force)| (f, ramp * force)));
         }
+        for bound in self.bindings.iter().filter(|b| !b.loads.is_empty()) {
+            bound.binding.spread(&b.mesh, &bound.loads, &mut b.bc.force);
+        }
         let before = b.state.u.clone();
         self.last = b.solver.step(dt_s, &b.bc, &mut b.state)?;
         self.totals.steps += 1;
@@ -1073,6 +1081,7 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
             points,
             removed: Vec::new(),
             unreported: false,
+            loads: Vec::new(),
         });
         self.unmapped = true;
         Ok(BindingId(self.bindings.len() as u64 - 1))
@@ -1136,6 +1145,12 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         notes.insert("last_residual".into(), self.last.residual);
         notes.insert("worst_residual".into(), self.totals.worst_residual);
         notes.insert("unconverged_solves".into(), self.totals.unconverged as f64);
+        if self.totals.compliance_solves > 0 {
+            notes.insert(
+                "compliance_solves".into(),
+                self.totals.compliance_solves as f64,
+            );
+        }
         self.far_grabs.add_notes(&mut notes);
         if let Some(b) = &self.built {
             b.solver.notes(&mut notes);
@@ -1167,6 +1182,68 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         }
         bound.unreported = false;
         Ok(changed)
+    }
+
+    /// Spread over the corners of each point's tetrahedron by its weights
+    /// from the next step on (P2 too: the corners take a point's force by
+    /// its linear weights, which keeps it work-consistent with
+    /// [`DeformationModel::compliance`]'s observation).
+    fn set_point_loads(&mut self, binding: BindingId, forces: &[DVec3]) -> Result<(), ModelError> {
+        let bound = self
+            .bindings
+            .get_mut(binding.0 as usize)
+            .ok_or_else(|| ModelError(format!("unknown binding id {}", binding.0)))?;
+        if forces.len() != bound.binding.len() {
+            return Err(ModelError(format!(
+                "{}: {} point loads for a binding of {} points",
+                S::NAME,
+                forces.len(),
+                bound.binding.len()
+            )));
+        }
+        if let Some(i) = forces.iter().position(|f| !f.is_finite()) {
+            return Err(ModelError(format!(
+                "{}: the load on bound point {i} is not finite",
+                S::NAME
+            )));
+        }
+        bound.loads = forces.to_vec();
+        Ok(())
+    }
+
+    /// The solver's compliance on the proxy, spread and read at the points
+    /// by their linear barycentric weights (for P2 the mid-edge nodes take
+    /// no force and the corners' displacements are read).
+    fn compliance(
+        &mut self,
+        binding: BindingId,
+        forces: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), ModelError> {
+        let b = built_mut(&mut self.built)?;
+        let bound = &self
+            .bindings
+            .get(binding.0 as usize)
+            .ok_or_else(|| ModelError(format!("unknown binding id {}", binding.0)))?
+            .binding;
+        if forces.len() != bound.len() || out.len() != bound.len() {
+            return Err(ModelError(format!(
+                "{}: compliance of {} forces into {} outputs for a binding of {} points",
+                S::NAME,
+                forces.len(),
+                out.len(),
+                bound.len()
+            )));
+        }
+        let mut nodal = vec![DVec3::ZERO; b.mesh.nodes.len()];
+        bound.spread(&b.mesh, forces, &mut nodal);
+        let (u, report) = b.solver.compliance(&b.bc, &b.state, &nodal)?;
+        bound.gather(&b.mesh, &u, out);
+        self.totals.compliance_solves += 1;
+        self.totals.iterations += u64::from(report.iterations);
+        self.totals.unconverged += u64::from(report.unconverged);
+        self.totals.worst_residual = self.totals.worst_residual.max(report.worst_residual);
+        Ok(())
     }
 
     fn map(&mut self, binding: BindingId, out: DisplacementTarget<'_>) -> Result<(), ModelError> {

@@ -1,0 +1,629 @@
+//! The actuation stage: before every model step it chooses each
+//! actuator's effort `λ` — given by its script, driven to a scripted
+//! measure, or by the inverse solve towards the effectors' targets — and
+//! hands the forces `Σ λ_a J_aᵀ + loads` to the deformation model as point
+//! loads; after the step it reads the points back and linearises the
+//! actuators again at their new positions (one linearisation per frame).
+//!
+//! Every actuator and effector point is bound to the model once, as one
+//! point set, so one compliance solve per actuator observes every
+//! effector and every actuator's measure at once.
+
+use super::geometry::RestGeometry;
+use super::inverse::{InverseProblem, MeasureRow};
+use super::report::{ActuationReport, ActuatorSeries, EffectorSeries};
+use super::secant::Secant;
+use std::ops::Range;
+use voxflex_core::actuator::{
+    ActuatorCommand, ActuatorGeometry, ActuatorLinearisation, ActuatorModel,
+};
+use voxflex_core::deformation::{
+    BindingId, DeformationModel, DisplacementTarget, FrameInfo, RestPoints,
+};
+use voxflex_core::error::ModelError;
+use voxflex_core::glam::DVec3;
+use voxflex_core::keyframes::Keyframes;
+
+/// One actuator of the stage.
+pub(crate) struct Actuator {
+    /// Name in metrics and messages.
+    pub(crate) name: String,
+    /// Its plugin's name.
+    pub(crate) plugin: String,
+    pub(crate) model: Box<dyn ActuatorModel>,
+    /// Its points in the stage's point set.
+    range: Range<usize>,
+    /// The effort now.
+    effort: f64,
+    /// Linearised at the points' current positions.
+    lin: ActuatorLinearisation,
+    command: ActuatorCommand,
+}
+
+/// An actuator the stage is built with: its plugin instance (created, not
+/// yet initialised), rest geometry and gravity.
+pub(crate) struct NewActuator {
+    /// Name in metrics and messages.
+    pub(crate) name: String,
+    /// Its plugin's name.
+    pub(crate) plugin: String,
+    pub(crate) model: Box<dyn ActuatorModel>,
+    pub(crate) geometry: RestGeometry,
+    /// m/s², world axes.
+    pub(crate) gravity: DVec3,
+}
+
+/// One effector of the stage.
+pub(crate) struct Effector {
+    pub(crate) name: String,
+    /// Its point's index in the stage's point set.
+    index: usize,
+    targets: [Keyframes; 3],
+}
+
+/// The stage: actuators, effectors, their points bound on the model.
+pub(crate) struct ActuationStage {
+    actuators: Vec<Actuator>,
+    effectors: Vec<Effector>,
+    /// Every actuator's points, then every effector's, at rest (mm).
+    rest: Vec<DVec3>,
+    /// The same points now (mm).
+    positions: Vec<DVec3>,
+    binding: Option<BindingId>,
+    report: ActuationReport,
+    /// The inverse solve's trust region: per actuator, the largest
+    /// effort change of one frame (`∞` until a step disappoints).
+    trust: Vec<f64>,
+    /// The last inverse step, to judge it by what the model did.
+    last: Option<InverseStep>,
+    /// The learned correction of the effectors' response.
+    secant: Secant,
+    /// The forces applied in the last step (µN per point).
+    applied: Vec<DVec3>,
+    /// The settling warning was given.
+    warned_unsettled: bool,
+}
+
+/// The actuator forces may change by this fraction of their size over
+/// the last frame before the run warns that the body has not settled.
+pub const SETTLED_FORCE_CHANGE: f64 = 1e-2;
+
+/// What the last frame's inverse step expected (see
+/// [`ActuationStage::judge_last_step`]).
+struct InverseStep {
+    /// Effector offset norm before the step, and as the linearisation
+    /// predicted after it (mm).
+    before: f64,
+    predicted: f64,
+    /// The targets it aimed at (mm).
+    targets: Vec<DVec3>,
+    /// `(actuator, effort change)` of the unknowns.
+    delta: Vec<(usize, f64)>,
+}
+
+/// An error of the stage, naming what failed.
+fn failed(what: &str, e: impl std::fmt::Display) -> ModelError {
+    ModelError(format!("actuation: {what}: {e}"))
+}
+
+impl ActuationStage {
+    /// The stage over `actuators` (initialised here) and effectors
+    /// (`(name, rest point mm, targets)`).
+    pub(crate) fn new(
+        actuators: Vec<NewActuator>,
+        effectors: Vec<(String, DVec3, [Keyframes; 3])>,
+    ) -> Result<Self, ModelError> {
+        let mut rest = Vec::new();
+        let mut stage_actuators = Vec::new();
+        for NewActuator {
+            name,
+            plugin,
+            mut model,
+            geometry,
+            gravity,
+        } in actuators
+        {
+            model
+                .init(ActuatorGeometry {
+                    points: &geometry.points,
+                    triangles: &geometry.triangles,
+                    gravity_m_s2: gravity,
+                })
+                .map_err(|e| failed(&format!("[[actuator]] {name}"), e))?;
+            let range = rest.len()..rest.len() + geometry.points.len();
+            rest.extend(&geometry.points);
+            stage_actuators.push(Actuator {
+                name,
+                plugin,
+                model,
+                range,
+                effort: 0.0,
+                lin: ActuatorLinearisation::default(),
+                command: ActuatorCommand::Free,
+            });
+        }
+        let effectors: Vec<Effector> = effectors
+            .into_iter()
+            .map(|(name, point, targets)| {
+                rest.push(point);
+                Effector {
+                    name,
+                    index: rest.len() - 1,
+                    targets,
+                }
+            })
+            .collect();
+        let report = ActuationReport::new(&stage_actuators, &effectors_names(&effectors));
+        let n_actuators = stage_actuators.len();
+        Ok(Self {
+            positions: rest.clone(),
+            actuators: stage_actuators,
+            effectors,
+            rest,
+            binding: None,
+            report,
+            trust: vec![f64::INFINITY; n_actuators],
+            last: None,
+            secant: Secant::default(),
+            applied: Vec::new(),
+            warned_unsettled: false,
+        })
+    }
+
+    /// Binds the points on `model` (again after a model swap) and
+    /// linearises the actuators there. A model without the actuation
+    /// capability is refused here, by name.
+    pub(crate) fn bind(&mut self, model: &mut dyn DeformationModel) -> Result<(), ModelError> {
+        let points: Vec<[f32; 3]> = self.rest.iter().map(|p| p.as_vec3().to_array()).collect();
+        let binding = model
+            .bind(RestPoints::Points(&points))
+            .map_err(|e| failed("binding the actuator and effector points", e))?;
+        let zero = vec![DVec3::ZERO; points.len()];
+        model
+            .set_point_loads(binding, &zero)
+            .map_err(|e| failed("the scene's [model]", e))?;
+        if !self.effectors.is_empty() {
+            // Inverse control needs the compliance every frame: refuse a
+            // model without it now, not at the first frame.
+            model
+                .compliance(binding, &zero, &mut zero.clone())
+                .map_err(|e| failed("the scene's [model]", e))?;
+        }
+        self.secant = Secant::new(3 * self.effectors.len(), self.actuators.len());
+        self.binding = Some(binding);
+        self.refresh(model)
+    }
+
+    /// Chooses the efforts of frame `frame` and applies their forces.
+    pub(crate) fn before_step(
+        &mut self,
+        model: &mut dyn DeformationModel,
+        frame: FrameInfo,
+    ) -> Result<(), ModelError> {
+        let binding = self.binding.ok_or_else(|| failed("step", "not bound"))?;
+        for a in &mut self.actuators {
+            a.command = a
+                .model
+                .command(frame)
+                .map_err(|e| failed(&format!("[[actuator]] {}", a.name), e))?;
+        }
+        let known: Vec<Option<f64>> = self
+            .actuators
+            .iter()
+            .map(|a| match a.command {
+                ActuatorCommand::Effort(v) => Some(clamp(v, a.lin.effort_bounds)),
+                _ => None,
+            })
+            .collect();
+        let inverse = known.iter().any(Option::is_none);
+        if inverse || !self.effectors.is_empty() {
+            self.solve_inverse(model, binding, &known, frame)?;
+        } else {
+            for (a, k) in self.actuators.iter_mut().zip(&known) {
+                a.effort = k.unwrap_or(a.effort);
+            }
+        }
+        let mut forces = vec![DVec3::ZERO; self.rest.len()];
+        for a in &self.actuators {
+            let slot = &mut forces[a.range.clone()];
+            for (i, f) in slot.iter_mut().enumerate() {
+                *f += a.effort * a.lin.directions[i];
+                if let Some(l) = a.lin.loads.get(i) {
+                    *f += *l;
+                }
+            }
+        }
+        model
+            .set_point_loads(binding, &forces)
+            .map_err(|e| failed("applying the actuator forces", e))?;
+        self.applied = forces;
+        Ok(())
+    }
+
+    /// The forces the actuators would apply at the points' current
+    /// positions with the current efforts (µN per point).
+    fn forces_now(&self) -> Vec<DVec3> {
+        let mut forces = vec![DVec3::ZERO; self.rest.len()];
+        for a in &self.actuators {
+            for (i, f) in forces[a.range.clone()].iter_mut().enumerate() {
+                *f += a.effort * a.lin.directions[i]
+                    + a.lin.loads.get(i).copied().unwrap_or_default();
+            }
+        }
+        forces
+    }
+
+    /// How much the actuator forces changed over the last frame, relative
+    /// to their size: they follow the walls they push, and a frame applies
+    /// them as they were at its start, so a body that is still moving
+    /// under its actuators has not reached the equilibrium of its efforts.
+    fn force_change(&self) -> f64 {
+        let now = self.forces_now();
+        let size: f64 = self
+            .applied
+            .iter()
+            .map(|f| f.length_squared())
+            .sum::<f64>()
+            .sqrt();
+        let change: f64 = now
+            .iter()
+            .zip(&self.applied)
+            .map(|(a, b)| (*a - *b).length_squared())
+            .sum::<f64>()
+            .sqrt();
+        if size > 0.0 { change / size } else { 0.0 }
+    }
+
+    /// Reads the points back after the step, linearises again, and
+    /// records the frame.
+    pub(crate) fn after_step(
+        &mut self,
+        model: &mut dyn DeformationModel,
+        frame: FrameInfo,
+    ) -> Result<(), ModelError> {
+        self.refresh(model)?;
+        let coords = self.effector_coordinates();
+        self.secant.observe(&coords);
+        let offsets: Vec<(DVec3, DVec3)> = self
+            .effectors
+            .iter()
+            .map(|e| (self.positions[e.index], target(e, frame.frame as f64)))
+            .collect();
+        let change = self.force_change();
+        self.report.record(&self.actuators, &offsets, change);
+        if frame.frame + 1 == frame.frames
+            && change > SETTLED_FORCE_CHANGE
+            && !self.warned_unsettled
+        {
+            self.warned_unsettled = true;
+            tracing::warn!(
+                "actuation: the actuator forces still changed by {:.1} % over the last frame \
+                 (above {:.0} %): the body has not settled at its efforts (a pressure or a \
+                 cable follows what it pushes, one frame behind); run more frames or ramp the \
+                 efforts more slowly",
+                100.0 * change,
+                100.0 * SETTLED_FORCE_CHANGE
+            );
+        }
+        Ok(())
+    }
+
+    /// What the stage did, for `metrics.json`.
+    pub(crate) fn report(&mut self) -> Result<ActuationReport, ModelError> {
+        let mut r = self.report.clone();
+        r.secant_updates = self.secant.updates;
+        for (a, series) in self.actuators.iter_mut().zip(&mut r.actuators) {
+            series.notes = a
+                .model
+                .notes()
+                .map_err(|e| failed(&format!("[[actuator]] {} notes", a.name), e))?;
+        }
+        Ok(r)
+    }
+
+    /// The points' positions from the model, and each actuator linearised
+    /// there.
+    fn refresh(&mut self, model: &mut dyn DeformationModel) -> Result<(), ModelError> {
+        let binding = self.binding.ok_or_else(|| failed("refresh", "not bound"))?;
+        let n = self.rest.len();
+        let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        model
+            .map(
+                binding,
+                DisplacementTarget::Cpu {
+                    x: &mut x,
+                    y: &mut y,
+                    z: &mut z,
+                },
+            )
+            .map_err(|e| failed("reading the actuator points", e))?;
+        for (i, p) in self.positions.iter_mut().enumerate() {
+            *p = self.rest[i] + DVec3::new(x[i] as f64, y[i] as f64, z[i] as f64);
+        }
+        for a in &mut self.actuators {
+            a.lin = a
+                .model
+                .linearise(&self.positions[a.range.clone()])
+                .map_err(|e| failed(&format!("[[actuator]] {}", a.name), e))?;
+        }
+        Ok(())
+    }
+
+    /// Each actuator's response (mm at every stage point per unit
+    /// effort): `K⁻¹ J_aᵀ`, and for loads that grow with the measure (a
+    /// hydraulic cavity) the unified constraint `K⁻¹ (J_aᵀ + J_wᵀ J_a K⁻¹ J_aᵀ)`.
+    fn responses(
+        &mut self,
+        model: &mut dyn DeformationModel,
+        binding: BindingId,
+    ) -> Result<Vec<Vec<DVec3>>, ModelError> {
+        let n = self.rest.len();
+        let mut out = Vec::with_capacity(self.actuators.len());
+        for a in &self.actuators {
+            let solve = |model: &mut dyn DeformationModel, v: &[DVec3]| {
+                let mut f = vec![DVec3::ZERO; n];
+                f[a.range.clone()].copy_from_slice(v);
+                let mut u = vec![DVec3::ZERO; n];
+                model
+                    .compliance(binding, &f, &mut u)
+                    .map_err(|e| failed(&format!("compliance of [[actuator]] {}", a.name), e))?;
+                Ok::<_, ModelError>(u)
+            };
+            let mut u = solve(model, &a.lin.directions)?;
+            self.report.compliance_solves += 1;
+            if !a.lin.load_growth.is_empty() {
+                let s = measure_response(a, &u);
+                let ug = solve(model, &a.lin.load_growth)?;
+                self.report.compliance_solves += 1;
+                for (ui, gi) in u.iter_mut().zip(&ug) {
+                    *ui += s * *gi;
+                }
+            }
+            out.push(u);
+        }
+        Ok(out)
+    }
+
+    /// Builds and solves the frame's inverse problem over the actuators
+    /// whose effort is not given; `known` holds the given ones.
+    fn solve_inverse(
+        &mut self,
+        model: &mut dyn DeformationModel,
+        binding: BindingId,
+        known: &[Option<f64>],
+        frame: FrameInfo,
+    ) -> Result<(), ModelError> {
+        let responses = self.responses(model, binding)?;
+        let unknown: Vec<usize> = (0..known.len()).filter(|&a| known[a].is_none()).collect();
+        // What the given efforts' changes do, before the unknowns move.
+        let mut shift = vec![DVec3::ZERO; self.rest.len()];
+        for (a, k) in known.iter().enumerate() {
+            if let Some(v) = k {
+                let d = v - self.actuators[a].effort;
+                for (s, r) in shift.iter_mut().zip(&responses[a]) {
+                    *s += d * *r;
+                }
+            }
+        }
+        let mut p = InverseProblem::default();
+        let when = frame.frame as f64;
+        // Per effector coordinate, its response to every actuator: the
+        // compliance's, corrected by what the last frames taught.
+        let rows = self.effector_rows(&responses);
+        let given: Vec<f64> = known
+            .iter()
+            .zip(&self.actuators)
+            .map(|(k, a)| k.map_or(0.0, |v| v - a.effort))
+            .collect();
+        for (row, w) in rows.iter().enumerate() {
+            let e = &self.effectors[row / 3];
+            let k = row % 3;
+            let offset = self.positions[e.index][k] + dot(w, &given) - target(e, when)[k];
+            p.effector_response
+                .push(unknown.iter().map(|&a| w[a]).collect());
+            p.effector_offset.push(offset);
+        }
+        self.judge_last_step();
+        for &a in &unknown {
+            p.efforts.push(self.actuators[a].effort);
+            p.effort_bounds.push(self.actuators[a].lin.effort_bounds);
+            p.step_limits.push(self.trust[a]);
+        }
+        for b in &self.actuators {
+            let target = match b.command {
+                ActuatorCommand::Measure(m) => Some(m),
+                _ => None,
+            };
+            let bounded = b.lin.measure_bounds.iter().any(|v| v.is_finite());
+            if target.is_none() && !bounded {
+                continue;
+            }
+            p.measures.push(MeasureRow {
+                response: unknown
+                    .iter()
+                    .map(|&a| measure_response(b, &responses[a]))
+                    .collect(),
+                now: b.lin.measure + measure_response(b, &shift),
+                bounds: b.lin.measure_bounds,
+                target,
+            });
+        }
+        tracing::debug!(?p, "actuation: inverse problem of frame {}", frame.frame);
+        let targets: Vec<DVec3> = self.effectors.iter().map(|e| target(e, when)).collect();
+        let before = p.effector_offset.iter().map(|d| d * d).sum::<f64>().sqrt();
+        let delta = match p.solve() {
+            Ok(s) => {
+                self.report.qp_iterations += u64::from(s.iterations);
+                self.last = (!self.effectors.is_empty()).then(|| InverseStep {
+                    before,
+                    predicted: s.predicted_offset,
+                    targets,
+                    delta: unknown
+                        .iter()
+                        .copied()
+                        .zip(s.delta.iter().copied())
+                        .collect(),
+                });
+                s.delta
+            }
+            Err(why) => {
+                self.report.qp_failures += 1;
+                tracing::warn!(
+                    "actuation, frame {}: {why}; the efforts stay as they were (a scripted \
+                     measure outside the actuator's bounds, or conflicting scripts)",
+                    frame.frame
+                );
+                vec![0.0; unknown.len()]
+            }
+        };
+        let before_efforts: Vec<f64> = self.actuators.iter().map(|a| a.effort).collect();
+        for (a, k) in known.iter().enumerate() {
+            if let Some(v) = k {
+                self.actuators[a].effort = *v;
+            }
+        }
+        for (&a, d) in unknown.iter().zip(delta) {
+            let act = &mut self.actuators[a];
+            act.effort = clamp(act.effort + d, act.lin.effort_bounds);
+        }
+        let change: Vec<f64> = self
+            .actuators
+            .iter()
+            .zip(&before_efforts)
+            .map(|(a, b)| a.effort - b)
+            .collect();
+        let predicted = rows.iter().map(|w| dot(w, &change)).collect();
+        let coords = self.effector_coordinates();
+        self.secant
+            .record(&before_efforts, change, coords, predicted);
+        Ok(())
+    }
+
+    /// Per effector coordinate (x, y, z of each effector), its response to
+    /// a unit effort of every actuator (mm): the compliance's plus the
+    /// secant correction.
+    fn effector_rows(&self, responses: &[Vec<DVec3>]) -> Vec<Vec<f64>> {
+        let mut rows = Vec::with_capacity(3 * self.effectors.len());
+        for e in &self.effectors {
+            for k in 0..3 {
+                let row = rows.len();
+                rows.push(
+                    responses
+                        .iter()
+                        .enumerate()
+                        .map(|(a, r)| r[e.index][k] + self.secant.correction(row, a))
+                        .collect(),
+                );
+            }
+        }
+        rows
+    }
+
+    /// The effectors' coordinates now (x, y, z of each), mm.
+    fn effector_coordinates(&self) -> Vec<f64> {
+        self.effectors
+            .iter()
+            .flat_map(|e| self.positions[e.index].to_array())
+            .collect()
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+impl ActuationStage {
+    /// Judges the last inverse step by the model's answer (a trust region,
+    /// as in Levenberg–Marquardt): where the effectors got less than a
+    /// quarter of the predicted improvement, the next steps of the
+    /// actuators that moved are limited to a quarter of theirs; where they
+    /// got most of it, the limit doubles. A soft body's response to its
+    /// actuators changes fast under large strain (a bulging wall takes the
+    /// volume a bend needed), and a full Gauss–Newton step then overshoots
+    /// and oscillates.
+    fn judge_last_step(&mut self) {
+        let Some(last) = self.last.take() else {
+            return;
+        };
+        let now: f64 = self
+            .effectors
+            .iter()
+            .zip(&last.targets)
+            .map(|(e, t)| (self.positions[e.index] - *t).length_squared())
+            .sum::<f64>()
+            .sqrt();
+        let expected = last.before - last.predicted;
+        if expected <= 1e-12 * last.before.max(1e-12) {
+            return;
+        }
+        let rho = (last.before - now) / expected;
+        for (a, d) in last.delta {
+            if rho < 0.25 {
+                self.trust[a] = 0.25 * d.abs().min(self.trust[a]);
+                self.report.trust_shrinks += 1;
+            } else if rho > 0.75 && self.trust[a].is_finite() {
+                self.trust[a] *= 2.0;
+            }
+        }
+    }
+}
+
+/// `J_b · u` over actuator `b`'s points: the change of its measure under
+/// the displacements `u` of every stage point.
+fn measure_response(b: &Actuator, u: &[DVec3]) -> f64 {
+    b.lin
+        .directions
+        .iter()
+        .zip(&u[b.range.clone()])
+        .map(|(d, v)| d.dot(*v))
+        .sum()
+}
+
+fn target(e: &Effector, frame: f64) -> DVec3 {
+    DVec3::new(
+        e.targets[0].at(frame),
+        e.targets[1].at(frame),
+        e.targets[2].at(frame),
+    )
+}
+
+fn clamp(v: f64, bounds: [f64; 2]) -> f64 {
+    v.max(bounds[0]).min(bounds[1])
+}
+
+fn effectors_names(e: &[Effector]) -> Vec<String> {
+    e.iter().map(|e| e.name.clone()).collect()
+}
+
+impl Actuator {
+    /// The effort now.
+    pub(crate) fn effort(&self) -> f64 {
+        self.effort
+    }
+
+    /// The measure at the points' current positions.
+    pub(crate) fn measure(&self) -> f64 {
+        self.lin.measure
+    }
+}
+
+impl ActuatorSeries {
+    /// An empty series for `a`.
+    pub(crate) fn of(a: &Actuator) -> Self {
+        Self {
+            name: a.name.clone(),
+            plugin: a.plugin.clone(),
+            ..Self::default()
+        }
+    }
+}
+
+impl EffectorSeries {
+    /// An empty series named `name`.
+    pub(crate) fn named(name: &str) -> Self {
+        Self {
+            name: name.to_owned(),
+            ..Self::default()
+        }
+    }
+}
