@@ -93,6 +93,8 @@ fn tip_after(r: &ActuationReport) -> [f64; 3] {
     r.effectors[0].position_mm
 }
 
+/// A pressurised thick-walled sphere against Lamé's volume growth at two
+/// mesh levels: both within 1 %, the finer closer.
 #[test]
 fn a_pressurised_thick_sphere_grows_as_lame_says() {
     let work = tempfile::tempdir().unwrap();
@@ -110,8 +112,12 @@ fn a_pressurised_thick_sphere_grows_as_lame_says() {
             100.0 * r.relative_error(),
             r.seconds
         );
-        assert!(r.relative_error().abs() < 0.02, "{r:?}");
+        assert!(r.relative_error().abs() < 0.01, "{r:?}");
     }
+    assert!(
+        fine.relative_error().abs() < coarse.relative_error().abs(),
+        "the finer mesh is closer: {fine:?} vs {coarse:?}"
+    );
 }
 
 /// Inflating bends the finger toward its solid side (−z); the finger
@@ -121,7 +127,7 @@ fn a_pressurised_thick_sphere_grows_as_lame_says() {
 /// corner plane (`voxflex_mesh::proxy`), so the hole a cavity leaves in
 /// the proxy sits half a voxel low on either side and the mirrored
 /// finger's wall is a voxel thinner (2 mm instead of 3 on its 2 mm
-/// cells): measured 1.24 mm against 0.51 mm at 4 kPa. The compliance
+/// cells): measured 2.53 mm against 1.09 mm at 4 kPa (settled). The compliance
 /// itself mirrors exactly (`corotational-fem`'s actuation tests).
 #[test]
 fn pressure_bends_the_finger_away_from_its_cavity_and_the_mirror_the_other_way() {

@@ -42,8 +42,9 @@ pub struct BenchArgs {
     /// and `front.md` into `--out`.
     #[arg(long)]
     pub fronts: bool,
-    /// With `--fronts`: tiny sizes (seconds; what the tests run).
-    #[arg(long, requires = "fronts")]
+    /// With `--fronts` or `--actuators`: tiny sizes (seconds; what the
+    /// tests run).
+    #[arg(long)]
     pub quick: bool,
     /// With `--fronts`: only these fronts (fem_cantilever, fem_elastica,
     /// grab, cut, resample, roi, render; repeatable).
@@ -56,6 +57,12 @@ pub struct BenchArgs {
     /// deformation model (see `bench::stress`).
     #[arg(long, conflicts_with_all = ["fronts", "accuracy"])]
     pub stress: bool,
+    /// Report the soft-robot actuator figures instead: a pressurised
+    /// thick-walled sphere against Lamé at two mesh levels, and the
+    /// four-cavity hydraulic pendulum under inverse control (time per
+    /// frame, settling, tracking error). `--quick` runs 5 frames.
+    #[arg(long, conflicts_with_all = ["fronts", "accuracy", "stress"])]
+    pub actuators: bool,
     /// Stress: scenes per model.
     #[arg(long, default_value_t = BenchOptions::default().stress_scenes)]
     pub stress_scenes: u64,
@@ -86,6 +93,7 @@ impl From<BenchArgs> for BenchOptions {
             only: a.only,
             out: a.out,
             stress: a.stress,
+            actuators: a.actuators,
             stress_scenes: a.stress_scenes,
             stress_frames: a.stress_frames,
             stress_model: a.stress_model,

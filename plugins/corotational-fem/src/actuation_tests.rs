@@ -145,3 +145,36 @@ fn wrong_lengths_and_non_finite_loads_are_refused() {
             .is_err()
     );
 }
+
+/// `resolve` repeats the frame from its start with the loads as set now:
+/// the same as stepping a fresh model with those loads.
+#[test]
+fn resolve_repeats_the_frame_with_the_new_loads() {
+    let frame = FrameInfo {
+        frame: 0,
+        frames: 1,
+        dt_s: 0.0,
+    };
+    let (mut m, id) = beam(ElementKind::P1);
+    assert!(
+        DeformationModel::resolve(&mut m).is_err(),
+        "nothing to repeat before a step"
+    );
+    m.set_point_loads(id, &tip_push(-1e-3)).unwrap();
+    m.step(frame).unwrap();
+    m.set_point_loads(id, &tip_push(-2e-3)).unwrap();
+    assert!(DeformationModel::resolve(&mut m).unwrap().changed);
+    let again = map_on_cpu(&mut m, id, points().len());
+    let (mut fresh, fid) = beam(ElementKind::P1);
+    fresh.set_point_loads(fid, &tip_push(-2e-3)).unwrap();
+    fresh.step(frame).unwrap();
+    let want = map_on_cpu(&mut fresh, fid, points().len());
+    for a in 0..3 {
+        for (g, w) in again[a].iter().zip(&want[a]) {
+            assert!(
+                (g - w).abs() <= 1e-6 * want[2][2].abs().max(1e-9),
+                "{g} vs {w}"
+            );
+        }
+    }
+}

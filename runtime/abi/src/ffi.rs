@@ -377,6 +377,10 @@ pub struct DeformationVTable {
         out: *mut [f64; 3],
         err: *mut ErrorBuf,
     ) -> i32,
+    /// `DeformationModel::resolve`; writes 1 to `out_changed` when the
+    /// field changed.
+    pub resolve:
+        unsafe extern "C" fn(instance: Instance, out_changed: *mut u32, err: *mut ErrorBuf) -> i32,
 }
 
 /// An actuator's points at rest (mirror of

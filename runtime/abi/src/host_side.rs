@@ -506,6 +506,16 @@ impl DeformationModel for DeformationProxy {
         })
     }
 
+    fn resolve(&mut self) -> Result<StepOutcome, ModelError> {
+        let mut changed = 0u32;
+        let (vt, inst) = (self.vtable, self.instance);
+        // SAFETY: plain output alive during the call.
+        self.call(|err| unsafe { (vt.resolve)(inst, &mut changed, err) })?;
+        Ok(StepOutcome {
+            changed: changed != 0,
+        })
+    }
+
     fn compliance(
         &mut self,
         binding: BindingId,

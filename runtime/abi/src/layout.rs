@@ -121,7 +121,8 @@ pub const fn compute() -> u64 {
             removed_tetrahedra,
             notes,
             set_point_loads,
-            compliance
+            compliance,
+            resolve
         }
     );
     hash_type!(

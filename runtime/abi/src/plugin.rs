@@ -574,6 +574,24 @@ unsafe extern "C" fn compliance<P: DeformationPlugin>(
     })
 }
 
+unsafe extern "C" fn resolve<P: DeformationPlugin>(
+    instance: Instance,
+    out_changed: *mut u32,
+    err: *mut ErrorBuf,
+) -> i32 {
+    guard(err, || {
+        // SAFETY: host contract.
+        let s = unsafe { state::<P>(instance) }?;
+        if out_changed.is_null() {
+            return Err("null output".into());
+        }
+        let o = s.model.resolve().map_err(|e| e.to_string())?;
+        // SAFETY: checked non-null.
+        unsafe { *out_changed = u32::from(o.changed) };
+        Ok(())
+    })
+}
+
 /// The vtable of plugin type `P` (used by [`crate::export_deformation_plugin!`]).
 pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
     DeformationVTable {
@@ -590,6 +608,7 @@ pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
         notes: notes::<P>,
         set_point_loads: set_point_loads::<P>,
         compliance: compliance::<P>,
+        resolve: resolve::<P>,
     }
 }
 

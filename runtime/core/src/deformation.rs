@@ -245,6 +245,17 @@ pub trait DeformationModel: Send {
         let _ = (binding, forces, out);
         Err(ModelError::new(NO_ACTUATION))
     }
+
+    /// **Optional capability (actuators):** repeats the last
+    /// [`DeformationModel::step`] from the state it started from, with the
+    /// point loads as they are set now — the frame's grabs, ramped loads
+    /// and clock unchanged. Forces that follow the body (a pressure on the
+    /// walls it moves) reach the equilibrium of their effort this way
+    /// within one frame. Returns whether the field changed. The default
+    /// refuses ([`NO_ACTUATION`]).
+    fn resolve(&mut self) -> Result<StepOutcome, ModelError> {
+        Err(ModelError::new(NO_ACTUATION))
+    }
 }
 
 /// What a model without the actuation capability answers

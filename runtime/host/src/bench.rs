@@ -18,8 +18,13 @@
 //!
 //! `--stress` runs instead the numerical stress suite of every deformation
 //! model on randomized scenes (see [`stress`]).
+//!
+//! `--actuators` reports instead the soft-robot figures: the pressurised
+//! sphere against Lamé at two mesh levels and the four-cavity pendulum
+//! under inverse control (frame time, settling, tracking).
 
 mod accuracy;
+mod actuators;
 mod fronts;
 pub mod lame;
 pub mod stress;
@@ -65,6 +70,9 @@ pub struct BenchOptions {
     pub out: PathBuf,
     /// Run the numerical stress suite instead (see [`stress`]).
     pub stress: bool,
+    /// Run the soft-robot actuator figures instead (see `actuators`):
+    /// Lamé's sphere, the four-cavity pendulum under inverse control.
+    pub actuators: bool,
     /// Stress: scenes per model.
     pub stress_scenes: u64,
     /// Stress: frames per scene.
@@ -91,6 +99,7 @@ impl Default for BenchOptions {
             only: vec![],
             out: PathBuf::from("docs/fronts"),
             stress: false,
+            actuators: false,
             stress_scenes: 250,
             stress_frames: 13,
             stress_model: vec![],
@@ -136,6 +145,9 @@ pub fn run(args: &BenchOptions) -> Result<String, BenchError> {
     }
     if args.stress {
         return stress::run(args);
+    }
+    if args.actuators {
+        return actuators::run(args);
     }
     let repeat = args.repeat.max(1);
     let n = args.size;

@@ -19,7 +19,28 @@ pub fn write_vtu(
     mesh: &TetMesh,
     displacement: Option<[&[f32]; 3]>,
 ) -> Result<(), IoError> {
+    write_vtu_with(path, mesh, displacement, &[])
+}
+
+/// [`write_vtu`] with more per-node vectors (`(name, one per node)`, e.g.
+/// the nodal forces in µN), written as point data beside the
+/// displacement.
+pub fn write_vtu_with(
+    path: &Path,
+    mesh: &TetMesh,
+    displacement: Option<[&[f32]; 3]>,
+    point_vectors: &[(&str, &[glam::DVec3])],
+) -> Result<(), IoError> {
     let n = mesh.nodes.len();
+    if let Some((name, v)) = point_vectors.iter().find(|(_, v)| v.len() != n) {
+        return Err(IoError::InvalidRequest {
+            path: path.to_path_buf(),
+            message: format!(
+                "{name} holds {} vectors but the mesh has {n} nodes",
+                v.len()
+            ),
+        });
+    }
     if let Some(u) = displacement
         && u.iter().any(|a| a.len() != n)
     {
@@ -83,7 +104,18 @@ pub fn write_vtu(
         for i in 0..n {
             writeln!(w, "{} {} {}", u(i, 0), u(i, 1), u(i, 2))?;
         }
-        writeln!(w, "</DataArray>\n</PointData>")?;
+        writeln!(w, "</DataArray>")?;
+        for (name, values) in point_vectors {
+            writeln!(
+                w,
+                r#"<DataArray type="Float64" Name="{name}" NumberOfComponents="3" format="ascii">"#
+            )?;
+            for v in values.iter() {
+                writeln!(w, "{} {} {}", v.x, v.y, v.z)?;
+            }
+            writeln!(w, "</DataArray>")?;
+        }
+        writeln!(w, "</PointData>")?;
         writeln!(w, r#"<CellData Scalars="label">"#)?;
         writeln!(
             w,
@@ -101,6 +133,22 @@ pub fn write_vtu(
 mod tests {
     use super::*;
     use glam::DVec3;
+
+    #[test]
+    fn extra_point_vectors_are_written_and_wrong_lengths_refused() {
+        let nodes = vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z];
+        let m = TetMesh::new("one", nodes, vec![[0, 1, 2, 3]], vec![1]).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.vtu");
+        let f = vec![DVec3::new(0.0, 0.0, -2.5); 4];
+        write_vtu_with(&path, &m, None, &[("actuator_force_uN", &f)]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let field = text.split(r#"Name="actuator_force_uN""#).nth(1).unwrap();
+        let field = &field[..field.find("</DataArray>").unwrap()];
+        assert_eq!(field.matches("0 0 -2.5").count(), 4, "{field}");
+        let e = write_vtu_with(&path, &m, None, &[("short", &f[1..])]).unwrap_err();
+        assert!(e.to_string().contains("short holds 3 vectors"), "{e}");
+    }
 
     #[test]
     fn writes_the_moved_proxy_for_paraview() {

@@ -15,6 +15,7 @@
 //! the actuators are separate plugins (a finger may have a cavity and a
 //! cable); the host is the one place that sees them all and the model.
 
+mod anderson;
 pub mod geometry;
 pub mod inverse;
 pub mod report;

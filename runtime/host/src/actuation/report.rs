@@ -20,6 +20,9 @@ pub struct ActuationReport {
     /// body still was from the equilibrium of its efforts. Above 1 % at
     /// the last frame the run warns.
     pub force_change: Vec<f64>,
+    /// Per frame, the repeated steps (`resolve`) its follower forces took
+    /// to settle.
+    pub settle_iterations: Vec<u32>,
     /// Compliance solves the inverse problems and measure scripts took.
     pub compliance_solves: u64,
     /// Interior-point iterations of the inverse QPs, summed.

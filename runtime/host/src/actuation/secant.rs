@@ -20,12 +20,22 @@
 /// motion is solver noise).
 const SMALLEST_RELATIVE_STEP: f64 = 1e-3;
 
+/// A frame teaches only when the motion its effort change was predicted
+/// to cause is at least this fraction of the motion seen: otherwise the
+/// motion is mostly not the efforts' doing (a fluid's weight settling, a
+/// body still creeping under old efforts) and would be blamed on them.
+const SMALLEST_PREDICTED_SHARE: f64 = 0.2;
+
 /// The correction and the step it waits to judge.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Secant {
     /// Rows: effector coordinates; columns: actuators (mm per effort unit).
     b: Vec<Vec<f64>>,
     pending: Option<Pending>,
+    /// Per actuator, the largest effort or effort change seen: the scale
+    /// its changes are measured in (a change of 1e-5 Pa from 1e-5 Pa is
+    /// not a step).
+    scale: Vec<f64>,
     /// Updates made (for metrics).
     pub(crate) updates: u64,
 }
@@ -46,6 +56,7 @@ impl Secant {
         Self {
             b: vec![vec![0.0; cols]; rows],
             pending: None,
+            scale: vec![0.0; cols],
             updates: 0,
         }
     }
@@ -59,7 +70,9 @@ impl Secant {
             .unwrap_or(0.0)
     }
 
-    /// Remembers a step: each actuator's effort before it and its change,
+    /// Remembers a step: each actuator's effort before it and its change
+    /// (changes are measured against the largest effort each actuator has
+    /// had),
     /// the effector coordinates before it and the change predicted with
     /// the corrected response.
     pub(crate) fn record(
@@ -69,10 +82,16 @@ impl Secant {
         before: Vec<f64>,
         predicted: Vec<f64>,
     ) {
-        let scale = efforts
+        if self.scale.len() < delta.len() {
+            self.scale.resize(delta.len(), 0.0);
+        }
+        for ((s, l), d) in self.scale.iter_mut().zip(efforts).zip(&delta) {
+            *s = s.max(l.abs()).max((l + d).abs()).max(d.abs());
+        }
+        let scale = self
+            .scale
             .iter()
-            .zip(&delta)
-            .map(|(l, d)| (l.abs() + d.abs()).max(f64::MIN_POSITIVE))
+            .map(|s| s.max(f64::MIN_POSITIVE))
             .collect();
         self.pending = Some(Pending {
             delta,
@@ -90,6 +109,16 @@ impl Secant {
         let scaled: Vec<f64> = p.delta.iter().zip(&p.scale).map(|(d, s)| d / s).collect();
         let norm2: f64 = scaled.iter().map(|v| v * v).sum();
         if norm2.sqrt() < SMALLEST_RELATIVE_STEP || after.len() != p.before.len() {
+            return;
+        }
+        let seen: f64 = after
+            .iter()
+            .zip(&p.before)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        let predicted: f64 = p.predicted.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if predicted < SMALLEST_PREDICTED_SHARE * seen {
             return;
         }
         for (row, b) in self.b.iter_mut().enumerate() {
@@ -128,6 +157,15 @@ mod tests {
             s.observe(&[sign * 3.0]);
             assert!((s.correction(0, 0) - 0.5).abs() < 1e-12, "{sign}");
         }
+    }
+
+    #[test]
+    fn motion_the_efforts_did_not_cause_teaches_nothing() {
+        // 0.1 mm predicted, 3 mm seen: a weight settling, not the effort.
+        let mut s = Secant::new(1, 1);
+        s.record(&[0.0], vec![1.0], vec![0.0], vec![0.1]);
+        s.observe(&[3.0]);
+        assert_eq!((s.correction(0, 0), s.updates), (0.0, 0));
     }
 
     #[test]

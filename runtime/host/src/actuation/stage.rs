@@ -9,6 +9,7 @@
 //! point set, so one compliance solve per actuator observes every
 //! effector and every actuator's measure at once.
 
+use super::anderson::Anderson;
 use super::geometry::RestGeometry;
 use super::inverse::{InverseProblem, MeasureRow};
 use super::report::{ActuationReport, ActuatorSeries, EffectorSeries};
@@ -78,11 +79,29 @@ pub(crate) struct ActuationStage {
     last: Option<InverseStep>,
     /// The learned correction of the effectors' response.
     secant: Secant,
+    /// Per actuator, the largest effort change an inverse step has made
+    /// (the scale of its trust region's floor).
+    largest_step: Vec<f64>,
     /// The forces applied in the last step (µN per point).
     applied: Vec<DVec3>,
     /// The settling warning was given.
     warned_unsettled: bool,
 }
+
+/// The follower forces count as settled when they change by less than
+/// this fraction of their size over a repeated step.
+pub const SETTLE_TOLERANCE: f64 = 1e-4;
+
+/// Past iterates the settling mixes ([`Anderson`]).
+const ANDERSON_DEPTH: usize = 4;
+
+/// Repeated steps per frame at most while the follower forces settle.
+pub const SETTLE_ITERATIONS: u32 = 30;
+
+/// The trust region never shrinks below this fraction of the largest
+/// step an actuator has taken: a run of disappointing frames (a moving
+/// target, a body still settling) must not freeze the efforts for good.
+const TRUST_FLOOR: f64 = 0.02;
 
 /// The actuator forces may change by this fraction of their size over
 /// the last frame before the run warns that the body has not settled.
@@ -165,6 +184,7 @@ impl ActuationStage {
             trust: vec![f64::INFINITY; n_actuators],
             last: None,
             secant: Secant::default(),
+            largest_step: vec![0.0; n_actuators],
             applied: Vec::new(),
             warned_unsettled: false,
         })
@@ -274,14 +294,37 @@ impl ActuationStage {
         if size > 0.0 { change / size } else { 0.0 }
     }
 
-    /// Reads the points back after the step, linearises again, and
-    /// records the frame.
+    /// Reads the points back after the step and settles the follower
+    /// forces: while the forces at the new shape differ from those applied
+    /// by more than [`SETTLE_TOLERANCE`], they are applied again and the
+    /// model repeats the frame's step (`resolve`), up to
+    /// [`SETTLE_ITERATIONS`] times. Then linearises at the settled shape
+    /// and records the frame. Returns whether a repeated step moved the
+    /// field.
     pub(crate) fn after_step(
         &mut self,
         model: &mut dyn DeformationModel,
         frame: FrameInfo,
-    ) -> Result<(), ModelError> {
+    ) -> Result<bool, ModelError> {
         self.refresh(model)?;
+        let binding = self.binding.ok_or_else(|| failed("settle", "not bound"))?;
+        let mut moved = false;
+        let mut iterations = 0;
+        let mut mixing = Anderson::new(ANDERSON_DEPTH);
+        while iterations < SETTLE_ITERATIONS && self.force_change() > SETTLE_TOLERANCE {
+            let forces = mixing.next(&self.applied, &self.forces_now());
+            model
+                .set_point_loads(binding, &forces)
+                .map_err(|e| failed("applying the actuator forces", e))?;
+            moved |= model
+                .resolve()
+                .map_err(|e| failed("settling the actuator forces", e))?
+                .changed;
+            self.applied = forces;
+            self.refresh(model)?;
+            iterations += 1;
+        }
+        self.report.settle_iterations.push(iterations);
         let coords = self.effector_coordinates();
         self.secant.observe(&coords);
         let offsets: Vec<(DVec3, DVec3)> = self
@@ -305,7 +348,7 @@ impl ActuationStage {
                 100.0 * SETTLED_FORCE_CHANGE
             );
         }
-        Ok(())
+        Ok(moved)
     }
 
     /// What the stage did, for `metrics.json`.
@@ -553,13 +596,17 @@ impl ActuationStage {
             .sum::<f64>()
             .sqrt();
         let expected = last.before - last.predicted;
-        if expected <= 1e-12 * last.before.max(1e-12) {
-            return;
-        }
-        let rho = (last.before - now) / expected;
+        // A step that promised nothing (at an optimum) cannot disappoint.
+        let rho = if expected <= 1e-12 * last.before.max(1e-12) {
+            1.0
+        } else {
+            (last.before - now) / expected
+        };
         for (a, d) in last.delta {
+            self.largest_step[a] = self.largest_step[a].max(d.abs());
             if rho < 0.25 {
-                self.trust[a] = 0.25 * d.abs().min(self.trust[a]);
+                let floor = TRUST_FLOOR * self.largest_step[a];
+                self.trust[a] = (0.25 * d.abs().min(self.trust[a])).max(floor);
                 self.report.trust_shrinks += 1;
             } else if rho > 0.75 && self.trust[a].is_finite() {
                 self.trust[a] *= 2.0;

@@ -689,9 +689,9 @@ impl Session {
         if let Some(a) = &mut self.actuation {
             a.before_step(m.model.as_mut(), frame)?;
         }
-        let outcome = m.model.step(frame).map_err(ModelCall::Step.failed())?;
+        let mut outcome = m.model.step(frame).map_err(ModelCall::Step.failed())?;
         if let Some(a) = &mut self.actuation {
-            a.after_step(m.model.as_mut(), frame)?;
+            outcome.changed |= a.after_step(m.model.as_mut(), frame)?;
         }
         m.frame += 1;
         let wall = t.elapsed() + std::mem::take(&mut self.pending_interaction);

@@ -24,7 +24,7 @@ use crate::tet_mesh::TetMesh;
 use crate::volume::VolumeView;
 use glam::DVec3;
 use std::sync::Arc;
-use voxflex_io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu};
+use voxflex_io::{msh::read_msh, tetgen::read_tetgen, vtu::write_vtu_with};
 use voxflex_resample::{tets_at_vertex, tets_cut_by};
 
 /// A node moved by less than this (mm) in a step does not count as a
@@ -136,6 +136,10 @@ struct Built<S: MeshSolver> {
     u32: [Vec<f32>; 3],
     /// Bumped by every change of topology (cut, carve).
     version: u64,
+    /// The last frame's nodal forces before the point loads (µN), and the
+    /// state and time step it started from: what `resolve` repeats.
+    frame_forces: Vec<DVec3>,
+    step_start: Option<(NodeState, f64)>,
 }
 
 impl<S: MeshSolver> Built<S> {
@@ -256,6 +260,8 @@ impl<S: MeshSolver> MeshModel<S> {
             gravity,
             u32: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             version: 0,
+            frame_forces: Vec::new(),
+            step_start: None,
         });
         Ok(())
     }
@@ -677,6 +683,8 @@ impl<S: MeshSolver> MeshModel<S> {
     /// from every fixed or grabbed node.
     fn topology_changed(&mut self, what: &str) -> Result<(), ModelError> {
         let b = built_mut(&mut self.built)?;
+        // A step from before the change cannot be repeated on the new mesh.
+        b.step_start = None;
         let mut anchored = b.bc.fixed.clone();
         for g in &self.grabs {
             anchored[g.node as usize] = true;
@@ -837,9 +845,44 @@ impl<S: MeshSolver> MeshModel<S> {
             b.bc.faces
                 .extend(load.faces.iter().map(|&(f, force)| (f, ramp * force)));
         }
+        b.frame_forces.clone_from(&b.bc.force);
+        self.spread_point_loads();
+        let b = built_mut(&mut self.built)?;
+        b.step_start = Some((b.state.clone(), dt_s));
+        self.solve_step(dt_s)
+    }
+
+    /// Adds every binding's point loads to the boundary's nodal forces.
+    fn spread_point_loads(&mut self) {
+        let Some(b) = self.built.as_mut() else {
+            return;
+        };
         for bound in self.bindings.iter().filter(|b| !b.loads.is_empty()) {
             bound.binding.spread(&b.mesh, &bound.loads, &mut b.bc.force);
         }
+    }
+
+    /// The frame's step again, from the state it started from, with the
+    /// point loads as they are now set (the frame's grabs, ramped loads
+    /// and gravity unchanged): how an actuator whose forces follow the
+    /// body (a pressure on moving walls) reaches the equilibrium of its
+    /// effort within one frame. Returns whether the field changed.
+    pub fn resolve(&mut self) -> Result<bool, ModelError> {
+        let b = built_mut(&mut self.built)?;
+        let (start, dt_s) = b
+            .step_start
+            .clone()
+            .ok_or_else(|| ModelError(format!("{}: resolve before a step", S::NAME)))?;
+        b.bc.force.clone_from(&b.frame_forces);
+        b.state = start;
+        self.spread_point_loads();
+        self.solve_step(dt_s)
+    }
+
+    /// The solver's step from the prepared boundary, then the checks, the
+    /// counts and the f32 copy of the displacements.
+    fn solve_step(&mut self, dt_s: f64) -> Result<bool, ModelError> {
+        let b = built_mut(&mut self.built)?;
         let before = b.state.u.clone();
         self.last = b.solver.step(dt_s, &b.bc, &mut b.state)?;
         self.totals.steps += 1;
@@ -879,7 +922,23 @@ impl<S: MeshSolver> MeshModel<S> {
             }
             if let Some(path) = &self.params.vtu {
                 let u = [&b.u32[0][..], &b.u32[1][..], &b.u32[2][..]];
-                write_vtu(path, &b.mesh, Some(u))
+                // Every external force (gravity, loads, actuators), and the
+                // actuators' alone (pressure, fluid weight, cable): the
+                // difference of the force with and without point loads.
+                let actuator: Vec<DVec3> = if b.frame_forces.len() == b.bc.force.len() {
+                    b.bc.force
+                        .iter()
+                        .zip(&b.frame_forces)
+                        .map(|(f, g)| *f - *g)
+                        .collect()
+                } else {
+                    vec![DVec3::ZERO; b.bc.force.len()]
+                };
+                let vectors = [
+                    ("external_force_uN", &b.bc.force[..]),
+                    ("actuator_force_uN", &actuator[..]),
+                ];
+                write_vtu_with(path, &b.mesh, Some(u), &vectors)
                     .map_err(|e| ModelError(format!("{} vtu: {e}", S::NAME)))?;
             }
         }
@@ -1209,6 +1268,11 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         }
         bound.loads = forces.to_vec();
         Ok(())
+    }
+
+    fn resolve(&mut self) -> Result<StepOutcome, ModelError> {
+        let changed = MeshModel::resolve(self)?;
+        Ok(StepOutcome { changed })
     }
 
     /// The solver's compliance on the proxy, spread and read at the points
