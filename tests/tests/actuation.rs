@@ -348,3 +348,46 @@ fn inverse_control_without_a_compliance_and_a_missing_cavity_label_are_refused_b
     .unwrap_err();
     assert!(e.contains("label = 7"), "{e}");
 }
+
+/// The finger's cavity given as a mesh file (OBJ, the box the label fills)
+/// bends the finger as the label's surface does.
+#[test]
+fn a_cavity_mesh_file_acts_like_the_label_it_outlines() {
+    let work = tempfile::tempdir().unwrap();
+    let lo = voxflex_core::glam::DVec3::new(-32.0, -4.0, -1.0);
+    let hi = voxflex_core::glam::DVec3::new(36.0, 4.0, 5.0);
+    let surface = voxflex_core::triangle_surface::TriangleSurface::tiled_box(lo, hi, 8);
+    let mut obj = String::new();
+    for v in &surface.vertices {
+        obj += &format!("v {} {} {}\n", v.x, v.y, v.z);
+    }
+    for t in &surface.triangles {
+        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let path = work.path().join("cavity.obj");
+    std::fs::write(&path, obj).unwrap();
+    let tips = [
+        "cavity = { label = 2 }".to_string(),
+        format!("cavity = {{ file = {:?} }}", path.display().to_string()),
+    ]
+    .map(|geometry| {
+        let tables = format!(
+            "[[actuator]]\nplugin = \"cavity\"\n{geometry}\n[actuator.params]\n\
+             pressure_pa = [[0, 0], [4, 3000]]\n{}",
+            tip(TIP)
+        );
+        let r = run(
+            &finger_scene("phantom:finger", "corotational-fem", 5, &tables),
+            work.path(),
+            "g",
+        )
+        .unwrap();
+        tip_after(&r)[2]
+    });
+    eprintln!(
+        "tip z at 3 kPa: label {} mm, OBJ file {} mm",
+        tips[0], tips[1]
+    );
+    assert!(tips[1] < -0.3, "{tips:?}");
+    assert!((tips[1] - tips[0]).abs() < 0.1 * tips[0].abs(), "{tips:?}");
+}

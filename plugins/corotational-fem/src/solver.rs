@@ -756,6 +756,10 @@ impl MeshSolver for CorotationalFem {
         self.edge_nodes.as_ref().map(EdgeNodes::layer)
     }
 
+    fn is_static(&self) -> bool {
+        self.params.solver == SolverKind::Static
+    }
+
     /// `K⁻¹ f` with the static Newton solve's tangent at `state` (the
     /// warped stiffness plus the positive part of the rotations' own
     /// stiffness, [`Twist::Clamped`], so it is positive definite), by the

@@ -2,8 +2,8 @@
 //!
 //! Every file format voxflex reads or writes: volumes (NIfTI-1, NRRD,
 //! MetaImage), PNG slice snapshots, tetrahedral meshes (VTU, Gmsh MSH,
-//! TetGen) and triangle surfaces (OFF). It owns the format dependencies
-//! (`nifti`, `image`, `flate2`).
+//! TetGen) and triangle surfaces (OFF, OBJ, STL; [`surface_mesh`]). It owns
+//! the format dependencies (`nifti`, `image`, `flate2`, `tobj`, `stl_io`).
 //!
 //! Its own crate because no plugin reads files: the deformation and render
 //! plugins (and the ABI) depend on voxflex-core alone, so a change to a
@@ -54,6 +54,7 @@ pub mod nrrd;
 pub mod off;
 pub mod orientation;
 pub mod png;
+pub mod surface_mesh;
 pub mod tetgen;
 pub mod vtu;
 

@@ -36,7 +36,7 @@ pub fn rest_geometry(
     let surface: TriangleSurface = match (&cavity.file, cavity.label) {
         (Some(file), _) => {
             let path = base_dir.join(file);
-            voxflex_io::off::read_off(&path).map_err(|e| e.to_string())?
+            voxflex_io::surface_mesh::read_surface(&path).map_err(|e| e.to_string())?
         }
         (None, Some(label)) => voxflex_mesh::label_surface::label_surface(source, label)
             .map_err(|e| format!("cavity = {{ label = {label} }}: {e}"))?,

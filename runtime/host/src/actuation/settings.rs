@@ -56,8 +56,8 @@ fn earth() -> [f64; 3] {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CavitySource {
-    /// A closed triangle mesh file (OFF), world mm, normals out of the
-    /// fluid; relative to the scene file.
+    /// A closed triangle mesh file (`.off`, `.obj` or `.stl`), world mm,
+    /// normals out of the fluid; relative to the scene file.
     #[serde(default)]
     pub file: Option<PathBuf>,
     /// A label of the source volume: the boundary of its voxels.

@@ -220,6 +220,15 @@ pub trait MeshSolver: Send + Sized + 'static {
         )))
     }
 
+    /// True when a step finds an equilibrium that does not depend on the
+    /// state it starts from (a static solve of an elastic body), so a
+    /// repeated step ([`MeshModel::resolve`]) may start warm from the last
+    /// answer instead of the frame's start. False (the default) for time
+    /// stepping, whose step depends on where it starts.
+    fn is_static(&self) -> bool {
+        false
+    }
+
     /// Advances `state` by `dt_s` seconds under `bc` (a static solver finds
     /// the equilibrium instead). On return the imposed displacements of
     /// `bc` hold exactly and every value is finite.

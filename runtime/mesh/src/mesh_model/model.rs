@@ -862,9 +862,10 @@ impl<S: MeshSolver> MeshModel<S> {
         }
     }
 
-    /// The frame's step again, from the state it started from, with the
-    /// point loads as they are now set (the frame's grabs, ramped loads
-    /// and gravity unchanged): how an actuator whose forces follow the
+    /// The frame's step again — from the state it started from, or for a
+    /// static solver ([`MeshSolver::is_static`]) from the last answer —
+    /// with the point loads as they are now set (the frame's grabs, ramped
+    /// loads and gravity unchanged): how an actuator whose forces follow the
     /// body (a pressure on moving walls) reaches the equilibrium of its
     /// effort within one frame. Returns whether the field changed.
     pub fn resolve(&mut self) -> Result<bool, ModelError> {
@@ -874,7 +875,11 @@ impl<S: MeshSolver> MeshModel<S> {
             .clone()
             .ok_or_else(|| ModelError(format!("{}: resolve before a step", S::NAME)))?;
         b.bc.force.clone_from(&b.frame_forces);
-        b.state = start;
+        if !b.solver.is_static() {
+            // A time step depends on where it starts: repeat it from there.
+            // A static equilibrium does not, so it starts warm.
+            b.state = start;
+        }
         self.spread_point_loads();
         self.solve_step(dt_s)
     }
