@@ -50,20 +50,42 @@ impl Anderson {
                 .map(|j| diff(&self.residuals[j + 1], &self.residuals[j]))
                 .collect();
             let gamma = least_squares(&dr, &r);
-            let mut x = g;
+            let mut x = g.clone();
             for (j, c) in gamma.iter().enumerate() {
                 let dg = diff(&self.outputs[j + 1], &self.outputs[j]);
                 for (xi, d) in x.iter_mut().zip(dg) {
                     *xi -= c * d;
                 }
             }
-            x
+            // Safeguard: a mix farther from the plain iterate than the
+            // residual itself is an extrapolation the history cannot
+            // support (nearly dependent columns); take the plain iterate
+            // and start the history again.
+            let jump = norm(&diff(&x, &g));
+            if jump.is_finite() && jump <= SAFE_JUMP * norm(&r) {
+                x
+            } else {
+                self.outputs.clear();
+                self.residuals.clear();
+                self.outputs.push(g.clone());
+                self.residuals.push(r);
+                g
+            }
         };
         mixed
             .chunks_exact(3)
             .map(|c| DVec3::new(c[0], c[1], c[2]))
             .collect()
     }
+}
+
+/// The largest distance from the plain iterate a mix may take, in
+/// residual norms: a fixed point contracting by ρ lies ρ/(1 − ρ)
+/// residuals away, so 20 allows ρ up to 0.95.
+const SAFE_JUMP: f64 = 20.0;
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
 fn diff(a: &[f64], b: &[f64]) -> Vec<f64> {

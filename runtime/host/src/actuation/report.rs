@@ -23,6 +23,9 @@ pub struct ActuationReport {
     /// Per frame, the repeated steps (`resolve`) its follower forces took
     /// to settle.
     pub settle_iterations: Vec<u32>,
+    /// Repeated steps that failed (the model kept its last converged
+    /// state; each also a warning).
+    pub settle_failures: u64,
     /// Compliance solves the inverse problems and measure scripts took.
     pub compliance_solves: u64,
     /// Interior-point iterations of the inverse QPs, summed.

@@ -98,6 +98,10 @@ const ANDERSON_DEPTH: usize = 4;
 /// Repeated steps per frame at most while the follower forces settle.
 pub const SETTLE_ITERATIONS: u32 = 30;
 
+/// Effort changes below this fraction of the efforts' scale are the QP's
+/// rounding, not a step.
+const QP_NOISE: f64 = 1e-9;
+
 /// The trust region never shrinks below this fraction of the largest
 /// step an actuator has taken: a run of disappointing frames (a moving
 /// target, a body still settling) must not freeze the efforts for good.
@@ -316,10 +320,22 @@ impl ActuationStage {
             model
                 .set_point_loads(binding, &forces)
                 .map_err(|e| failed("applying the actuator forces", e))?;
-            moved |= model
-                .resolve()
-                .map_err(|e| failed("settling the actuator forces", e))?
-                .changed;
+            match model.resolve() {
+                Ok(o) => moved |= o.changed,
+                Err(e) => {
+                    // The model keeps its last converged state: the frame
+                    // ends unsettled, and says so.
+                    self.report.settle_failures += 1;
+                    tracing::warn!(
+                        "actuation, frame {}: a repeated step to settle the actuator forces \
+                         failed ({e}); the frame ends unsettled — ramp the efforts more slowly",
+                        frame.frame
+                    );
+                    moved = true;
+                    self.refresh(model)?;
+                    break;
+                }
+            }
             self.applied = forces;
             self.refresh(model)?;
             iterations += 1;
@@ -525,9 +541,17 @@ impl ActuationStage {
                 self.actuators[a].effort = *v;
             }
         }
+        let largest = delta.iter().fold(0.0f64, |m, d| m.max(d.abs()));
         for (&a, d) in unknown.iter().zip(delta) {
             let act = &mut self.actuators[a];
-            act.effort = clamp(act.effort + d, act.lin.effort_bounds);
+            // The interior-point answer carries its own rounding (1e-10 of
+            // the problem's scale): a change that small is no change, and
+            // an effort of 1e-10 Pa on a body at rest would hand the model
+            // a load whose only scale is rounding noise.
+            let noise = QP_NOISE * act.effort.abs().max(largest).max(1.0);
+            if d.abs() > noise {
+                act.effort = clamp(act.effort + d, act.lin.effort_bounds);
+            }
         }
         let change: Vec<f64> = self
             .actuators
