@@ -58,16 +58,7 @@ fn bad<T>(key: &str, value: impl std::fmt::Debug, why: &str) -> Result<T, ModelE
 
 /// A toml parse error as one line naming the offending line of the text.
 fn toml_error(text: &str, e: &toml::de::Error) -> ModelError {
-    let msg = e.message().trim().replace('\n', " ");
-    match e.span() {
-        Some(span) => {
-            let start = span.start.min(text.len());
-            let line_no = text[..start].matches('\n').count() + 1;
-            let line = text.lines().nth(line_no - 1).unwrap_or("").trim();
-            ModelError(format!("[actuator.params] line {line_no} `{line}`: {msg}"))
-        }
-        None => ModelError(format!("[actuator.params]: {msg}")),
-    }
+    voxflex_core::error::toml_table_error("[actuator.params]", text, e)
 }
 
 impl CableParams {

@@ -254,16 +254,7 @@ fn bad<T>(key: &str, why: impl std::fmt::Display) -> Result<T, ModelError> {
 
 /// A toml parse error as one line naming the offending line of the text.
 fn toml_error(text: &str, e: &toml::de::Error) -> ModelError {
-    let msg = e.message().trim().replace('\n', " ");
-    match e.span() {
-        Some(span) => {
-            let start = span.start.min(text.len());
-            let line_no = text[..start].matches('\n').count() + 1;
-            let line = text.lines().nth(line_no - 1).unwrap_or("").trim();
-            ModelError(format!("[render] line {line_no} `{line}`: {msg}"))
-        }
-        None => ModelError(format!("[render]: {msg}")),
-    }
+    voxflex_core::error::toml_table_error("[render]", text, e)
 }
 
 /// `v` is finite **as the f32 the renderer computes with**: a finite f64

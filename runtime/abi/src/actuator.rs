@@ -4,7 +4,9 @@
 
 use crate::ffi::*;
 use crate::guard::guard;
-use crate::host_side::{HostServices, checked_call, create_proxy_instance, plugin_error};
+use crate::host_side::{
+    HostServices, checked_call, create_proxy_instance, plugin_error, read_notes,
+};
 use crate::plugin::{
     HostContext, create_instance, destroy_instance, state, vectors_in, vectors_out,
 };
@@ -362,16 +364,7 @@ impl ActuatorModel for ActuatorProxy {
 
     fn notes(&mut self) -> Result<ModelNotes, ModelError> {
         let (vt, inst) = (self.vtable, self.instance);
-        let mut storage = vec![0u8; crate::notes_text::HOST_CAPACITY];
-        let mut out = ErrorBuf {
-            ptr: storage.as_mut_ptr(),
-            cap: storage.len(),
-            len: 0,
-        };
-        // SAFETY: `out` points at `storage`, alive during the call.
-        self.call(|err| unsafe { (vt.notes)(inst, &mut out, err) })?;
-        storage.truncate(out.len.min(storage.len()));
-        crate::notes_text::decode(&storage)
-            .map_err(|e| plugin_error(&self.name, &format!("its notes: {e}")))
+        // SAFETY: `read_notes` passes buffers alive during the call.
+        read_notes(&self.name, |out, err| unsafe { (vt.notes)(inst, out, err) })
     }
 }

@@ -312,6 +312,24 @@ pub(crate) unsafe fn create_proxy_instance(
     Ok(instance)
 }
 
+/// A plugin's notes: `call` writes them into the host buffer it is given
+/// (`name<TAB>value` lines, [`crate::notes_text`]); errors name the plugin.
+pub(crate) fn read_notes(
+    name: &str,
+    call: impl FnOnce(*mut ErrorBuf, *mut ErrorBuf) -> i32,
+) -> Result<ModelNotes, ModelError> {
+    let mut storage = vec![0u8; crate::notes_text::HOST_CAPACITY];
+    let mut out = ErrorBuf {
+        ptr: storage.as_mut_ptr(),
+        cap: storage.len(),
+        len: 0,
+    };
+    checked_call(name, |err| call(&mut out, err))?;
+    storage.truncate(out.len.min(storage.len()));
+    crate::notes_text::decode(&storage)
+        .map_err(|e| ModelError(format!("plugin '{name}': its notes: {e}")))
+}
+
 /// An error reported by (or about) plugin `name`.
 pub(crate) fn plugin_error(name: &str, message: &str) -> ModelError {
     ModelError(format!("plugin `{name}`: {message}"))
@@ -482,19 +500,9 @@ impl DeformationModel for DeformationProxy {
     }
 
     fn notes(&mut self) -> Result<ModelNotes, ModelError> {
-        let vt = self.vtable;
-        let inst = self.instance;
-        let mut storage = vec![0u8; crate::notes_text::HOST_CAPACITY];
-        let mut out = ErrorBuf {
-            ptr: storage.as_mut_ptr(),
-            cap: storage.len(),
-            len: 0,
-        };
-        // SAFETY: `out` points at `storage`, alive during the call.
-        self.call(|err| unsafe { (vt.notes)(inst, &mut out, err) })?;
-        storage.truncate(out.len.min(storage.len()));
-        crate::notes_text::decode(&storage)
-            .map_err(|e| ModelError(format!("plugin '{}': its notes: {e}", self.name)))
+        let (vt, inst) = (self.vtable, self.instance);
+        // SAFETY: `read_notes` passes buffers alive during the call.
+        read_notes(&self.name, |out, err| unsafe { (vt.notes)(inst, out, err) })
     }
 
     fn set_point_loads(&mut self, binding: BindingId, forces: &[DVec3]) -> Result<(), ModelError> {

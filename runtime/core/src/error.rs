@@ -97,6 +97,22 @@ impl ModelError {
     }
 }
 
+/// A TOML parse error of a plugin's table `table` (e.g.
+/// `[actuator.params]`) as one line naming the offending line of `text`
+/// and what is wrong: how every plugin reports a table it cannot parse.
+pub fn toml_table_error(table: &str, text: &str, e: &toml::de::Error) -> ModelError {
+    let msg = e.message().trim().replace('\n', " ");
+    match e.span() {
+        Some(span) => {
+            let start = span.start.min(text.len());
+            let line_no = text[..start].matches('\n').count() + 1;
+            let line = text.lines().nth(line_no - 1).unwrap_or("").trim();
+            ModelError(format!("{table} line {line_no} `{line}`: {msg}"))
+        }
+        None => ModelError(format!("{table}: {msg}")),
+    }
+}
+
 impl From<GpuError> for ModelError {
     fn from(e: GpuError) -> Self {
         Self(e.to_string())
