@@ -450,3 +450,125 @@ volume_mm3 = [[0, 0], [14, 15000]]
     );
     assert_eq!(runs[0].qp_failures + runs[1].qp_failures, 0);
 }
+
+/// `[actuation] settle_iterations = 0` (interactive): each frame applies
+/// the pressure's forces as they were at its start, so a held pressure
+/// reaches the settled answer over frames instead of within each; it
+/// repeats no step, and `force_change` says how far behind each frame was.
+/// A bad value names its key; the table without actuators is refused.
+#[test]
+fn lagged_follower_forces_reach_the_settled_bend_over_frames() {
+    let work = tempfile::tempdir().unwrap();
+    let held = format!(
+        "{}{}",
+        cavity("pressure_pa = [[0, 0], [2, 3000]]"),
+        tip(TIP)
+    );
+    let settled = run(
+        &finger_scene("phantom:finger", "corotational-fem", 24, &held),
+        work.path(),
+        "settled",
+    )
+    .unwrap();
+    let lagged_tables = format!("{held}[actuation]\nsettle_iterations = 0\n");
+    let lagged = run(
+        &finger_scene("phantom:finger", "corotational-fem", 24, &lagged_tables),
+        work.path(),
+        "lagged",
+    )
+    .unwrap();
+    eprintln!(
+        "settled tip {:?} ({:?} repeats), lagged tip {:?}, force change per frame {:?}",
+        tip_after(&settled),
+        settled.settle_iterations,
+        tip_after(&lagged),
+        lagged.force_change
+    );
+    assert!(settled.settle_iterations.iter().any(|&n| n > 0));
+    assert!(lagged.settle_iterations.iter().all(|&n| n == 0));
+    // While the pressure ramps the lag is visible…
+    assert!(
+        lagged.force_change[1] > settled.force_change[1],
+        "{lagged:?}"
+    );
+    // …and twenty frames after it stopped ramping it has caught up
+    // (measured: 1 % behind after ten, 4e-5 after twenty-two).
+    let (a, b) = (tip_after(&settled)[2], tip_after(&lagged)[2]);
+    assert!(a < -0.5, "the settled finger bends: {a}");
+    assert!(
+        (a - b).abs() <= 1e-3 * a.abs(),
+        "settled {a} mm, lagged {b} mm"
+    );
+    assert!(*lagged.force_change.last().unwrap() < 1e-3, "{lagged:?}");
+
+    let bad = format!("{held}[actuation]\nsettle_tolerance = 2\n");
+    let e = run(
+        &finger_scene("phantom:finger", "corotational-fem", 1, &bad),
+        work.path(),
+        "bad",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("settle_tolerance") && e.contains("(0, 1)"),
+        "{e}"
+    );
+    let orphan = "[actuation]\nsettle_iterations = 0\n";
+    let e = run(
+        &finger_scene("phantom:finger", "corotational-fem", 1, orphan),
+        work.path(),
+        "orphan",
+    )
+    .unwrap_err();
+    assert!(e.contains("no [[actuator]]"), "{e}");
+}
+
+/// Under inverse control the fluid decides the reach, as the paper shows:
+/// a target 2 mm below the finger's rest tip is reached by the pneumatic
+/// finger within 1 % of its length (inflating bends it down; one actuator
+/// traces a curve, which passes 0.57 mm from this point), while the hydraulic one already hangs
+/// lower under its water's weight with no pressure at all — a pressure
+/// only bends it further — so the target is out of its reach and it ends
+/// at its unpressurised sag, the closest it can be.
+#[test]
+fn hydraulic_and_pneumatic_fingers_differ_in_reach_under_inverse_control() {
+    let work = tempfile::tempdir().unwrap();
+    let target = [TIP[0], TIP[1], TIP[2] - 2.0];
+    let [air, water] = ["\"air\"", "\"water\""].map(|fluid| {
+        let tables = format!(
+            "{}{}",
+            cavity(&format!("fluid = {fluid}\nmax_pressure_pa = 30000")),
+            tip(target)
+        );
+        run(
+            &finger_scene("phantom:finger", "corotational-fem", 15, &tables),
+            work.path(),
+            &format!("reach-{}", fluid.trim_matches('"')),
+        )
+        .unwrap()
+    });
+    let last = |r: &ActuationReport| {
+        (
+            *r.effectors[0].distance_mm.last().unwrap(),
+            *r.actuators[0].effort.last().unwrap(),
+        )
+    };
+    let ((d_air, p_air), (d_water, p_water)) = (last(&air), last(&water));
+    eprintln!(
+        "target {target:?}: air ends {d_air:.3} mm away at {p_air:.0} Pa (tip {:?}); water \
+         {d_water:.3} mm away at {p_water:.0} Pa (tip {:?})",
+        tip_after(&air),
+        tip_after(&water)
+    );
+    assert!(d_air < 0.8, "the pneumatic finger reaches it: {d_air} mm");
+    assert!(p_air > 100.0, "by inflating: {p_air} Pa");
+    assert!(
+        tip_after(&water)[2] < target[2] - 0.5,
+        "the water's weight alone takes the hydraulic tip below the target: {:?}",
+        tip_after(&water)
+    );
+    assert!(
+        p_water < 0.05 * p_air,
+        "so its closest is (about) no pressure: {p_water} Pa against air's {p_air} Pa"
+    );
+    assert!(d_water > d_air + 0.5, "water {d_water} mm, air {d_air} mm");
+}

@@ -5,6 +5,10 @@
 //! `raycast` plugin: `mode`, `shading.enabled`, `transfer_function`,
 //! `clip_planes`, `crop_box`). Every other key of the opened scene's table
 //! (background, sampling, …) is kept as it was.
+//!
+//! The plugin's `configure` keeps a key its text leaves out, so no clip
+//! plane and no crop box are written out as such (`clip_planes = []`,
+//! `crop_box = "none"`): left out, the last ones sent would stay.
 
 use crate::tf_points::{TfPoint, TfPoints};
 use voxflex_core::glam::DVec3;
@@ -57,6 +61,9 @@ pub struct RenderOptions {
 
 /// The preset the raycast plugin uses when the table names none.
 const DEFAULT_PRESET: &str = "ct-bone";
+
+/// The raycast plugin's `crop_box` value for "no crop box".
+const NO_CROP_BOX: &str = "none";
 
 fn mm3(v: Option<&toml::Value>) -> Option<[f64; 3]> {
     let a = v?.as_array()?;
@@ -169,24 +176,23 @@ impl RenderOptions {
             }
         }
         t.insert("transfer_function".into(), tf.into());
+        // Written even when off: a reconfigure without the keys would keep
+        // the planes and box last sent.
         let planes: Vec<toml::Value> = (0..3)
             .filter(|&a| self.clips[a].enabled)
             .map(|a| plane_table(a, &self.clips[a]).into())
             .collect();
-        if planes.is_empty() {
-            t.remove("clip_planes");
-        } else {
-            t.insert("clip_planes".into(), planes.into());
-        }
-        if self.crop.enabled {
+        t.insert("clip_planes".into(), planes.into());
+        let crop_box = if self.crop.enabled {
             let mut b = toml::Table::new();
             let (min, max) = self.crop_corners();
             b.insert("min".into(), vec3(min));
             b.insert("max".into(), vec3(max));
-            t.insert("crop_box".into(), b.into());
+            b.into()
         } else {
-            t.remove("crop_box");
-        }
+            NO_CROP_BOX.into()
+        };
+        t.insert("crop_box".into(), crop_box);
         t
     }
 
@@ -341,7 +347,8 @@ mod tests {
         );
         assert!(!o.mip && o.shading && !o.crop.enabled);
         let t = o.params_table(&base);
-        assert!(!t.contains_key("clip_planes") && !t.contains_key("crop_box"));
+        assert_eq!(t["clip_planes"].as_array().map(Vec::len), Some(0));
+        assert_eq!(t["crop_box"].as_str(), Some(NO_CROP_BOX));
         o.mip = true;
         o.shading = false;
         o.clips[2] = AxisClip {
@@ -365,5 +372,28 @@ mod tests {
             Some([-10.0, -100.0, -100.0]),
             "each axis ordered"
         );
+    }
+
+    #[test]
+    fn unticked_clip_planes_and_crop_box_are_written_as_off() {
+        // A scene that clips and crops, both then turned off in the panel.
+        let base = table(
+            r#"
+            clip_planes = [{ point = [0, 0, 7], normal = [0, 0, 1] }]
+            crop_box = { min = [-50, -40, -30], max = [50, 40, 30] }
+            "#,
+        );
+        let mut o = RenderOptions::from_params(&base, bounds(), (0.0, 1.0));
+        assert!(o.clips[2].enabled && o.crop.enabled);
+        o.clips[2].enabled = false;
+        o.crop.enabled = false;
+        let out = table(&o.params_toml(&base));
+        // Left out, the plugin would keep the ones it was given last.
+        assert_eq!(out["clip_planes"], toml::Value::Array(vec![]));
+        assert_eq!(out["crop_box"].as_str(), Some(NO_CROP_BOX));
+        // And it reads back as off, the sliders where the volume ends.
+        let back = RenderOptions::from_params(&out, bounds(), (0.0, 1.0));
+        assert!(!back.clips.iter().any(|c| c.enabled) && !back.crop.enabled);
+        assert_eq!((back.crop.min, back.crop.max), ([-100.0; 3], [100.0; 3]));
     }
 }

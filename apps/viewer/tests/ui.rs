@@ -9,7 +9,12 @@
 //!   a point next to the ventricle changes);
 //! - choosing another model in the combo box keeps the ROI maps;
 //! - a cut line drawn across the head, then a grab on one side, opens a
-//!   gap at the cut (air where the uncut tissue stays tissue);
+//!   gap at the cut (air where the uncut tissue stays tissue); seen from
+//!   the front along the cut plane, the 3D view cropped to a slab around
+//!   the pull, the gap turns tissue pixels to background, and the axial
+//!   slice shows air along the cut line;
+//! - unticking the crop box, or the only clip plane, in the *Rendering*
+//!   panel gives the uncropped 3D image back;
 //! - a carve click turns the voxel under the brush centre to air;
 //! - the parameter form files a bad TOML text and the plugin's refusal
 //!   under their key, and Apply rebuilds the model;
@@ -30,8 +35,10 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use std::path::PathBuf;
 use std::time::Duration;
+use voxflex_core::camera::Camera;
 use voxflex_core::glam::DVec3;
-use voxflex_runtime::session::Seed;
+use voxflex_runtime::session::{Seed, SliceImage};
+use voxflex_runtime::visualise::RgbaImage;
 use voxflex_viewer::app::ViewerApp;
 use voxflex_viewer::protocol::Command;
 use voxflex_viewer::protocol::SliceFrame;
@@ -268,20 +275,30 @@ fn grab_drag_axial(h: &mut Harness<'static, ViewerApp>, from: DVec3, to: DVec3) 
 /// whole axial slice.
 fn pull_left_half(cut_first: bool) -> f32 {
     let mut h = open_phantom();
-    // Just right of the cut line, in brain, away from the ventricles.
-    let probe = DVec3::new(-2.0, 40.0, 15.0);
-    let value = put_cursor(&mut h, probe);
+    pull_left_half_of(&mut h, cut_first);
+    h.state().cursor_value()
+}
+
+/// Just right of the cut line of [`pull_left_half_of`], in brain, away
+/// from the ventricles.
+const PULL_PROBE: DVec3 = DVec3::new(-2.0, 40.0, 15.0);
+
+/// [`pull_left_half`] in `h`: the cursor at [`PULL_PROBE`], the cut along
+/// x = 0 (when `cut_first`), the pull and five settling steps.
+fn pull_left_half_of(h: &mut Harness<'static, ViewerApp>, cut_first: bool) {
+    let probe = PULL_PROBE;
+    let value = put_cursor(h, probe);
     assert!((value - 30.0).abs() < 1.0, "brain at the probe: {value}");
     if cut_first {
         h.get_by_label("Cut").click();
         h.step();
         let steps = h.state().steps();
         drag_axial(
-            &mut h,
+            h,
             DVec3::new(0.0, -118.0, 15.0),
             DVec3::new(0.0, 118.0, 15.0),
         );
-        wait(&mut h, "the step after the cut", |a| a.steps() > steps);
+        wait(h, "the step after the cut", |a| a.steps() > steps);
         assert!(
             h.state().messages().iter().all(|m| !m.starts_with("error")),
             "{:?}",
@@ -289,7 +306,7 @@ fn pull_left_half(cut_first: bool) -> f32 {
         );
     }
     grab_drag_axial(
-        &mut h,
+        h,
         DVec3::new(-30.0, 40.0, 15.0),
         DVec3::new(-50.0, 40.0, 15.0),
     );
@@ -297,9 +314,8 @@ fn pull_left_half(cut_first: bool) -> f32 {
     for _ in 0..5 {
         let steps = h.state().steps();
         h.get_by_label("Step").click();
-        wait(&mut h, "a step", |a| a.steps() > steps);
+        wait(h, "a step", |a| a.steps() > steps);
     }
-    h.state().cursor_value()
 }
 
 #[test]
@@ -311,6 +327,245 @@ fn a_cut_then_a_grab_opens_a_gap_across_the_cut_line() {
     // left half pulls away and the probe lies in the gap (air, −1000).
     assert!(joined > -500.0, "uncut: tissue at the probe, got {joined}");
     assert!(cut < -500.0, "cut: the gap at the probe, got {cut}");
+}
+
+/// Pixels a side of the 3D image in the gap test: small (fast), the gap
+/// still a few pixels wide.
+const GAP_RENDER_PX: u32 = 192;
+
+/// Waits for a full-quality 3D image `px` pixels a side, with every
+/// rendering option set so far applied, and returns it.
+fn image_at_size(h: &mut Harness<'static, ViewerApp>, px: u32) -> RgbaImage {
+    h.state_mut().set_render_size(px);
+    wait(h, &format!("a 3D image {px} px a side"), |a| {
+        a.render_panel().settled() && a.ready() && a.render_image().0.is_some_and(|i| i.width == px)
+    });
+    h.state().render_image().0.expect("a 3D image").clone()
+}
+
+/// The renderer's background (black) or nearly so.
+fn is_background(rgba: &[u8]) -> bool {
+    rgba[0].max(rgba[1]).max(rgba[2]) < 8
+}
+
+/// Which pixels of `camera`'s image see within `half` mm of the cut plane
+/// x = 0, where their rays cross the pull's plane (y of [`PULL_PROBE`]).
+fn cut_band(camera: &Camera, half: f64) -> Vec<bool> {
+    let mut band = Vec::with_capacity((camera.width * camera.height) as usize);
+    for py in 0..camera.height {
+        for px in 0..camera.width {
+            let r = camera.ray(px as f64, py as f64);
+            let p = r.origin + r.dir * ((PULL_PROBE.y - r.origin.y) / r.dir.y);
+            band.push(p.x.abs() <= half);
+        }
+    }
+    band
+}
+
+/// Rows of the axial slice `s` with an air pixel (black in the
+/// soft-tissue window) within 30 mm of the cut line x = 0 and 70 mm of
+/// y = 0: all brain in the phantom at the probe's height.
+fn rows_with_air_at_the_cut(s: &SliceImage) -> usize {
+    (0..s.image.height)
+        .filter(|&row| {
+            (0..s.image.width).any(|col| {
+                let p = s.pixel_to_world(col, row).expect("in the image");
+                p.x.abs() <= 30.0
+                    && p.y.abs() <= 70.0
+                    && s.image.pixels[row * s.image.width + col] == 0
+            })
+        })
+        .count()
+}
+
+#[test]
+fn a_cut_shows_a_gap_in_the_rendered_image_and_on_the_slice() {
+    let mut h = open_phantom();
+    wait(&mut h, "the rendering options", |a| {
+        a.render_panel().options().is_some()
+    });
+    // The front camera looks along +y, in the cut plane x = 0: the gap is
+    // seen edge-on, through. The 3D view is cropped to a slab 20 mm thick
+    // across y around the pull's plane: outside it the gap stays shut, and
+    // the face, brain and skull there would hide it.
+    let camera = Camera {
+        width: GAP_RENDER_PX,
+        height: GAP_RENDER_PX,
+        ..h.state().opened().expect("opened").camera
+    };
+    assert!(camera.basis().2.dot(DVec3::Y) > 0.999, "{camera:?}");
+    let (lo, hi) = h.state().opened().expect("opened").grid.world_bounds();
+    let mut o = h.state().render_panel().options().expect("options").clone();
+    o.crop.enabled = true;
+    o.crop.min = [lo.x, PULL_PROBE.y - 10.0, lo.z];
+    o.crop.max = [hi.x, PULL_PROBE.y + 10.0, hi.z];
+    h.state_mut().render_panel_mut().set_options(o);
+    put_cursor(&mut h, PULL_PROBE);
+    let slice_before = h.state().slices().expect("slices")[0].slice.clone();
+    let before = image_at_size(&mut h, GAP_RENDER_PX);
+    // Watched at half size: the first image back at full size is rendered
+    // after the pull's last step (the worker takes commands in order).
+    h.state_mut().set_render_size(GAP_RENDER_PX / 2);
+    pull_left_half_of(&mut h, true);
+    let after = image_at_size(&mut h, GAP_RENDER_PX);
+    let slice_after = h.state().slices().expect("slices")[0].slice.clone();
+    assert_eq!(slice_after.index, slice_before.index, "the same slice");
+
+    let band = cut_band(&camera, 30.0);
+    let (mut tissue, mut opened, mut background) = (0, 0, [0, 0]);
+    for ((b, a), &inside) in before
+        .pixels
+        .chunks_exact(4)
+        .zip(after.pixels.chunks_exact(4))
+        .zip(&band)
+    {
+        if inside {
+            background[0] += usize::from(is_background(b));
+            background[1] += usize::from(is_background(a));
+            tissue += usize::from(!is_background(b));
+            opened += usize::from(!is_background(b) && is_background(a));
+        }
+    }
+    let rows = [&slice_before, &slice_after].map(rows_with_air_at_the_cut);
+    eprintln!(
+        "cut band ({} px): background {} before, {} after; {opened} of its {tissue} \
+         tissue px now background; axial slice rows with air at the cut: {} before, {} after",
+        band.iter().filter(|&&b| b).count(),
+        background[0],
+        background[1],
+        rows[0],
+        rows[1]
+    );
+    assert!(
+        tissue > 1000,
+        "the slab's brain fills the band: {tissue} px"
+    );
+    // Uncut, the pull stretches the tissue: no pixel of it turns to
+    // background.
+    assert!(
+        opened >= 100,
+        "the gap shows as background in the 3D image: {opened} px"
+    );
+    assert_eq!(rows[0], 0, "brain all along the cut line before the cut");
+    assert!(
+        rows[1] >= 20,
+        "air along the cut line on the axial slice: {} rows",
+        rows[1]
+    );
+}
+
+/// Pixels a side of the 3D image in the crop-off test.
+const CROP_RENDER_PX: u32 = 128;
+
+/// How many pixels of `image` show the head (not the background).
+fn tissue_pixels(image: &RgbaImage) -> usize {
+    image
+        .pixels
+        .chunks_exact(4)
+        .filter(|p| !is_background(p))
+        .count()
+}
+
+/// How many pixels of `a` and `b` differ, and by how much at most (of
+/// 255, any channel).
+fn pixel_difference(a: &RgbaImage, b: &RgbaImage) -> (usize, u8) {
+    a.pixels
+        .chunks_exact(4)
+        .zip(b.pixels.chunks_exact(4))
+        .map(|(p, q)| {
+            p.iter()
+                .zip(q)
+                .map(|(x, y)| x.abs_diff(*y))
+                .max()
+                .unwrap_or(0)
+        })
+        .filter(|&d| d > 0)
+        .fold((0, 0), |(n, most), d| (n + 1, most.max(d)))
+}
+
+/// Clicks the *Rendering* panel's checkbox `label` and checks that the
+/// panel took it (a reconfigure is then on its way).
+fn tick(h: &mut Harness<'static, ViewerApp>, label: &str, enabled: impl Fn(&ViewerApp) -> bool) {
+    let before = enabled(h.state());
+    h.get_by_label(label).click();
+    h.step();
+    assert_ne!(enabled(h.state()), before, "{label} toggled");
+}
+
+#[test]
+fn unticking_the_crop_box_or_the_clip_plane_gives_the_whole_image_back() {
+    let mut h = open_phantom();
+    wait(&mut h, "the rendering options", |a| {
+        a.render_panel().options().is_some()
+    });
+    h.get_by_label("Rendering").click();
+    // The panel settles its width over a few frames; click after.
+    for _ in 0..6 {
+        h.step();
+    }
+    let whole = image_at_size(&mut h, CROP_RENDER_PX);
+
+    // Crop to the half x ≥ 0 (the front camera sees x across the image),
+    // then untick *Crop box*.
+    let (lo, hi) = h.state().opened().expect("opened").grid.world_bounds();
+    let mut o = h.state().render_panel().options().expect("options").clone();
+    o.crop.enabled = true;
+    o.crop.min = [0.0, lo.y, lo.z];
+    o.crop.max = hi.to_array();
+    h.state_mut().render_panel_mut().set_options(o);
+    let cropped = image_at_size(&mut h, CROP_RENDER_PX);
+    let crop_on = |a: &ViewerApp| a.render_panel().options().expect("options").crop.enabled;
+    tick(&mut h, "Crop box", crop_on);
+    let uncropped = image_at_size(&mut h, CROP_RENDER_PX);
+
+    // The same with the clip plane across z (at the volume's centre,
+    // keeping +z), ticked and unticked in the panel.
+    let clip_on = |a: &ViewerApp| a.render_panel().options().expect("options").clips[2].enabled;
+    tick(&mut h, "clip z", clip_on);
+    let clipped = image_at_size(&mut h, CROP_RENDER_PX);
+    tick(&mut h, "clip z", clip_on);
+    let unclipped = image_at_size(&mut h, CROP_RENDER_PX);
+
+    let count = [&whole, &cropped, &uncropped, &clipped, &unclipped].map(tissue_pixels);
+    let (crop_diff, clip_diff) = (
+        pixel_difference(&uncropped, &whole),
+        pixel_difference(&unclipped, &whole),
+    );
+    eprintln!(
+        "head pixels of {px}²: {} whole, {} cropped, {} unticked ({} px differ from whole, \
+         by ≤ {}/255); {} clipped, {} unticked ({} px differ, by ≤ {}/255)",
+        count[0],
+        count[1],
+        count[2],
+        crop_diff.0,
+        crop_diff.1,
+        count[3],
+        count[4],
+        clip_diff.0,
+        clip_diff.1,
+        px = CROP_RENDER_PX,
+    );
+    assert!(count[0] > 2000, "the head fills the view: {}", count[0]);
+    // The crop and the clip each take a clear part of the head away…
+    for (what, n) in [("cropped", count[1]), ("clipped", count[3])] {
+        assert!(
+            n * 10 < count[0] * 8,
+            "{what}: {n} head px, whole {}",
+            count[0]
+        );
+    }
+    // …and unticked, the whole head is back (the same renderer settings
+    // as at first: the same image, within a pixel count's rounding).
+    let tolerance = count[0] / 200;
+    for (what, n) in [("crop box", count[2]), ("clip plane", count[4])] {
+        assert!(
+            n.abs_diff(count[0]) <= tolerance,
+            "{what} unticked: {n} head px, whole {} (cropped {}, clipped {})",
+            count[0],
+            count[1],
+            count[3]
+        );
+    }
 }
 
 #[test]

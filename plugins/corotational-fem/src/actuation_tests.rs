@@ -26,6 +26,7 @@ fn points() -> Vec<[f32; 3]> {
 fn params(element: ElementKind) -> FemParams {
     FemParams {
         element,
+        compliance_cg_tolerance: 1e-12,
         ..static_params(1e-12)
     }
 }
@@ -175,6 +176,41 @@ fn resolve_repeats_the_frame_with_the_new_loads() {
                 (g - w).abs() <= 1e-6 * want[2][2].abs().max(1e-9),
                 "{g} vs {w}"
             );
+        }
+    }
+}
+
+#[test]
+fn a_repeated_compliance_solve_starts_from_the_last_answer() {
+    for element in [ElementKind::P1, ElementKind::P2] {
+        // The default compliance tolerance (1e-4): the start's rounding
+        // is far below it.
+        let mut m = cantilever(
+            2,
+            0.0,
+            FemParams {
+                element,
+                ..static_params(1e-12)
+            },
+        );
+        let id = m.bind(RestPoints::Points(&points())).unwrap();
+        let iterations = |m: &mut Fem| m.notes().unwrap()["solver_iterations"];
+        let f = tip_push(1.0);
+        let first = compliance(&mut m, id, &f);
+        let after_first = iterations(&mut m);
+        assert!(after_first > 0.0, "{element:?}: the first solve iterates");
+        // The same load again, and a scaled one: both lie in the span of
+        // the kept answers, so the Galerkin start is the answer.
+        let again = compliance(&mut m, id, &f);
+        let scaled = compliance(&mut m, id, &tip_push(-2.5));
+        assert_eq!(
+            iterations(&mut m),
+            after_first,
+            "{element:?}: a load in the kept span needs no iteration"
+        );
+        for ((a, b), c) in first.iter().zip(&again).zip(&scaled) {
+            assert!((*a - *b).length() <= 1e-9 * a.length().max(1e-12));
+            assert!((*c + 2.5 * *a).length() <= 1e-9 * a.length().max(1e-12));
         }
     }
 }

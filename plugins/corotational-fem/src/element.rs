@@ -118,6 +118,40 @@ impl Element {
         );
     }
 
+    /// The warped stiffness `k[4a + b]` and force offsets `f0[a]`
+    /// ([`Element::corotate`]) at corner displacements `u` (mm), with the
+    /// rotation's own stiffness ([`Element::add_twist_stiffness`]) when
+    /// `twist` is `Some(clamp)`: one signed SVD of `F` gives both.
+    pub fn linearise(&self, u: [DVec3; 4], k: &mut [DMat3], f0: &mut [DVec3], twist: Option<bool>) {
+        let x = [0, 1, 2, 3].map(|a| self.rest[a] + u[a]);
+        let f = self.deformation_gradient(x);
+        let Some(clamp) = twist else {
+            self.corotate(rotation(f), k, f0);
+            return;
+        };
+        let svd = signed_svd(f);
+        self.corotate(svd.0 * svd.2.transpose(), k, f0);
+        add_twist_svd(
+            svd,
+            &self.grads,
+            self.volume,
+            (self.lambda, self.mu),
+            k,
+            clamp,
+        );
+    }
+
+    /// The elastic force on each corner (µN) and the strain energy (µN·mm)
+    /// at corner displacements `u` (mm), from one rotation: what
+    /// [`Element::elastic_force`] and [`Element::energy`] give.
+    pub fn force_and_energy(&self, u: [DVec3; 4]) -> ([DVec3; 4], f64) {
+        let x = [0, 1, 2, 3].map(|a| self.rest[a] + u[a]);
+        let f = self.deformation_gradient(x);
+        let r = rotation(f);
+        let energy = self.volume * rotated_energy_density(r, f, self.lambda, self.mu);
+        (self.force_with(r, u), energy)
+    }
+
     /// The element's strain energy (µN·mm) at corner displacements `u`
     /// (mm): `V (μ |ε|² + λ/2 (tr ε)²)` with the corotated strain
     /// `ε = sym(Rᵀ F) − I`. [`Element::elastic_force`] is its gradient
@@ -133,7 +167,12 @@ impl Element {
     /// with, `R K (Rᵀ x − X)`) at corner displacements `u` (mm), with the
     /// element's rotation taken from `u`.
     pub fn elastic_force(&self, u: [DVec3; 4]) -> [DVec3; 4] {
-        let r = self.rotation(u);
+        self.force_with(self.rotation(u), u)
+    }
+
+    /// [`Element::elastic_force`] with the rotation `r` given.
+    #[inline]
+    fn force_with(&self, r: DMat3, u: [DVec3; 4]) -> [DVec3; 4] {
         let rt = r.transpose();
         let local = [0, 1, 2, 3].map(|b| rt * (self.rest[b] + u[b]) - self.rest[b]);
         [0, 1, 2, 3]
@@ -156,7 +195,13 @@ pub fn stiffness_block(ga: DVec3, gb: DVec3, lambda: f64, mu: f64, w: f64) -> DM
 /// `f`: `μ |ε|² + λ/2 (tr ε)²` with `ε = sym(Rᵀ F) − I`, `R` its rotation.
 #[inline]
 pub fn energy_density(f: DMat3, lambda: f64, mu: f64) -> f64 {
-    let d = rotation(f).transpose() * f - DMat3::IDENTITY;
+    rotated_energy_density(rotation(f), f, lambda, mu)
+}
+
+/// [`energy_density`] with `f`'s rotation `r` given.
+#[inline]
+pub fn rotated_energy_density(r: DMat3, f: DMat3, lambda: f64, mu: f64) -> f64 {
+    let d = r.transpose() * f - DMat3::IDENTITY;
     let e = (d + d.transpose()) * 0.5;
     let trace = e.x_axis.x + e.y_axis.y + e.z_axis.z;
     let squares = e.x_axis.length_squared() + e.y_axis.length_squared() + e.z_axis.length_squared();
@@ -175,8 +220,20 @@ pub fn add_twist(
     k: &mut [DMat3],
     clamp: bool,
 ) {
+    add_twist_svd(signed_svd(f), grads, w, (lambda, mu), k, clamp);
+}
+
+/// [`add_twist`] from the signed SVD `(U, Σ, V)` of the deformation
+/// gradient ([`signed_svd`]).
+pub fn add_twist_svd(
+    (uu, sigma, vv): (DMat3, DVec3, DMat3),
+    grads: &[DVec3],
+    w: f64,
+    (lambda, mu): (f64, f64),
+    k: &mut [DMat3],
+    clamp: bool,
+) {
     let n = grads.len();
-    let (uu, sigma, vv) = signed_svd(f);
     let s = sigma.to_array();
     let stretch = s[0] + s[1] + s[2] - 3.0;
     let psi = s.map(|si| 2.0 * mu * (si - 1.0) + lambda * stretch);

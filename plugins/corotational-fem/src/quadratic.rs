@@ -21,8 +21,10 @@
 //!
 //! Units: positions mm, gradients 1/mm, volume mm³, moduli Pa, forces µN.
 
-use crate::element::{add_twist, energy_density, stiffness_block};
-use crate::polar::rotation;
+use crate::element::{
+    add_twist, add_twist_svd, energy_density, rotated_energy_density, stiffness_block,
+};
+use crate::polar::{rotation, signed_svd};
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::tet_mesh::TetMesh;
 use voxflex_mesh::mesh_model::ElasticMaterial;
@@ -151,20 +153,27 @@ impl Quadratic {
     pub fn corotate(&self, u: &[DVec3; NODES], k: &mut [DMat3], f0: &mut [DVec3]) {
         k.iter_mut().for_each(|b| *b = DMat3::ZERO);
         f0.iter_mut().for_each(|f| *f = DVec3::ZERO);
-        for (q, p) in self.points.iter().enumerate() {
-            let r = rotation(self.deformation_gradient(q, u));
-            let rt = r.transpose();
-            let offset = self.rest.map(|x| x - rt * x);
-            for a in 0..NODES {
-                let mut f = DVec3::ZERO;
-                for b in 0..NODES {
-                    let rk =
-                        r * stiffness_block(p.grads[a], p.grads[b], self.lambda, self.mu, p.weight);
-                    k[NODES * a + b] += rk * rt;
-                    f += rk * offset[b];
-                }
-                f0[a] += f;
+        for q in 0..self.points.len() {
+            self.corotate_point(q, rotation(self.deformation_gradient(q, u)), k, f0);
+        }
+    }
+
+    /// Adds Gauss point `q`'s share of [`Quadratic::corotate`], with its
+    /// rotation `r`, to `k` and `f0`.
+    #[inline]
+    fn corotate_point(&self, q: usize, r: DMat3, k: &mut [DMat3], f0: &mut [DVec3]) {
+        let p = &self.points[q];
+        let rt = r.transpose();
+        let offset = self.rest.map(|x| x - rt * x);
+        for a in 0..NODES {
+            let mut f = DVec3::ZERO;
+            for b in 0..NODES {
+                let rk =
+                    r * stiffness_block(p.grads[a], p.grads[b], self.lambda, self.mu, p.weight);
+                k[NODES * a + b] += rk * rt;
+                f += rk * offset[b];
             }
+            f0[a] += f;
         }
     }
 
@@ -175,6 +184,46 @@ impl Quadratic {
             let f = self.deformation_gradient(q, u);
             add_twist(f, &p.grads, p.weight, (self.lambda, self.mu), k, clamp);
         }
+    }
+
+    /// The warped stiffness and force offsets ([`Quadratic::corotate`]) at
+    /// node displacements `u` (mm), with each Gauss point's rotation
+    /// stiffness ([`Quadratic::add_twist_stiffness`]) when `twist` is
+    /// `Some(clamp)`: one signed SVD per Gauss point gives both.
+    pub fn linearise(
+        &self,
+        u: &[DVec3; NODES],
+        k: &mut [DMat3],
+        f0: &mut [DVec3],
+        twist: Option<bool>,
+    ) {
+        k.iter_mut().for_each(|b| *b = DMat3::ZERO);
+        f0.iter_mut().for_each(|f| *f = DVec3::ZERO);
+        for (q, p) in self.points.iter().enumerate() {
+            let f = self.deformation_gradient(q, u);
+            let Some(clamp) = twist else {
+                self.corotate_point(q, rotation(f), k, f0);
+                continue;
+            };
+            let svd = signed_svd(f);
+            self.corotate_point(q, svd.0 * svd.2.transpose(), k, f0);
+            add_twist_svd(svd, &p.grads, p.weight, (self.lambda, self.mu), k, clamp);
+        }
+    }
+
+    /// The elastic force on each node (µN) and the strain energy (µN·mm)
+    /// at node displacements `u` (mm), one rotation per Gauss point: what
+    /// [`Quadratic::elastic_force`] and [`Quadratic::energy`] give.
+    pub fn force_and_energy(&self, u: &[DVec3; NODES]) -> ([DVec3; NODES], f64) {
+        let mut out = [DVec3::ZERO; NODES];
+        let mut energy = 0.0;
+        for (q, p) in self.points.iter().enumerate() {
+            let f = self.deformation_gradient(q, u);
+            let r = rotation(f);
+            energy += p.weight * rotated_energy_density(r, f, self.lambda, self.mu);
+            self.add_point_force(q, r, f, &mut out);
+        }
+        (out, energy)
     }
 
     /// The element's strain energy (µN·mm) at node displacements `u` (mm).
@@ -191,20 +240,27 @@ impl Quadratic {
     /// `Σ_q w_q P_q ∇N_a` with the stress `P = R (2μ ε + λ tr ε I)`.
     pub fn elastic_force(&self, u: &[DVec3; NODES]) -> [DVec3; NODES] {
         let mut out = [DVec3::ZERO; NODES];
-        for (q, p) in self.points.iter().enumerate() {
+        for q in 0..self.points.len() {
             let f = self.deformation_gradient(q, u);
-            let r = rotation(f);
-            let d = r.transpose() * f - DMat3::IDENTITY;
-            let e = (d + d.transpose()) * 0.5;
-            let trace = e.x_axis.x + e.y_axis.y + e.z_axis.z;
-            let stress = r
-                * (e * (2.0 * self.mu) + DMat3::from_diagonal(DVec3::splat(self.lambda * trace)))
-                * p.weight;
-            for (o, g) in out.iter_mut().zip(&p.grads) {
-                *o += stress * *g;
-            }
+            self.add_point_force(q, rotation(f), f, &mut out);
         }
         out
+    }
+
+    /// Adds Gauss point `q`'s share `w_q P_q ∇N_a` of the elastic force,
+    /// at deformation gradient `f` with rotation `r`, to `out`.
+    #[inline]
+    fn add_point_force(&self, q: usize, r: DMat3, f: DMat3, out: &mut [DVec3; NODES]) {
+        let p = &self.points[q];
+        let d = r.transpose() * f - DMat3::IDENTITY;
+        let e = (d + d.transpose()) * 0.5;
+        let trace = e.x_axis.x + e.y_axis.y + e.z_axis.z;
+        let stress = r
+            * (e * (2.0 * self.mu) + DMat3::from_diagonal(DVec3::splat(self.lambda * trace)))
+            * p.weight;
+        for (o, g) in out.iter_mut().zip(&p.grads) {
+            *o += stress * *g;
+        }
     }
 }
 

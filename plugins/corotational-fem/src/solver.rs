@@ -26,6 +26,7 @@
 
 mod elements;
 mod newton;
+mod recycle;
 
 pub use newton::SMALLEST_LOAD_STEP;
 
@@ -128,6 +129,13 @@ pub struct FemParams {
     #[serde(default = "pcg::default_tolerance")]
     #[schemars(range(min = 0, max = 1))]
     pub cg_tolerance: f64,
+    /// The compliance solves (`K⁻¹ b` for an actuator's forces, which only
+    /// predict the inverse step's response; the step itself is solved to
+    /// `cg_tolerance` and `static_tolerance`) stop at this relative PCG
+    /// residual (default 1e-4).
+    #[serde(default = "default_compliance_cg_tolerance")]
+    #[schemars(range(min = 0, max = 1))]
+    pub compliance_cg_tolerance: f64,
     /// PCG iteration cap per solve; `None` (the default) derives it from
     /// the problem size ([`pcg::size_cap`]).
     #[serde(default)]
@@ -163,6 +171,9 @@ pub struct FemParams {
     pub stiffness_damping: f64,
 }
 
+fn default_compliance_cg_tolerance() -> f64 {
+    1e-4
+}
 fn default_static_iterations() -> u32 {
     25
 }
@@ -185,6 +196,7 @@ impl Default for FemParams {
             element: ElementKind::default(),
             solver: SolverKind::default(),
             cg_tolerance: pcg::default_tolerance(),
+            compliance_cg_tolerance: default_compliance_cg_tolerance(),
             cg_max_iterations: None,
             preconditioner: PreconditionerKind::default(),
             static_iterations: default_static_iterations(),
@@ -208,6 +220,12 @@ impl FemParams {
             return fail(format!(
                 "static_tolerance {} must lie in (0, 1) (a relative force residual)",
                 self.static_tolerance
+            ));
+        }
+        if !(self.compliance_cg_tolerance > 0.0 && self.compliance_cg_tolerance < 1.0) {
+            return fail(format!(
+                "compliance_cg_tolerance {} must lie in (0, 1) (a relative PCG residual)",
+                self.compliance_cg_tolerance
             ));
         }
         let valid = |d: f64| d.is_finite() && d >= 0.0;
@@ -267,6 +285,14 @@ pub struct CorotationalFem {
     /// tangent's near-null space is the rigid motions of the deformed body
     /// (modes of the rest body precondition a beam bent by 90° poorly).
     deformed: Vec<DVec3>,
+    /// The displacements (mm) the matrix was last linearised at for a
+    /// compliance solve (clamped twist, unscaled); `None` once any other
+    /// linearisation replaced it. The actuators' compliance solves of one
+    /// frame share it instead of linearising once each.
+    compliance_tangent: Option<Vec<DVec3>>,
+    /// The last compliance answers, the warm start of the next
+    /// ([`recycle`]).
+    compliance_starts: recycle::Recycler,
     /// The AMG hierarchy (`preconditioner = "amg"`), kept between solves
     /// while the pattern and the free nodes stay, and its setup figures.
     amg: std::sync::Mutex<AmgState>,
@@ -300,6 +326,10 @@ pub const AMG_AUTO_NODES_P2: usize = 2_000;
 /// many times the iterations of the solve right after its setup (plus 2).
 const AMG_STALE: f64 = 1.5;
 
+/// Compliance answers kept to warm-start the next ([`recycle`]): one
+/// frame's worth for four hydraulic cavities (two solves each).
+const COMPLIANCE_KEPT: usize = 8;
+
 /// Setup figures of `preconditioner = "amg"` (→ notes).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AmgStats {
@@ -332,6 +362,7 @@ impl CorotationalFem {
     /// with `twist`, each element's rotation stiffness too
     /// ([`Element::add_twist_stiffness`]; the static Newton tangent).
     fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>, twist: Twist) {
+        self.compliance_tangent = None;
         self.elements
             .linearise(u, k_scale, twist, &mut self.blocks, &mut self.corner_f0);
         self.deformed.clear();
@@ -342,17 +373,19 @@ impl CorotationalFem {
     }
 
     /// Solves the assembled system on the GPU when there is one, else with
-    /// the rayon PCG; warns when the solve stops above its tolerance and
-    /// counts it in `report`.
+    /// the rayon PCG, to `settings` ([`CorotationalFem::settings`], or
+    /// looser for a Newton direction near convergence); warns when the
+    /// solve stops above its tolerance and counts it in `report`.
     fn solve(
         &self,
         bc: &Boundary,
         free: &[bool],
         rhs: &[DVec3],
         x: &mut [DVec3],
+        settings: CgSettings,
         report: &mut SolveReport,
     ) -> Result<CgOutcome, ModelError> {
-        let out = self.solve_quietly(bc, free, rhs, x)?;
+        let out = self.solve_quietly(bc, free, rhs, x, settings)?;
         let what = match self.params.solver {
             SolverKind::Static => "static (Newton)",
             SolverKind::Dynamic => "implicit step's",
@@ -368,7 +401,7 @@ impl CorotationalFem {
         } else {
             "raise cg_max_iterations or loosen cg_tolerance"
         };
-        let converged = pcg::warn_unconverged(Self::NAME, what, out, self.settings(free), keys);
+        let converged = pcg::warn_unconverged(Self::NAME, what, out, settings, keys);
         report.add_solve(out, converged);
         Ok(out)
     }
@@ -382,8 +415,8 @@ impl CorotationalFem {
         free: &[bool],
         rhs: &[DVec3],
         x: &mut [DVec3],
+        settings: CgSettings,
     ) -> Result<CgOutcome, ModelError> {
-        let settings = self.settings(free);
         Ok(match &self.gpu {
             Some(g) => g
                 .solve(&self.matrix, free, &bc.hanging, rhs, x, settings)
@@ -583,7 +616,7 @@ impl CorotationalFem {
             for &(n, target) in &bc.driven {
                 v[n as usize] = (target - state.u[n as usize]) / (h * remaining);
             }
-            self.solve(bc, &free, &rhs, &mut v, &mut report)?;
+            self.solve(bc, &free, &rhs, &mut v, self.settings(&free), &mut report)?;
             for (u, vn) in state.u.iter_mut().zip(&v) {
                 *u += h * *vn;
             }
@@ -601,9 +634,11 @@ impl MeshSolver for CorotationalFem {
         "corotational linear FEM on a tetrahedral proxy (static or implicit backward Euler, PCG)";
     type Params = FemParams;
 
-    /// 3 voxels: the knee of the combined front over the cantilever,
-    /// elastica, grab, two-material and cut fronts (docs/BENCHMARKS.md,
-    /// "Combined fronts").
+    /// 3 voxels: the combined front over the cantilever, elastica, grab,
+    /// two-material and cut fronts has no knee (it is straight in log–log),
+    /// so the default is the most accurate spacing that keeps the
+    /// interactive reference scene within 30 frames/s on 2 cores
+    /// (docs/BENCHMARKS.md, "Combined fronts").
     const DEFAULT_NODE_SPACING: usize = 3;
 
     /// Uniform cells of [`MeshSolver::DEFAULT_NODE_SPACING`] voxels with
@@ -702,6 +737,8 @@ impl MeshSolver for CorotationalFem {
             force_scale: newton::ForceScale::default(),
             deformed: positions.clone(),
             positions,
+            compliance_tangent: None,
+            compliance_starts: recycle::Recycler::new(COMPLIANCE_KEPT),
             amg: Default::default(),
             elements,
             params,
@@ -788,6 +825,30 @@ impl MeshSolver for CorotationalFem {
 }
 
 impl CorotationalFem {
+    /// The start of a solve of the assembled matrix for `rhs` (µN per
+    /// node): its Galerkin projection onto the last compliance answers
+    /// ([`recycle`]; zero without any): an actuator's forces change a
+    /// little a frame, so its next compliance solve starts close. (Newton
+    /// directions started this way took as many iterations and a slower
+    /// frame on the pendulum, so they start from zero.)
+    fn recycled_start(&self, bc: &Boundary, free: &[bool], rhs: &[DVec3]) -> Vec<DVec3> {
+        let restrict = |v: &mut [DVec3]| {
+            for (vi, &f) in v.iter_mut().zip(free) {
+                if !f {
+                    *vi = DVec3::ZERO;
+                }
+            }
+        };
+        let mut b = rhs.to_vec();
+        bc.untie(&mut b);
+        restrict(&mut b);
+        self.compliance_starts.start(&b, &mut |v, out| {
+            self.matrix.mul(v, out);
+            bc.untie(out);
+            restrict(out);
+        })
+    }
+
     /// [`MeshSolver::compliance`] on the solver's own nodes.
     fn compliance_nodes(
         &mut self,
@@ -795,11 +856,17 @@ impl CorotationalFem {
         u: &[DVec3],
         forces: &[DVec3],
     ) -> Result<(Vec<DVec3>, SolveReport), ModelError> {
-        self.linearise(u, 1.0, None, Twist::Clamped);
+        if self.compliance_tangent.as_deref() != Some(u) {
+            self.linearise(u, 1.0, None, Twist::Clamped);
+            self.compliance_tangent = Some(u.to_vec());
+        }
         let free: Vec<bool> = bc.constrained().iter().map(|c| !c).collect();
-        let mut x = vec![DVec3::ZERO; forces.len()];
+        let mut x = self.recycled_start(bc, &free, forces);
         let mut report = SolveReport::default();
-        self.solve(bc, &free, forces, &mut x, &mut report)?;
+        let mut settings = self.settings(&free);
+        settings.tolerance = self.params.compliance_cg_tolerance;
+        self.solve(bc, &free, forces, &mut x, settings, &mut report)?;
+        self.compliance_starts.keep(&x);
         Ok((x, report))
     }
 }

@@ -15,7 +15,7 @@
 //! [model]
 //! plugin = "mass-spring"
 //! [model.params.mass-spring]
-//! proxy = { kind = "uniform", step = 4 }
+//! proxy = { kind = "uniform", step = 3 }   # the default
 //! materials = [{ name = "soft tissue", range = [-50, 300], youngs_modulus = 3000 }]
 //! integrator = "implicit"   # the default; or "explicit"
 //! damping_ratio = 0.1

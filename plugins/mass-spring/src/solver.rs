@@ -488,10 +488,12 @@ impl MeshSolver for MassSpring {
     const NAME: &'static str = "mass-spring";
     const DESCRIPTION: &'static str = "mass-spring model on a tetrahedral proxy's edges (implicit backward Euler, or explicit with stable sub-steps)";
     type Params = SpringParams;
-    /// 4 voxels: the knee of the combined front over the grab,
-    /// two-material and cut fronts (docs/BENCHMARKS.md, "Combined
+    /// 3 voxels: the combined front over the grab, two-material and cut
+    /// fronts has no knee (it is straight in log–log), so the default is
+    /// the most accurate spacing that keeps the interactive reference scene
+    /// within 30 frames/s on 2 cores (docs/BENCHMARKS.md, "Combined
     /// fronts").
-    const DEFAULT_NODE_SPACING: usize = 4;
+    const DEFAULT_NODE_SPACING: usize = 3;
 
     fn new(
         mesh: &TetMesh,

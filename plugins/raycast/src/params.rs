@@ -20,8 +20,12 @@
 //! # or: transfer_function = { points = [[value, r, g, b, a], …], shift = 0.0, normalized = false }
 //! shading = { enabled = true, ambient = 0.1, diffuse = 0.9, specular = 0.2, shininess = 10.0 }
 //! clip_planes = [{ point = [0, 0, 0], normal = [1, 0, 0] }]   # ≤ 6; keeps the side the normal points to
-//! crop_box = { min = [-50, -50, -50], max = [50, 50, 50] }    # world mm
+//! crop_box = { min = [-50, -50, -50], max = [50, 50, 50] }    # world mm; "none" = no crop box
 //! ```
+//!
+//! `Renderer::configure` replaces only the keys its text gives and keeps
+//! the others: `clip_planes = []` removes every clip plane and
+//! `crop_box = "none"` the crop box (leaving the key out keeps them).
 
 use crate::transfer::{ControlPoint, PRESETS, TransferFunction, ValueUnits};
 use serde::Deserialize;
@@ -219,10 +223,53 @@ pub struct RaycastParams {
     pub transfer_function: TransferFunctionSpec,
     /// Gradient shading.
     pub shading: Shading,
-    /// Clip planes (≤ [`MAX_CLIP_PLANES`]).
+    /// Clip planes (≤ [`MAX_CLIP_PLANES`]); `[]`, the default, for none.
     pub clip_planes: Vec<ClipPlane>,
-    /// Crop box, world mm.
+    /// Crop box, world mm, or `"none"` for no crop box (the default).
+    /// `configure` keeps a key its text leaves out, so `"none"` is how it
+    /// removes a crop box.
+    #[serde(deserialize_with = "crop_box_or_none")]
+    #[schemars(schema_with = "crop_box_schema")]
     pub crop_box: Option<CropBox>,
+}
+
+/// The word `crop_box` takes for "no crop box".
+pub const NO_CROP_BOX: &str = "none";
+
+/// `crop_box`: a table `{ min, max }`, or [`NO_CROP_BOX`] for none; any
+/// other value is refused, naming both forms.
+fn crop_box_or_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<CropBox>, D::Error> {
+    struct CropBoxOrNone;
+    impl<'de> serde::de::Visitor<'de> for CropBoxOrNone {
+        type Value = Option<CropBox>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            write!(
+                f,
+                "a crop box {{ min = [x, y, z], max = [x, y, z] }} (world mm), \
+                 or \"{NO_CROP_BOX}\" for no crop box"
+            )
+        }
+        fn visit_str<E: serde::de::Error>(self, s: &str) -> Result<Self::Value, E> {
+            if s == NO_CROP_BOX {
+                Ok(None)
+            } else {
+                Err(E::invalid_value(serde::de::Unexpected::Str(s), &self))
+            }
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+            CropBox::deserialize(serde::de::value::MapAccessDeserializer::new(map)).map(Some)
+        }
+    }
+    d.deserialize_any(CropBoxOrNone)
+}
+
+/// The schema of `crop_box`: the [`CropBox`] table or the string
+/// [`NO_CROP_BOX`] (absent: none).
+fn crop_box_schema(g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    let table = g.subschema_for::<CropBox>();
+    schemars::json_schema!({
+        "anyOf": [table, { "type": "string", "const": NO_CROP_BOX }, { "type": "null" }]
+    })
 }
 
 impl Default for RaycastParams {
@@ -619,5 +666,99 @@ mod tests {
         assert_eq!(q.mode, RenderMode::Mip);
         assert!(!q.shading.enabled);
         assert!(p.merged("sample_distance = 0").is_err());
+    }
+
+    #[test]
+    fn merged_with_the_explicit_off_clears_a_crop_and_clip_planes() {
+        let p = RaycastParams::from_toml(
+            "crop_box = { min = [-1, -2, -3], max = [1, 2, 3] }\n\
+             clip_planes = [{ point = [0, 0, 0], normal = [1, 0, 0] }]",
+        )
+        .unwrap();
+        assert!(p.crop_box.is_some() && p.clip_planes.len() == 1);
+        // Left out, both are kept (a partial `configure`)…
+        let kept = p.merged("mode = \"mip\"").unwrap();
+        assert_eq!(
+            (kept.crop_box, &kept.clip_planes),
+            (p.crop_box, &p.clip_planes)
+        );
+        // …and the explicit off removes them.
+        let off = p.merged("crop_box = \"none\"\nclip_planes = []").unwrap();
+        assert_eq!(off.crop_box, None);
+        assert!(off.clip_planes.is_empty());
+        assert_eq!(
+            off,
+            RaycastParams::default(),
+            "as if never cropped nor clipped"
+        );
+        // Each on its own, the other kept.
+        let q = p.merged("crop_box = \"none\"").unwrap();
+        assert_eq!((q.crop_box, q.clip_planes.len()), (None, 1));
+        let q = p.merged("clip_planes = []").unwrap();
+        assert_eq!((q.crop_box, q.clip_planes.len()), (p.crop_box, 0));
+        // A new box after "none" crops again.
+        let again = off
+            .merged("crop_box = { min = [0, 0, 0], max = [5, 5, 5] }")
+            .unwrap();
+        assert_eq!(again.crop_box.unwrap().max, [5.0, 5.0, 5.0]);
+        // "none" in a whole table is the default.
+        assert_eq!(
+            RaycastParams::from_toml("crop_box = \"none\"").unwrap(),
+            RaycastParams::default()
+        );
+    }
+
+    #[test]
+    fn a_crop_box_that_is_neither_a_table_nor_none_is_refused() {
+        for text in [
+            "crop_box = \"off\"",
+            "crop_box = \"None\"",
+            "crop_box = false",
+            "crop_box = true",
+            "crop_box = 0",
+            "crop_box = []",
+        ] {
+            let e = err(text);
+            assert!(
+                e.contains("crop_box") && e.contains("\"none\"") && e.contains("min = [x, y, z]"),
+                "{text}: {e}"
+            );
+        }
+        let e = err("mode = \"mip\"\ncrop_box = \"off\"");
+        assert!(e.contains("line 2") && e.contains("\"off\""), "{e}");
+        // A table still names its own bad keys and values.
+        assert!(err("crop_box = { min = [0, 0, 0] }").contains("max"));
+        assert!(err("crop_box = { min = [0, 0, 0], max = [1, 1, 1], mid = 0 }").contains("mid"));
+        assert!(err("crop_box = { min = [2, 0, 0], max = [1, 1, 1] }").contains("min must be"));
+        // `configure`'s merge refuses it as well.
+        let p =
+            RaycastParams::from_toml("crop_box = { min = [0, 0, 0], max = [1, 1, 1] }").unwrap();
+        assert!(p.merged("crop_box = false").is_err());
+    }
+
+    #[test]
+    fn the_schema_the_host_reads_takes_a_table_or_none_for_the_crop_box() {
+        use voxflex_runtime::param_schema::ParamSchema;
+        let json = voxflex_abi::params_schema::json(&schemars::schema_for!(RaycastParams)).unwrap();
+        let schema = ParamSchema::from_json(&json).unwrap();
+        let spec = schema.get("crop_box").unwrap();
+        assert!(!spec.required);
+        assert_eq!(spec.kind.to_string(), "\"none\" | table", "{spec:?}");
+        assert!(spec.doc.contains("\"none\""), "{}", spec.doc);
+        let check = |text: &str| schema.check(&text.parse().unwrap());
+        assert_eq!(
+            check("crop_box = \"none\"\nclip_planes = []"),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            check("crop_box = { min = [0, 0, 0], max = [1, 1, 1] }"),
+            Vec::<String>::new()
+        );
+        let issues = check("crop_box = \"off\"");
+        assert!(
+            issues.len() == 1 && issues[0].contains("crop_box") && issues[0].contains("\"none\""),
+            "{issues:?}"
+        );
+        assert_eq!(check("crop_box = true").len(), 1);
     }
 }

@@ -34,7 +34,7 @@
 //! nifti = "deformed.nii.gz"
 //! ```
 
-use crate::actuation::{ActuatorSettings, EffectorSettings};
+use crate::actuation::{ActuationSettings, ActuatorSettings, EffectorSettings};
 use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -455,6 +455,8 @@ struct SceneFile {
     actuator: Vec<ActuatorSettings>,
     #[serde(default)]
     effector: Vec<EffectorSettings>,
+    #[serde(default)]
+    actuation: Option<ActuationSettings>,
 }
 
 /// The `[[actuator]]` and `[[effector]]` tables' own checks, errors
@@ -483,6 +485,22 @@ fn check_actuation(file: &SceneFile, text: &str, path: &Path) -> Result<(), Scen
                 "an effector is driven by actuators: add an [[actuator]]".into(),
             ),
         ));
+    }
+    if let Some(settle) = &file.actuation {
+        if file.actuator.is_empty() {
+            return Err(SceneError::Invalid {
+                location: locate_key(text, path, "[actuation]"),
+                message: "`[actuation]` settles actuator forces, and the scene has no \
+                          [[actuator]]: add one or remove the table"
+                    .into(),
+            });
+        }
+        settle
+            .check()
+            .map_err(|(key, message)| SceneError::Invalid {
+                location: locate_key(text, path, &key),
+                message: format!("`[actuation] {key}` = {message}"),
+            })?;
     }
     for (n, a) in file.actuator.iter().enumerate() {
         a.check().map_err(|e| at("actuator", n, e))?;
@@ -520,6 +538,9 @@ pub struct Scene {
     pub actuators: Vec<ActuatorSettings>,
     /// `[[effector]]` inverse-control targets (need an actuator).
     pub effectors: Vec<EffectorSettings>,
+    /// `[actuation]`: how each frame settles the actuator forces
+    /// (defaults when the table is absent).
+    pub actuation: ActuationSettings,
 }
 
 impl Scene {
@@ -788,6 +809,7 @@ impl Scene {
             rois: file.roi,
             actuators: file.actuator,
             effectors: file.effector,
+            actuation: file.actuation.unwrap_or_default(),
         })
     }
 

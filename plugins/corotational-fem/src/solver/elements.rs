@@ -15,10 +15,20 @@ pub(super) trait Tet<const N: usize>: Sync {
     /// `k[N a + b]` = warped stiffness, `f0[a]` = force offset, with the
     /// rotations' own stiffness as `twist` says.
     fn linearise(&self, u: [DVec3; N], k: &mut [DMat3], f0: &mut [DVec3], twist: Twist);
-    /// Strain energy, µN·mm.
-    fn energy(&self, u: [DVec3; N]) -> f64;
     /// Elastic force per node, µN.
     fn force(&self, u: [DVec3; N]) -> [DVec3; N];
+    /// Both, from one rotation (per Gauss point): µN per node, µN·mm.
+    fn force_and_energy(&self, u: [DVec3; N]) -> ([DVec3; N], f64);
+}
+
+/// The SVD's twist option of a [`Twist`]: `Some(clamp)` when the
+/// rotations' own stiffness is added.
+fn twist_clamp(twist: Twist) -> Option<bool> {
+    match twist {
+        Twist::None => None,
+        Twist::Full => Some(false),
+        Twist::Clamped => Some(true),
+    }
 }
 
 impl Tet<4> for Element {
@@ -26,18 +36,13 @@ impl Tet<4> for Element {
         self.nodes
     }
     fn linearise(&self, u: [DVec3; 4], k: &mut [DMat3], f0: &mut [DVec3], twist: Twist) {
-        self.corotate(self.rotation(u), k, f0);
-        match twist {
-            Twist::None => {}
-            Twist::Full => self.add_twist_stiffness(u, k, false),
-            Twist::Clamped => self.add_twist_stiffness(u, k, true),
-        }
-    }
-    fn energy(&self, u: [DVec3; 4]) -> f64 {
-        Element::energy(self, u)
+        Element::linearise(self, u, k, f0, twist_clamp(twist));
     }
     fn force(&self, u: [DVec3; 4]) -> [DVec3; 4] {
         self.elastic_force(u)
+    }
+    fn force_and_energy(&self, u: [DVec3; 4]) -> ([DVec3; 4], f64) {
+        Element::force_and_energy(self, u)
     }
 }
 
@@ -46,18 +51,13 @@ impl Tet<NODES> for Quadratic {
         self.nodes
     }
     fn linearise(&self, u: [DVec3; NODES], k: &mut [DMat3], f0: &mut [DVec3], twist: Twist) {
-        self.corotate(&u, k, f0);
-        match twist {
-            Twist::None => {}
-            Twist::Full => self.add_twist_stiffness(&u, k, false),
-            Twist::Clamped => self.add_twist_stiffness(&u, k, true),
-        }
-    }
-    fn energy(&self, u: [DVec3; NODES]) -> f64 {
-        Quadratic::energy(self, &u)
+        Quadratic::linearise(self, &u, k, f0, twist_clamp(twist));
     }
     fn force(&self, u: [DVec3; NODES]) -> [DVec3; NODES] {
         self.elastic_force(&u)
+    }
+    fn force_and_energy(&self, u: [DVec3; NODES]) -> ([DVec3; NODES], f64) {
+        Quadratic::force_and_energy(self, &u)
     }
 }
 
@@ -93,20 +93,25 @@ fn linearise_all<const N: usize, E: Tet<N>>(
         });
 }
 
-fn energy_all<const N: usize, E: Tet<N>>(elements: &[E], u: &[DVec3]) -> f64 {
-    elements
-        .par_iter()
-        .with_min_len(256)
-        .map(|e| e.energy(e.nodes().map(|n| u[n as usize])))
-        .sum()
-}
-
 fn forces_all<const N: usize, E: Tet<N>>(elements: &[E], u: &[DVec3]) -> Vec<DVec3> {
     elements
         .par_iter()
         .with_min_len(256)
         .flat_map_iter(|e| e.force(e.nodes().map(|n| u[n as usize])))
         .collect()
+}
+
+fn forces_and_energy_all<const N: usize, E: Tet<N>>(
+    elements: &[E],
+    u: &[DVec3],
+) -> (Vec<DVec3>, f64) {
+    let per: Vec<([DVec3; N], f64)> = elements
+        .par_iter()
+        .with_min_len(256)
+        .map(|e| e.force_and_energy(e.nodes().map(|n| u[n as usize])))
+        .collect();
+    let energy = per.iter().map(|(_, w)| w).sum();
+    (per.into_iter().flat_map(|(f, _)| f).collect(), energy)
 }
 
 impl Elements {
@@ -142,11 +147,12 @@ impl Elements {
         }
     }
 
-    /// The total strain energy at `u`, µN·mm.
-    pub(super) fn energy(&self, u: &[DVec3]) -> f64 {
+    /// [`Elements::forces`] and the total strain energy (µN·mm) at `u`,
+    /// from one rotation per element (per Gauss point).
+    pub(super) fn forces_and_energy(&self, u: &[DVec3]) -> (Vec<DVec3>, f64) {
         match self {
-            Self::Linear(e) => energy_all(e, u),
-            Self::Quadratic(e) => energy_all(e, u),
+            Self::Linear(e) => forces_and_energy_all(e, u),
+            Self::Quadratic(e) => forces_and_energy_all(e, u),
         }
     }
 

@@ -24,4 +24,4 @@ pub mod settings;
 pub(crate) mod stage;
 
 pub use report::ActuationReport;
-pub use settings::{ActuatorSettings, CavitySource, EffectorSettings};
+pub use settings::{ActuationSettings, ActuatorSettings, CavitySource, EffectorSettings};

@@ -13,6 +13,10 @@
 //! [actuator.params]              # the plugin's own keys
 //! fluid = "water"
 //!
+//! [actuation]                    # how each frame settles (optional)
+//! settle_tolerance = 1e-4        # the follower forces' relative change that counts as settled
+//! settle_iterations = 30         # repeated steps per frame at most; 0: lagged by a frame
+//!
 //! [[effector]]
 //! point = [60, 10, 10]           # rest position on the body, mm
 //! target = [60, 10, 30]          # where it should go, mm
@@ -63,6 +67,70 @@ pub struct CavitySource {
     /// A label of the source volume: the boundary of its voxels.
     #[serde(default)]
     pub label: Option<i64>,
+}
+
+/// `[actuation]`: how each frame settles the actuators' follower forces
+/// (a pressure or a cable pushes along the wall it moves).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ActuationSettings {
+    /// The forces count as settled when a repeated step changes them by
+    /// less than this fraction of their size (default 1e-4).
+    #[serde(default = "default_settle_tolerance")]
+    pub settle_tolerance: f64,
+    /// Repeated steps per frame at most (default 30). 0 applies each
+    /// frame's forces as they were at its start and moves on — the
+    /// interactive setting: the body then lags its follower forces by a
+    /// frame, `force_change` in metrics.json says by how much, and the run
+    /// warns when the last frame's change is above 1 %.
+    #[serde(default = "default_settle_iterations")]
+    pub settle_iterations: u32,
+}
+
+fn default_settle_tolerance() -> f64 {
+    1e-4
+}
+fn default_settle_iterations() -> u32 {
+    30
+}
+
+/// More repeated steps per frame than this is a typo, not a setting.
+pub const MAX_SETTLE_ITERATIONS: u32 = 1000;
+
+impl Default for ActuationSettings {
+    fn default() -> Self {
+        Self {
+            settle_tolerance: default_settle_tolerance(),
+            settle_iterations: default_settle_iterations(),
+        }
+    }
+}
+
+impl ActuationSettings {
+    /// The key and the message of the first bad value.
+    pub fn check(&self) -> Result<(), (String, String)> {
+        if !(self.settle_tolerance > 0.0 && self.settle_tolerance < 1.0) {
+            return Err((
+                "settle_tolerance".into(),
+                format!(
+                    "{} must lie in (0, 1): the follower forces' relative change per repeated \
+                     step that counts as settled (default 1e-4)",
+                    self.settle_tolerance
+                ),
+            ));
+        }
+        if self.settle_iterations > MAX_SETTLE_ITERATIONS {
+            return Err((
+                "settle_iterations".into(),
+                format!(
+                    "{} is more than {MAX_SETTLE_ITERATIONS} repeated steps a frame; use 0 \
+                     (interactive: forces lag a frame) to 30 (the default)",
+                    self.settle_iterations
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// `[[effector]]`: a point of the body driven to a target by the inverse

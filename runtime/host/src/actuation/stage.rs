@@ -17,6 +17,7 @@ use super::anderson::Anderson;
 use super::geometry::RestGeometry;
 use super::report::{ActuationReport, ActuatorSeries, EffectorSeries};
 use super::secant::Secant;
+use super::settings::ActuationSettings;
 use std::ops::Range;
 use voxflex_core::actuator::{
     ActuatorCommand, ActuatorGeometry, ActuatorLinearisation, ActuatorModel,
@@ -89,17 +90,12 @@ pub(crate) struct ActuationStage {
     applied: Vec<DVec3>,
     /// The settling warning was given.
     warned_unsettled: bool,
+    /// How each frame settles (`[actuation]`).
+    settle: ActuationSettings,
 }
-
-/// The follower forces count as settled when they change by less than
-/// this fraction of their size over a repeated step.
-pub const SETTLE_TOLERANCE: f64 = 1e-4;
 
 /// Past iterates the settling mixes ([`Anderson`]).
 const ANDERSON_DEPTH: usize = 4;
-
-/// Repeated steps per frame at most while the follower forces settle.
-pub const SETTLE_ITERATIONS: u32 = 30;
 
 /// The actuator forces may change by this fraction of their size over
 /// the last frame before the run warns that the body has not settled.
@@ -116,6 +112,7 @@ impl ActuationStage {
     pub(crate) fn new(
         actuators: Vec<NewActuator>,
         effectors: Vec<(String, DVec3, [Keyframes; 3])>,
+        settle: ActuationSettings,
     ) -> Result<Self, ModelError> {
         let mut rest = Vec::new();
         let mut stage_actuators = Vec::new();
@@ -172,6 +169,7 @@ impl ActuationStage {
             largest_step: vec![0.0; n_actuators],
             applied: Vec::new(),
             warned_unsettled: false,
+            settle,
         })
     }
 
@@ -281,9 +279,9 @@ impl ActuationStage {
 
     /// Reads the points back after the step and settles the follower
     /// forces: while the forces at the new shape differ from those applied
-    /// by more than [`SETTLE_TOLERANCE`], they are applied again and the
-    /// model repeats the frame's step (`resolve`), up to
-    /// [`SETTLE_ITERATIONS`] times. Then linearises at the settled shape
+    /// by more than `[actuation] settle_tolerance`, they are applied again
+    /// and the model repeats the frame's step (`resolve`), up to
+    /// `settle_iterations` times. Then linearises at the settled shape
     /// and records the frame. Returns whether a repeated step moved the
     /// field.
     pub(crate) fn after_step(
@@ -296,7 +294,9 @@ impl ActuationStage {
         let mut moved = false;
         let mut iterations = 0;
         let mut mixing = Anderson::new(ANDERSON_DEPTH);
-        while iterations < SETTLE_ITERATIONS && self.force_change() > SETTLE_TOLERANCE {
+        while iterations < self.settle.settle_iterations
+            && self.force_change() > self.settle.settle_tolerance
+        {
             let forces = mixing.next(&self.applied, &self.forces_now());
             model
                 .set_point_loads(binding, &forces)

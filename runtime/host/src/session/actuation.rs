@@ -65,7 +65,7 @@ impl Session {
                 Ok((e.display_name(n), e.rest(), targets))
             })
             .collect::<Result<Vec<_>, RunError>>()?;
-        let mut stage = ActuationStage::new(actuators, effectors)?;
+        let mut stage = ActuationStage::new(actuators, effectors, scene.actuation)?;
         let model = self.model.as_mut().ok_or_else(|| {
             RunError::Other(format!(
                 "{context}: [[actuator]] needs a [model] to act on (corotational-fem)"

@@ -1182,9 +1182,10 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
     /// piece), `steps`, `substeps` and `solver_iterations` summed
     /// over the run, and `last_residual` (relative, of the last linear
     /// solve; 0 for explicit steps), `worst_residual` (the largest relative
-    /// residual of any linear solve of the run) and `unconverged_solves`
-    /// (linear solves that stopped above their tolerance), then the
-    /// solver's own notes.
+    /// residual of any linear solve of the run, each held to its own
+    /// tolerance, which a solver may loosen: inexact Newton directions,
+    /// compliance solves) and `unconverged_solves` (linear solves that
+    /// stopped above their tolerance), then the solver's own notes.
     fn notes(&mut self) -> Result<ModelNotes, ModelError> {
         let mut notes = ModelNotes::new();
         if let Some(b) = &self.built {

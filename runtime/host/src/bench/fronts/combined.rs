@@ -17,7 +17,7 @@
 //! is the combined error ratio, so its Pareto front and knee are
 //! `front.md`'s own ([`pareto`], [`knee`], [`below_chord`]).
 
-use super::{ERROR_FLOOR, Front, Point, below_chord, knee, pareto};
+use super::{ERROR_FLOOR, Front, Point, below_chord, knee, no_knee, pareto};
 use crate::bench::BenchError;
 use std::fmt::Write as _;
 
@@ -249,7 +249,8 @@ impl Combined {
             Some(k) => {
                 let _ = write!(s, "knee {}", at(&pts[k]));
             }
-            None => s.push_str("no configuration in every front"),
+            None if pts.is_empty() => s.push_str("no configuration in every front"),
+            None => s.push_str(&no_knee(pts)),
         }
         for (i, p) in pts.iter().enumerate().filter(|(_, p)| p.is_default) {
             let place = if Some(i) == k {
