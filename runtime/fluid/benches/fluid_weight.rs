@@ -5,7 +5,11 @@
 //! and 1.06 ms.
 //!
 //! The weigher is reused across iterations (its working memory kept), as
-//! an actuator weighing its cavity every frame does.
+//! an actuator weighing its cavity every frame does. On the CPU the row
+//! scan's tasks take whole triangles, so α only changes the reported `k`
+//! there (`voxflex_fluid::schedule::TaskSplit`): the two series time the
+//! same work, a check that it stays so. Per-stage times:
+//! `cargo run --release -p voxflex-fluid --example fluid_stages`.
 //!
 //! `cargo bench -p voxflex-fluid --bench fluid_weight`
 

@@ -56,28 +56,14 @@ impl ColumnGrid {
 
     /// The columns (index range `i0..i1` along u) whose centres lie in
     /// `[lo, hi]` along u (mm), up to about an ulp of the coordinates at
-    /// the ends; possibly empty. The row scan's 1-D range.
+    /// the ends; possibly empty. `inv_cell_u` is `1 / w` (the row scan
+    /// computes it once). The row scan's 1-D range.
     #[inline]
-    pub fn columns_within(&self, lo: f64, hi: f64) -> [usize; 2] {
-        let inv = 1.0 / self.cell.x;
-        let first = ((lo - self.origin.x) * inv - 0.5).ceil().max(0.0) as usize;
-        let last = (((hi - self.origin.x) * inv - 0.5).floor() + 1.0).clamp(0.0, self.n[0] as f64)
-            as usize;
+    pub fn columns_within(&self, inv_cell_u: f64, lo: f64, hi: f64) -> [usize; 2] {
+        let first = ((lo - self.origin.x) * inv_cell_u - 0.5).ceil().max(0.0) as usize;
+        let last = (((hi - self.origin.x) * inv_cell_u - 0.5).floor() + 1.0)
+            .clamp(0.0, self.n[0] as f64) as usize;
         [first.min(last), last]
-    }
-
-    /// The columns whose centres may lie in the (u, v) box `[lo, hi]` (mm):
-    /// index ranges `i0..i1`, `j0..j1` (possibly empty).
-    pub fn centres_within(&self, lo: DVec2, hi: DVec2) -> ([usize; 2], [usize; 2]) {
-        let range = |lo: f64, hi: f64, o: f64, c: f64, n: usize| {
-            // centre(i) = o + (i + ½)c ≥ lo  ⇔  i ≥ (lo − o)/c − ½
-            let first = ((lo - o) / c - 0.5).ceil().max(0.0) as usize;
-            let last = (((hi - o) / c - 0.5).floor() + 1.0).clamp(0.0, n as f64) as usize;
-            [first.min(last), last]
-        };
-        let ui = range(lo.x, hi.x, self.origin.x, self.cell.x, self.n[0]);
-        let vj = range(lo.y, hi.y, self.origin.y, self.cell.y, self.n[1]);
-        (ui, vj)
     }
 }
 
@@ -87,7 +73,7 @@ mod tests {
     use glam::DVec3;
 
     #[test]
-    fn candidate_ranges_hold_exactly_the_centres_inside_the_box() {
+    fn a_row_range_holds_exactly_the_centres_inside_it() {
         let g = ColumnGrid::spanning(
             GravityFrame::new(DVec3::NEG_Z),
             DVec2::ZERO,
@@ -95,15 +81,11 @@ mod tests {
             10,
         );
         assert_eq!(g.cell, DVec2::new(1.0, 0.5));
-        // centres at 0.5, 1.5, … along u; 0.25, 0.75, … along v
-        let (u, v) = g.centres_within(DVec2::new(0.5, 0.3), DVec2::new(2.4, 0.75));
-        assert_eq!(u, [0, 2]);
-        assert_eq!(v, [1, 2]);
-        let (u, _) = g.centres_within(DVec2::new(-5.0, 0.0), DVec2::new(-1.0, 1.0));
-        assert_eq!(u[0], u[1], "a box left of the grid holds no centre");
-        let (u, _) = g.centres_within(DVec2::new(9.6, 0.0), DVec2::new(20.0, 1.0));
-        assert_eq!(u[0], u[1]);
-        let (u, _) = g.centres_within(DVec2::new(-1.0, 0.0), DVec2::new(20.0, 1.0));
-        assert_eq!(u, [0, 10]);
+        // centres at 0.5, 1.5, … along u
+        assert_eq!(g.columns_within(1.0, 0.5, 2.4), [0, 2]);
+        assert_eq!(g.columns_within(1.0, 0.6, 2.5), [1, 3]);
+        let [a, b] = g.columns_within(1.0, -5.0, -1.0);
+        assert_eq!(a, b, "a span left of the grid holds no centre");
+        assert_eq!(g.columns_within(1.0, -1.0, 20.0), [0, 10]);
     }
 }

@@ -2,10 +2,12 @@
 //! written against [`GpuService`]; the rayon twin is [`crate::hits`],
 //! [`crate::sections`] and [`crate::weighing`].
 //!
-//! The projection stage ([`FluidWeighing::project`]: the gravity frame, the
-//! grid, each triangle's side and candidate columns, the leveraging `k`)
-//! runs on the CPU for both paths and is uploaded, so both test the same
-//! candidates. Two kernels follow:
+//! The projection ([`FluidWeighing::project`]: the gravity frame and the
+//! grid) and each triangle's side and candidate columns with the
+//! leveraging `k` ([`crate::projection::ProjectedSurface::classify`], the
+//! classification the CPU's row scan makes as it goes) run on the CPU and
+//! are uploaded, so both paths test the same candidates. Two kernels
+//! follow:
 //!
 //! - `emit` — one invocation per (triangle, worker), `k` workers per
 //!   triangle (the paper's parallel leveraging): the fill-rule test at each
@@ -105,7 +107,8 @@ impl<'g> GpuFluidWeighing<'g> {
         params: &FluidWeightParams,
     ) -> Result<FluidWeights, FluidError> {
         let mut scratch = std::mem::take(&mut self.scratch);
-        let w = FluidWeighing::project(surface, params, &mut scratch)?;
+        let mut w = FluidWeighing::project(surface, params, &mut scratch)?;
+        w.classify();
         let buffers = Buffers::upload(self.gpu, &w)?;
         let result = run(self.gpu, &mut self.cap, &w, &buffers);
         buffers.release(self.gpu);
@@ -271,14 +274,10 @@ impl Buffers {
             .triangles
             .iter()
             .flat_map(|t| {
-                let ([i0, i1], [j0, j1]) = t.candidates;
-                let (i1, j1) = if t.side == Side::Vertical {
-                    (i0, j0)
-                } else {
-                    (i1, j1)
-                };
+                // a vertical triangle's candidate ranges are empty
+                let ([i0, i1], [j0, j1]) = (t.columns, t.rows);
                 let top = if t.side == Side::Top { TOP } else { 0 };
-                [i0 as u32, i1 as u32, j0 as u32, j1 as u32 | top]
+                [i0, i1, j0, j1 | top]
             })
             .collect();
         let columns = p.grid.len() as u64;

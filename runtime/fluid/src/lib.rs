@@ -11,20 +11,35 @@
 //! bounding box ([`ColumnGrid`]). Triangles whose normal points up are
 //! *top* triangles, those pointing down *bottom* ones. Each column centre
 //! is tested against every projected triangle whose bounding box holds it
-//! (2-D barycentric test, [`hits`]), which records the surface's height
-//! there (and, for bottom triangles, the triangle and the barycentric
-//! coordinates). Per column the intersections are sorted by height and
-//! matched bottom → top into sections (several in a non-convex cavity,
-//! [`sections`]); each section's weight `W = A·h·ρ·g` goes to its bottom
-//! triangle's corners by the barycentric coordinates.
+//! (2-D point-in-triangle test with a fill rule, [`hits`]), which records
+//! the surface's height there. Per column the crossings are sorted by
+//! height and matched bottom → top into sections (several in a non-convex
+//! cavity, [`sections`]); each section's weight `W = A·h·ρ·g` goes to its
+//! bottom triangle's corners by the barycentric coordinates
+//! ([`distribute`]).
 //!
 //! The triangle–column candidates are irregular (a large triangle covers
 //! many columns, a small one none), so the paper gives each triangle
 //! `k = max(1, ⌊α·c⌋)` workers, `c` the mean number of candidate columns
-//! per triangle ("parallel leveraging", [`schedule`]); worker `j` of a
-//! triangle tests its candidates `j, j + k, j + 2k, …`. The CPU path runs
-//! the workers on rayon, the WGSL path ([`gpu`]) on GPU invocations;
-//! `α = 0` is one worker per triangle.
+//! per triangle ("parallel leveraging", [`schedule`]). The WGSL path
+//! ([`gpu`]) runs one GPU invocation per worker, worker `j` of a triangle
+//! testing its candidates `j, j + k, j + 2k, …`; `α = 0` is one worker per
+//! triangle.
+//!
+//! The CPU path (rayon) scans rows instead of testing every candidate: in
+//! a row the centres inside a triangle are one run of consecutive columns
+//! ([`hits::Run`]). A row of up to eight candidates tests each, four at a
+//! time in SIMD lanes; a wider one is cut by the triangle's edges and
+//! tests only the run's ends exactly. One pass over the triangles
+//! classifies each and scans its rows while its corners are at hand
+//! ([`row_scan`]), storing each run with its heights and barycentric
+//! coordinates in a bucket for its band of rows. The section pass then
+//! takes a band at a time and groups its crossings by column in a counting
+//! sort; the weight pass sums each bottom run's sections and puts them on
+//! its triangle's corners ([`distribute`]). No pass sorts the whole grid's
+//! crossings, and no two tasks write to one place. On the CPU a task takes
+//! hundreds of triangles, so `k` changes nothing there (see
+//! [`schedule::TaskSplit`]).
 //!
 //! Units: lengths mm, density kg/m³, gravity m/s², weights µN (the
 //! corotational FEM's force unit: Pa · mm²).
@@ -36,6 +51,7 @@
 #![warn(missing_docs)]
 
 pub mod column_grid;
+pub mod distribute;
 pub mod error;
 pub mod gpu;
 pub mod gravity_frame;
@@ -44,6 +60,7 @@ pub mod params;
 #[cfg(feature = "test-support")]
 pub mod parity;
 pub mod projection;
+pub mod row_scan;
 pub mod schedule;
 pub mod sections;
 #[cfg(feature = "test-support")]

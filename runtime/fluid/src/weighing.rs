@@ -2,13 +2,13 @@
 //! distribute — one stage method each.
 
 use crate::column_grid::ColumnGrid;
+use crate::distribute::add_weights;
 use crate::error::FluidError;
-use crate::hits::{Hit, find_hits};
 use crate::params::FluidWeightParams;
-use crate::projection::{ProjectedSurface, signed_area2};
-use crate::schedule::workers_per_triangle;
-use crate::sections::{SectionCount, bucket_by_column, match_sections};
-use glam::DVec2;
+use crate::projection::ProjectedSurface;
+use crate::row_scan::{RowBands, TaskRuns, scan_triangles};
+use crate::schedule::{TaskSplit, workers_per_triangle};
+use crate::sections::{BandScratch, SectionCount, SectionTally, match_bands};
 use voxflex_core::triangle_surface::TriangleSurface;
 
 /// µN per (kg/m³ · m/s² · mm³): 1e-9 N = 1e-3 µN.
@@ -73,14 +73,15 @@ impl FluidWeigher {
     }
 }
 
-/// Working memory of one weighing (capacity reused between calls).
+/// Working memory of one weighing (capacity reused between calls): the
+/// projection's vertices and triangles, each row-scan task's runs, each
+/// band's matching and weighed runs.
 #[derive(Debug, Default)]
 pub struct Scratch {
     uvh: Vec<glam::DVec3>,
     triangles: Vec<crate::projection::ProjectedTriangle>,
-    batches: Vec<Vec<Hit>>,
-    hits: Vec<Hit>,
-    start: Vec<u32>,
+    tasks: Vec<TaskRuns>,
+    bands: Vec<BandScratch>,
 }
 
 /// The pipeline's state between stages.
@@ -88,16 +89,17 @@ pub struct Scratch {
 pub struct FluidWeighing<'a> {
     params: FluidWeightParams,
     projected: ProjectedSurface<'a>,
+    /// Workers per triangle (the leveraging `k`; set once the triangles are
+    /// classified).
     k: usize,
-    /// The paper's `c`, from the projection (it sets `k`).
-    mean_candidates: f64,
-    count: SectionCount,
+    bands: RowBands,
+    tally: SectionTally,
     scratch: &'a mut Scratch,
 }
 
 impl<'a> FluidWeighing<'a> {
-    /// Stage 1: the surface in the gravity frame, the grid, each
-    /// triangle's side and candidates, and the leveraging `k`.
+    /// Stage 1: the surface's vertices in the gravity frame and the grid
+    /// over their bounds.
     pub fn project(
         surface: &'a TriangleSurface,
         params: &FluidWeightParams,
@@ -110,70 +112,73 @@ impl<'a> FluidWeighing<'a> {
                 surface.triangles.len()
             )));
         }
-        let projected = ProjectedSurface::new_in(
+        let projected = ProjectedSurface::frame_in(
             surface,
             params.gravity_m_s2,
             params.columns_per_side,
             std::mem::take(&mut scratch.uvh),
             std::mem::take(&mut scratch.triangles),
         );
-        let mean_candidates = projected.mean_candidates();
-        let k = workers_per_triangle(params.leverage_alpha, mean_candidates);
+        let bands = RowBands::new(
+            projected.grid.n[1],
+            projected.grid.n[0],
+            BANDS_PER_THREAD * rayon::current_num_threads(),
+        );
         Ok(Self {
             params: *params,
             projected,
-            k,
-            mean_candidates,
-            count: SectionCount::default(),
+            k: 1,
+            bands,
+            tally: SectionTally::default(),
             scratch,
         })
     }
 
-    /// Stage 2: every column–triangle crossing, grouped by column.
+    /// Each triangle's side and candidates and the leveraging `k`, without
+    /// the row scan (what the GPU path uploads).
+    pub(crate) fn classify(&mut self) {
+        self.projected.classify();
+        self.set_workers();
+    }
+
+    fn set_workers(&mut self) {
+        self.k = workers_per_triangle(self.params.leverage_alpha, self.projected.mean_candidates);
+    }
+
+    /// Stage 2: each triangle's side and candidates, and its run of crossed
+    /// columns in each of its candidate rows (the row scan,
+    /// [`crate::row_scan`]).
     pub fn intersect(&mut self) {
-        let s = &mut *self.scratch;
-        find_hits(&self.projected, self.k, &mut s.batches);
-        bucket_by_column(
-            &s.batches,
-            self.projected.grid.len(),
-            &mut s.start,
-            &mut s.hits,
+        let split = TaskSplit::new(
+            self.projected.surface.triangles.len(),
+            TASKS_PER_THREAD * rayon::current_num_threads(),
+            MIN_TASK_TRIANGLES,
         );
+        self.projected.mean_candidates =
+            scan_triangles(&self.projected, split, self.bands, &mut self.scratch.tasks);
+        self.set_workers();
     }
 
-    /// Stage 3: per column, the sections of fluid.
+    /// Stage 3: per column, the sections of fluid, and each bottom run's
+    /// weight on its triangle's corners ([`crate::sections`],
+    /// [`crate::distribute`]).
     pub fn match_sections(&mut self) {
-        self.count = match_sections(&mut self.scratch.hits);
+        let scale = self.rho_g() * self.projected.grid.column_area();
+        let s = &mut *self.scratch;
+        let n_u = self.projected.grid.n[0];
+        self.tally = match_bands(n_u, self.bands, &s.tasks, scale, &mut s.bands);
     }
 
-    /// Stage 4: each section's weight `A·h·ρ·g` onto its bottom triangle's
-    /// corners by the barycentric coordinates.
+    /// Stage 4: the weights onto the vertices, and the volume.
     pub fn distribute(self) -> FluidWeights {
         let p = &self.projected;
-        let area = p.grid.column_area();
-        let rho_g = self.rho_g();
         let mut node_weights = vec![0.0; p.surface.vertices.len()];
-        let mut volume = 0.0;
-        let n_u = p.grid.n[0];
-        // Bottom crossings carry the height of fluid above them (sections pass).
-        for h in self
-            .scratch
-            .hits
-            .iter()
-            .filter(|h| !h.top() && h.height > 0.0)
-        {
-            let v = area * h.height;
-            volume += v;
-            let tri = p.surface.triangles[h.triangle()];
-            let c = h.column as usize;
-            let centre = p.grid.centre(c % n_u, c / n_u);
-            let bary = barycentric(tri.map(|i| p.uvh[i as usize].truncate()), centre);
-            for (corner, b) in tri.iter().zip(bary) {
-                node_weights[*corner as usize] += rho_g * v * b;
-            }
-        }
-        let crossings = self.scratch.hits.len();
-        let count = self.count;
+        add_weights(
+            &mut node_weights,
+            self.scratch.bands.iter().flat_map(|b| &b.weighted),
+        );
+        let volume = p.grid.column_area() * self.tally.fluid_height;
+        let (count, crossings) = (self.tally.count, self.tally.crossings);
         self.finish(node_weights, volume, count, crossings)
     }
 
@@ -207,7 +212,7 @@ impl<'a> FluidWeighing<'a> {
             count,
             crossings,
             workers_per_triangle: self.k,
-            mean_candidates: self.mean_candidates,
+            mean_candidates: self.projected.mean_candidates,
             grid: self.projected.grid,
         };
         (self.scratch.uvh, self.scratch.triangles) = self.projected.into_buffers();
@@ -215,14 +220,17 @@ impl<'a> FluidWeighing<'a> {
     }
 }
 
-/// Barycentric coordinates of `p` in the 2-D triangle `q` (they sum to 1
-/// exactly in the last coordinate's definition).
-fn barycentric(q: [DVec2; 3], p: DVec2) -> [f64; 3] {
-    let area2 = signed_area2(q[0], q[1], q[2]);
-    let b0 = signed_area2(p, q[1], q[2]) / area2;
-    let b1 = signed_area2(q[0], p, q[2]) / area2;
-    [b0, b1, 1.0 - b0 - b1]
-}
+/// Row-scan tasks per rayon thread: a few, so a thread that finishes early
+/// steals work.
+const TASKS_PER_THREAD: usize = 4;
+
+/// Row bands per rayon thread, at least (the section pass's tasks; a large
+/// grid has more, [`RowBands::new`]).
+const BANDS_PER_THREAD: usize = 8;
+
+/// The fewest triangles a row-scan task takes, so a small surface is not
+/// cut finer than its work.
+const MIN_TASK_TRIANGLES: usize = 512;
 
 #[cfg(test)]
 #[path = "weighing_tests.rs"]
