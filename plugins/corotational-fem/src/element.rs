@@ -96,32 +96,10 @@ impl Element {
         }
     }
 
-    /// Adds to the corotated stiffness blocks `k[4a + b]` the part of the
-    /// energy's Hessian that [`Element::corotate`] leaves out: the change of
-    /// the rotation itself. With `F = U Σ Vᵀ` (signed) and
-    /// `ψ_i = ∂ψ/∂σ_i = 2μ (σ_i − 1) + λ (Σσ − 3)`, the Hessian has, on each
-    /// twist mode `T_ij = (u_i v_jᵀ − u_j v_iᵀ)/√2`, the eigenvalue
-    /// `(ψ_i + ψ_j)/(σ_i + σ_j)` where `R K Rᵀ` has 0 (Smith et al. 2019);
-    /// it is added where positive (an element in tension resists turning);
-    /// where negative (compression) it is added too unless `clamp`, which
-    /// keeps the tangent positive definite (projected Newton).
-    pub fn add_twist_stiffness(&self, u: [DVec3; 4], k: &mut [DMat3], clamp: bool) {
-        let x = [0, 1, 2, 3].map(|a| self.rest[a] + u[a]);
-        let f = self.deformation_gradient(x);
-        add_twist(
-            f,
-            &self.grads,
-            self.volume,
-            (self.lambda, self.mu),
-            k,
-            clamp,
-        );
-    }
-
     /// The warped stiffness `k[4a + b]` and force offsets `f0[a]`
     /// ([`Element::corotate`]) at corner displacements `u` (mm), with the
-    /// rotation's own stiffness ([`Element::add_twist_stiffness`]) when
-    /// `twist` is `Some(clamp)`: one signed SVD of `F` gives both.
+    /// rotation's own stiffness ([`add_twist`]) when `twist` is
+    /// `Some(clamp)`: one signed SVD of `F` gives both.
     pub fn linearise(&self, u: [DVec3; 4], k: &mut [DMat3], f0: &mut [DVec3], twist: Option<bool>) {
         let x = [0, 1, 2, 3].map(|a| self.rest[a] + u[a]);
         let f = self.deformation_gradient(x);
@@ -131,7 +109,7 @@ impl Element {
         };
         let svd = signed_svd(f);
         self.corotate(svd.0 * svd.2.transpose(), k, f0);
-        add_twist_svd(
+        add_twist(
             svd,
             &self.grads,
             self.volume,
@@ -208,24 +186,18 @@ pub fn rotated_energy_density(r: DMat3, f: DMat3, lambda: f64, mu: f64) -> f64 {
     mu * squares + 0.5 * lambda * trace * trace
 }
 
-/// Adds to `k[n a + b]` (`n = grads.len()`) the rotation's own stiffness
-/// at deformation gradient `f` over volume `w` (mm³) with shape-function
-/// gradients `grads` (1/mm) and Lamé `(λ, μ)` (Pa): see
-/// [`Element::add_twist_stiffness`].
+/// Adds to `k[n a + b]` (`n = grads.len()`) the part of the energy's
+/// Hessian that the corotated stiffness `R K Rᵀ` leaves out: the change of
+/// the rotation itself, over volume `w` (mm³) with shape-function
+/// gradients `grads` (1/mm) and Lamé `(λ, μ)` (Pa), from the signed SVD
+/// `F = U Σ Vᵀ` ([`signed_svd`]). With
+/// `ψ_i = ∂ψ/∂σ_i = 2μ (σ_i − 1) + λ (Σσ − 3)`, the Hessian has, on each
+/// twist mode `T_ij = (u_i v_jᵀ − u_j v_iᵀ)/√2`, the eigenvalue
+/// `(ψ_i + ψ_j)/(σ_i + σ_j)` where `R K Rᵀ` has 0 (Smith et al. 2019);
+/// it is added where positive (an element in tension resists turning);
+/// where negative (compression) it is added too unless `clamp`, which
+/// keeps the tangent positive definite (projected Newton).
 pub fn add_twist(
-    f: DMat3,
-    grads: &[DVec3],
-    w: f64,
-    (lambda, mu): (f64, f64),
-    k: &mut [DMat3],
-    clamp: bool,
-) {
-    add_twist_svd(signed_svd(f), grads, w, (lambda, mu), k, clamp);
-}
-
-/// [`add_twist`] from the signed SVD `(U, Σ, V)` of the deformation
-/// gradient ([`signed_svd`]).
-pub fn add_twist_svd(
     (uu, sigma, vv): (DMat3, DVec3, DMat3),
     grads: &[DVec3],
     w: f64,
@@ -316,12 +288,11 @@ mod tests {
         let e = element();
         let m = rotated_stretch();
         let u = e.rest.map(|x| m * x - x);
-        let x = [0, 1, 2, 3].map(|a| e.rest[a] + u[a]);
-        let mut k = vec![DMat3::ZERO; 16];
+        let mut without = vec![DMat3::ZERO; 16];
         let mut f0 = [DVec3::ZERO; 4];
-        e.corotate(rotation(e.deformation_gradient(x)), &mut k, &mut f0);
-        let without = k.clone();
-        e.add_twist_stiffness(u, &mut k, true);
+        e.linearise(u, &mut without, &mut f0, None);
+        let mut k = vec![DMat3::ZERO; 16];
+        e.linearise(u, &mut k, &mut f0, Some(true));
         let jac = force_jacobian(u, |u| e.elastic_force(*u));
         assert_tangent_is_jacobian(&k, &jac, 4);
         // How far the tangent without the twist part is from the Jacobian.

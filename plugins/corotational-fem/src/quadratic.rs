@@ -21,9 +21,7 @@
 //!
 //! Units: positions mm, gradients 1/mm, volume mm³, moduli Pa, forces µN.
 
-use crate::element::{
-    add_twist, add_twist_svd, energy_density, rotated_energy_density, stiffness_block,
-};
+use crate::element::{add_twist, energy_density, rotated_energy_density, stiffness_block};
 use crate::polar::{rotation, signed_svd};
 use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::tet_mesh::TetMesh;
@@ -145,21 +143,11 @@ impl Quadratic {
         })
     }
 
-    /// The corotated stiffness `Σ_q R_q K^q_ab R_qᵀ` (written to
-    /// `k[10 a + b]`) and force offsets
-    /// `f0_a = Σ_q Σ_b R_q K^q_ab (X_b − R_qᵀ X_b)` (µN; `f0[a]`) at node
-    /// displacements `u` (mm), so that the elastic force is
+    /// Adds Gauss point `q`'s share of the corotated stiffness
+    /// `Σ_q R_q K^q_ab R_qᵀ` (to `k[10 a + b]`) and of the force offsets
+    /// `f0_a = Σ_q Σ_b R_q K^q_ab (X_b − R_qᵀ X_b)` (µN; `f0[a]`), with its
+    /// rotation `r`: summed over the points, the elastic force is
     /// `f_int = K_rot u − f0`.
-    pub fn corotate(&self, u: &[DVec3; NODES], k: &mut [DMat3], f0: &mut [DVec3]) {
-        k.iter_mut().for_each(|b| *b = DMat3::ZERO);
-        f0.iter_mut().for_each(|f| *f = DVec3::ZERO);
-        for q in 0..self.points.len() {
-            self.corotate_point(q, rotation(self.deformation_gradient(q, u)), k, f0);
-        }
-    }
-
-    /// Adds Gauss point `q`'s share of [`Quadratic::corotate`], with its
-    /// rotation `r`, to `k` and `f0`.
     #[inline]
     fn corotate_point(&self, q: usize, r: DMat3, k: &mut [DMat3], f0: &mut [DVec3]) {
         let p = &self.points[q];
@@ -177,19 +165,10 @@ impl Quadratic {
         }
     }
 
-    /// Adds each Gauss point's rotation stiffness (see
-    /// [`crate::element::Element::add_twist_stiffness`]) to `k[10 a + b]`.
-    pub fn add_twist_stiffness(&self, u: &[DVec3; NODES], k: &mut [DMat3], clamp: bool) {
-        for (q, p) in self.points.iter().enumerate() {
-            let f = self.deformation_gradient(q, u);
-            add_twist(f, &p.grads, p.weight, (self.lambda, self.mu), k, clamp);
-        }
-    }
-
-    /// The warped stiffness and force offsets ([`Quadratic::corotate`]) at
-    /// node displacements `u` (mm), with each Gauss point's rotation
-    /// stiffness ([`Quadratic::add_twist_stiffness`]) when `twist` is
-    /// `Some(clamp)`: one signed SVD per Gauss point gives both.
+    /// The warped stiffness and force offsets (per Gauss point,
+    /// [`Quadratic::corotate_point`]) at node displacements `u` (mm), with
+    /// each Gauss point's rotation stiffness ([`add_twist`]) when `twist`
+    /// is `Some(clamp)`: one signed SVD per Gauss point gives both.
     pub fn linearise(
         &self,
         u: &[DVec3; NODES],
@@ -207,7 +186,7 @@ impl Quadratic {
             };
             let svd = signed_svd(f);
             self.corotate_point(q, svd.0 * svd.2.transpose(), k, f0);
-            add_twist_svd(svd, &p.grads, p.weight, (self.lambda, self.mu), k, clamp);
+            add_twist(svd, &p.grads, p.weight, (self.lambda, self.mu), k, clamp);
         }
     }
 
@@ -342,7 +321,7 @@ mod tests {
         // K_rot u − f0 is the same force.
         let mut k = vec![DMat3::ZERO; NODES * NODES];
         let mut f0 = [DVec3::ZERO; NODES];
-        e.corotate(&u, &mut k, &mut f0);
+        e.linearise(&u, &mut k, &mut f0, None);
         for a in 0..NODES {
             let ku: DVec3 = (0..NODES).map(|b| k[NODES * a + b] * u[b]).sum();
             assert!(((ku - f0[a]) - f[a]).length() <= 1e-9 * scale, "node {a}");
@@ -356,8 +335,7 @@ mod tests {
         let u = e.rest.map(|x| m * x - x);
         let mut k = vec![DMat3::ZERO; NODES * NODES];
         let mut f0 = [DVec3::ZERO; NODES];
-        e.corotate(&u, &mut k, &mut f0);
-        e.add_twist_stiffness(&u, &mut k, true);
+        e.linearise(&u, &mut k, &mut f0, Some(true));
         let jac = force_jacobian(u, |u| e.elastic_force(u));
         assert_tangent_is_jacobian(&k, &jac, NODES);
     }

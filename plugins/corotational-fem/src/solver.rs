@@ -360,7 +360,7 @@ impl CorotationalFem {
     /// Rotations from `u`, the warped stiffness assembled with `diagonal`
     /// on the diagonal blocks and scaled by `k_scale`, and `f0` per node;
     /// with `twist`, each element's rotation stiffness too
-    /// ([`Element::add_twist_stiffness`]; the static Newton tangent).
+    /// ([`crate::element::add_twist`]; the static Newton tangent).
     fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>, twist: Twist) {
         self.compliance_tangent = None;
         self.elements
@@ -832,20 +832,9 @@ impl CorotationalFem {
     /// directions started this way took as many iterations and a slower
     /// frame on the pendulum, so they start from zero.)
     fn recycled_start(&self, bc: &Boundary, free: &[bool], rhs: &[DVec3]) -> Vec<DVec3> {
-        let restrict = |v: &mut [DVec3]| {
-            for (vi, &f) in v.iter_mut().zip(free) {
-                if !f {
-                    *vi = DVec3::ZERO;
-                }
-            }
-        };
-        let mut b = rhs.to_vec();
-        bc.untie(&mut b);
-        restrict(&mut b);
+        let b = pcg::reduced_rhs(bc, free, rhs);
         self.compliance_starts.start(&b, &mut |v, out| {
-            self.matrix.mul(v, out);
-            bc.untie(out);
-            restrict(out);
+            pcg::apply_reduced(&self.matrix, bc, free, v, out)
         })
     }
 

@@ -13,6 +13,7 @@
 
 use std::collections::VecDeque;
 use voxflex_core::glam::DVec3;
+use voxflex_mesh::mesh_model::pcg::dot;
 
 /// Below this fraction of its own `K`-norm² a kept solution is dependent on
 /// the ones before it and adds no direction.
@@ -24,10 +25,6 @@ const DEPENDENT: f64 = 1e-10;
 pub(super) struct Recycler {
     kept: VecDeque<Vec<DVec3>>,
     capacity: usize,
-}
-
-fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
 }
 
 fn axpy(y: &mut [DVec3], a: f64, x: &[DVec3]) {

@@ -127,7 +127,8 @@ pub fn warn_unconverged(
 /// Below this many nodes the vector operations run on one thread.
 const PARALLEL_NODES: usize = 8192;
 
-fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
+/// `Σ aᵢ · bᵢ`.
+pub fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
     if a.len() < PARALLEL_NODES {
         a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
     } else {
@@ -193,6 +194,38 @@ impl Built {
     }
 }
 
+/// Zeroes the entries of `v` whose node is not free (`free[i]`).
+pub fn restrict(v: &mut [DVec3], free: &[bool]) {
+    for (vi, &f) in v.iter_mut().zip(free) {
+        if !f {
+            *vi = DVec3::ZERO;
+        }
+    }
+}
+
+/// The right-hand side `b` as the solves' operator sees it: hanging
+/// nodes' loads moved onto their masters, constrained nodes' zeroed.
+pub fn reduced_rhs(bc: &Boundary, free: &[bool], b: &[DVec3]) -> Vec<DVec3> {
+    let mut rhs = b.to_vec();
+    bc.untie(&mut rhs);
+    restrict(&mut rhs, free);
+    rhs
+}
+
+/// `out = A v` as the solves iterate with it: untied and restricted like
+/// [`reduced_rhs`] (`v` tied, zero on constrained nodes).
+pub fn apply_reduced(
+    a: &BlockMatrix,
+    bc: &Boundary,
+    free: &[bool],
+    v: &[DVec3],
+    out: &mut [DVec3],
+) {
+    a.mul(v, out);
+    bc.untie(out);
+    restrict(out, free);
+}
+
 /// Solves `A x = b` for the free nodes (`free[i]`), from the given `x`,
 /// with the given preconditioner.
 pub fn solve_with(
@@ -227,16 +260,8 @@ pub fn solve_preconditioned(
     precondition: &mut dyn FnMut(&[DVec3], &mut [DVec3]),
 ) -> CgOutcome {
     let n = a.rows();
-    let restrict = |v: &mut [DVec3]| {
-        for (vi, &f) in v.iter_mut().zip(free) {
-            if !f {
-                *vi = DVec3::ZERO;
-            }
-        }
-    };
-    let mut rhs = b.to_vec();
-    bc.untie(&mut rhs);
-    restrict(&mut rhs);
+    let restrict = |v: &mut [DVec3]| restrict(v, free);
+    let rhs = reduced_rhs(bc, free, b);
     let b_norm = dot(&rhs, &rhs).sqrt();
     bc.tie(x);
     let mut r = vec![DVec3::ZERO; n];
@@ -263,9 +288,7 @@ pub fn solve_preconditioned(
     let mut iterations = 0;
     while iterations < settings.max_iterations {
         iterations += 1;
-        a.mul(&p, &mut q);
-        bc.untie(&mut q);
-        restrict(&mut q);
+        apply_reduced(a, bc, free, &p, &mut q);
         let pq = dot(&p, &q);
         if pq <= 0.0 || !pq.is_finite() {
             // Not positive definite along p (or breakdown): stop here.
