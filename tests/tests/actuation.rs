@@ -284,6 +284,40 @@ fn the_hydraulic_finger_carries_its_waters_weight() {
     assert_eq!(air.1["fluid_weight_uN"], 0.0);
 }
 
+/// The hydraulic finger with `backend = "gpu"` (lavapipe in CI): the
+/// cavity plugin weighs its water with the WGSL kernels on the host's
+/// device, and the run ends where the CPU run ends — the same weight, the
+/// same tip (the model's own GPU path rounds in f32, so within 1e-3 mm).
+#[test]
+fn the_hydraulic_finger_weighs_its_water_on_the_gpu_as_on_the_cpu() {
+    if voxflex_runtime::gpu_context::testing::test_gpu().is_none() {
+        return;
+    }
+    let work = tempfile::tempdir().unwrap();
+    let tables = format!(
+        "{}{}",
+        cavity("fluid = \"water\"\npressure_pa = [[0, 0], [2, 2000]]"),
+        tip(TIP)
+    );
+    // a 4 mm proxy: the model's GPU solve on a software adapter is slow
+    let scene = finger_scene("phantom:finger", "corotational-fem", 3, &tables)
+        .replace("step = 2", "step = 4");
+    let [cpu, gpu] = ["cpu", "gpu"].map(|backend| {
+        let text = scene.replace("backend = \"cpu\"", &format!("backend = {backend:?}"));
+        run(&text, work.path(), backend).unwrap()
+    });
+    let (c, g) = (&cpu.actuators[0].notes, &gpu.actuators[0].notes);
+    assert_eq!((c["weighed_on_gpu"], g["weighed_on_gpu"]), (0.0, 1.0));
+    let (wc, wg) = (c["fluid_weight_uN"], g["fluid_weight_uN"]);
+    assert!(
+        wc > 0.0 && (wc - wg).abs() < 1e-4 * wc,
+        "weight {wc} (CPU) vs {wg} µN (GPU)"
+    );
+    let (tc, tg) = (tip_after(&cpu), tip_after(&gpu));
+    let gap = (0..3).map(|i| (tc[i] - tg[i]).abs()).fold(0.0, f64::max);
+    assert!(gap < 1e-3, "tip {tc:?} (CPU) vs {tg:?} (GPU)");
+}
+
 /// A cable along the finger's top pulled through a point at its base
 /// bends it toward +z.
 #[test]

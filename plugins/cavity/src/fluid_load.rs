@@ -3,12 +3,19 @@
 //! current surface gives the loads `w_i ĝ` on the cavity's vertices, and
 //! `w_i ĝ / v_c` — how they grow per mm³ pumped in — the paper's `J_w`,
 //! which the host folds into the unified hydraulic constraint.
+//!
+//! The weighing runs where the scene computes: on the CPU (rayon,
+//! `voxflex_fluid::FluidWeigher`) or, when the host offers the plugin a GPU
+//! (the scene's backend resolved to `gpu`), with the WGSL kernels
+//! (`voxflex_fluid::GpuFluidWeighing`) on the host's shared device.
 
+use std::sync::Arc;
 use std::time::Instant;
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::GpuService;
 use voxflex_core::triangle_surface::TriangleSurface;
-use voxflex_fluid::{FluidWeigher, FluidWeightParams};
+use voxflex_fluid::{FluidWeigher, FluidWeightParams, FluidWeights, GpuFluidWeighing};
 
 /// The loads of one weighing (µN per vertex, and µN per mm³ per vertex).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -20,12 +27,63 @@ pub struct Loads {
     pub load_growth: Vec<DVec3>,
 }
 
+/// Where a cavity weighs its fluid; each keeps its memory between frames.
+pub enum Weigher {
+    /// rayon on the CPU.
+    Cpu(FluidWeigher),
+    /// The WGSL kernels on the host's device.
+    Gpu {
+        /// The host's GPU service (shared with the deformation model).
+        gpu: Arc<dyn GpuService>,
+        /// The kernels' state (crossing slots, working memory).
+        weighing: GpuFluidWeighing,
+    },
+}
+
+impl Weigher {
+    /// The GPU weigher when `gpu` is offered, else the CPU's.
+    pub fn on(gpu: Option<Arc<dyn GpuService>>) -> Self {
+        match gpu {
+            Some(gpu) => Self::Gpu {
+                gpu,
+                weighing: GpuFluidWeighing::new(),
+            },
+            None => Self::Cpu(FluidWeigher::default()),
+        }
+    }
+
+    /// True on the GPU.
+    pub fn is_gpu(&self) -> bool {
+        matches!(self, Self::Gpu { .. })
+    }
+
+    fn weigh(
+        &mut self,
+        surface: &TriangleSurface,
+        params: &FluidWeightParams,
+    ) -> Result<FluidWeights, voxflex_fluid::FluidError> {
+        match self {
+            Self::Cpu(w) => w.weigh(surface, params),
+            Self::Gpu { gpu, weighing } => weighing.weigh(gpu.as_ref(), surface, params),
+        }
+    }
+}
+
+impl std::fmt::Debug for Weigher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Cpu(_) => f.write_str("Weigher::Cpu"),
+            Self::Gpu { gpu, .. } => write!(f, "Weigher::Gpu({})", gpu.adapter_description()),
+        }
+    }
+}
+
 /// A cavity's fluid weighing: the weigher (its memory reused every
 /// frame), its parameters and what it has seen over the run.
 #[derive(Debug)]
 pub struct FluidLoad {
     params: FluidWeightParams,
-    weigher: FluidWeigher,
+    weigher: Weigher,
     /// Weighings done.
     pub weighings: u64,
     /// Seconds spent weighing, in total.
@@ -41,11 +99,11 @@ pub struct FluidLoad {
 }
 
 impl FluidLoad {
-    /// A weighing with checked `params` (gravity not zero).
-    pub fn new(params: FluidWeightParams) -> Self {
+    /// A weighing with checked `params` (gravity not zero) on `weigher`.
+    pub fn new(params: FluidWeightParams, weigher: Weigher) -> Self {
         Self {
             params,
-            weigher: FluidWeigher::default(),
+            weigher,
             weighings: 0,
             weighing_s: 0.0,
             last_weight: 0.0,
@@ -79,6 +137,11 @@ impl FluidLoad {
         let loads: Vec<DVec3> = w.node_weights.iter().map(|&n| n * down).collect();
         let load_growth = loads.iter().map(|&l| l / w.volume_mm3).collect();
         Ok(Loads { loads, load_growth })
+    }
+
+    /// True when the weighing runs on the GPU.
+    pub fn on_gpu(&self) -> bool {
+        self.weigher.is_gpu()
     }
 
     /// Counts irregular columns, warning the first time any are seen.

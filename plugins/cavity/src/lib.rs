@@ -28,9 +28,12 @@
 //! Units: positions mm, volumes mm³, pressures Pa (µN/mm²), forces µN,
 //! density kg/m³, gravity m/s² (the scene's, world axes).
 //!
-//! Backend: the weighing runs on the CPU (rayon). `voxflex-fluid` also has
-//! its WGSL twin (`voxflex_fluid::gpu`), which this plugin does not use
-//! yet, so it declares [`CAPABILITY_CPU`] only.
+//! Backend: the weighing runs where the scene computes — rayon on the CPU,
+//! or the WGSL kernels of `voxflex_fluid::gpu` on the host's device when
+//! the scene's backend resolves to `gpu` (the host then offers the plugin
+//! its GPU service). Both give the same weights within f32 rounding (the
+//! parity tests hold them to 1e-5 of the largest vertex weight); the
+//! metrics note `weighed_on_gpu` says which ran.
 //!
 //! Scene usage:
 //!
@@ -57,7 +60,7 @@ pub mod params;
 pub use model::Cavity;
 pub use params::{CavityParams, Fluid};
 
-use voxflex_abi::ffi::CAPABILITY_CPU;
+use voxflex_abi::ffi::{CAPABILITY_CPU, CAPABILITY_GPU};
 use voxflex_abi::{ActuatorPlugin, HostContext};
 use voxflex_core::error::ModelError;
 
@@ -73,14 +76,15 @@ impl ActuatorPlugin for Cavity {
     const NAME: &'static str = "cavity";
     const DESCRIPTION: &'static str = "pneumatic or hydraulic cavity: volume growth, pressure \
          Jacobian and the fluid's weight (SoftRobots' SurfacePressureConstraint, ICRA 2017)";
-    const CAPABILITIES: u32 = CAPABILITY_CPU;
+    const CAPABILITIES: u32 = CAPABILITY_CPU | CAPABILITY_GPU;
 
     /// Parses and validates the parameter table: every error that does
     /// not need the surface is given here, so `voxflex validate` reports it.
-    fn create(params_toml: &str, _host: HostContext) -> Result<Self, ModelError> {
+    fn create(params_toml: &str, host: HostContext) -> Result<Self, ModelError> {
         let params = CavityParams::from_toml(params_toml)?;
-        tracing::debug!(?params, "cavity plugin created");
-        Ok(Self::new(params))
+        let gpu = host.gpu();
+        tracing::debug!(?params, on_gpu = gpu.is_some(), "cavity plugin created");
+        Ok(Self::on(params, gpu))
     }
 }
 

@@ -5,14 +5,16 @@
 //! SurfacePressureConstraint. A hydraulic cavity also carries its fluid's
 //! weight ([`crate::fluid_load`]).
 
-use crate::fluid_load::{FluidLoad, Loads};
+use crate::fluid_load::{FluidLoad, Loads, Weigher};
 use crate::params::{CavityParams, Fluid};
+use std::sync::Arc;
 use voxflex_core::actuator::{
     ActuatorCommand, ActuatorGeometry, ActuatorLinearisation, ActuatorModel,
 };
 use voxflex_core::deformation::{FrameInfo, ModelNotes};
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::DVec3;
+use voxflex_core::gpu::GpuService;
 use voxflex_core::triangle_surface::TriangleSurface;
 
 /// What `init` learnt about the cavity at rest.
@@ -29,9 +31,11 @@ struct Rest {
 }
 
 /// A pneumatic or hydraulic cavity: the model of the `cavity` plugin.
-#[derive(Debug)]
 pub struct Cavity {
     params: CavityParams,
+    /// The host's GPU, offered when the scene's backend resolved to `gpu`:
+    /// the fluid is then weighed there.
+    gpu: Option<Arc<dyn GpuService>>,
     rest: Option<Rest>,
     /// `linearise` calls so far.
     linearisations: u64,
@@ -40,11 +44,17 @@ pub struct Cavity {
 }
 
 impl Cavity {
-    /// A cavity with parsed parameters; [`ActuatorModel::init`] gives it
-    /// its surface.
+    /// A cavity with parsed parameters, weighing its fluid on the CPU;
+    /// [`ActuatorModel::init`] gives it its surface.
     pub fn new(params: CavityParams) -> Self {
+        Self::on(params, None)
+    }
+
+    /// [`Cavity::new`], weighing the fluid on `gpu` when one is given.
+    pub fn on(params: CavityParams, gpu: Option<Arc<dyn GpuService>>) -> Self {
         Self {
             params,
+            gpu,
             rest: None,
             linearisations: 0,
             last_volume_mm3: None,
@@ -76,13 +86,24 @@ impl Cavity {
                  nothing, so the cavity carries no loads"
             );
         }
-        Ok(weighing.map(FluidLoad::new))
+        Ok(weighing.map(|w| FluidLoad::new(w, Weigher::on(self.gpu.clone()))))
     }
 
     fn rest_mut(&mut self) -> Result<&mut Rest, ModelError> {
         self.rest
             .as_mut()
             .ok_or_else(|| ModelError::new("cavity: linearise before init"))
+    }
+}
+
+impl std::fmt::Debug for Cavity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Cavity")
+            .field("params", &self.params)
+            .field("gpu", &self.gpu.as_ref().map(|g| g.adapter_description()))
+            .field("rest", &self.rest)
+            .field("linearisations", &self.linearisations)
+            .finish()
     }
 }
 
@@ -198,8 +219,9 @@ impl ActuatorModel for Cavity {
 /// The weighing's figures; zeros for a fluid that is not weighed (its
 /// weight is neglected).
 fn add_fluid_notes(notes: &mut ModelNotes, fluid: Option<&FluidLoad>) {
-    let figures = fluid.map_or([0.0; 6], |f| {
+    let figures = fluid.map_or([0.0; 7], |f| {
         [
+            f64::from(u8::from(f.on_gpu())),
             f.last_weight,
             f.last_fluid_volume,
             f.irregular_columns_max as f64,
@@ -209,6 +231,7 @@ fn add_fluid_notes(notes: &mut ModelNotes, fluid: Option<&FluidLoad>) {
         ]
     });
     let names = [
+        "weighed_on_gpu",
         "fluid_weight_uN",
         "fluid_volume_mm3",
         "irregular_columns_max",

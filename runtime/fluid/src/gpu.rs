@@ -81,37 +81,44 @@ pub(crate) struct Params {
     geom: [f32; 4],
 }
 
-/// The GPU fluid-weight computation on one device; keeps the slot count
-/// between calls.
-pub struct GpuFluidWeighing<'g> {
-    gpu: &'g dyn GpuService,
+/// The GPU fluid-weight computation: the slot count and working memory
+/// kept between calls (the device is given to each call, so a plugin can
+/// hold this beside the host's shared service).
+#[derive(Debug)]
+pub struct GpuFluidWeighing {
     cap: u32,
     scratch: crate::weighing::Scratch,
 }
 
-impl<'g> GpuFluidWeighing<'g> {
-    /// A computation on `gpu` starting with 4 slots per column.
-    pub fn new(gpu: &'g dyn GpuService) -> Self {
+impl Default for GpuFluidWeighing {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl GpuFluidWeighing {
+    /// A computation starting with 4 slots per column.
+    pub fn new() -> Self {
         Self {
-            gpu,
             cap: 4,
             scratch: Default::default(),
         }
     }
 
-    /// [`crate::fluid_weights`] on the GPU: the same result within f32
+    /// [`crate::fluid_weights`] on `gpu`: the same result within f32
     /// rounding (see the module docs).
     pub fn weigh(
         &mut self,
+        gpu: &dyn GpuService,
         surface: &TriangleSurface,
         params: &FluidWeightParams,
     ) -> Result<FluidWeights, FluidError> {
         let mut scratch = std::mem::take(&mut self.scratch);
         let mut w = FluidWeighing::project(surface, params, &mut scratch)?;
         w.classify();
-        let buffers = Buffers::upload(self.gpu, &w)?;
-        let result = run(self.gpu, &mut self.cap, &w, &buffers);
-        buffers.release(self.gpu);
+        let buffers = Buffers::upload(gpu, &w)?;
+        let result = run(gpu, &mut self.cap, &w, &buffers);
+        buffers.release(gpu);
         let (node_weights, volume, count, crossings) = result?;
         let weights = w.finish(node_weights, volume, count, crossings);
         self.scratch = scratch;

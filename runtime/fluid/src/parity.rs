@@ -59,8 +59,8 @@ fn check(
     p: &FluidWeightParams,
 ) -> Result<(), String> {
     let cpu = fluid_weights(s, p).map_err(|e| e.to_string())?;
-    let on_gpu = GpuFluidWeighing::new(gpu)
-        .weigh(s, p)
+    let on_gpu = GpuFluidWeighing::new()
+        .weigh(gpu, s, p)
         .map_err(|e| e.to_string())?;
     compare(label, &cpu, &on_gpu)
 }
@@ -105,10 +105,10 @@ pub fn check_bunny_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
             cpu.count
         ));
     }
-    let mut w = GpuFluidWeighing::new(gpu);
-    let first = w.weigh(&s, &p).map_err(|e| e.to_string())?;
+    let mut w = GpuFluidWeighing::new();
+    let first = w.weigh(gpu, &s, &p).map_err(|e| e.to_string())?;
     compare("bunny 200²", &cpu, &first)?;
     // a second call starts from the grown slot count
-    let again = w.weigh(&s, &p).map_err(|e| e.to_string())?;
+    let again = w.weigh(gpu, &s, &p).map_err(|e| e.to_string())?;
     compare("bunny 200², second call", &cpu, &again)
 }
