@@ -5,6 +5,7 @@
 //! and exit code 1 (2 for command-line usage errors, from clap).
 
 mod bench_args;
+mod peers;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
@@ -161,6 +162,50 @@ enum Command {
         /// Per-pixel ray-start jitter (fixed per pixel): true or false.
         #[arg(long)]
         jitter: Option<bool>,
+        /// After the written image, render the same view N more times (not
+        /// written) and print each frame's time: the steady per-frame cost.
+        #[arg(long, default_value_t = 0)]
+        repeat: u32,
+    },
+    /// Write a built-in phantom as NIfTI (inputs for other tools, e.g. `bench/peers/`).
+    Phantom {
+        /// Phantom name: head, cube, rings, ramp, abdomen, finger, cylinder, pendulum.
+        name: String,
+        /// Resolution, voxels: x,y,z.
+        #[arg(long, value_delimiter = ',', default_value = "128,128,128")]
+        dims: Vec<usize>,
+        /// Output file (.nii or .nii.gz).
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write the organ labels (u8) here; abdomen only.
+        #[arg(long)]
+        labels: Option<PathBuf>,
+    },
+    /// Resample a volume under an analytic field on the CPU and time only the resample
+    /// stage; `--export` writes the source, the result and the exact backward field.
+    Resample {
+        /// A volume file or `phantom:<name>`.
+        volume: String,
+        /// Phantom resolution (x,y,z), phantoms only.
+        #[arg(long, value_delimiter = ',')]
+        dims: Option<Vec<usize>>,
+        /// The deformation, about the volume's centre.
+        #[arg(long, value_enum, default_value = "twist")]
+        field: peers::FieldKind,
+        /// The field's angle, degrees (twist and bend: over the z extent).
+        #[arg(long, default_value_t = 40.0, allow_hyphen_values = true)]
+        angle_deg: f64,
+        /// Timed repetitions after one untimed warm-up.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+        /// Interpolation: tetrahedral or trilinear (default: the resampler's, trilinear).
+        #[arg(long)]
+        interpolation: Option<voxflex_resample::Interpolation>,
+        /// Write `source.nii`, `resampled.nii` (f32), `backward_{x,y,z}.nii`
+        /// (f32 mm: rest point − output voxel centre, LPS) and `resample.json`
+        /// (times, grids) into this directory.
+        #[arg(long)]
+        export: Option<PathBuf>,
     },
     /// Benchmark the resampling pipeline through the real plugin path.
     Bench(bench_args::BenchArgs),
@@ -303,6 +348,7 @@ fn dispatch(command: Command) -> Result<()> {
             sampling,
             gradient,
             jitter,
+            repeat,
         } => {
             let (width, height) = size
                 .split_once('x')
@@ -325,8 +371,39 @@ fn dispatch(command: Command) -> Result<()> {
             );
             params.push_str(&filter_keys(step, sampling, gradient, jitter));
             render(
-                volume, dims, out, params, width, height, camera, turntable, backend,
+                volume, dims, out, params, width, height, camera, turntable, backend, repeat,
             )
+        }
+        Command::Phantom {
+            name,
+            dims,
+            out,
+            labels,
+        } => {
+            let report = peers::phantom(&name, &dims, &out, labels.as_deref())?;
+            println!("{report}");
+            Ok(())
+        }
+        Command::Resample {
+            volume,
+            dims,
+            field,
+            angle_deg,
+            repeat,
+            interpolation,
+            export,
+        } => {
+            let report = peers::resample(peers::ResampleArgs {
+                volume,
+                dims,
+                field,
+                angle_deg,
+                repeat,
+                interpolation,
+                export,
+            })?;
+            println!("{report}");
+            Ok(())
         }
         Command::Bench(args) => {
             let report = bench::run(&args.into())?;
@@ -465,7 +542,10 @@ fn plugins(dirs: Vec<PathBuf>) -> Result<()> {
     Ok(())
 }
 
-fn load_volume(source: &str, dims: Option<Vec<usize>>) -> Result<voxflex_core::volume::Volume> {
+pub(crate) fn load_volume(
+    source: &str,
+    dims: Option<Vec<usize>>,
+) -> Result<voxflex_core::volume::Volume> {
     use voxflex_phantom::{VolumeSource, parse_source, phantom};
     Ok(match parse_source(source) {
         VolumeSource::Phantom(name) => {
@@ -547,7 +627,9 @@ fn roi(
         },
         steps: a.steps,
     };
+    let grow = std::time::Instant::now();
     let o = grow_roi(volume.view(), &req, None)?;
+    let grow_ms = grow.elapsed().as_secs_f64() * 1e3;
     for w in o.warnings() {
         eprintln!("warning: {w}");
     }
@@ -555,7 +637,7 @@ fn roi(
     let written = voxflex_runtime::visualise::map_volume(&volume.grid, map);
     voxflex_io::write_volume(&out, written.view())?;
     println!(
-        "{}: lambda {}{}, {} ({} steps), {} voxels ≥ 0.5, {} visits ({:.0}% useful), map box {:?} ({} bytes) → {}",
+        "{}: lambda {}{}, {} ({} steps), {} voxels ≥ 0.5, {} visits ({:.0}% useful), map box {:?} ({} bytes), grown in {grow_ms:.1} ms → {}",
         source,
         o.lambda,
         if o.auto.is_some() { " (auto)" } else { "" },
@@ -605,6 +687,7 @@ fn render(
     camera: voxflex_runtime::scene::CameraSettings,
     turntable: u32,
     backend: voxflex_runtime::backend::BackendChoice,
+    repeat: u32,
 ) -> Result<()> {
     use voxflex_runtime::scene::RenderSettings;
     let name = out.to_string_lossy().into_owned();
@@ -614,6 +697,9 @@ fn render(
     use voxflex_runtime::scene::{MAX_IMAGE_SIDE, MAX_TURNTABLE_FRAMES};
     if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
         bail!("--size {width}x{height} is out of range; use 1 to {MAX_IMAGE_SIDE} pixels per side");
+    }
+    if repeat > 1000 {
+        bail!("--repeat {repeat} is out of range; use 0 to 1000");
     }
     if turntable > MAX_TURNTABLE_FRAMES {
         bail!("--turntable {turntable} frames is absurd; use 0 to {MAX_TURNTABLE_FRAMES}");
@@ -664,6 +750,19 @@ fn render(
         println!("wrote {}", dir.join(f).display());
     }
     println!("{} in {wall:.0} ms", resolved.reason);
+    if repeat > 0 {
+        // The same view again, the scene already handed over: each frame's
+        // time is the rays' alone.
+        let camera = voxflex_runtime::visualise::camera_for(&settings, &volume.grid, 0.0);
+        let mut times = vec![];
+        for _ in 0..repeat {
+            let t = std::time::Instant::now();
+            stage.render_image(&camera)?;
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let list: Vec<String> = times.iter().map(|t| format!("{t:.1}")).collect();
+        println!("repeat frames (ms): {}", list.join(" "));
+    }
     Ok(())
 }
 
