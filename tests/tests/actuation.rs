@@ -193,20 +193,51 @@ fn an_inverse_finger_reaches_a_reachable_target_within_one_percent_of_its_length
         )
         .unwrap(),
     );
-    let inverse = format!("{}{}", cavity("max_pressure_pa = 30000"), tip(reached));
-    let r = run(
-        &finger_scene("phantom:finger", "corotational-fem", 15, &inverse),
-        work.path(),
-        "i",
-    )
-    .unwrap();
-    let d = r.effectors[0].distance_mm.last().copied().unwrap();
-    eprintln!(
-        "reachable target {reached:?}: distance per frame {:?}, pressure {:?}",
-        r.effectors[0].distance_mm, r.actuators[0].effort
+    // Every frame solves its responses; then every fourth (the secant
+    // update corrects the reused ones in between): both reach it.
+    let mut solves = Vec::new();
+    for every in [1, 4] {
+        let inverse = format!(
+            "{}{}[actuation]\nresponse_refresh_frames = {every}\n",
+            cavity("max_pressure_pa = 30000"),
+            tip(reached)
+        );
+        let r = run(
+            &finger_scene("phantom:finger", "corotational-fem", 15, &inverse),
+            work.path(),
+            &format!("i{every}"),
+        )
+        .unwrap();
+        let d = r.effectors[0].distance_mm.last().copied().unwrap();
+        eprintln!(
+            "reachable target {reached:?}, responses every {every} frames: distance per frame \
+             {:?}, pressure {:?}, {} compliance solves, {} reused",
+            r.effectors[0].distance_mm,
+            r.actuators[0].effort,
+            r.compliance_solves,
+            r.responses_reused
+        );
+        assert!(d < 0.8, "{d} mm from the target");
+        assert_eq!(r.qp_failures, 0);
+        solves.push((r.compliance_solves, r.responses_reused));
+    }
+    assert_eq!(solves[0].1, 0);
+    assert!(
+        solves[1].1 > 0 && solves[1].0 < solves[0].0,
+        "reusing responses saves solves: {solves:?}"
     );
-    assert!(d < 0.8, "{d} mm from the target");
-    assert_eq!(r.qp_failures, 0);
+    let bad = format!(
+        "{}{}[actuation]\nresponse_refresh_frames = 0\n",
+        cavity("max_pressure_pa = 30000"),
+        tip(reached)
+    );
+    let e = run(
+        &finger_scene("phantom:finger", "corotational-fem", 1, &bad),
+        work.path(),
+        "bad",
+    )
+    .unwrap_err();
+    assert!(e.contains("response_refresh_frames"), "{e}");
 }
 
 /// An unreachable target ends at the closest configuration the actuator

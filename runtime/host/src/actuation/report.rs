@@ -28,6 +28,9 @@ pub struct ActuationReport {
     pub settle_failures: u64,
     /// Compliance solves the inverse problems and measure scripts took.
     pub compliance_solves: u64,
+    /// Inverse steps that reused the last frames' responses instead of
+    /// solving again (`[actuation] response_refresh_frames` above 1).
+    pub responses_reused: u64,
     /// Interior-point iterations of the inverse QPs, summed.
     pub qp_iterations: u64,
     /// Frames whose inverse QP failed (infeasible scripts): the efforts

@@ -16,6 +16,7 @@
 //! [actuation]                    # how each frame settles (optional)
 //! settle_tolerance = 1e-4        # the follower forces' relative change that counts as settled
 //! settle_iterations = 30         # repeated steps per frame at most; 0: lagged by a frame
+//! response_refresh_frames = 1    # inverse control: recompute the compliance responses every N frames
 //!
 //! [[effector]]
 //! point = [60, 10, 10]           # rest position on the body, mm
@@ -85,6 +86,16 @@ pub struct ActuationSettings {
     /// warns when the last frame's change is above 1 %.
     #[serde(default = "default_settle_iterations")]
     pub settle_iterations: u32,
+    /// Inverse control: the actuators' responses (one compliance solve per
+    /// actuator, two for a hydraulic cavity) are recomputed every this
+    /// many frames (default 1: every frame), and sooner whenever the last
+    /// inverse step disappointed (the effectors got less than a quarter of
+    /// the improvement it predicted). In between, the responses of the
+    /// last solve, corrected by the secant update from what the effectors
+    /// did, steer the efforts; the physics of every frame is still the
+    /// model's full solve.
+    #[serde(default = "default_response_refresh_frames")]
+    pub response_refresh_frames: u32,
 }
 
 fn default_settle_tolerance() -> f64 {
@@ -93,6 +104,12 @@ fn default_settle_tolerance() -> f64 {
 fn default_settle_iterations() -> u32 {
     30
 }
+fn default_response_refresh_frames() -> u32 {
+    1
+}
+
+/// More frames between response refreshes than this is a typo.
+pub const MAX_RESPONSE_REFRESH_FRAMES: u32 = 1000;
 
 /// More repeated steps per frame than this is a typo, not a setting.
 pub const MAX_SETTLE_ITERATIONS: u32 = 1000;
@@ -102,6 +119,7 @@ impl Default for ActuationSettings {
         Self {
             settle_tolerance: default_settle_tolerance(),
             settle_iterations: default_settle_iterations(),
+            response_refresh_frames: default_response_refresh_frames(),
         }
     }
 }
@@ -126,6 +144,16 @@ impl ActuationSettings {
                     "{} is more than {MAX_SETTLE_ITERATIONS} repeated steps a frame; use 0 \
                      (interactive: forces lag a frame) to 30 (the default)",
                     self.settle_iterations
+                ),
+            ));
+        }
+        if !(1..=MAX_RESPONSE_REFRESH_FRAMES).contains(&self.response_refresh_frames) {
+            return Err((
+                "response_refresh_frames".into(),
+                format!(
+                    "{} must lie in 1..={MAX_RESPONSE_REFRESH_FRAMES}: recompute the \
+                     actuators' compliance responses every N frames (default 1: every frame)",
+                    self.response_refresh_frames
                 ),
             ));
         }

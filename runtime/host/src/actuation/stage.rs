@@ -88,6 +88,12 @@ pub(crate) struct ActuationStage {
     largest_step: Vec<f64>,
     /// The forces applied in the last step (µN per point).
     applied: Vec<DVec3>,
+    /// The last responses solved (`K⁻¹ J_aᵀ` per actuator, mm per unit
+    /// effort at every stage point) and the inverse steps since.
+    responses: Option<(Vec<Vec<DVec3>>, u32)>,
+    /// The last inverse step got less than a quarter of the improvement
+    /// it predicted: the next one solves its responses afresh.
+    disappointed: bool,
     /// The settling warning was given.
     warned_unsettled: bool,
     /// How each frame settles (`[actuation]`).
@@ -168,6 +174,8 @@ impl ActuationStage {
             secant: Secant::default(),
             largest_step: vec![0.0; n_actuators],
             applied: Vec::new(),
+            responses: None,
+            disappointed: false,
             warned_unsettled: false,
             settle,
         })
@@ -193,6 +201,7 @@ impl ActuationStage {
                 .map_err(|e| failed("the scene's [model]", e))?;
         }
         self.secant = Secant::new(3 * self.effectors.len(), self.actuators.len());
+        self.responses = None;
         self.binding = Some(binding);
         self.refresh(model)
     }

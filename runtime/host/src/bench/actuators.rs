@@ -17,33 +17,33 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// One pendulum configuration of the bench: the proxy step (voxels of
-/// 1.2 mm: 2 is the scene's 5,311 nodes, 3 the paper's ~2 k-node class)
-/// and whether each frame settles its follower forces (the default) or
-/// lags them by a frame (`[actuation] settle_iterations = 0`).
+/// 1.2 mm: 2 is the scene's 5,311 nodes, 3 the paper's ~2 k-node class),
+/// whether each frame settles its follower forces (the default) or lags
+/// them by a frame (`[actuation] settle_iterations = 0`), and how often
+/// the inverse step solves its responses (`response_refresh_frames`).
 #[derive(Clone, Copy, Debug)]
 struct Variant {
     step: usize,
     lagged: bool,
+    responses_every: u32,
+}
+
+const fn variant(step: usize, lagged: bool, responses_every: u32) -> Variant {
+    Variant {
+        step,
+        lagged,
+        responses_every,
+    }
 }
 
 /// The configurations measured, interleaved within each repeat.
-const VARIANTS: [Variant; 4] = [
-    Variant {
-        step: 2,
-        lagged: false,
-    },
-    Variant {
-        step: 2,
-        lagged: true,
-    },
-    Variant {
-        step: 3,
-        lagged: false,
-    },
-    Variant {
-        step: 3,
-        lagged: true,
-    },
+const VARIANTS: [Variant; 6] = [
+    variant(2, false, 1),
+    variant(2, true, 1),
+    variant(3, false, 1),
+    variant(3, true, 1),
+    variant(3, false, 8),
+    variant(3, true, 8),
 ];
 
 /// The pendulum scene (`configs/soft-pendulum.toml`'s physics) for
@@ -98,11 +98,11 @@ dir = {out:?}
         d = cavity("-y", 5),
         out = out.display().to_string(),
         step = v.step,
-        settle = if v.lagged {
-            "\n[actuation]\nsettle_iterations = 0\n"
-        } else {
-            ""
-        },
+        settle = format!(
+            "\n[actuation]\nsettle_iterations = {}\nresponse_refresh_frames = {}\n",
+            if v.lagged { 0 } else { 30 },
+            v.responses_every
+        ),
     )
 }
 
@@ -210,8 +210,8 @@ pub fn run(args: &BenchOptions) -> Result<String, BenchError> {
         out,
         "Pendulum, four water cavities at 200² columns, inverse control ({frames} frames, {} runs \
          each, interleaved):\n  \
-         step  nodes  settling          ms/frame min  median  frames/s  repeats/frame  \
-         compliance/frame  weighing ms  force change  tip median mm  tip worst mm",
+         step  nodes  settling          responses  ms/frame min  median  frames/s  \
+         repeats/frame  compliance/frame  weighing ms  force change  tip median mm  tip worst mm",
         args.repeat.max(1)
     );
     for (v, r) in VARIANTS.iter().zip(&mut runs) {
@@ -219,8 +219,8 @@ pub fn run(args: &BenchOptions) -> Result<String, BenchError> {
         let (best, median) = (&r[0], &r[r.len() / 2]);
         let _ = writeln!(
             out,
-            "  {:<4}  {:<5}  {:<16}  {:<12.1}  {:<6.1}  {:<8.1}  {:<13.1}  {:<16.1}  {:<11.3}  \
-             {:<12.2e}  {:<13.3}  {:.3}",
+            "  {:<4}  {:<5}  {:<16}  {:<9}  {:<12.1}  {:<6.1}  {:<8.1}  {:<13.1}  {:<16.1}  \
+             {:<11.3}  {:<12.2e}  {:<13.3}  {:.3}",
             v.step,
             best.nodes,
             if v.lagged {
@@ -228,6 +228,7 @@ pub fn run(args: &BenchOptions) -> Result<String, BenchError> {
             } else {
                 "settled (1e-4)"
             },
+            format!("every {}", v.responses_every),
             best.ms_per_frame,
             median.ms_per_frame,
             1e3 / median.ms_per_frame,

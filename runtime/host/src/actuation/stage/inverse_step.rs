@@ -68,6 +68,33 @@ impl ActuationStage {
         Ok(out)
     }
 
+    /// The responses this inverse step uses: solved afresh on the first
+    /// step, every `response_refresh_frames` steps and, when frames
+    /// settle, after a disappointing step; else the last ones (the secant
+    /// correction keeps learning what they miss).
+    fn current_responses(
+        &mut self,
+        model: &mut dyn DeformationModel,
+        binding: BindingId,
+    ) -> Result<Vec<Vec<DVec3>>, ModelError> {
+        let every = self.settle.response_refresh_frames;
+        // A settled frame judges the responses by what the model did; a
+        // lagged one (settle_iterations = 0) mostly measures its own lag.
+        let misled = self.disappointed && self.settle.settle_iterations > 0;
+        match self.responses.take() {
+            Some((r, age)) if age + 1 < every && !misled => {
+                self.report.responses_reused += 1;
+                self.responses = Some((r.clone(), age + 1));
+                Ok(r)
+            }
+            _ => {
+                let r = self.responses(model, binding)?;
+                self.responses = Some((r.clone(), 0));
+                Ok(r)
+            }
+        }
+    }
+
     /// Builds and solves the frame's inverse problem over the actuators
     /// whose effort is not given; `known` holds the given ones.
     pub(super) fn solve_inverse(
@@ -77,7 +104,8 @@ impl ActuationStage {
         known: &[Option<f64>],
         frame: FrameInfo,
     ) -> Result<(), ModelError> {
-        let responses = self.responses(model, binding)?;
+        self.judge_last_step();
+        let responses = self.current_responses(model, binding)?;
         let unknown: Vec<usize> = (0..known.len()).filter(|&a| known[a].is_none()).collect();
         // What the given efforts' changes do, before the unknowns move.
         let mut shift = vec![DVec3::ZERO; self.rest.len()];
@@ -107,7 +135,6 @@ impl ActuationStage {
                 .push(unknown.iter().map(|&a| w[a]).collect());
             p.effector_offset.push(offset);
         }
-        self.judge_last_step();
         for &a in &unknown {
             p.efforts.push(self.actuators[a].effort);
             p.effort_bounds.push(self.actuators[a].lin.effort_bounds);
@@ -247,6 +274,7 @@ impl ActuationStage {
         } else {
             (last.before - now) / expected
         };
+        self.disappointed = rho < 0.25;
         for (a, d) in last.delta {
             self.largest_step[a] = self.largest_step[a].max(d.abs());
             if rho < 0.25 {
