@@ -146,7 +146,19 @@ def machine() -> dict:
         "os": platform.platform(),
         "python": platform.python_version(),
         "load_average_1min": round(load_average(), 2),
+        "copy_bandwidth_gb_s": copy_bandwidth_gb_s(),
     }
+
+
+def copy_bandwidth_gb_s(mib: int = 256, repeat: int = 5) -> float:
+    """The machine's memory copy bandwidth (read + write bytes per second,
+    GB/s): best of ``repeat`` numpy copies of a ``mib`` MiB array."""
+    import numpy as np
+
+    src = np.ones(mib * 2**20 // 8)
+    dst = np.empty_like(src)
+    best = min(timed_ms(lambda: np.copyto(dst, src))[0] for _ in range(repeat))
+    return round(2 * src.nbytes / (best * 1e-3) / 1e9, 2)
 
 
 def fmt_ms(v: float | None) -> str:

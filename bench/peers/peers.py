@@ -67,7 +67,11 @@ def versions(ctx: Context) -> dict:
     try:
         out["voxflex"] = subprocess.run([str(ctx.voxflex), "--version"], capture_output=True, text=True).stdout.strip()
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO)
-        out["git"] = rev.stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/peers"],
+            capture_output=True, text=True, cwd=REPO,
+        ).stdout.strip()  # fmt: skip
+        out["git"] = rev.stdout.strip() + (" + uncommitted changes" if dirty else "")
     except OSError as e:
         out["voxflex"] = f"unavailable: {e}"
     for mod, attr in [
@@ -98,7 +102,7 @@ def markdown(rows: list[dict], meta: dict) -> str:
         "",
         f"Command: `{meta['command']}`  ",
         f"Machine: {meta['machine']['cpu']}, {meta['machine']['cores']} cores, "
-        f"{meta['machine']['memory_gib']} GiB; load average {meta['load_before']} before, {meta['load_after']} after  ",
+        f"{meta['machine']['memory_gib']} GiB, numpy copy {meta['machine']['copy_bandwidth_gb_s']} GB/s; load average {meta['load_before']} before, {meta['load_after']} after  ",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items()) + "  ",
         f"Started {meta['started']}; {meta['repeat']} interleaved rounds per case{' (--quick)' if meta['quick'] else ''}.",
         "",
