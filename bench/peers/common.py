@@ -110,6 +110,26 @@ def run_voxflex(ctx: Context, *args: str, timeout: float = 3600) -> str:
     return p.stdout
 
 
+def bench_executable(ctx: Context, package: str, bench: str) -> pathlib.Path:
+    """Builds a crate's bench binary once (``cargo bench --no-run``) and
+    returns its path, so the timed rounds run that one binary — no cargo
+    check or rebuild between rounds."""
+    import json
+
+    cmd = ["cargo", "bench", "--no-run", "-q", "-p", package, "--bench", bench, "--message-format=json"]
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=ctx.repo, timeout=3600)
+    if p.returncode != 0:
+        raise HarnessError(f"{' '.join(cmd)} failed: {p.stderr.strip()[-1500:]}")
+    for line in p.stdout.splitlines():
+        try:
+            msg = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if msg.get("reason") == "compiler-artifact" and msg.get("target", {}).get("name") == bench and msg.get("executable"):
+            return pathlib.Path(msg["executable"])
+    raise HarnessError(f"cargo built no executable for bench `{bench}` of {package}")
+
+
 def parse_ms(pattern: str, text: str) -> float:
     """The first number captured by ``pattern`` in ``text`` (ms)."""
     m = re.search(pattern, text)
