@@ -15,7 +15,7 @@ import re
 import statistics
 import subprocess
 import time
-from typing import Callable
+from collections.abc import Callable
 
 
 class HarnessError(RuntimeError):
@@ -125,7 +125,11 @@ def bench_executable(ctx: Context, package: str, bench: str) -> pathlib.Path:
             msg = json.loads(line)
         except json.JSONDecodeError:
             continue
-        if msg.get("reason") == "compiler-artifact" and msg.get("target", {}).get("name") == bench and msg.get("executable"):
+        if (
+            msg.get("reason") == "compiler-artifact"
+            and msg.get("target", {}).get("name") == bench
+            and msg.get("executable")
+        ):
             return pathlib.Path(msg["executable"])
     raise HarnessError(f"cargo built no executable for bench `{bench}` of {package}")
 

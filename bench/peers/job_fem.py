@@ -103,14 +103,14 @@ def run(ctx: Context) -> list[Row]:
     vox: dict[tuple, list[list[dict]]] = {p: [] for p in pairs}
     peer: dict[tuple, list[float]] = {p: [] for p in pairs}
     tips: dict[tuple, float] = {}
-    for (el, r) in pairs:  # warm-up of the peer, and its answer
+    for el, r in pairs:  # warm-up of the peer, and its answer
         tips[(el, r)] = skfem_tip(ref, meshes[r], ELEMENTS[el])
     for _ in range(ctx.repeat):
         front = voxflex_front(ctx, out_dir)
         for p in pairs:
             vox[p].append([x for x in front if (x["element"], x["r"]) == p])
-        for (el, r) in pairs:
-            ms, _ = timed_ms(lambda: skfem_tip(ref, meshes[r], ELEMENTS[el]))
+        for el, r in pairs:
+            ms, _ = timed_ms(lambda r=r, el=el: skfem_tip(ref, meshes[r], ELEMENTS[el]))
             peer[(el, r)].append(ms)
     rows = []
     for p in pairs:
@@ -120,7 +120,9 @@ def run(ctx: Context) -> list[Row]:
         for round_rows in vox[p]:
             for x in round_rows:
                 by_tol.setdefault(x["tol"], []).append(x)
-        agree = [t for t in sorted(by_tol, reverse=True) if abs(by_tol[t][0]["tip"] - tips[p]) <= TIP_REL * abs(tips[p])]
+        agree = [
+            t for t in sorted(by_tol, reverse=True) if abs(by_tol[t][0]["tip"] - tips[p]) <= TIP_REL * abs(tips[p])
+        ]
         tol = agree[0] if agree else min(by_tol)
         chosen = by_tol[tol]
         rel = abs(chosen[0]["tip"] - tips[p]) / abs(tips[p])
@@ -164,9 +166,7 @@ def equal_error_row(vox: dict, peer: dict, tips: dict) -> Row:
             if close(xs[0]["tip"]):
                 times = [x["ms"] for x in xs]
                 vox_cands.append((sorted(times)[len(times) // 2], f"{p[0]} r = {p[1]}, CG {tol:g}", times))
-    peer_cands = [
-        (sorted(t)[len(t) // 2], f"{p[0]} r = {p[1]}", t) for p, t in peer.items() if close(tips[p])
-    ]
+    peer_cands = [(sorted(t)[len(t) // 2], f"{p[0]} r = {p[1]}", t) for p, t in peer.items() if close(tips[p])]
     ok = bool(vox_cands and peer_cands)
     v = min(vox_cands) if vox_cands else (None, "none", [])
     q = min(peer_cands) if peer_cands else (None, "none", [])

@@ -97,17 +97,21 @@ def cell(text: str) -> str:
 
 
 def markdown(rows: list[dict], meta: dict) -> str:
+    m = meta["machine"]
+    quick = " (--quick)" if meta["quick"] else ""
+    header = ["job", "case", "peer", "voxflex min / median ms", "peer min / median ms"]
+    header += ["peer ÷ voxflex (median)", "same answer?", "note"]
     lines = [
         "# voxflex side by side with its peers",
         "",
         f"Command: `{meta['command']}`  ",
-        f"Machine: {meta['machine']['cpu']}, {meta['machine']['cores']} cores, "
-        f"{meta['machine']['memory_gib']} GiB, numpy copy {meta['machine']['copy_bandwidth_gb_s']} GB/s; load average {meta['load_before']} before, {meta['load_after']} after  ",
+        f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gib']} GiB, numpy copy {m['copy_bandwidth_gb_s']} GB/s; "
+        f"load average {meta['load_before']} before, {meta['load_after']} after  ",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items()) + "  ",
-        f"Started {meta['started']}; {meta['repeat']} interleaved rounds per case{' (--quick)' if meta['quick'] else ''}.",
+        f"Started {meta['started']}; {meta['repeat']} interleaved rounds per case{quick}.",
         "",
-        "| job | case | peer | voxflex min / median ms | peer min / median ms | peer ÷ voxflex (median) | same answer? | note |",
-        "|---|---|---|---|---|---|---|---|",
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
     ]
     for r in rows:
         c = r["check"]
@@ -137,7 +141,9 @@ def main(argv: list[str]) -> int:
     ensure_voxflex(a)
     data = pathlib.Path(os.environ.get("VOXFLEX_TEST_DATA", REPO.parent / "shared/data"))
     a.work.mkdir(parents=True, exist_ok=True)
-    ctx = Context(repo=REPO, voxflex=a.voxflex.resolve(), work=a.work.resolve(), data=data, repeat=a.repeat, quick=a.quick)
+    ctx = Context(
+        repo=REPO, voxflex=a.voxflex.resolve(), work=a.work.resolve(), data=data, repeat=a.repeat, quick=a.quick
+    )
     meta = {
         "command": "bench/peers/run.sh " + shlex.join(argv),
         "started": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
@@ -165,8 +171,7 @@ def main(argv: list[str]) -> int:
             print(
                 f"  {r.case}: voxflex {fmt_ms(vmin)} / {fmt_ms(vmed)} ms, {r.peer.split(',')[0]} "
                 f"{fmt_ms(pmin)} / {fmt_ms(pmed)} ms, check {'ok' if r.check.ok else 'FAILED'} "
-                f"({r.check.value}; tol. {r.check.tolerance})"
-                + (f", ratio {ratio:.2f}×" if ratio is not None else ""),
+                f"({r.check.value}; tol. {r.check.tolerance})" + (f", ratio {ratio:.2f}×" if ratio is not None else ""),
                 flush=True,
             )
         rows += new
