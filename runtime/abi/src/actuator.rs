@@ -127,7 +127,7 @@ unsafe extern "C" fn linearise<P: ActuatorPlugin>(
         }
         // SAFETY: host contract: `len` positions.
         let x = unsafe { vectors_in(positions, len) }?;
-        let l = s.model.linearise(&x).map_err(|e| e.to_string())?;
+        let l = crate::plugin::on_worker(|| s.model.linearise(&x)).map_err(|e| e.to_string())?;
         l.check(x.len(), P::NAME).map_err(|e| e.to_string())?;
         // SAFETY: host contract: three arrays of `len` entries.
         unsafe {

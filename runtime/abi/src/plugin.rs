@@ -360,7 +360,7 @@ unsafe extern "C" fn step<P: DeformationPlugin>(
         }
         // SAFETY: checked non-null; plain data.
         let info: FrameInfo = unsafe { *frame }.into();
-        let outcome = s.model.step(info).map_err(|e| e.to_string())?;
+        let outcome = on_worker(|| s.model.step(info)).map_err(|e| e.to_string())?;
         // SAFETY: checked non-null.
         unsafe { *out_changed = outcome.changed as u32 };
         Ok(())
@@ -562,13 +562,8 @@ unsafe extern "C" fn compliance<P: DeformationPlugin>(
         // SAFETY: host contract: `len` forces at `forces`.
         let forces = unsafe { vectors_in(forces, len) }?;
         let mut u = vec![DVec3::ZERO; forces.len()];
-        s.model
-            .compliance(
-                voxflex_core::deformation::BindingId(binding),
-                &forces,
-                &mut u,
-            )
-            .map_err(|e| e.to_string())?;
+        let binding = voxflex_core::deformation::BindingId(binding);
+        on_worker(|| s.model.compliance(binding, &forces, &mut u)).map_err(|e| e.to_string())?;
         // SAFETY: host contract: `len` entries at `out`.
         unsafe { vectors_out(&u, out, len) }
     })
@@ -585,11 +580,26 @@ unsafe extern "C" fn resolve<P: DeformationPlugin>(
         if out_changed.is_null() {
             return Err("null output".into());
         }
-        let o = s.model.resolve().map_err(|e| e.to_string())?;
+        let o = on_worker(|| s.model.resolve()).map_err(|e| e.to_string())?;
         // SAFETY: checked non-null.
         unsafe { *out_changed = u32::from(o.changed) };
         Ok(())
     })
+}
+
+/// Runs `f` on a worker of the plugin's own rayon pool (every plugin
+/// library links its own copy of rayon, so the host's thread is a stranger
+/// to it) and waits: the parallel loops inside `f` then split work among
+/// workers directly instead of each handing its job across threads and
+/// blocking the caller on a lock — one hand-over per call instead of one
+/// per loop (a static solve runs hundreds of loops). Already on a worker,
+/// `f` runs in place.
+pub(crate) fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    if rayon::current_thread_index().is_some() {
+        f()
+    } else {
+        rayon::join(f, || ()).0
+    }
 }
 
 /// The vtable of plugin type `P` (used by [`crate::export_deformation_plugin!`]).
@@ -662,4 +672,21 @@ macro_rules! __export_header {
             &__VOXFLEX_HEADER
         }
     };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::on_worker;
+
+    #[test]
+    fn calls_run_on_a_worker_of_the_pool_and_nested_calls_in_place() {
+        assert_eq!(rayon::current_thread_index(), None, "the test thread");
+        let (outer, inner) = on_worker(|| {
+            let outer = std::thread::current().id();
+            let inner = on_worker(|| std::thread::current().id());
+            (rayon::current_thread_index().map(|_| outer), inner)
+        });
+        assert!(outer.is_some(), "the call ran on a pool worker");
+        assert_eq!(outer, Some(inner), "a nested call stays on its worker");
+    }
 }
