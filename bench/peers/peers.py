@@ -156,7 +156,8 @@ def main(argv: list[str]) -> int:
     }
     rows: list[Row] = []
     for job in a.jobs.split(","):
-        print(f"== {job} (load {load_average():.2f})", flush=True)
+        load = round(load_average(), 2)
+        print(f"== {job} (load {load})", flush=True)
         try:
             module = importlib.import_module(JOBS[job])
             new = module.run(ctx)
@@ -174,6 +175,9 @@ def main(argv: list[str]) -> int:
                 f"({r.check.value}; tol. {r.check.tolerance})" + (f", ratio {ratio:.2f}×" if ratio is not None else ""),
                 flush=True,
             )
+        for r in new:
+            r.extra["load_before"], r.extra["load_after"] = load, round(load_average(), 2)
+            r.note += f" (load {load}–{r.extra['load_after']})"
         rows += new
     meta["load_after"] = round(load_average(), 2)
     summaries = [r.summary() for r in rows]
