@@ -587,20 +587,11 @@ unsafe extern "C" fn resolve<P: DeformationPlugin>(
     })
 }
 
-/// Runs `f` on a worker of the plugin's own rayon pool (every plugin
-/// library links its own copy of rayon, so the host's thread is a stranger
-/// to it) and waits: the parallel loops inside `f` then split work among
-/// workers directly instead of each handing its job across threads and
-/// blocking the caller on a lock — one hand-over per call instead of one
-/// per loop (a static solve runs hundreds of loops). Already on a worker,
-/// `f` runs in place.
-pub(crate) fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
-    if rayon::current_thread_index().is_some() {
-        f()
-    } else {
-        rayon::join(f, || ()).0
-    }
-}
+/// [`voxflex_core::on_worker::on_worker`] in this library: every plugin
+/// library links its own copy of rayon, so the host's thread is a
+/// stranger to its pool, and a call that runs many parallel loops (a
+/// static solve) hands over once instead of once per loop.
+pub(crate) use voxflex_core::on_worker::on_worker;
 
 /// The vtable of plugin type `P` (used by [`crate::export_deformation_plugin!`]).
 pub const fn deformation_vtable<P: DeformationPlugin>() -> DeformationVTable {
@@ -672,21 +663,4 @@ macro_rules! __export_header {
             &__VOXFLEX_HEADER
         }
     };
-}
-
-#[cfg(test)]
-mod tests {
-    use super::on_worker;
-
-    #[test]
-    fn calls_run_on_a_worker_of_the_pool_and_nested_calls_in_place() {
-        assert_eq!(rayon::current_thread_index(), None, "the test thread");
-        let (outer, inner) = on_worker(|| {
-            let outer = std::thread::current().id();
-            let inner = on_worker(|| std::thread::current().id());
-            (rayon::current_thread_index().map(|_| outer), inner)
-        });
-        assert!(outer.is_some(), "the call ran on a pool worker");
-        assert_eq!(outer, Some(inner), "a nested call stays on its worker");
-    }
 }

@@ -39,6 +39,7 @@ pub mod grid;
 pub mod interaction;
 pub mod keyframes;
 pub mod non_finite;
+pub mod on_worker;
 pub mod opacity_map;
 pub mod render;
 pub mod slice_axis;
