@@ -23,7 +23,9 @@
 //!    favour of a half-grown map). Without any ratio (the first step
 //!    already jumps) it is the last candidate before the jump.
 //!
-//! The map is then grown once more at that λ. Figures (Dice per organ for
+//! The map is that trial's growth — kept from the search while the kept
+//! maps fit [`KEPT_BYTES`], else grown once more at that λ (the same map:
+//! a growth is deterministic and resumable). Figures (Dice per organ for
 //! this rule and for fixed λ on `phantom:abdomen`) are in docs/BENCHMARKS.md and in
 //! `docs/roi_dice_vs_lambda.md`.
 
@@ -59,6 +61,11 @@ pub const FLAT_TOL: f64 = 0.25;
 /// Regions smaller than this (voxels at opacity ≥ 0.5) do not start a
 /// ratio: a seed that has not spread yet.
 pub const MIN_VOXELS: usize = 27;
+
+/// The trials' maps kept for the answer, in bytes at most: the oldest go
+/// first (the rule picks among the later candidates); a map not kept is
+/// grown again.
+pub const KEPT_BYTES: usize = 256 << 20;
 
 /// One candidate λ tried by the search.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -120,6 +127,7 @@ pub fn auto_lambda(
     steps: Option<usize>,
 ) -> Result<AutoLambda, OpacityError> {
     let mut trials: Vec<Trial> = Vec::new();
+    let mut kept: Vec<(f32, Grown)> = Vec::new();
     for &lambda in &CANDIDATES {
         let bound = trials
             .last()
@@ -137,12 +145,28 @@ pub fn auto_lambda(
         if bound.is_some_and(|b| voxels > b) {
             break;
         }
+        keep(&mut kept, lambda, grown);
     }
     let lambda = pick(&trials);
-    let grown = runner.grow(GrowthParams { lambda, ..params }, steps, None)?;
+    let grown = match kept.into_iter().find(|(l, _)| *l == lambda) {
+        Some((_, grown)) => grown,
+        None => runner.grow(GrowthParams { lambda, ..params }, steps, None)?,
+    };
     Ok(AutoLambda {
         lambda,
         trials,
         grown,
     })
+}
+
+/// Keeps a trial's growth (run to its end, not cut short), dropping the
+/// oldest while the kept maps exceed [`KEPT_BYTES`].
+fn keep(kept: &mut Vec<(f32, Grown)>, lambda: f32, grown: Grown) {
+    if grown.aborted {
+        return;
+    }
+    kept.push((lambda, grown));
+    while kept.iter().map(|(_, g)| g.map.bytes()).sum::<usize>() > KEPT_BYTES {
+        kept.remove(0);
+    }
 }

@@ -122,6 +122,49 @@ fn auto_lambda_reaches_the_stated_dice_on_every_organ() {
     }
 }
 
+/// Counts the growths a search asks for.
+struct Counting<'a>(CpuRunner<'a>, usize);
+
+impl GrowRunner for Counting<'_> {
+    fn grow(
+        &mut self,
+        params: GrowthParams,
+        steps: Option<usize>,
+        abort_above: Option<usize>,
+    ) -> Result<runner::Grown, OpacityError> {
+        self.1 += 1;
+        self.0.grow(params, steps, abort_above)
+    }
+}
+
+#[test]
+fn the_search_answers_with_the_chosen_trials_map_without_growing_it_again() {
+    let v = phantom().volume.view();
+    let (_, p) = seed_of("liver");
+    let mut r = Counting(
+        CpuRunner {
+            volume: v,
+            values: v,
+            seed: Seed::World(p),
+        },
+        0,
+    );
+    let a = auto_lambda::auto_lambda(&mut r, GrowthParams::default(), None).unwrap();
+    assert_eq!(r.1, a.trials.len(), "one growth per trial, none after");
+    let again =
+        r.0.grow(
+            GrowthParams {
+                lambda: a.lambda,
+                ..GrowthParams::default()
+            },
+            None,
+            None,
+        )
+        .unwrap();
+    assert_eq!(again.map, a.grown.map);
+    assert_eq!(again.report.steps, a.grown.report.steps);
+}
+
 #[test]
 fn the_plateau_rule_picks_the_flattest_step() {
     let t = |lambda: f32, voxels: usize, aborted: bool| Trial {
