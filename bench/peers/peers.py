@@ -7,6 +7,7 @@ environment); see ``bench/peers/README.md``.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import importlib
 import json
 import os
@@ -66,6 +67,10 @@ def versions(ctx: Context) -> dict:
     out = {}
     try:
         out["voxflex"] = subprocess.run([str(ctx.voxflex), "--version"], capture_output=True, text=True).stdout.strip()
+        # Which build: others may rebuild target/release while this runs.
+        digest = hashlib.sha256(ctx.voxflex.read_bytes()).hexdigest()[:12]
+        built = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(ctx.voxflex.stat().st_mtime))
+        out["voxflex binary"] = f"sha256 {digest}, built {built}"
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO)
         dirty = subprocess.run(
             ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/peers"],
