@@ -78,6 +78,16 @@ fn run(text: &str, work: &Path, name: &str) -> Result<ActuationReport, String> {
     m.actuation.ok_or_else(|| "no actuation report".into())
 }
 
+/// Runs the finger scene (`phantom:finger`, corotational FEM) for
+/// `frames` frames with `tables` in `work`.
+fn finger(frames: u64, tables: &str, work: &Path, name: &str) -> Result<ActuationReport, String> {
+    run(
+        &finger_scene("phantom:finger", "corotational-fem", frames, tables),
+        work,
+        name,
+    )
+}
+
 fn cavity(params: &str) -> String {
     format!(
         "[[actuator]]\nplugin = \"cavity\"\ncavity = {{ label = 2 }}\n[actuator.params]\n{params}\n"
@@ -185,14 +195,7 @@ fn an_inverse_finger_reaches_a_reachable_target_within_one_percent_of_its_length
         cavity("pressure_pa = [[0, 0], [4, 3000]]"),
         tip(TIP)
     );
-    let reached = tip_after(
-        &run(
-            &finger_scene("phantom:finger", "corotational-fem", 5, &direct),
-            work.path(),
-            "d",
-        )
-        .unwrap(),
-    );
+    let reached = tip_after(&finger(5, &direct, work.path(), "d").unwrap());
     // Every frame solves its responses; then every fourth (the secant
     // update corrects the reused ones in between): both reach it.
     let mut solves = Vec::new();
@@ -202,12 +205,7 @@ fn an_inverse_finger_reaches_a_reachable_target_within_one_percent_of_its_length
             cavity("max_pressure_pa = 30000"),
             tip(reached)
         );
-        let r = run(
-            &finger_scene("phantom:finger", "corotational-fem", 15, &inverse),
-            work.path(),
-            &format!("i{every}"),
-        )
-        .unwrap();
+        let r = finger(15, &inverse, work.path(), &format!("i{every}")).unwrap();
         let d = r.effectors[0].distance_mm.last().copied().unwrap();
         eprintln!(
             "reachable target {reached:?}, responses every {every} frames: distance per frame \
@@ -231,12 +229,7 @@ fn an_inverse_finger_reaches_a_reachable_target_within_one_percent_of_its_length
         cavity("max_pressure_pa = 30000"),
         tip(reached)
     );
-    let e = run(
-        &finger_scene("phantom:finger", "corotational-fem", 1, &bad),
-        work.path(),
-        "bad",
-    )
-    .unwrap_err();
+    let e = finger(1, &bad, work.path(), "bad").unwrap_err();
     assert!(e.contains("response_refresh_frames"), "{e}");
 }
 
@@ -253,24 +246,14 @@ fn an_unreachable_target_ends_at_the_closest_configuration_of_a_pressure_sweep()
         cavity("pressure_pa = [[0, 0], [30, 3000]]"),
         tip(target)
     );
-    let s = run(
-        &finger_scene("phantom:finger", "corotational-fem", 40, &sweep),
-        work.path(),
-        "s",
-    )
-    .unwrap();
+    let s = finger(40, &sweep, work.path(), "s").unwrap();
     let closest = s.effectors[0]
         .distance_mm
         .iter()
         .copied()
         .fold(f64::INFINITY, f64::min);
     let inverse = format!("{}{}", cavity("max_pressure_pa = 3000"), tip(target));
-    let r = run(
-        &finger_scene("phantom:finger", "corotational-fem", 40, &inverse),
-        work.path(),
-        "u",
-    )
-    .unwrap();
+    let r = finger(40, &inverse, work.path(), "u").unwrap();
     let d = r.effectors[0].distance_mm.last().copied().unwrap();
     eprintln!(
         "unreachable target: inverse ends {d} mm away, the sweep's closest {closest} mm; \
@@ -295,12 +278,7 @@ fn the_hydraulic_finger_carries_its_waters_weight() {
             )),
             tip(TIP)
         );
-        let r = run(
-            &finger_scene("phantom:finger", "corotational-fem", 5, &tables),
-            work.path(),
-            fluid.trim_matches('"'),
-        )
-        .unwrap();
+        let r = finger(5, &tables, work.path(), fluid.trim_matches('"')).unwrap();
         (tip_after(&r), r.actuators[0].notes.clone())
     });
     let (air, water) = (&tips[0], &tips[1]);
@@ -362,12 +340,7 @@ fn a_cable_along_the_top_bends_the_finger_up() {
          pull_point_mm = [-45, 0, 6.5]\ntension_uN = [[0, 0], [4, 20000]]\n{}",
         tip(TIP)
     );
-    let r = run(
-        &finger_scene("phantom:finger", "corotational-fem", 5, &tables),
-        work.path(),
-        "c",
-    )
-    .unwrap();
+    let r = finger(5, &tables, work.path(), "c").unwrap();
     let t = tip_after(&r);
     eprintln!("cable: tip {t:?}, shortening {:?}", r.actuators[0].measure);
     assert!(t[2] > 0.5, "{t:?}");
@@ -405,12 +378,7 @@ fn inverse_control_without_a_compliance_and_a_missing_cavity_label_are_refused_b
     .unwrap_err();
     assert!(e.contains("mass-spring: no compliance solve"), "{e}");
     let tables = "[[actuator]]\nplugin = \"cavity\"\ncavity = { label = 7 }\n";
-    let e = run(
-        &finger_scene("phantom:finger", "corotational-fem", 1, tables),
-        work.path(),
-        "l",
-    )
-    .unwrap_err();
+    let e = finger(1, tables, work.path(), "l").unwrap_err();
     assert!(e.contains("label = 7"), "{e}");
 }
 
@@ -441,12 +409,7 @@ fn a_cavity_mesh_file_acts_like_the_label_it_outlines() {
              pressure_pa = [[0, 0], [4, 3000]]\n{}",
             tip(TIP)
         );
-        let r = run(
-            &finger_scene("phantom:finger", "corotational-fem", 5, &tables),
-            work.path(),
-            "g",
-        )
-        .unwrap();
+        let r = finger(5, &tables, work.path(), "g").unwrap();
         tip_after(&r)[2]
     });
     eprintln!(
@@ -529,19 +492,9 @@ fn lagged_follower_forces_reach_the_settled_bend_over_frames() {
         cavity("pressure_pa = [[0, 0], [2, 3000]]"),
         tip(TIP)
     );
-    let settled = run(
-        &finger_scene("phantom:finger", "corotational-fem", 24, &held),
-        work.path(),
-        "settled",
-    )
-    .unwrap();
+    let settled = finger(24, &held, work.path(), "settled").unwrap();
     let lagged_tables = format!("{held}[actuation]\nsettle_iterations = 0\n");
-    let lagged = run(
-        &finger_scene("phantom:finger", "corotational-fem", 24, &lagged_tables),
-        work.path(),
-        "lagged",
-    )
-    .unwrap();
+    let lagged = finger(24, &lagged_tables, work.path(), "lagged").unwrap();
     eprintln!(
         "settled tip {:?} ({:?} repeats), lagged tip {:?}, force change per frame {:?}",
         tip_after(&settled),
@@ -567,23 +520,13 @@ fn lagged_follower_forces_reach_the_settled_bend_over_frames() {
     assert!(*lagged.force_change.last().unwrap() < 1e-3, "{lagged:?}");
 
     let bad = format!("{held}[actuation]\nsettle_tolerance = 2\n");
-    let e = run(
-        &finger_scene("phantom:finger", "corotational-fem", 1, &bad),
-        work.path(),
-        "bad",
-    )
-    .unwrap_err();
+    let e = finger(1, &bad, work.path(), "bad").unwrap_err();
     assert!(
         e.contains("settle_tolerance") && e.contains("(0, 1)"),
         "{e}"
     );
     let orphan = "[actuation]\nsettle_iterations = 0\n";
-    let e = run(
-        &finger_scene("phantom:finger", "corotational-fem", 1, orphan),
-        work.path(),
-        "orphan",
-    )
-    .unwrap_err();
+    let e = finger(1, orphan, work.path(), "orphan").unwrap_err();
     assert!(e.contains("no [[actuator]]"), "{e}");
 }
 
@@ -604,8 +547,9 @@ fn hydraulic_and_pneumatic_fingers_differ_in_reach_under_inverse_control() {
             cavity(&format!("fluid = {fluid}\nmax_pressure_pa = 30000")),
             tip(target)
         );
-        run(
-            &finger_scene("phantom:finger", "corotational-fem", 15, &tables),
+        finger(
+            15,
+            &tables,
             work.path(),
             &format!("reach-{}", fluid.trim_matches('"')),
         )
