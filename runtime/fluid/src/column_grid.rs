@@ -67,19 +67,26 @@ impl ColumnGrid {
     }
 }
 
+/// The tests' grid: 10 × 10 columns of 1 × 0.5 mm over [0, 10] × [0, 5]
+/// mm, gravity along −z (centres at 0.5, 1.5, … along u; 0.25, 0.75, …
+/// along v).
+#[cfg(test)]
+pub(crate) fn ten_by_five_mm() -> ColumnGrid {
+    ColumnGrid::spanning(
+        GravityFrame::new(glam::DVec3::NEG_Z),
+        DVec2::ZERO,
+        DVec2::new(10.0, 5.0),
+        10,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
 
     #[test]
     fn a_row_range_holds_exactly_the_centres_inside_it() {
-        let g = ColumnGrid::spanning(
-            GravityFrame::new(DVec3::NEG_Z),
-            DVec2::ZERO,
-            DVec2::new(10.0, 5.0),
-            10,
-        );
+        let g = ten_by_five_mm();
         assert_eq!(g.cell, DVec2::new(1.0, 0.5));
         // centres at 0.5, 1.5, … along u
         assert_eq!(g.columns_within(1.0, 0.5, 2.4), [0, 2]);

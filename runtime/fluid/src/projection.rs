@@ -295,12 +295,7 @@ mod tests {
 
     #[test]
     fn the_candidate_window_holds_the_centres_of_the_box_and_at_most_one_more() {
-        let g = ColumnGrid::spanning(
-            GravityFrame::new(DVec3::NEG_Z),
-            DVec2::ZERO,
-            DVec2::new(10.0, 5.0),
-            10,
-        );
+        let g = crate::column_grid::ten_by_five_mm();
         let w = CandidateWindow::new(&g);
         // centres at 0.5, 1.5, … along u; 0.25, 0.75, … along v
         assert_eq!(
