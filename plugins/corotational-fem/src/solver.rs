@@ -41,6 +41,7 @@ use voxflex_core::glam::{DMat3, DVec3};
 use voxflex_core::gpu::GpuService;
 use voxflex_core::tet_mesh::TetMesh;
 use voxflex_mesh::mesh_model::amg::Amg;
+use voxflex_mesh::mesh_model::ichol::IncompleteCholesky;
 use voxflex_mesh::mesh_model::pcg::{self, CgOutcome, CgSettings, Preconditioner};
 use voxflex_mesh::mesh_model::pcg_gpu::GpuPcg;
 use voxflex_mesh::mesh_model::{
@@ -290,6 +291,9 @@ pub struct CorotationalFem {
     /// linearisation replaced it. The actuators' compliance solves of one
     /// frame share it instead of linearising once each.
     compliance_tangent: Option<Vec<DVec3>>,
+    /// The incomplete Cholesky factor of that tangent on these free nodes,
+    /// shared by the frame's compliance solves (CPU, IC(0) only).
+    compliance_ic: Option<(Vec<bool>, IncompleteCholesky)>,
     /// The last compliance answers, the warm start of the next
     /// ([`recycle`]).
     compliance_starts: recycle::Recycler,
@@ -363,6 +367,7 @@ impl CorotationalFem {
     /// ([`crate::element::add_twist`]; the static Newton tangent).
     fn linearise(&mut self, u: &[DVec3], k_scale: f64, diagonal: Option<&[f64]>, twist: Twist) {
         self.compliance_tangent = None;
+        self.compliance_ic = None;
         self.elements
             .linearise(u, k_scale, twist, &mut self.blocks, &mut self.corner_f0);
         self.deformed.clear();
@@ -386,6 +391,13 @@ impl CorotationalFem {
         report: &mut SolveReport,
     ) -> Result<CgOutcome, ModelError> {
         let out = self.solve_quietly(bc, free, rhs, x, settings)?;
+        self.report_solve(out, settings, report);
+        Ok(out)
+    }
+
+    /// Warns when `out` stopped above its tolerance (naming the keys that
+    /// help) and counts it in `report`.
+    fn report_solve(&self, out: CgOutcome, settings: CgSettings, report: &mut SolveReport) {
         let what = match self.params.solver {
             SolverKind::Static => "static (Newton)",
             SolverKind::Dynamic => "implicit step's",
@@ -403,7 +415,6 @@ impl CorotationalFem {
         };
         let converged = pcg::warn_unconverged(Self::NAME, what, out, settings, keys);
         report.add_solve(out, converged);
-        Ok(out)
     }
 
     /// The solve of [`CorotationalFem::solve`], neither warning nor
@@ -738,6 +749,7 @@ impl MeshSolver for CorotationalFem {
             deformed: positions.clone(),
             positions,
             compliance_tangent: None,
+            compliance_ic: None,
             compliance_starts: recycle::Recycler::new(COMPLIANCE_KEPT),
             amg: Default::default(),
             elements,
@@ -838,6 +850,25 @@ impl CorotationalFem {
         })
     }
 
+    /// True when the compliance solves precondition with one IC(0) factor
+    /// of the compliance tangent on `free`, factored here on first use:
+    /// the frame's solves (one or two per actuator) then factor once
+    /// instead of once each. False on the GPU, with AMG or block Jacobi,
+    /// and where the factorisation breaks down (the solve then chooses).
+    fn shares_compliance_ic(&mut self, free: &[bool]) -> bool {
+        if self.gpu.is_some()
+            || self.uses_amg(free)
+            || self.params.cpu_preconditioner() != Preconditioner::IncompleteCholesky
+        {
+            return false;
+        }
+        if self.compliance_ic.as_ref().is_none_or(|(f, _)| f != free) {
+            self.compliance_ic =
+                IncompleteCholesky::new(&self.matrix, free).map(|ic| (free.to_vec(), ic));
+        }
+        self.compliance_ic.is_some()
+    }
+
     /// [`MeshSolver::compliance`] on the solver's own nodes.
     fn compliance_nodes(
         &mut self,
@@ -854,7 +885,21 @@ impl CorotationalFem {
         let mut report = SolveReport::default();
         let mut settings = self.settings(&free);
         settings.tolerance = self.params.compliance_cg_tolerance;
-        self.solve(bc, &free, forces, &mut x, settings, &mut report)?;
+        if self.shares_compliance_ic(&free) {
+            let (_, ic) = self.compliance_ic.as_ref().expect("shared");
+            let out = pcg::solve_preconditioned(
+                &self.matrix,
+                bc,
+                &free,
+                forces,
+                &mut x,
+                settings,
+                &mut |r, z| ic.apply(r, z),
+            );
+            self.report_solve(out, settings, &mut report);
+        } else {
+            self.solve(bc, &free, forces, &mut x, settings, &mut report)?;
+        }
         self.compliance_starts.keep(&x);
         Ok((x, report))
     }
