@@ -11,12 +11,26 @@
 //! expressions of `raster` (same IEEE operations, same order, no fused
 //! multiply-add), so the owners are those of `raster::CellRaster` and of the
 //! WGSL kernel, bit for bit.
+//!
+//! Claims go into a [`TileSink`], an output tile's own key and payload
+//! arrays (no atomics: one thread owns a tile). A claim that beats the
+//! tile's key also stores its payload, computed from the face values and
+//! orientations the inclusion test already has: the barycentric weights
+//! `λ_a = t_a(q) / D_a` of the claiming tetrahedron — the very expressions
+//! `raster::barycentric` evaluates (same planes from the same corners in the
+//! same order), so the same bits — turned into the rest offset in the
+//! owner's cell (trilinear mode, `raster::rest_offset`) or the interpolated
+//! value (tetrahedral mode, `raster::interpolate`).
 
+// Lane and corner loops index several arrays by the same number.
+#![allow(clippy::needless_range_loop)]
+
+use super::raster::interpolate;
 use super::sampling_mesh::{
     CELL_TETS, CORNER_TABLES, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset,
 };
-use super::{DisplacementsRef, OutputGrid, VoxelBox};
-use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+use super::{DisplacementsRef, VoxelBox};
+use crate::volume::Sample;
 use wide::{f32x8, i32x8};
 
 /// Lanes (cells) per group.
@@ -112,6 +126,10 @@ struct CornerTet {
     t_central: Test,
     boundary: [PlaneV; 3],
     t_boundary: [Test; 3],
+    /// The `D`s of `t_corner`, `t_central` and `t_boundary` (for the weights).
+    d_corner: F,
+    d_central: F,
+    d_boundary: [F; 3],
 }
 
 #[inline(always)]
@@ -125,17 +143,163 @@ fn corner<const P: usize>(p: &[[F; 3]; 8], k: usize, eps: f32) -> CornerTet {
     };
     let interior = face(it[0]);
     let boundary = [face(bt[0][0]), face(bt[1][0]), face(bt[2][0])];
+    let d_corner = eval(&interior, &p[it[1] as usize]);
+    let d_central = eval(&interior, &p[it[2] as usize]);
+    let d_boundary = [
+        eval(&boundary[0], &p[bt[0][1] as usize]),
+        eval(&boundary[1], &p[bt[1][1] as usize]),
+        eval(&boundary[2], &p[bt[2][1] as usize]),
+    ];
     CornerTet {
-        t_corner: test(eval(&interior, &p[it[1] as usize]), eps),
-        t_central: test(eval(&interior, &p[it[2] as usize]), eps),
+        t_corner: test(d_corner, eps),
+        t_central: test(d_central, eps),
         t_boundary: [
-            test(eval(&boundary[0], &p[bt[0][1] as usize]), eps),
-            test(eval(&boundary[1], &p[bt[1][1] as usize]), eps),
-            test(eval(&boundary[2], &p[bt[2][1] as usize]), eps),
+            test(d_boundary[0], eps),
+            test(d_boundary[1], eps),
+            test(d_boundary[2], eps),
         ],
         interior,
         boundary,
+        d_corner,
+        d_central,
+        d_boundary,
     }
+}
+
+/// Per parity, tetrahedron and corner slot (its corners ascending, as
+/// `raster::barycentric` numbers them): where pass 1 keeps the value `t` of
+/// the face opposite that slot — index into the per-iteration face values
+/// (interior plane `k`: `k`; boundary plane `m` of corner tetrahedron `k`:
+/// `4 + 3k + m`) — and its `D` — index into the per-group orientations
+/// (`d_corner` of `k`: `k`; `d_central` of `k`: `4 + k`; `d_boundary[m]`
+/// of `k`: `8 + 3k + m`).
+const SLOT_SRC: [[[(u8, u8); 4]; 5]; 2] = [slot_src(0), slot_src(1)];
+
+/// [`SLOT_SRC`] as `[t index, D index]` pairs.
+const SLOT_SRC_PAIRS: [[[[u8; 2]; 4]; 5]; 2] = {
+    let mut out = [[[[0u8; 2]; 4]; 5]; 2];
+    let mut p = 0;
+    while p < 2 {
+        let mut t = 0;
+        while t < 5 {
+            let mut a = 0;
+            while a < 4 {
+                out[p][t][a] = [SLOT_SRC[p][t][a].0, SLOT_SRC[p][t][a].1];
+                a += 1;
+            }
+            t += 1;
+        }
+        p += 1;
+    }
+    out
+};
+
+const fn slot_of(tet: &[u8; 4], corner: u8) -> usize {
+    let mut a = 0;
+    while a < 4 {
+        if tet[a] == corner {
+            return a;
+        }
+        a += 1;
+    }
+    panic!("corner not in tetrahedron")
+}
+
+const fn slot_src(p: usize) -> [[(u8, u8); 4]; 5] {
+    let mut out = [[(255u8, 255u8); 4]; 5];
+    let mut k = 0;
+    while k < 4 {
+        let tet = &CELL_TETS[p][k];
+        let it = &CORNER_TABLES.interior[p][k];
+        out[k][slot_of(tet, it[1])] = (k as u8, k as u8);
+        let mut m = 0;
+        while m < 3 {
+            let b = &CORNER_TABLES.boundary[p][k][m];
+            out[k][slot_of(tet, b[1])] = ((4 + 3 * k + m) as u8, (8 + 3 * k + m) as u8);
+            m += 1;
+        }
+        out[4][slot_of(&CELL_TETS[p][4], it[2])] = (k as u8, (4 + k) as u8);
+        k += 1;
+    }
+    // Every slot of every tetrahedron got its face.
+    let mut t = 0;
+    while t < 5 {
+        let mut a = 0;
+        while a < 4 {
+            assert!(out[t][a].0 != 255, "a slot without its face");
+            a += 1;
+        }
+        t += 1;
+    }
+    out
+}
+
+/// Per parity, tetrahedron and slot: the corner's offset in the cell (0 or
+/// 1 per axis), as f32 (trilinear mode's rest offsets).
+const SLOT_OFFSETS: [[[[f32; 3]; 4]; 5]; 2] = [slot_offsets(0), slot_offsets(1)];
+
+const fn slot_offsets(p: usize) -> [[[f32; 3]; 4]; 5] {
+    let mut out = [[[0.0; 3]; 4]; 5];
+    let mut t = 0;
+    while t < 5 {
+        let mut a = 0;
+        while a < 4 {
+            let o = corner_offset(CELL_TETS[p][t][a]);
+            out[t][a] = [o[0] as f32, o[1] as f32, o[2] as f32];
+            a += 1;
+        }
+        t += 1;
+    }
+    out
+}
+
+/// An output tile's claims: per voxel of the tile (x fastest) the smallest
+/// owner key so far (`u32::MAX`: none) and its payload — trilinear mode:
+/// the source sample's lower corner (linear index, as `f32` bits) and its
+/// three fractions ([`trilinear_box`]); tetrahedral mode: the value (in
+/// `[0]`).
+pub(crate) struct TileSink<'s> {
+    pub keys: &'s mut [u32],
+    pub payload: &'s mut [[f32; 4]],
+    /// The tile's lowest voxel, source index units.
+    pub lo: [i32; 3],
+    /// The tile's voxels along x and y.
+    pub dims: [usize; 2],
+}
+
+impl TileSink<'_> {
+    /// Index in the tile of voxel `q` (source index units, inside the tile).
+    #[inline(always)]
+    pub fn local(&self, q: [i32; 3]) -> usize {
+        let x = (q[0] - self.lo[0]) as usize;
+        let y = (q[1] - self.lo[1]) as usize;
+        let z = (q[2] - self.lo[2]) as usize;
+        x + self.dims[0] * (y + self.dims[1] * z)
+    }
+}
+
+/// Trilinear mode, per lane: the source sample at the rest position
+/// `cell + r` (source index units) as the linear index of its lower corner
+/// and the fractions along x, y, z — `raster::trilinear_axis` per axis,
+/// clamped to the grid `dims`: outside, or exactly on the last voxel, the
+/// fraction is 0 (and the upper neighbour is never read).
+#[inline(always)]
+pub(crate) fn trilinear_box(cell: &[I; 3], r: &[F; 3], dims: [usize; 3]) -> (I, [F; 3]) {
+    let mut i0 = [I::ZERO; 3];
+    let mut f = [F::ZERO; 3];
+    for a in 0..3 {
+        let n = dims[a] as i32;
+        // ⌊r⌋ as `floor_i32`: saturating truncation, then −1 where it rounded up.
+        let t = r[a].trunc_int();
+        let down: I = bytemuck::cast(F::from_i32x8(t).simd_gt(r[a]));
+        let fl = t.saturating_add(down);
+        let g = cell[a].saturating_add(fl);
+        let clamped: F = bytemuck::cast(g.simd_lt(I::ZERO) | g.simd_gt(I::splat(n - 2)));
+        i0[a] = g.max(I::ZERO).min(I::splat(n - 1));
+        f[a] = clamped.select(F::ZERO, r[a] - F::from_i32x8(fl));
+    }
+    let (nx, ny) = (dims[0] as i32, dims[1] as i32);
+    (i0[0] + I::splat(nx) * (i0[1] + I::splat(ny) * i0[2]), f)
 }
 
 /// What every group needs.
@@ -145,67 +309,163 @@ pub(crate) struct LaneCtx<'a> {
     pub inv_spacing: [f32; 3],
     pub eps: f32,
     pub disp: DisplacementsRef<'a>,
-    pub output: OutputGrid,
+    /// Voxels that may be claimed (inside the sink's tile), source index units.
     pub clip: VoxelBox,
 }
 
-/// Rasterises up to [`LANES`] cells of parity `P` (`cells[l]`, `n` of them valid;
-/// `removed[l]`: removed-tetrahedra bits) into `out`.
+/// The deformed corners of [`LANES`] cells: `p[corner][axis]` (lanes =
+/// cells), source index units, `index + displacement · (1 / spacing)` as
+/// `deformed_coordinate` (indices are far below 2^24, so
+/// `(i + o) as f32 = i as f32 + o as f32` exactly); `moved[corner]`: the
+/// lanes where that corner's position is not its rest index.
+pub(crate) struct Corners {
+    pub p: [[F; 3]; 8],
+    pub moved: [u32; 8],
+}
+
+/// The vertices `v[2l]`, `v[2l + 1]` and `v[2l + 2]`, `l < LANES`, of a
+/// row slice of at least `2 LANES + 2` values.
 #[inline(always)]
-pub(crate) fn raster_group<const P: usize>(
+fn deinterleave(v: &[f32]) -> [F; 3] {
+    assert!(v.len() >= 2 * LANES + 2);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: AVX2 is enabled at compile time; the four unaligned loads
+        // read v[0..16] and v[2..18], in bounds (asserted above).
+        unsafe {
+            let p = v.as_ptr();
+            let (a, b) = (_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));
+            let (c, d) = (_mm256_loadu_ps(p.add(2)), _mm256_loadu_ps(p.add(10)));
+            // shuffle: [a0 a2 b0 b2 | a4 a6 b4 b6]; permute: 64-bit pairs 0 2 1 3.
+            let even = |a: __m256, b: __m256| {
+                _mm256_castpd_ps(_mm256_permute4x64_pd(
+                    _mm256_castps_pd(_mm256_shuffle_ps(a, b, 0b10_00_10_00)),
+                    0b11_01_10_00,
+                ))
+            };
+            let odd = _mm256_castpd_ps(_mm256_permute4x64_pd(
+                _mm256_castps_pd(_mm256_shuffle_ps(a, b, 0b11_01_11_01)),
+                0b11_01_10_00,
+            ));
+            [
+                bytemuck::cast(even(a, b)),
+                bytemuck::cast(odd),
+                bytemuck::cast(even(c, d)),
+            ]
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    {
+        let pick = |o: usize| {
+            F::new([
+                v[o],
+                v[o + 2],
+                v[o + 4],
+                v[o + 6],
+                v[o + 8],
+                v[o + 10],
+                v[o + 12],
+                v[o + 14],
+            ])
+        };
+        [pick(0), pick(1), pick(2)]
+    }
+}
+
+/// [`Corners`] of the cells `(x0 + 2l, j, k)` (`[0]`) and
+/// `(x0 + 1 + 2l, j, k)` (`[1]`), `l < LANES`: a strip of 16 cells of one
+/// row, split by parity, from contiguous loads of the four vertex rows.
+/// Lanes past the row's last cell hold garbage (finite or not) and must be
+/// left out by the caller.
+#[inline(always)]
+pub(crate) fn strip_corners(ctx: &LaneCtx<'_>, x0: usize, j: usize, k: usize) -> [Corners; 2] {
+    const W: usize = 2 * LANES + 2;
+    let [nx, ny, _] = ctx.vertex_dims;
+    let disp = [ctx.disp.x, ctx.disp.y, ctx.disp.z];
+    let lane = F::from([0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]);
+    // Rest x of the lanes' vertices at offsets 0, 1, 2 along the strip.
+    let x = x0 as i32 as f32;
+    let xr = [
+        F::splat(x) + lane,
+        F::splat(x + 1.0) + lane,
+        F::splat(x + 2.0) + lane,
+    ];
+    let mut out = [
+        Corners {
+            p: [[F::ZERO; 3]; 8],
+            moved: [0; 8],
+        },
+        Corners {
+            p: [[F::ZERO; 3]; 8],
+            moved: [0; 8],
+        },
+    ];
+    for oz in 0..2 {
+        for oy in 0..2 {
+            let start = x0 + nx * (j + oy + ny * (k + oz));
+            let ry = F::splat((j + oy) as i32 as f32);
+            let rz = F::splat((k + oz) as i32 as f32);
+            let mut mv = [F::ZERO; 3];
+            for a in 0..3 {
+                let d = disp[a];
+                // The row's vertices x0 ..= x0 + 17: read in place when in
+                // bounds, else from a copy padded with zeros.
+                let e = if start + W <= d.len() {
+                    deinterleave(&d[start..start + W])
+                } else {
+                    let mut row = [0f32; W];
+                    let n = d.len().saturating_sub(start).min(W);
+                    row[..n].copy_from_slice(&d[start..start + n]);
+                    deinterleave(&row)
+                };
+                for o in 0..3 {
+                    let r = match a {
+                        0 => xr[o],
+                        1 => ry,
+                        _ => rz,
+                    };
+                    let pos = r + e[o] * F::splat(ctx.inv_spacing[a]);
+                    // Corner (ox, oy, oz) of parity group g sits at offset g + ox.
+                    let c = 2 * oy + 4 * oz;
+                    if o < 2 {
+                        out[0].p[c + o][a] = pos;
+                    }
+                    if o > 0 {
+                        out[1].p[c + o - 1][a] = pos;
+                    }
+                    let m: F = pos.simd_ne(r);
+                    mv[o] = if a == 0 { m } else { mv[o] | m };
+                }
+            }
+            let c = 2 * oy + 4 * oz;
+            let bits = mv.map(|m| m.to_bitmask());
+            out[0].moved[c] = bits[0];
+            out[0].moved[c + 1] = bits[1];
+            out[1].moved[c] = bits[1];
+            out[1].moved[c + 1] = bits[2];
+        }
+    }
+    out
+}
+
+/// Rasterises up to [`LANES`] cells of parity `P` (`cells[l]`, `n` of them
+/// valid, corners `corners`; `removed[l]`: removed-tetrahedra bits) into
+/// `sink`, whose tile must hold `ctx.clip`. `src`: the source values (read
+/// in tetrahedral mode, `!TRI`).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
     ctx: &LaneCtx<'_>,
     cells: &[[usize; 3]; LANES],
+    corners: &Corners,
     removed: &[u8; LANES],
     n: usize,
-    out: &[AtomicU32],
+    sink: &mut TileSink<'_>,
+    src: &[T],
 ) {
-    let [nx, ny, _] = ctx.vertex_dims;
-    // Corner positions p[corner][axis] (lanes = cells), source index units:
-    // `index + displacement · (1 / spacing)`, as `deformed_coordinate`
-    // (indices are far below 2^24, so `(i + o) as f32 = i as f32 + o as f32`
-    // exactly, and the i32 conversion is the branch-free one).
-    let disp = [ctx.disp.x, ctx.disp.y, ctx.disp.z];
-    let mut base = [0usize; LANES];
-    let mut cell_f = [[0f32; LANES]; 3];
-    for l in 0..LANES {
-        let c = cells[l];
-        base[l] = c[0] + nx * (c[1] + ny * c[2]);
-        for a in 0..3 {
-            cell_f[a][l] = c[a] as i32 as f32;
-        }
-    }
-    // The farthest corner is the last one: one bounds check per lane.
-    let last = 1 + nx * (1 + ny);
-    let n_vertices = disp[0].len().min(disp[1].len()).min(disp[2].len());
-    assert!(base.iter().all(|&b| b + last < n_vertices));
-    let cell_i = [0, 1, 2].map(|a| I::new(cell_f[a].map(|v| v as i32)));
-    let cell_f = [F::new(cell_f[0]), F::new(cell_f[1]), F::new(cell_f[2])];
-    let inv = [
-        F::splat(ctx.inv_spacing[0]),
-        F::splat(ctx.inv_spacing[1]),
-        F::splat(ctx.inv_spacing[2]),
-    ];
-    let mut p = [[F::ZERO; 3]; 8];
-    // Lanes where corner c moved (its position is not its rest index).
-    let mut moved = [0u32; 8];
-    for c in 0..8u8 {
-        let o = corner_offset(c);
-        let off = o[0] + nx * (o[1] + ny * o[2]);
-        let mut m = F::ZERO.simd_ne(F::ZERO);
-        for a in 0..3 {
-            let d = &disp[a];
-            let mut v = [0f32; LANES];
-            for l in 0..LANES {
-                // SAFETY: `off <= last` and every `base[l] + last` is in
-                // bounds (asserted above).
-                v[l] = unsafe { *d.get_unchecked(base[l] + off) };
-            }
-            let rest = cell_f[a] + F::splat(o[a] as f32);
-            p[c as usize][a] = rest + F::new(v) * inv[a];
-            m |= p[c as usize][a].simd_ne(rest);
-        }
-        moved[c as usize] = m.to_bitmask();
-    }
+    let Corners { p, moved } = corners;
+    let cell_i = [0, 1, 2].map(|a| I::new(std::array::from_fn(|l| cells[l][a] as i32)));
     // Candidate boxes: ⌈min⌉ ..= ⌊max⌋ of the corners per axis, clipped
     // (`ceil_i32` / `floor_i32` per lane: saturating truncation, then ±1).
     let mut lo = [I::ZERO; 3];
@@ -237,10 +497,10 @@ pub(crate) fn raster_group<const P: usize>(
     // Planes and orientation tests, built in place (no zeroed scratch).
     let eps = ctx.eps;
     let cs = [
-        corner::<P>(&p, 0, eps),
-        corner::<P>(&p, 1, eps),
-        corner::<P>(&p, 2, eps),
-        corner::<P>(&p, 3, eps),
+        corner::<P>(p, 0, eps),
+        corner::<P>(p, 1, eps),
+        corner::<P>(p, 2, eps),
+        corner::<P>(p, 3, eps),
     ];
     // Live tetrahedra per lane (bit per lane).
     let mut live = [(1u32 << LANES) - 1; 5];
@@ -254,19 +514,31 @@ pub(crate) fn raster_group<const P: usize>(
     }
     // Owner keys' weak bit per tetrahedron and lane (see `WEAK_OWNER`).
     let weak = [
-        weak_lanes::<P>(0, &moved, cs[0].t_corner.positive),
-        weak_lanes::<P>(1, &moved, cs[1].t_corner.positive),
-        weak_lanes::<P>(2, &moved, cs[2].t_corner.positive),
-        weak_lanes::<P>(3, &moved, cs[3].t_corner.positive),
-        weak_lanes::<P>(4, &moved, cs[0].t_central.positive),
+        weak_lanes::<P>(0, moved, cs[0].t_corner.positive),
+        weak_lanes::<P>(1, moved, cs[1].t_corner.positive),
+        weak_lanes::<P>(2, moved, cs[2].t_corner.positive),
+        weak_lanes::<P>(3, moved, cs[3].t_corner.positive),
+        weak_lanes::<P>(4, moved, cs[0].t_central.positive),
     ];
     // Walk every lane's box in step; lanes that run out drop out. Cursors
     // stay inside their box (they wrap), so "at the end" is equality.
     let mut q = lo;
     let [cx, cy, _] = ctx.cell_dims;
-    let base_id = |l: usize| {
+    // Each lane's first tetrahedron id (ids are below 2^31).
+    let base_id = I::new(std::array::from_fn(|l| {
         let c = cells[l];
-        (5 * (c[0] + cx * (c[1] + cy * c[2]))) as u32
+        (5 * (c[0] + cx * (c[1] + cy * c[2]))) as i32
+    }));
+    let lane_bits = I::new([1, 2, 4, 8, 16, 32, 64, 128]);
+    let mask_of = |bits: u32| (I::splat(bits as i32) & lane_bits).simd_eq(lane_bits);
+    // The face value `t` and orientation `D` sources of `SLOT_SRC`.
+    let d_src = |i: u8| -> F {
+        let i = i as usize;
+        match i {
+            0..4 => cs[i].d_corner,
+            4..8 => cs[i - 4].d_central,
+            _ => cs[(i - 8) / 3].d_boundary[(i - 8) % 3],
+        }
     };
     while active != 0 {
         let qf = [
@@ -281,14 +553,17 @@ pub(crate) fn raster_group<const P: usize>(
             eval(&cs[3].interior, &qf),
         ];
         // Lanes passing each tetrahedron's four faces: corner tetrahedra
-        // 0..4, then the central one.
+        // 0..4, then the central one. `tb`: the boundary planes' values
+        // (only where some lane needs them).
         let mut passing = [0u32; 5];
+        let mut tb = [[F::ZERO; 3]; 4];
         for k in 0..4 {
             let c = &cs[k];
             let mut m = pass(&c.t_corner, ti[k]) & live[k] & active;
             if m != 0 {
                 for mm in 0..3 {
-                    m &= pass(&c.t_boundary[mm], eval(&c.boundary[mm], &qf));
+                    tb[k][mm] = eval(&c.boundary[mm], &qf);
+                    m &= pass(&c.t_boundary[mm], tb[k][mm]);
                 }
             }
             passing[k] = m;
@@ -309,26 +584,112 @@ pub(crate) fn raster_group<const P: usize>(
                 let m = at[0][c & 1] & at[1][(c >> 1) & 1] & at[2][c >> 2];
                 *s = m.to_bitmask() & !moved[c];
             }
+            // Per lane, the passing tetrahedron of smallest owner key, all
+            // lanes at once. Keys are compared as `key ^ 2^31` in i32 (the
+            // unsigned order): a strong claim is `id | 2^31` there, a weak
+            // one `id`.
+            let mut best = I::splat(i32::MAX);
+            let mut owner = I::ZERO;
+            for t in 0..5 {
+                let [a, b, c, d] = CELL_TETS[P][t];
+                let touch = at_still[a as usize]
+                    | at_still[b as usize]
+                    | at_still[c as usize]
+                    | at_still[d as usize];
+                let strong = mask_of(!(weak[t] | touch));
+                let key = (base_id + I::splat(t as i32)) | (strong & I::splat(WEAK_OWNER as i32));
+                let better = mask_of(passing[t]) & key.simd_lt(best);
+                best = better.select(key, best);
+                owner = better.select(I::splat(t as i32), owner);
+            }
+            // The owner's barycentric weights `λ_a = t_a / D_a` (every D of
+            // a passing tetrahedron is finite and non-zero; other lanes'
+            // values are never read).
+            let is = [0, 1, 2, 3].map(|t| bytemuck::cast::<I, F>(owner.simd_eq(I::splat(t))));
+            let t_src = |i: u8| -> F {
+                let i = i as usize;
+                if i < 4 {
+                    ti[i]
+                } else {
+                    tb[(i - 4) / 3][(i - 4) % 3]
+                }
+            };
+            let pick_t = |a: usize| {
+                let mut v = t_src(SLOT_SRC_PAIRS[P][4][a][0]);
+                for t in (0..4).rev() {
+                    v = is[t].select(t_src(SLOT_SRC_PAIRS[P][t][a][0]), v);
+                }
+                v
+            };
+            let pick_d = |a: usize| {
+                let mut v = d_src(SLOT_SRC_PAIRS[P][4][a][1]);
+                for t in (0..4).rev() {
+                    v = is[t].select(d_src(SLOT_SRC_PAIRS[P][t][a][1]), v);
+                }
+                v
+            };
+            let w = [
+                pick_t(0) / pick_d(0),
+                pick_t(1) / pick_d(1),
+                pick_t(2) / pick_d(2),
+                pick_t(3) / pick_d(3),
+            ];
+            let keys = (best ^ I::splat(WEAK_OWNER as i32)).to_array();
             let (qx, qy, qz) = (q[0].to_array(), q[1].to_array(), q[2].to_array());
-            while found != 0 {
-                let l = found.trailing_zeros() as usize;
-                found &= found - 1;
-                // The lane's smallest key among its passing tetrahedra.
-                let mut key = u32::MAX;
-                for t in 0..5 {
-                    if (passing[t] >> l) & 1 != 0 {
-                        let [a, b, c, d] = CELL_TETS[P][t];
-                        let touch = at_still[a as usize]
-                            | at_still[b as usize]
-                            | at_still[c as usize]
-                            | at_still[d as usize];
-                        let w = (((weak[t] | touch) >> l) & 1) * WEAK_OWNER;
-                        key = key.min(w | (base_id(l) + t as u32));
+            if TRI {
+                // Rest offset in the owner's cell, as `raster::rest_offset`:
+                // `Σ λ_a o_a` over the slots in order (`o_a` 0 or 1, so the
+                // products are the weights or zeros), or exactly `o_a` for
+                // the first `λ_a == 1`.
+                let one = w.map(|v| v.simd_eq(F::ONE));
+                let r: [F; 3] = std::array::from_fn(|axis| {
+                    let o: [F; 4] = std::array::from_fn(|a| {
+                        let mut v = F::splat(SLOT_OFFSETS[P][4][a][axis]);
+                        for t in (0..4).rev() {
+                            v = is[t].select(F::splat(SLOT_OFFSETS[P][t][a][axis]), v);
+                        }
+                        v
+                    });
+                    let mut sum = ((w[0] * o[0] + w[1] * o[1]) + w[2] * o[2]) + w[3] * o[3];
+                    for a in (0..4).rev() {
+                        sum = one[a].select(o[a], sum);
+                    }
+                    sum
+                });
+                let (base, f) = trilinear_box(&cell_i, &r, ctx.vertex_dims);
+                let base = base.to_array();
+                let f = f.map(|v| v.to_array());
+                while found != 0 {
+                    let l = found.trailing_zeros() as usize;
+                    found &= found - 1;
+                    let i = sink.local([qx[l], qy[l], qz[l]]);
+                    let key = keys[l] as u32;
+                    if key < sink.keys[i] {
+                        sink.keys[i] = key;
+                        sink.payload[i] =
+                            [f32::from_bits(base[l] as u32), f[0][l], f[1][l], f[2][l]];
                     }
                 }
-                let o = &out[ctx.output.linear([qx[l], qy[l], qz[l]])];
-                if o.load(Relaxed) > key {
-                    o.fetch_min(key, Relaxed);
+            } else {
+                let w = w.map(|v| v.to_array());
+                let owner = owner.to_array();
+                let [nx, ny, _] = ctx.vertex_dims;
+                while found != 0 {
+                    let l = found.trailing_zeros() as usize;
+                    found &= found - 1;
+                    let i = sink.local([qx[l], qy[l], qz[l]]);
+                    let key = keys[l] as u32;
+                    if key < sink.keys[i] {
+                        sink.keys[i] = key;
+                        let c = cells[l];
+                        let base = c[0] + nx * (c[1] + ny * c[2]);
+                        let v = CELL_TETS[P][owner[l] as usize].map(|corner| {
+                            let o = corner_offset(corner);
+                            src[base + o[0] + nx * (o[1] + ny * o[2])].to_f32()
+                        });
+                        let wl = [w[0][l], w[1][l], w[2][l], w[3][l]];
+                        sink.payload[i] = [interpolate(wl, v), 0.0, 0.0, 0.0];
+                    }
                 }
             }
         }
@@ -345,96 +706,165 @@ pub(crate) fn raster_group<const P: usize>(
 
 #[cfg(test)]
 mod tests {
-    use super::super::raster::{CellCorners, CellRaster};
+    use super::super::raster::{
+        CellCorners, CellRaster, barycentric, interpolate, rest_offset, trilinear_axis,
+    };
     use super::super::sampling_mesh::{SamplingMesh, cell_parity, deformed_coordinate};
     use super::*;
     use crate::grid::Grid;
     use glam::DVec3;
     use proptest::prelude::*;
 
+    /// Runs every cell of the mesh through `strip_corners` + `raster_cells`
+    /// (strips of 16 along each row, as the CPU kernel does) into one tile.
+    fn lanes_claims<const TRI: bool>(
+        ctx: &LaneCtx<'_>,
+        mesh: &SamplingMesh,
+        removed: &[u8],
+        src: &[f32],
+    ) -> (Vec<u32>, Vec<[f32; 4]>) {
+        let clip = ctx.clip;
+        let d = clip.dims();
+        let n = d[0] * d[1] * d[2];
+        let (mut keys, mut payload) = (vec![u32::MAX; n], vec![[0f32; 4]; n]);
+        let mut sink = TileSink {
+            keys: &mut keys,
+            payload: &mut payload,
+            lo: clip.lo,
+            dims: [d[0], d[1]],
+        };
+        let c = mesh.cell_dims();
+        for k in 0..c[2] {
+            for j in 0..c[1] {
+                for x0 in (0..c[0]).step_by(2 * LANES) {
+                    let count = (c[0] - x0).min(2 * LANES);
+                    let corners = strip_corners(ctx, x0, j, k);
+                    for (g, cs) in corners.iter().enumerate() {
+                        let n = (count + 1 - g) / 2;
+                        if n == 0 {
+                            continue;
+                        }
+                        let cells: [[usize; 3]; LANES] =
+                            std::array::from_fn(|l| [x0 + g + 2 * l.min(n - 1), j, k]);
+                        let rm = cells.map(|cell| removed[mesh.cell_linear(cell)]);
+                        if cell_parity(cells[0]) == 0 {
+                            raster_cells::<0, f32, TRI>(ctx, &cells, cs, &rm, n, &mut sink, src);
+                        } else {
+                            raster_cells::<1, f32, TRI>(ctx, &cells, cs, &rm, n, &mut sink, src);
+                        }
+                    }
+                }
+            }
+        }
+        (keys, payload)
+    }
+
     proptest! {
-        /// Lane groups (any mix of cells, tails, removed tetrahedra) give
-        /// the owners of the scalar reference, cell by cell.
+        /// Lane groups (rows split into strips of 16, tails, removed
+        /// tetrahedra, still and moved corners) claim what the scalar
+        /// reference does, cell by cell: the smallest owner key per voxel,
+        /// and for it the payload of `raster::barycentric` +
+        /// `raster::rest_offset` + `raster::trilinear_axis` (trilinear) or
+        /// `raster::interpolate` (tetrahedral), bit for bit.
         #[test]
         fn lanes_equal_scalar_reference(
-            d in proptest::collection::vec(prop_oneof![Just(0.0f32), -1.2f32..1.2], 3 * 7 * 5 * 4),
-            picks in proptest::collection::vec((0usize..72, 0u8..32), 1..2 * LANES + 1),
+            d in proptest::collection::vec(prop_oneof![Just(0.0f32), -1.2f32..1.2], 3 * 19 * 5 * 4),
+            removed in proptest::collection::vec(prop_oneof![4 => Just(0u8), 1 => 0u8..32], 18 * 4 * 3),
+            values in proptest::collection::vec(-1000.0f32..2000.0, 19 * 5 * 4),
             eps in prop::sample::select(vec![0.0f32, 1e-6, 1e-2]),
         ) {
-            let grid = Grid::new([7, 5, 4], DVec3::new(1.0, 0.8, 1.3), DVec3::ZERO);
+            let grid = Grid::new([19, 5, 4], DVec3::new(1.0, 0.8, 1.3), DVec3::ZERO);
             let mesh = SamplingMesh::new(&grid).unwrap();
             let n = grid.len();
             let (x, rest) = d.split_at(n);
             let (y, z) = rest.split_at(n);
             let disp = DisplacementsRef { x, y, z };
             let inv = [1.0f32, 1.0 / 0.8, 1.0 / 1.3];
-            let clip = VoxelBox { lo: [-3; 3], hi: [9; 3] };
-            let output = OutputGrid { origin_index: [-3; 3], dims: [13; 3] };
+            let clip = VoxelBox { lo: [-3; 3], hi: [21, 9, 9] };
             let ctx = LaneCtx {
                 vertex_dims: mesh.vertex_dims(), cell_dims: mesh.cell_dims(), inv_spacing: inv,
-                eps, disp, output, clip,
+                eps, disp, clip,
             };
-            for parity in 0..2 {
-                let chosen: Vec<([usize; 3], u8)> = picks.iter()
-                    .map(|&(c, r)| (mesh.cell_of_linear(c % mesh.cell_count()), r))
-                    .filter(|(c, _)| cell_parity(*c) == parity)
-                    .collect();
-                if chosen.is_empty() { continue; }
-                let mut cells = [chosen[0].0; LANES];
-                let mut removed = [chosen[0].1; LANES];
-                for (l, (c, r)) in chosen.iter().enumerate().take(LANES) {
-                    cells[l] = *c;
-                    removed[l] = *r;
+            let d = clip.dims();
+            let local = |q: [i32; 3]| {
+                (q[0] - clip.lo[0]) as usize
+                    + d[0] * ((q[1] - clip.lo[1]) as usize + d[1] * (q[2] - clip.lo[2]) as usize)
+            };
+            // The reference: per cell, `CellRaster`'s owner of every candidate.
+            let mut want = vec![(u32::MAX, [0usize; 3], 0usize); d[0] * d[1] * d[2]];
+            let mut corners_of = Vec::new();
+            for l in 0..mesh.cell_count() {
+                let cell = mesh.cell_of_linear(l);
+                let mut c = CellCorners::default();
+                for q in 0..8u8 {
+                    let o = corner_offset(q);
+                    let v = [cell[0] + o[0], cell[1] + o[1], cell[2] + o[2]];
+                    let g = grid.linear(v[0], v[1], v[2]);
+                    c.x[q as usize] = deformed_coordinate(v[0], x[g], inv[0]);
+                    c.y[q as usize] = deformed_coordinate(v[1], y[g], inv[1]);
+                    c.z[q as usize] = deformed_coordinate(v[2], z[g], inv[2]);
+                    let still = c.x[q as usize] == v[0] as f32
+                        && c.y[q as usize] == v[1] as f32
+                        && c.z[q as usize] == v[2] as f32;
+                    c.moved |= (!still as u8) << q;
                 }
-                let k = chosen.len().min(LANES);
-                let out: Vec<AtomicU32> = (0..output.len()).map(|_| AtomicU32::new(u32::MAX)).collect();
-                if parity == 0 {
-                    raster_group::<0>(&ctx, &cells, &removed, k, &out);
-                } else {
-                    raster_group::<1>(&ctx, &cells, &removed, k, &out);
-                }
-                let mut want = vec![u32::MAX; output.len()];
-                for l in 0..k {
-                    let cell = cells[l];
-                    let mut c = CellCorners::default();
-                    for q in 0..8u8 {
-                        let o = corner_offset(q);
-                        let v = [cell[0] + o[0], cell[1] + o[1], cell[2] + o[2]];
-                        let g = grid.linear(v[0], v[1], v[2]);
-                        c.x[q as usize] = deformed_coordinate(v[0], x[g], inv[0]);
-                        c.y[q as usize] = deformed_coordinate(v[1], y[g], inv[1]);
-                        c.z[q as usize] = deformed_coordinate(v[2], z[g], inv[2]);
-                        let still = c.x[q as usize] == v[0] as f32
-                            && c.y[q as usize] == v[1] as f32
-                            && c.z[q as usize] == v[2] as f32;
-                        c.moved |= (!still as u8) << q;
-                    }
-                    c.rest = cell.map(|v| v as i32);
-                    let owner = |r: &mut dyn FnMut([f32; 3]) -> Option<u32>, lo: [i32; 3], hi: [i32; 3], want: &mut Vec<u32>| {
-                        for zz in lo[2]..=hi[2] {
-                            for yy in lo[1]..=hi[1] {
-                                for xx in lo[0]..=hi[0] {
-                                    if let Some(key) = r([xx as f32, yy as f32, zz as f32]) {
-                                        let o = output.linear([xx, yy, zz]);
-                                        want[o] = want[o].min(key);
+                c.rest = cell.map(|v| v as i32);
+                corners_of.push(c);
+                let mut claim = |r: &mut dyn FnMut([f32; 3]) -> Option<(usize, bool)>, lo: [i32; 3], hi: [i32; 3]| {
+                    for zz in lo[2]..=hi[2] {
+                        for yy in lo[1]..=hi[1] {
+                            for xx in lo[0]..=hi[0] {
+                                if let Some((t, weak)) = r([xx as f32, yy as f32, zz as f32]) {
+                                    let key = mesh.tet_id(cell, t) | ((weak as u32) * WEAK_OWNER);
+                                    let w = &mut want[local([xx, yy, zz])];
+                                    if key < w.0 {
+                                        *w = (key, cell, t);
                                     }
                                 }
                             }
                         }
-                    };
-                    let key = |t: usize, weak: bool| mesh.tet_id(cell, t) | ((weak as u32) * WEAK_OWNER);
-                    if parity == 0 {
-                        if let Some(mut r) = CellRaster::<0>::new(&c, removed[l], eps, &clip) {
-                            let (lo, hi) = (r.lo, r.hi);
-                            owner(&mut |q| r.owner(q).map(|(t, w)| key(t, w)), lo, hi, &mut want);
-                        }
-                    } else if let Some(mut r) = CellRaster::<1>::new(&c, removed[l], eps, &clip) {
-                        let (lo, hi) = (r.lo, r.hi);
-                        owner(&mut |q| r.owner(q).map(|(t, w)| key(t, w)), lo, hi, &mut want);
                     }
+                };
+                let c = corners_of.last().unwrap();
+                if cell_parity(cell) == 0 {
+                    if let Some(mut r) = CellRaster::<0>::new(c, removed[l], eps, &clip) {
+                        let (lo, hi) = (r.lo, r.hi);
+                        claim(&mut |q| r.owner(q), lo, hi);
+                    }
+                } else if let Some(mut r) = CellRaster::<1>::new(c, removed[l], eps, &clip) {
+                    let (lo, hi) = (r.lo, r.hi);
+                    claim(&mut |q| r.owner(q), lo, hi);
                 }
-                let got: Vec<u32> = out.iter().map(|a| a.load(Relaxed)).collect();
-                prop_assert_eq!(got, want);
+            }
+            let (keys_t, pay_t) = lanes_claims::<true>(&ctx, &mesh, &removed, &values);
+            let (keys_v, pay_v) = lanes_claims::<false>(&ctx, &mesh, &removed, &values);
+            prop_assert_eq!(&keys_t, &keys_v);
+            let dims = grid.dims.map(|v| v as i32);
+            for (i, &(key, cell, t)) in want.iter().enumerate() {
+                prop_assert_eq!(keys_t[i], key, "voxel {}", i);
+                if key == u32::MAX {
+                    continue;
+                }
+                let q = [
+                    clip.lo[0] + (i % d[0]) as i32,
+                    clip.lo[1] + ((i / d[0]) % d[1]) as i32,
+                    clip.lo[2] + (i / (d[0] * d[1])) as i32,
+                ];
+                let c = &corners_of[mesh.cell_linear(cell)];
+                let tet = CELL_TETS[cell_parity(cell)][t];
+                let w = barycentric(&tet.map(|k| c.point(k as usize)), q.map(|v| v as f32));
+                let o = tet.map(|k| corner_offset(k).map(|v| v as f32));
+                let r = rest_offset(w, o);
+                let ax = [0, 1, 2].map(|a| trilinear_axis(cell[a] as i32, r[a], dims[a]));
+                let base = ax[0].0 + dims[0] * (ax[1].0 + dims[1] * ax[2].0);
+                let want_t = [f32::from_bits(base as u32), ax[0].2, ax[1].2, ax[2].2];
+                prop_assert_eq!(pay_t[i].map(f32::to_bits), want_t.map(f32::to_bits), "voxel {:?}", q);
+                let v = tet.map(|k| {
+                    let off = corner_offset(k);
+                    values[grid.linear(cell[0] + off[0], cell[1] + off[1], cell[2] + off[2])]
+                });
+                let want_v = interpolate(w, v);
+                prop_assert_eq!(pay_v[i][0].to_bits(), want_v.to_bits(), "voxel {:?}", q);
             }
         }
     }

@@ -26,26 +26,31 @@
 //! 4. **Two-pass deterministic rasterisation** ([`raster`]): pass 1 runs per
 //!    cell, gives every output voxel centre in the cell's deformed bounding
 //!    box to the containing tetrahedron of the cell with the smallest *owner
-//!    key* and `atomic-min`s that key into the output, viewed as `u32` (the
-//!    CPU evaluates eight cells per SIMD lane group); pass 2 runs per output
-//!    voxel and replaces the key by the value interpolated with the owner's
-//!    barycentric weights (f32 bits, in place): the owner's vertex values
-//!    ([`Interpolation::Tetrahedral`], the paper's) or a trilinear sample of
-//!    the source at the barycentric rest position
-//!    ([`Interpolation::Trilinear`]; see [`interpolation`]). The key is the
+//!    key* and keeps the smallest key per voxel; pass 2 turns each voxel's
+//!    owner into the value interpolated with the owner's barycentric
+//!    weights: the owner's vertex values ([`Interpolation::Tetrahedral`],
+//!    the paper's) or a trilinear sample of the source at the barycentric
+//!    rest position ([`Interpolation::Trilinear`]; see [`interpolation`]).
+//!    The GPU runs the passes as the paper does — `atomicMin` of the key
+//!    into the output viewed as `u32`, then a pass per voxel replacing the
+//!    key by the value; the CPU fuses them per output tile (see [`cpu`]):
+//!    the claims go into a tile's own key and payload arrays without
+//!    atomics, the winning claim's payload is computed from the face values
+//!    pass 1 already has (the same bits pass 2 computes), and every output
+//!    word is written once. The key is the
 //!    tetrahedron id with [`sampling_mesh::WEAK_OWNER`] set on weak claims (a
 //!    tetrahedron that did not move, is inverted, or touches the centre only
 //!    at a still vertex), so where the deformed mesh overlaps itself moved
 //!    tissue wins over the still air and inverted cells beneath it, in every
 //!    direction; the smallest id decides among equal claims (shared faces).
-//!    The result does not depend on thread timing and is the same on CPU and
-//!    GPU. An unmoved voxel reproduces its source value bit for bit in both
-//!    modes.
+//!    The result does not depend on thread timing or tiling and is the same
+//!    on CPU and GPU. An unmoved voxel reproduces its source value bit for
+//!    bit in both modes.
 //! 5. **Removed tetrahedra** ([`TetMask`]) are skipped (cuts).
 //! 6. **Dirty-region resampling** ([`plan`]): after a localised change only
 //!    the output box `R` that the moved cells covered before or cover now is
-//!    cleared, re-rasterised (every cell block whose deformed box meets `R`,
-//!    clipped to `R`) and re-filled. The result equals a full resample bit
+//!    re-rasterised (every cell block whose deformed box meets `R`, clipped
+//!    to `R`) and re-filled. The result equals a full resample bit
 //!    for bit.
 //!
 //! The CPU ([`cpu`]) and GPU ([`gpu`]) paths share everything but the
@@ -57,8 +62,11 @@
 //! Beyond the source volume and the output (4 bytes per output voxel): the
 //! caller's displacements (12 bytes per voxel), the optional [`TetMask`]
 //! (1 byte per cell, only once something is removed), and the block bounds
-//! (24 bytes per 64 cells, 0.375 byte per voxel). Nothing else per voxel:
-//! at most 13.4 bytes per voxel beyond source and output.
+//! (24 bytes per 64 cells, 0.375 byte per voxel); per call, the blocks
+//! binned to output tiles (4 bytes per block and tile it meets, about
+//! 0.1 byte per voxel) and per thread one tile's keys and payloads
+//! (640 KiB). Nothing else per voxel: at most 13.5 bytes per voxel beyond
+//! source and output.
 //!
 //! ## GPU path
 //!
@@ -437,6 +445,7 @@ impl Resampler {
             mask,
             out: &mut self.cpu_values,
             fill: true,
+            still_shortcut: true,
         };
         let r = plan::drive(
             &self.params,

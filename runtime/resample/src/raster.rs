@@ -2,7 +2,9 @@
 //! planes, the inclusion test of pass 1 and the barycentric weights of
 //! pass 2. The CPU kernels run it eight lanes at a time (`super::lanes`,
 //! `super::fill_lanes`) and the GPU in WGSL; this file is the reference
-//! they are tested against, bit for bit, so it is compiled for tests only.
+//! they are tested against, bit for bit, so it is compiled for tests only
+//! — but for [`interpolate`], which the CPU kernel calls per winning claim
+//! in tetrahedral mode.
 //!
 //! All coordinates here are **source voxel index** units (see
 //! [`super::sampling_mesh::deformed_coordinate`]); a voxel centre of the
@@ -374,7 +376,6 @@ pub(crate) fn barycentric(p: &[[f32; 3]; 4], q: [f32; 3]) -> [f32; 4] {
     w
 }
 
-#[cfg(test)]
 /// `Σ λ_a v_a`, or exactly `v_a` when `λ_a == 1` (a voxel centre on a
 /// vertex: copies the value even when a neighbour is NaN or the value is −0).
 #[inline(always)]

@@ -24,7 +24,6 @@
 
 use super::ResampleError;
 use crate::grid::Grid;
-use voxflex_core::fast_div::FastDiv;
 
 /// Tetrahedra per hexahedral cell.
 pub const TETS_PER_CELL: usize = 5;
@@ -397,33 +396,6 @@ impl SamplingMesh {
     }
 }
 
-/// Fast [`SamplingMesh::decode_tet`] for hot loops (no 64-bit divisions).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct TetDecoder {
-    cx: FastDiv,
-    cy: FastDiv,
-}
-
-impl TetDecoder {
-    pub fn new(mesh: &SamplingMesh) -> Self {
-        let c = mesh.cell_dims();
-        Self {
-            cx: FastDiv::new(c[0] as u32),
-            cy: FastDiv::new(c[1] as u32),
-        }
-    }
-
-    /// Cell and local tetrahedron of a tetrahedron id.
-    #[inline(always)]
-    pub fn decode(&self, id: u32) -> ([usize; 3], usize) {
-        let cell = id / TETS_PER_CELL as u32;
-        let t = id - cell * TETS_PER_CELL as u32;
-        let (r, i) = self.cx.div_rem(cell);
-        let (k, j) = self.cy.div_rem(r);
-        ([i as usize, j as usize, k as usize], t as usize)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     #![allow(clippy::needless_range_loop)]
@@ -558,25 +530,6 @@ mod tests {
             }
             all.sort();
             assert_eq!(all, (0..16).collect::<Vec<u8>>(), "every face once");
-        }
-    }
-
-    #[test]
-    fn fast_decoder_matches_division() {
-        for dims in [[2, 2, 2], [3, 2, 9], [257, 130, 5], [600, 600, 600]] {
-            let mesh = SamplingMesh::new(&Grid::new(dims, DVec3::ONE, DVec3::ZERO)).unwrap();
-            let dec = TetDecoder::new(&mesh);
-            let n = mesh.tet_count() as u64;
-            let mut id = 0u64;
-            while id < n {
-                assert_eq!(
-                    dec.decode(id as u32),
-                    mesh.decode_tet(id as u32),
-                    "{dims:?} id {id}"
-                );
-                id += 1 + id / 3;
-            }
-            assert_eq!(dec.decode((n - 1) as u32), mesh.decode_tet((n - 1) as u32));
         }
     }
 

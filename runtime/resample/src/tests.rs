@@ -30,6 +30,17 @@ fn owners(
     mask: Option<&TetMask>,
     params: ResampleParams,
 ) -> (OutputGrid, Vec<u32>) {
+    owners_with(vol, f, mask, params, true)
+}
+
+/// [`owners`], with or without the still-block shortcut of the CPU kernel.
+fn owners_with(
+    vol: &Volume,
+    f: &Field,
+    mask: Option<&TetMask>,
+    params: ResampleParams,
+    still_shortcut: bool,
+) -> (OutputGrid, Vec<u32>) {
     let mut session = None;
     let mut out = Vec::new();
     let mut k = cpu::CpuKernels {
@@ -38,6 +49,7 @@ fn owners(
         mask,
         out: &mut out,
         fill: false,
+        still_shortcut,
     };
     plan::drive(
         &params,
@@ -53,6 +65,32 @@ fn owners(
         session.unwrap().output,
         out.iter().map(|v| v.to_bits()).collect(),
     )
+}
+
+/// Blocks none of whose vertices moved claim their vertices without the
+/// lanes: the same owner keys as the lanes give, voxel for voxel, around a
+/// bump (moved blocks beside still ones) and under the identity.
+#[test]
+fn still_block_shortcut_gives_the_lanes_owners() {
+    let grid = Grid::new([23, 19, 17], DVec3::new(1.0, 0.9, 1.2), DVec3::ZERO);
+    let vol = ramp(&grid, DVec3::new(1.0, -2.0, 0.5));
+    let bumped = Field::from_map(
+        &grid,
+        bump(DVec3::new(9.0, 8.0, 10.0), 5.0, DVec3::new(1.5, -0.7, 0.9)),
+    );
+    for f in [bumped, Field::zero(&grid)] {
+        for params in [
+            ResampleParams::default(),
+            ResampleParams {
+                inclusion_epsilon: 0.0,
+                ..Default::default()
+            },
+        ] {
+            let a = owners_with(&vol, &f, None, params, true);
+            let b = owners_with(&vol, &f, None, params, false);
+            assert_eq!(a, b);
+        }
+    }
 }
 
 #[test]
