@@ -33,7 +33,7 @@ JOBS = {
 # The release CLI and the plugins the jobs load.
 BUILD = [
     "cargo", "build", "--release", "-p", "voxflex-cli", "-p", "voxflex-raycast",
-    "-p", "voxflex-corotational-fem", "-p", "voxflex-affine",
+    "-p", "voxflex-corotational-fem", "-p", "voxflex-affine", "-p", "voxflex-mass-spring",
 ]  # fmt: skip
 
 
