@@ -24,8 +24,8 @@
 //!   vertex). Then every voxel of the tile is written once: the trilinear
 //!   sample (`super::fill_lanes`), the value, or the background.
 //!
-//! Per thread one tile's arrays (20 bytes per tile voxel, 640 KiB); no
-//! other per-voxel memory; every output word of the region is written
+//! Per thread one tile's arrays (20 bytes per tile voxel, 640 KiB, kept
+//! between calls); no other per-voxel memory; every output word of the region is written
 //! exactly once, so nothing is cleared first.
 
 // Lane loops index several arrays by the lane number.
@@ -96,9 +96,9 @@ impl Kernels for CpuKernels<'_> {
             }
             *self.out = v;
         }
-        // Every word of the output is cleared and rewritten by the passes;
-        // new words are written in parallel so that both cores share the
-        // first-touch page faults.
+        // Every word of the output is rewritten by the tiles; new words are
+        // written in parallel so that both cores share the first-touch page
+        // faults.
         let len = self.out.len();
         if n < len {
             self.out.truncate(n);
@@ -138,8 +138,10 @@ impl Kernels for CpuKernels<'_> {
                 crate::with_voxels!(self.source, |s| (0..tiles.count())
                     .into_par_iter()
                     .map(work)
-                    .for_each_init(Scratch::default, |scratch, (t, blocks)| {
-                        tile::<_, $tri>(&ctx, &lanes, s, tiles.tile(t), blocks, scratch, &out)
+                    .for_each(|(t, blocks)| {
+                        SCRATCH.with_borrow_mut(|scratch| {
+                            tile::<_, $tri>(&ctx, &lanes, s, tiles.tile(t), blocks, scratch, &out)
+                        })
                     }))
             };
         }
@@ -309,6 +311,12 @@ impl Tiles {
 struct Scratch {
     keys: Vec<u32>,
     payload: Vec<[f32; 4]>,
+}
+
+thread_local! {
+    /// Each thread's tile arrays, kept from call to call (640 KiB), so no
+    /// call allocates them or faults their pages in again.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 /// The output values, written by the tiles (disjoint boxes) in parallel.
