@@ -3,7 +3,7 @@
 //!
 //! - block bounds: one task per block, min/max of its vertices' positions
 //!   (a vertex row of the block per 8-wide SIMD load);
-//! - both passes, fused per **output tile** ([`TILE`] voxels; one rayon task
+//! - both passes, fused per **output tile** (`TILE` voxels; one rayon task
 //!   per tile, tiles are disjoint boxes of the region): the blocks whose
 //!   deformed bounds meet the tile are binned to it first (a counting sort
 //!   over the block list); the tile's rows of cells go sixteen at a time —

@@ -19,8 +19,12 @@
 //! `λ_a = t_a(q) / D_a` of the claiming tetrahedron — the very expressions
 //! `raster::barycentric` evaluates (same planes from the same corners in the
 //! same order), so the same bits — turned into the rest offset in the
-//! owner's cell (trilinear mode, `raster::rest_offset`) or the interpolated
-//! value (tetrahedral mode, `raster::interpolate`).
+//! owner's cell (`raster::rest_offset`) and from it the trilinear sample's
+//! lower corner and fractions ([`trilinear_box`], `raster::trilinear_axis`;
+//! trilinear mode), or into the interpolated value (`raster::interpolate`;
+//! tetrahedral mode). The lanes find a row's cells' corners with contiguous
+//! loads ([`strip_corners`]): the even and the odd cells of a strip of 16
+//! are the two lane groups.
 
 // Lane and corner loops index several arrays by the same number.
 #![allow(clippy::needless_range_loop)]

@@ -3,7 +3,7 @@
 //! pass 2. The CPU kernels run it eight lanes at a time (`super::lanes`,
 //! `super::fill_lanes`) and the GPU in WGSL; this file is the reference
 //! they are tested against, bit for bit, so it is compiled for tests only
-//! — but for [`interpolate`], which the CPU kernel calls per winning claim
+//! — but for `interpolate`, which the CPU kernel calls per winning claim
 //! in tetrahedral mode.
 //!
 //! All coordinates here are **source voxel index** units (see
