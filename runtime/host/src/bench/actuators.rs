@@ -87,7 +87,11 @@ max = [20, 20, 45]
 {a}{b}{c}{d}[[effector]]
 point = [0, 0, -39]
 path = [[0, 0, 0, -39.3], [10, 1.5, 0, -39.3], [20, 0, 1.5, -39.3], [30, -1.5, 0, -39.3], [40, 0, -1.5, -39.3]]
-{settle}
+
+[actuation]
+settle_iterations = {settle}
+response_refresh_frames = {every}
+
 [output]
 dir = {out:?}
 "#,
@@ -98,11 +102,8 @@ dir = {out:?}
         d = cavity("-y", 5),
         out = out.display().to_string(),
         step = v.step,
-        settle = format!(
-            "\n[actuation]\nsettle_iterations = {}\nresponse_refresh_frames = {}\n",
-            if v.lagged { 0 } else { 30 },
-            v.responses_every
-        ),
+        settle = if v.lagged { 0 } else { 30 },
+        every = v.responses_every,
     )
 }
 
