@@ -66,10 +66,14 @@ impl FluidWeigher {
         surface: &TriangleSurface,
         params: &FluidWeightParams,
     ) -> Result<FluidWeights, FluidError> {
-        let mut w = FluidWeighing::project(surface, params, &mut self.scratch)?;
-        w.intersect();
-        w.match_sections();
-        Ok(w.distribute())
+        // Its stages are short parallel loops: run them from a worker, so
+        // they split without a hand-over each ([`voxflex_core::on_worker`]).
+        voxflex_core::on_worker::on_worker(|| {
+            let mut w = FluidWeighing::project(surface, params, &mut self.scratch)?;
+            w.intersect();
+            w.match_sections();
+            Ok(w.distribute())
+        })
     }
 }
 
