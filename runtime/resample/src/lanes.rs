@@ -280,6 +280,29 @@ impl TileSink<'_> {
         let z = (q[2] - self.lo[2]) as usize;
         x + self.dims[0] * (y + self.dims[1] * z)
     }
+
+    /// Claims voxel `q[l]` for lane `l` of every bit set in `found` with
+    /// `keys[l]`, where it beats the tile's key; `payload(l)` is computed
+    /// only for a winning claim.
+    #[inline(always)]
+    pub fn claim_lanes(
+        &mut self,
+        mut found: u32,
+        q: [[i32; LANES]; 3],
+        keys: &[i32; LANES],
+        mut payload: impl FnMut(usize) -> [f32; 4],
+    ) {
+        while found != 0 {
+            let l = found.trailing_zeros() as usize;
+            found &= found - 1;
+            let i = self.local([q[0][l], q[1][l], q[2][l]]);
+            let key = keys[l] as u32;
+            if key < self.keys[i] {
+                self.keys[i] = key;
+                self.payload[i] = payload(l);
+            }
+        }
+    }
 }
 
 /// Trilinear mode, per lane: the source sample at the rest position
@@ -578,7 +601,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
             & pass(&cs[2].t_central, ti[2])
             & pass(&cs[3].t_central, ti[3])
             & active;
-        let mut found = passing.iter().fold(0, |a, &m| a | m);
+        let found = passing.iter().fold(0, |a, &m| a | m);
         if found != 0 {
             // Lanes whose centre is the rest position of a still corner c:
             // a tetrahedron touching it only there claims it weakly.
@@ -639,7 +662,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
                 pick_t(3) / pick_d(3),
             ];
             let keys = (best ^ I::splat(WEAK_OWNER as i32)).to_array();
-            let (qx, qy, qz) = (q[0].to_array(), q[1].to_array(), q[2].to_array());
+            let qa = [q[0].to_array(), q[1].to_array(), q[2].to_array()];
             if TRI {
                 // Rest offset in the owner's cell, as `raster::rest_offset`:
                 // `Σ λ_a o_a` over the slots in order (`o_a` 0 or 1, so the
@@ -663,38 +686,23 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
                 let (base, f) = trilinear_box(&cell_i, &r, ctx.vertex_dims);
                 let base = base.to_array();
                 let f = f.map(|v| v.to_array());
-                while found != 0 {
-                    let l = found.trailing_zeros() as usize;
-                    found &= found - 1;
-                    let i = sink.local([qx[l], qy[l], qz[l]]);
-                    let key = keys[l] as u32;
-                    if key < sink.keys[i] {
-                        sink.keys[i] = key;
-                        sink.payload[i] =
-                            [f32::from_bits(base[l] as u32), f[0][l], f[1][l], f[2][l]];
-                    }
-                }
+                sink.claim_lanes(found, qa, &keys, |l| {
+                    [f32::from_bits(base[l] as u32), f[0][l], f[1][l], f[2][l]]
+                });
             } else {
                 let w = w.map(|v| v.to_array());
                 let owner = owner.to_array();
                 let [nx, ny, _] = ctx.vertex_dims;
-                while found != 0 {
-                    let l = found.trailing_zeros() as usize;
-                    found &= found - 1;
-                    let i = sink.local([qx[l], qy[l], qz[l]]);
-                    let key = keys[l] as u32;
-                    if key < sink.keys[i] {
-                        sink.keys[i] = key;
-                        let c = cells[l];
-                        let base = c[0] + nx * (c[1] + ny * c[2]);
-                        let v = CELL_TETS[P][owner[l] as usize].map(|corner| {
-                            let o = corner_offset(corner);
-                            src[base + o[0] + nx * (o[1] + ny * o[2])].to_f32()
-                        });
-                        let wl = [w[0][l], w[1][l], w[2][l], w[3][l]];
-                        sink.payload[i] = [interpolate(wl, v), 0.0, 0.0, 0.0];
-                    }
-                }
+                sink.claim_lanes(found, qa, &keys, |l| {
+                    let c = cells[l];
+                    let base = c[0] + nx * (c[1] + ny * c[2]);
+                    let v = CELL_TETS[P][owner[l] as usize].map(|corner| {
+                        let o = corner_offset(corner);
+                        src[base + o[0] + nx * (o[1] + ny * o[2])].to_f32()
+                    });
+                    let wl = [w[0][l], w[1][l], w[2][l], w[3][l]];
+                    [interpolate(wl, v), 0.0, 0.0, 0.0]
+                });
             }
         }
         // Advance every lane's cursor: x, then y on wrap, then z.
