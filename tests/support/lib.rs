@@ -129,6 +129,11 @@ pub fn voxflex(args: &[&str], cwd: &Path) -> Output {
         .expect("run voxflex")
 }
 
+/// The stdout of a finished command, as text.
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
 /// stdout + stderr of a finished command, for assertion messages.
 pub fn text(o: &Output) -> String {
     format!(

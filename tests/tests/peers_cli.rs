@@ -6,10 +6,6 @@ use voxflex_core::glam::DVec3;
 use voxflex_integration_tests::*;
 use voxflex_resample::accuracy::trilinear_f64;
 
-fn out_text(o: &std::process::Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 #[test]
 fn phantom_writes_the_volume_and_the_abdomen_labels() {
     let tmp = tempfile::tempdir().unwrap();
@@ -76,7 +72,7 @@ fn resample_exports_the_exact_backward_field_of_its_result() {
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    assert!(out_text(&o).contains("resample: min "), "{}", text(&o));
+    assert!(stdout(&o).contains("resample: min "), "{}", text(&o));
     let dir = tmp.path().join("x");
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("resample.json")).unwrap()).unwrap();
@@ -149,7 +145,7 @@ fn render_repeat_times_each_frame_and_roi_reports_its_growth_time() {
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    let s = out_text(&o);
+    let s = stdout(&o);
     let line = s
         .lines()
         .find(|l| l.starts_with("repeat frames (ms): "))
@@ -175,5 +171,5 @@ fn render_repeat_times_each_frame_and_roi_reports_its_growth_time() {
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    assert!(out_text(&o).contains(" ms → "), "{}", text(&o));
+    assert!(stdout(&o).contains(" ms → "), "{}", text(&o));
 }

@@ -7,10 +7,6 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use voxflex_integration_tests::*;
 
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 fn up_to_date(o: &Output) -> bool {
     assert!(o.status.success(), "{}", text(o));
     stdout(o).contains("up to date")
