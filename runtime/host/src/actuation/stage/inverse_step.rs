@@ -81,18 +81,19 @@ impl ActuationStage {
         // A settled frame judges the responses by what the model did; a
         // lagged one (settle_iterations = 0) mostly measures its own lag.
         let misled = self.disappointed && self.settle.settle_iterations > 0;
-        match self.responses.take() {
+        let (r, age) = match self.responses.take() {
             Some((r, age)) if age + 1 < every && !misled => {
                 self.report.responses_reused += 1;
-                self.responses = Some((r.clone(), age + 1));
-                Ok(r)
+                (r, age + 1)
             }
-            _ => {
-                let r = self.responses(model, binding)?;
-                self.responses = Some((r.clone(), 0));
-                Ok(r)
-            }
+            _ => (self.responses(model, binding)?, 0),
+        };
+        // Kept only when a later step may use it (never at the default
+        // every = 1: no copy of the responses on that path).
+        if age + 1 < every {
+            self.responses = Some((r.clone(), age));
         }
+        Ok(r)
     }
 
     /// Builds and solves the frame's inverse problem over the actuators
