@@ -93,25 +93,8 @@ enum Command {
         /// Output file (.nii or .nii.gz).
         #[arg(long)]
         out: PathBuf,
-        /// Extinction scale λ: `auto` (the plateau rule; default) or a
-        /// positive number (the paper's is 30).
-        #[arg(long, default_value = "auto")]
-        lambda: String,
-        /// Intensity window lo,hi (volume units): voxels outside never rise above o_min.
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-        intensity: Option<Vec<f32>>,
-        /// Largest Euclidean distance from the seed (mm) a raised voxel may have.
-        #[arg(long, allow_hyphen_values = true)]
-        max_distance_mm: Option<f64>,
-        /// Opacity outside the region.
-        #[arg(long, default_value_t = 0.03)]
-        o_min: f32,
-        /// Opacity of the seed.
-        #[arg(long, default_value_t = 1.0)]
-        o_max: f32,
-        /// Growth steps (default: run to convergence).
-        #[arg(long)]
-        steps: Option<usize>,
+        #[command(flatten)]
+        growth: RoiArgs,
         /// Phantom resolution (x,y,z), phantoms only.
         #[arg(long, value_delimiter = ',')]
         dims: Option<Vec<usize>>,
@@ -311,27 +294,9 @@ fn dispatch(command: Command) -> Result<()> {
             volume,
             seed,
             out,
-            lambda,
-            intensity,
-            max_distance_mm,
-            o_min,
-            o_max,
-            steps,
+            growth,
             dims,
-        } => roi(
-            volume,
-            dims,
-            seed,
-            out,
-            RoiArgs {
-                lambda,
-                intensity,
-                max_distance_mm,
-                o_min,
-                o_max,
-                steps,
-            },
-        ),
+        } => roi(volume, dims, seed, out, growth),
         Command::Render {
             volume,
             out,
@@ -576,12 +541,30 @@ fn info(source: String, dims: Option<Vec<usize>>) -> Result<()> {
 }
 
 /// The growth options of `voxflex roi`.
+#[derive(clap::Args)]
 struct RoiArgs {
+    /// Extinction scale λ: `auto` (the plateau rule; default) or a
+    /// positive number (the paper's is 30).
+    #[arg(long, default_value = "auto")]
     lambda: String,
+    /// Intensity window lo,hi (volume units): voxels outside never rise above o_min.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     intensity: Option<Vec<f32>>,
+    /// Largest Euclidean distance from the seed (mm) a raised voxel may have.
+    #[arg(long, allow_hyphen_values = true)]
     max_distance_mm: Option<f64>,
+    /// Opacity outside the region.
+    #[arg(long, default_value_t = 0.03)]
     o_min: f32,
+    /// Opacity of the seed.
+    #[arg(long, default_value_t = 1.0)]
     o_max: f32,
+    /// Half-width (voxels) of the cube around the seed whose mean and σ set
+    /// the extinction: 1 is the paper's 1-ring; 2 measures σ on 125 voxels.
+    #[arg(long, default_value_t = 2)]
+    seed_radius: u32,
+    /// Growth steps (default: run to convergence).
+    #[arg(long)]
     steps: Option<usize>,
 }
 
@@ -618,6 +601,7 @@ fn roi(
         params: GrowthParams {
             o_min: a.o_min,
             o_max: a.o_max,
+            seed_radius: a.seed_radius,
             ..GrowthParams::default()
         },
         lambda,

@@ -7,7 +7,7 @@ use crate::roi_bounds::{BoundsEdit, bounds_ui};
 use egui::{Color32, RichText, Slider};
 use std::collections::HashMap;
 use std::path::PathBuf;
-use voxflex_runtime::session::{GrowthParams, RoiId};
+use voxflex_runtime::session::{GrowthParams, MAX_SEED_RADIUS, RoiId};
 
 /// Colours given to new maps, in turn.
 const PALETTE: [[u8; 3]; 6] = [
@@ -116,6 +116,11 @@ impl RoiPanel {
         slider(
             ui,
             Slider::new(&mut self.params.o_max, 0.1..=1.0).text("o_max"),
+        );
+        slider(
+            ui,
+            Slider::new(&mut self.params.seed_radius, 1..=MAX_SEED_RADIUS)
+                .text("seed radius (voxels)"),
         );
         if released && let Some(id) = self.selected {
             out.push(Command::RoiParams(id, self.params));

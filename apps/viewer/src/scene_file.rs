@@ -199,6 +199,7 @@ fn roi_table(r: &RoiInfo) -> Option<toml::Value> {
     t.insert("lambda".into(), f64::from(r.params.lambda).into());
     t.insert("o_min".into(), f64::from(r.params.o_min).into());
     t.insert("o_max".into(), f64::from(r.params.o_max).into());
+    t.insert("seed_radius".into(), i64::from(r.params.seed_radius).into());
     Some(t.into())
 }
 

@@ -396,6 +396,13 @@ pub struct RoiSettings {
     /// Opacity of the seed (default 1).
     #[serde(default = "default_o_max")]
     pub o_max: f32,
+    /// Half-width (voxels) of the cube around the seed whose mean and σ
+    /// set the extinction: 1 is the paper's 1-ring, the default 2
+    /// (`voxflex_opacity::GrowthParams::seed_radius` says why), at most 8.
+    /// Signed so that a negative value is refused by the scene check with
+    /// the key's name, like every other bad value.
+    #[serde(default = "default_seed_radius")]
+    pub seed_radius: i64,
     /// Growth steps; absent = run to convergence.
     #[serde(default)]
     pub steps: Option<usize>,
@@ -431,6 +438,9 @@ fn default_o_min() -> f32 {
 }
 fn default_o_max() -> f32 {
     1.0
+}
+fn default_seed_radius() -> i64 {
+    voxflex_opacity::GrowthParams::default().seed_radius.into()
 }
 
 #[derive(Deserialize)]
@@ -718,7 +728,9 @@ impl Scene {
                 LambdaSetting::Value(l) if !(l.is_finite() && *l > 0.0) => {
                     return Err(invalid(
                         "lambda",
-                        format!("{l} must be a positive number or \"auto\" (default 30)"),
+                        format!(
+                            "{l} must be a positive number or \"auto\" (the default; the paper's is 30)"
+                        ),
                     ));
                 }
                 LambdaSetting::Word(w) if w != "auto" => {
@@ -743,6 +755,16 @@ impl Scene {
                 return Err(invalid(
                     "max_distance_mm",
                     format!("{d} must be a positive finite distance in mm"),
+                ));
+            }
+            if !(1..=voxflex_opacity::MAX_SEED_RADIUS.into()).contains(&roi.seed_radius) {
+                return Err(invalid(
+                    "seed_radius",
+                    format!(
+                        "{} must be 1 (the paper's 1-ring) to {} voxels (default 2)",
+                        roi.seed_radius,
+                        voxflex_opacity::MAX_SEED_RADIUS
+                    ),
                 ));
             }
         }
@@ -1253,7 +1275,9 @@ kind = "release"
     fn roi_lambda_auto_and_bounds_parse_and_bad_values_name_the_key() {
         let roi = |extra: &str| format!("{GOOD}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{extra}\n");
         let s = Scene::parse(
-            &roi("lambda = \"auto\"\nintensity = [60, 170.5]\nmax_distance_mm = 80"),
+            &roi(
+                "lambda = \"auto\"\nintensity = [60, 170.5]\nmax_distance_mm = 80\nseed_radius = 1",
+            ),
             Path::new("t.toml"),
         )
         .unwrap();
@@ -1261,9 +1285,12 @@ kind = "release"
         assert_eq!(r.lambda, LambdaSetting::Word("auto".into()));
         assert_eq!(r.intensity, Some([60.0, 170.5]));
         assert_eq!(r.max_distance_mm, Some(80.0));
+        assert_eq!(r.seed_radius, 1);
+        assert_eq!(crate::visualise::roi_request(r).params.seed_radius, 1);
         let s = Scene::parse(&roi("lambda = 12"), Path::new("t.toml")).unwrap();
         assert_eq!(s.rois[0].lambda, LambdaSetting::Value(12.0));
         assert_eq!(s.rois[0].intensity, None);
+        assert_eq!(s.rois[0].seed_radius, 2);
         let s = Scene::parse(&roi(""), Path::new("t.toml")).unwrap();
         assert_eq!(s.rois[0].lambda, LambdaSetting::Word("auto".into()));
         // An error in the second [[roi]] points at its own line.
@@ -1285,6 +1312,9 @@ kind = "release"
             ("max_distance_mm = -1", "`max_distance_mm`"),
             ("max_distance_mm = 0", "`max_distance_mm`"),
             ("max_distance_mm = inf", "`max_distance_mm`"),
+            ("seed_radius = 0", "`seed_radius`"),
+            ("seed_radius = 9", "`seed_radius`"),
+            ("seed_radius = -1", "`seed_radius`"),
         ] {
             let e = Scene::parse(&roi(extra), Path::new("t.toml"))
                 .unwrap_err()

@@ -51,6 +51,9 @@ pub fn roi_request(roi: &RoiSettings) -> RoiRequest {
         params: GrowthParams {
             o_min: roi.o_min,
             o_max: roi.o_max,
+            // Checked to lie in 1 ..= MAX_SEED_RADIUS when the scene loaded;
+            // anything else is refused again by the growth's own check.
+            seed_radius: u32::try_from(roi.seed_radius).unwrap_or(0),
             ..GrowthParams::default()
         },
         lambda: match roi.lambda {
@@ -148,7 +151,7 @@ pub fn grow_rois(
 
 /// The `transfer_function` settings of `[render.params]` with the automatic
 /// Gaussian of the `[[roi]]` marked `gaussian_tf` (mean and σ of its seed's
-/// 1-ring), as TOML for `Renderer::configure`; `None` when no ROI asks.
+/// neighbourhood), as TOML for `Renderer::configure`; `None` when no ROI asks.
 pub fn gaussian_tf_settings(scene: &Scene, stats: &[SeedStats]) -> Option<String> {
     let (_, s) = scene.rois.iter().zip(stats).find(|(r, _)| r.gaussian_tf)?;
     let mut tf = match scene.render.as_ref()?.params.get("transfer_function") {

@@ -1,7 +1,7 @@
 //! Opacity-map growth benchmarks (CPU path):
 //! `cargo bench -p voxflex-opacity --bench opacity`.
 //!
-//! - `seed_ball_256`: seeding (1-ring statistics and the volume's value
+//! - `seed_ball_256`: seeding (neighbourhood statistics and the volume's value
 //!   range) in the volume below.
 //! - `grow_ball_256`: growth to convergence from the centre of a 256³ i16
 //!   volume holding a ball of radius 119 voxels (≈ 7.06 M voxels, value

@@ -3,7 +3,7 @@
 //! kidney (CPU path). Writes a markdown table, a CSV and an SVG plot.
 //!
 //! ```sh
-//! cargo run --release -p voxflex-opacity --example roi_dice -- [--dims 120,94,80] [--out docs]
+//! cargo run --release -p voxflex-opacity --example roi_dice -- [--dims 120,94,80] [--out docs] [--seed-radius 2]
 //! ```
 //!
 //! Output: `<out>/roi_dice_vs_lambda.md`, `<out>/roi_dice_vs_lambda.csv`,
@@ -123,6 +123,7 @@ fn svg(series: &[Series]) -> String {
 fn main() {
     let mut dims = [120usize, 94, 80];
     let mut out = std::path::PathBuf::from("docs");
+    let mut params = GrowthParams::default();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut i = 0;
     while i < args.len() {
@@ -139,7 +140,11 @@ fn main() {
                 out = args[i + 1].clone().into();
                 i += 2;
             }
-            a => panic!("unknown argument {a}; use --dims nx,ny,nz and --out DIR"),
+            "--seed-radius" => {
+                params.seed_radius = args[i + 1].parse().expect("--seed-radius N");
+                i += 2;
+            }
+            a => panic!("unknown argument {a}; use --dims nx,ny,nz, --out DIR, --seed-radius N"),
         }
     }
     let t = Instant::now();
@@ -167,7 +172,7 @@ fn main() {
         for &lambda in &lambdas {
             let req = RoiRequest {
                 seed,
-                params: GrowthParams::default(),
+                params,
                 lambda: LambdaChoice::Fixed(lambda),
                 limits: GrowthLimits::default(),
                 steps: None,
@@ -198,7 +203,7 @@ fn main() {
         }
         let req = RoiRequest {
             seed,
-            params: GrowthParams::default(),
+            params,
             lambda: LambdaChoice::Auto,
             limits: GrowthLimits::default(),
             steps: None,

@@ -3,9 +3,9 @@
 //!
 //! The converged map grows monotonically with λ (a larger λ lowers every
 //! positive extinction). Let `V(λ)` be the voxels at opacity ≥ 0.5. At
-//! small λ the region is held back inside the organ by noise (the seed's
-//! 1-ring σ_s underestimates correlated noise), so `V` rises quickly as λ
-//! grows and the organ fills; at large λ opacity flows further into every
+//! small λ the region is held back inside the organ by noise (σ_s, from the
+//! seed's neighbourhood, can underestimate correlated noise), so `V` rises
+//! quickly as λ grows and the organ fills; at large λ opacity flows further into every
 //! touching structure (a depth ∝ λ) or jumps across a contact into a
 //! neighbour, so `V` rises again. Between the two `V(λ)` is flattest. The
 //! rule:

@@ -40,7 +40,7 @@ pub struct CpuGrowth {
 
 impl CpuGrowth {
     /// Seeds a growth: the seed voxel at `o_max`, every other voxel at
-    /// `o_min`, the seed's 1-ring statistics measured. No step is run.
+    /// `o_min`, the seed's neighbourhood statistics measured. No step is run.
     pub fn new(
         volume: VolumeView<'_>,
         seed: &Seed,

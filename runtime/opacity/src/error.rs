@@ -60,18 +60,18 @@ pub enum OpacityError {
         /// Which coordinate is out of range and the valid range.
         detail: String,
     },
-    /// The seed's 1-ring holds NaN or infinite values, so its mean and
+    /// The seed's neighbourhood holds NaN or infinite values, so its mean and
     /// standard deviation are undefined.
     #[error(
-        "the 1-ring of seed voxel {voxel:?} holds non-finite values (mean {mean}, standard \
+        "the neighbourhood of seed voxel {voxel:?} holds non-finite values (mean {mean}, standard \
          deviation {std}); seed on finite data"
     )]
     SeedStatsNotFinite {
         /// Seed voxel index.
         voxel: [usize; 3],
-        /// Mean of the ring.
+        /// Mean of the neighbourhood.
         mean: f64,
-        /// Standard deviation of the ring.
+        /// Standard deviation of the neighbourhood.
         std: f64,
     },
     /// `lambda` is not a positive finite number.
@@ -91,6 +91,15 @@ pub enum OpacityError {
         o_min: f32,
         /// The `o_max` given.
         o_max: f32,
+    },
+    /// `seed_radius` is outside 1 ..= [`crate::MAX_SEED_RADIUS`].
+    #[error(
+        "seed_radius = {seed_radius} must be between 1 (the paper's 1-ring) and {max} voxels (default 2)",
+        max = crate::MAX_SEED_RADIUS
+    )]
+    BadSeedRadius {
+        /// The value given.
+        seed_radius: u32,
     },
     /// `sigma_floor` is not a positive finite number.
     #[error("sigma_floor = {sigma_floor} must be a positive finite number (default 1e-3)")]

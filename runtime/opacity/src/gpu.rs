@@ -237,7 +237,7 @@ pub struct GpuGrowth {
 
 impl GpuGrowth {
     /// Seeds a growth on the GPU. `volume` is the CPU copy of the volume
-    /// behind `values` (the seed's 1-ring statistics are measured on it,
+    /// behind `values` (the seed's neighbourhood statistics are measured on it,
     /// exactly as on the CPU path).
     pub fn new(
         gpu: &dyn GpuService,

@@ -20,8 +20,10 @@
 //! ```
 //!
 //! over its 26 neighbours `n`, where `d_v` is the voxel's value and `d_s`,
-//! σ_s the mean and standard deviation of the seed's 1-ring (the seed and
-//! its 26 neighbours, [`seed::seed_stats`]). Voxels within σ_s of `d_s` have
+//! σ_s the mean and standard deviation of the seed's neighbourhood (the
+//! cube of half-width [`GrowthParams::seed_radius`] voxels around it,
+//! [`seed::seed_stats`]; the paper's 1-ring is radius 1, the default is 2 —
+//! see the field's docs for why). Voxels within σ_s of `d_s` have
 //! `E_v < 0` and take the full opacity of their neighbour; the further a
 //! value lies from the seed's, the faster opacity dies out along a path. The
 //! growth converges when no voxel changes. σ_s has a floor
@@ -151,7 +153,7 @@ pub use extinction::Extinction;
 pub use gaussian_tf::{GaussianTf, gaussian_tf};
 pub use gpu::{GpuGrowth, GpuOpacityVolume};
 pub use limits::{GrowthLimits, LimitHits};
-pub use params::GrowthParams;
+pub use params::{GrowthParams, MAX_SEED_RADIUS};
 pub use report::GrowthReport;
 pub use roi::{LambdaChoice, RoiOutcome, RoiRequest, grow_roi};
 pub use runner::{CpuRunner, GpuRunner, GrowRunner, Grown};

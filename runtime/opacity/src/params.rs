@@ -3,8 +3,13 @@
 use super::OpacityError;
 use crate::opacity_map::to_fixed;
 
+/// Largest [`GrowthParams::seed_radius`]: a 17³ neighbourhood (4,913
+/// voxels) already spans more than most organs at CT resolution.
+pub const MAX_SEED_RADIUS: u32 = 8;
+
 /// Constants of the region growing (CEIG 2016): the opacity range, the
-/// extinction scale λ and the floor under the seed's standard deviation.
+/// extinction scale λ, the seed neighbourhood its statistics come from and
+/// the floor under the seed's standard deviation.
 ///
 /// All opacities are dimensionless, in [0, 1].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -26,6 +31,14 @@ pub struct GrowthParams {
     /// finite when the seed sits in a homogeneous region (σ_s = 0). Default
     /// 1e-3.
     pub sigma_floor: f32,
+    /// Half-width, in voxels, of the cube around the seed voxel whose mean
+    /// and standard deviation are `d_s` and σ_s: `(2 r + 1)³` voxels,
+    /// clipped to the volume. 1 is the paper's 1-ring (27 voxels); the
+    /// default, 2 (125 voxels, ITK's `ConfidenceConnected` default), because
+    /// 27 voxels of spatially correlated CT noise misjudge σ_s by up to 2×
+    /// (8.2–15 HU on 15 HU noise), which decides how far the growth runs
+    /// (docs/BENCHMARKS.md, "ROI maps"). 1 ..= [`MAX_SEED_RADIUS`].
+    pub seed_radius: u32,
 }
 
 impl Default for GrowthParams {
@@ -35,6 +48,7 @@ impl Default for GrowthParams {
             o_max: 1.0,
             lambda: 30.0,
             sigma_floor: 1e-3,
+            seed_radius: 2,
         }
     }
 }
@@ -57,6 +71,11 @@ impl GrowthParams {
         if !(self.sigma_floor.is_finite() && self.sigma_floor > 0.0) {
             return Err(OpacityError::BadSigmaFloor {
                 sigma_floor: self.sigma_floor,
+            });
+        }
+        if !(1..=MAX_SEED_RADIUS).contains(&self.seed_radius) {
+            return Err(OpacityError::BadSeedRadius {
+                seed_radius: self.seed_radius,
             });
         }
         Ok(())

@@ -12,13 +12,13 @@ use voxflex_phantom::{LabelledVolume, abdomen_labelled};
 /// 3 mm voxels: 360 × 280 × 240 mm / (120, 94, 80) (y: 2.98 mm).
 const DIMS: [usize; 3] = [120, 94, 80];
 
-/// Dice the automatic λ must reach per seed (measured 0.905, 0.779, 0.972
+/// Dice the automatic λ must reach per seed (measured 0.897, 0.870, 0.932
 /// at these dims: see docs/BENCHMARKS.md).
 fn auto_dice_min(name: &str) -> f64 {
     match name {
         "liver" => 0.88,
-        "spleen" => 0.75,
-        _ => 0.95,
+        "spleen" => 0.85,
+        _ => 0.92,
     }
 }
 
@@ -135,6 +135,37 @@ impl GrowRunner for Counting<'_> {
         self.1 += 1;
         self.0.grow(params, steps, abort_above)
     }
+}
+
+/// The regression of the peers harness (issue 17): at 1.5 mm voxels the
+/// liver seed's 1-ring measured σ_s = 14.7 HU, the organ filled by λ = 4
+/// and the body-wall muscle then took the map over gradually (no single
+/// jump), so the plateau rule settled on the muscle's own plateau (λ = 16,
+/// Dice 0.552). With σ_s from the 5³ neighbourhood it picks λ = 4 (Dice
+/// 0.964 measured).
+#[test]
+fn auto_lambda_keeps_to_the_liver_at_1_5_mm() {
+    const FINE: [usize; 3] = [240, 188, 160];
+    let ph = abdomen_labelled(FINE);
+    let (lab, p) = seed_of("liver");
+    let grow = |seed_radius| {
+        let req = RoiRequest {
+            params: GrowthParams {
+                seed_radius,
+                ..GrowthParams::default()
+            },
+            ..request(p, LambdaChoice::Auto, GrowthLimits::default())
+        };
+        let out = grow_roi(ph.volume.view(), &req, None).unwrap();
+        let d = out.grown.map.dense(FINE);
+        let dice = dice(d.iter().map(|&q| q >= 32768), &ph.labels, lab);
+        eprintln!(
+            "seed radius {seed_radius}: λ = {}, Dice {dice:.3}",
+            out.lambda
+        );
+        dice
+    };
+    assert!(grow(2) >= 0.93);
 }
 
 #[test]

@@ -150,25 +150,30 @@ impl Seed {
     }
 }
 
-/// The seed's intensity statistics over its 1-ring (the seed voxel and its
-/// 26 neighbours, clipped to the volume), in the volume's value units.
+/// The seed's intensity statistics over its neighbourhood: the cube of
+/// half-width [`GrowthParams::seed_radius`] voxels around the seed voxel
+/// (the paper's 1-ring at radius 1), clipped to the volume, in the
+/// volume's value units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeedStats {
     /// The seed voxel, **voxel index**.
     pub voxel: [usize; 3],
-    /// Voxels in the ring (27 inside the volume, fewer at its border).
+    /// Voxels in the neighbourhood (`(2 r + 1)³` inside the volume, fewer at
+    /// its border).
     pub ring_voxels: usize,
-    /// Mean `d_s` of the ring (value units).
+    /// Mean `d_s` of the neighbourhood (value units).
     pub mean: f32,
-    /// Population standard deviation of the ring (value units), as measured.
+    /// Population standard deviation of the neighbourhood (value units), as
+    /// measured.
     pub std: f32,
     /// The σ_s the growth uses: `max(std, floor)` (see
     /// [`GrowthParams::sigma_floor`]), > 0.
     pub sigma: f32,
 }
 
-/// Mean and standard deviation of the seed voxel's 1-ring, with the σ floor
-/// of `params` applied. A ring holding a NaN or infinite value, or values
+/// Mean and standard deviation of the seed voxel's neighbourhood (half-width
+/// `params.seed_radius` voxels), with the σ floor of `params` applied. A
+/// neighbourhood holding a NaN or infinite value, or values
 /// beyond ±1e29, is an error.
 pub fn seed_stats(
     volume: VolumeView<'_>,
@@ -183,9 +188,10 @@ pub fn seed_stats(
     }
     let mut n = 0usize;
     let (mut s, mut s2) = (0f64, 0f64);
-    let lo = voxel.map(|c| c.saturating_sub(1));
-    let hi = [0, 1, 2].map(|a| (voxel[a] + 1).min(d[a] - 1));
-    let mut values = Vec::with_capacity(27);
+    let r = params.seed_radius as usize;
+    let lo = voxel.map(|c| c.saturating_sub(r));
+    let hi = [0, 1, 2].map(|a| (voxel[a] + r).min(d[a] - 1));
+    let mut values = Vec::with_capacity((2 * r + 1).pow(3));
     for k in lo[2]..=hi[2] {
         for j in lo[1]..=hi[1] {
             for i in lo[0]..=hi[0] {

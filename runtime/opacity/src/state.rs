@@ -26,7 +26,7 @@ pub struct GrowthState {
 
 impl GrowthState {
     /// Seeds a growth on `volume` (already validated with `params`): the
-    /// seed's 1-ring statistics, the update constants and the initial boxes.
+    /// seed's neighbourhood statistics, the update constants and the initial boxes.
     /// Returns the state and the seed's index in the working box.
     pub(crate) fn seed(
         volume: VolumeView<'_>,

@@ -166,8 +166,16 @@ fn phantom_grows_sphere_a_and_never_enters_c() {
     );
     // Sphere C (contrast 200 ≫ (λ + 1) σ_s) is never entered, not even faintly.
     assert_eq!(c[3][2], 0, "opacity leaked into sphere C");
-    // Neither is the background (contrast 100).
-    assert_eq!(c[0][2], 0, "opacity leaked into the background");
+    // The background (contrast 100, E ≈ 100 / (30 σ_s) ≈ 1.05) is not
+    // entered: no voxel of it reaches 0.5, and only a noise voxel (3 σ
+    // towards A) right at A's surface rises faintly above o_min — one
+    // voxel deep, since it passes on less than the next voxel's extinction.
+    assert_eq!(c[0][1], 0, "opacity ≥ 0.5 in the background");
+    assert!(
+        c[0][2] as f64 <= 1e-4 * c[0][0] as f64,
+        "opacity leaked into the background: {} voxels",
+        c[0][2]
+    );
     // Sphere B (contrast 15 ≈ 5 σ_s): entered through the contact disc and
     // fading — a cap near the contact above 0.5, most of B below it, and the
     // far side of B never reached.
@@ -528,6 +536,10 @@ fn bad_input_is_refused_with_the_value() {
         },
     );
     assert!(e.contains("sigma_floor = 0"), "{e}");
+    for seed_radius in [0, crate::MAX_SEED_RADIUS + 1] {
+        let e = err(seed, GrowthParams { seed_radius, ..ok });
+        assert!(e.contains(&format!("seed_radius = {seed_radius}")), "{e}");
+    }
 
     // A volume of another size, a view whose values do not fit its grid.
     let mut g = CpuGrowth::new(v, &seed, ok).unwrap();

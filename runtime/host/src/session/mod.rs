@@ -92,7 +92,7 @@ pub use voxflex_core::opacity_map::OpacityMap;
 pub use voxflex_core::slice_axis::SliceAxis;
 pub use voxflex_core::stats::Histogram;
 pub use voxflex_io::png::{GrayImage, Window};
-pub use voxflex_opacity::{GrowthLimits, GrowthParams, GrowthReport, Seed};
+pub use voxflex_opacity::{GrowthLimits, GrowthParams, GrowthReport, MAX_SEED_RADIUS, Seed};
 
 use crate::backend::{self, BackendChoice, ResolvedBackend};
 use crate::gpu_context::WgpuService;
