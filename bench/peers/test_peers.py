@@ -66,6 +66,13 @@ class Gates(unittest.TestCase):
         self.assertEqual(job_render.footprint_iou(img, img), 1.0)
         self.assertLess(job_render.footprint_iou(img, shifted), job_render.IOU_MIN)
 
+    def test_equal_error_takes_each_sides_coarsest_step_within_the_target(self):
+        errors = {4.0: 9e-3, 2.0: 4e-3, 1.0: 2e-3, 0.5: 1.5e-3, 0.25: 1e-3}
+        self.assertEqual(job_render.equal_error_factor(errors, 2e-3), 1.0)
+        self.assertEqual(job_render.equal_error_factor(errors, 5e-3), 2.0)
+        self.assertEqual(job_render.equal_error_factor(errors, 1.2e-3), 0.25)
+        self.assertIsNone(job_render.equal_error_factor(errors, 5e-4))
+
 
 if __name__ == "__main__":
     unittest.main()
