@@ -14,6 +14,7 @@
 //! termination threshold.
 
 use crate::filters;
+use crate::gradient_cache::GradientCache;
 use crate::macrocell::MacroCells;
 use crate::transfer::Lut;
 use crate::uniforms::{
@@ -45,6 +46,9 @@ pub struct Scene<'a> {
     pub leap: &'a [u8],
     /// The combined opacity map, if any.
     pub map: Option<&'a OpacityMap>,
+    /// Cached Sobel gradients of `values` (bit-identical to computing them
+    /// per sample, which is what happens without it).
+    pub gradients: Option<&'a GradientCache>,
 }
 
 /// One ray's result: linear premultiplied RGBA (background included).
@@ -271,7 +275,13 @@ impl<'a> Kernel<'a> {
     fn gradient(&self, fp: &Footprint) -> Vec3 {
         let g = self.s.u.grad_scale;
         if self.flags & FLAG_SOBEL != 0 {
-            let d = filters::sobel(&filters::gather(self.s.values, self.dims, fp.i), fp.f);
+            let cached = self
+                .s
+                .gradients
+                .and_then(|c| c.sobel(self.s.values, fp.i, fp.f));
+            let d = cached.unwrap_or_else(|| {
+                filters::sobel(&filters::gather(self.s.values, self.dims, fp.i), fp.f)
+            });
             return Vec3::new(d.x * g[0], d.y * g[1], d.z * g[2]);
         }
         Vec3::new(

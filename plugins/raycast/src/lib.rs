@@ -53,8 +53,12 @@
 //!   The gradient is the 3×3×3 Sobel operator ([`filters::sobel`]: the
 //!   central difference along each axis, `[1, 2, 1] / 4` across it) of the
 //!   voxels, trilinear in between — or with `gradient = "central"` the
-//!   central difference `f(p ± 1 voxel)` of the trilinear field — on the fly, only at samples with non-zero opacity; where
-//!   it vanishes the sample is lit as if facing the light.
+//!   central difference `f(p ± 1 voxel)` of the trilinear field — only at samples with non-zero opacity; where
+//!   it vanishes the sample is lit as if facing the light. The CPU path
+//!   caches the Sobel gradients of the voxels per 8³-cell brick on first
+//!   use ([`gradient_cache`]: bit-identical, at most the volume's own size,
+//!   dropped where `set_volume`'s dirty region changes them); the GPU path
+//!   computes them per sample.
 //! - **MIP**: the largest trilinear value along the ray, then the TF: colour
 //!   `c(v_max)`, alpha `a(v_max)` (one unit distance) times `o` at that sample.
 //! - **Colour spaces** ([`color`]): sRGB at the interfaces (TF points,
@@ -104,6 +108,7 @@ pub mod color;
 pub mod cpu;
 pub mod filters;
 pub mod gpu;
+pub mod gradient_cache;
 pub mod macrocell;
 pub mod maps;
 pub mod params;
@@ -115,6 +120,7 @@ pub use params::RaycastParams;
 pub use views::{fit_camera, turntable};
 
 use gpu::GpuRenderer;
+use gradient_cache::GradientCache;
 use macrocell::{IndexBox, MacroCells, convert_region, dirty_voxels};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -151,6 +157,8 @@ pub struct RaycastRenderer {
     values: Vec<f32>,
     /// CPU backend: the macro-cells.
     cells: MacroCells,
+    /// CPU backend: Sobel gradients per brick, built on first use.
+    gradients: Option<GradientCache>,
     /// Bumped whenever the cells change.
     cells_version: u64,
     /// The external GPU buffer of the current volume, if any.
@@ -197,6 +205,7 @@ impl RaycastRenderer {
             backend: ExecutionBackend::Cpu,
             grid: None,
             values: Vec::new(),
+            gradients: None,
             cells_version: 0,
             external: None,
             range: None,
@@ -399,6 +408,7 @@ impl RaycastRenderer {
             cells: &self.cells,
             leap: &self.leap.as_ref().expect("made above").2,
             map: self.combined.as_ref().and_then(|m| m.as_ref()),
+            gradients: self.gradients.as_ref(),
         };
         Ok(cpu::render(&scene))
     }
@@ -412,6 +422,10 @@ impl RaycastRenderer {
     ) -> Result<(), ModelError> {
         if fresh {
             self.values = vec![0.0; grid.len()];
+            // At most as many bytes of gradients as the volume itself.
+            self.gradients = Some(GradientCache::new(grid.dims, 4 * grid.len()));
+        } else if let Some(g) = &mut self.gradients {
+            g.invalidate(region);
         }
         match volume {
             RenderVolume::Cpu(view) => convert_region(&view, region, &mut self.values),

@@ -237,12 +237,64 @@ fn accelerations_change_no_pixel() {
     }
 }
 
+/// The gradient cache changes no bit of a shaded image (Sobel and central
+/// gradients, trilinear and tricubic sampling, perspective).
+#[test]
+fn cached_gradients_change_no_pixel() {
+    let vol = head(48);
+    let cam = fit_camera(&vol.grid, 96, 80, 200.0, 20.0, Some(30.0));
+    for toml in [
+        "",
+        "sampling = \"tricubic\"",
+        "transfer_function = { preset = \"ct-soft-tissue\" }",
+        "gradient = \"central\"",
+    ] {
+        let mut r = with_volume(cpu(toml), &vol);
+        let (cached, _) = rgba8(&mut r, &cam);
+        let built = r.gradients.as_ref().unwrap().built();
+        assert_eq!(
+            built > 0,
+            !toml.contains("central"),
+            "{toml:?}: {built} bricks"
+        );
+        r.gradients = None;
+        let (uncached, _) = rgba8(&mut r, &cam);
+        assert!(
+            cached == uncached,
+            "{toml:?}: max diff {}",
+            max_diff(&cached, &uncached)
+        );
+    }
+}
+
 #[test]
 fn dirty_rebuild_equals_full_rebuild() {
     let mut vol = head(40);
     let mut r = with_volume(cpu(""), &vol);
-    // Raise a local block of voxels to bone.
     let g = vol.grid;
+    let cam = fit_camera(&g, 48, 48, 60.0, 10.0, None);
+    // Fill the gradient cache (no budget: the render, then every cell), so
+    // the change below must invalidate it.
+    r.gradients = Some(GradientCache::new(g.dims, usize::MAX));
+    rgba8(&mut r, &cam);
+    assert!(r.gradients.as_ref().unwrap().built() > 0);
+    let every_cell = |r: &RaycastRenderer, check: bool| {
+        let cache = r.gradients.as_ref().unwrap();
+        let f = voxflex_core::glam::Vec3::splat(0.5);
+        for k in 0..g.dims[2] - 1 {
+            for j in 0..g.dims[1] - 1 {
+                for i in 0..g.dims[0] - 1 {
+                    let got = cache.sobel(&r.values, [i, j, k], f);
+                    let want = filters::sobel(&filters::gather(&r.values, g.dims, [i, j, k]), f);
+                    if check {
+                        assert_eq!(got, Some(want), "cell {i} {j} {k}");
+                    }
+                }
+            }
+        }
+    };
+    every_cell(&r, false);
+    // Raise a local block of voxels to bone.
     if let VoxelData::I16(d) = &mut vol.data {
         for k in 10..15 {
             for j in 20..31 {
@@ -257,9 +309,11 @@ fn dirty_rebuild_equals_full_rebuild() {
         max: g.index_to_world(DVec3::new(16.0, 30.0, 14.0)),
     };
     r.set_volume(RenderVolume::Cpu(vol.view()), dirty).unwrap();
+    // Every gradient the cache holds or builds now is the changed volume's
+    // (the block may sit behind the skull, so the image alone cannot tell).
+    every_cell(&r, true);
     let fresh = with_volume(cpu(""), &vol);
     assert_eq!(r.macro_cells().unwrap(), fresh.macro_cells().unwrap());
-    let cam = fit_camera(&g, 48, 48, 60.0, 10.0, None);
     let (a, _) = rgba8(&mut r, &cam);
     let (b, _) = rgba8(&mut { fresh }, &cam);
     assert_eq!(a, b);

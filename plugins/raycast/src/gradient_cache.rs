@@ -1,0 +1,325 @@
+//! [`GradientCache`]: the CPU path's Sobel gradients at the voxels, built
+//! per brick of 8³ cells on first use and dropped where the volume changes.
+//!
+//! [`crate::filters::sobel`] evaluates the 3×3×3 Sobel operator at the 8
+//! corners of a sample's footprint and interpolates them trilinearly: 84
+//! four-tap filters per shaded sample, about a quarter of a shaded frame.
+//! The corner values depend on the voxels alone, so they are cached: a
+//! brick holds the gradients of the 9³ voxels that are corners of its 8³
+//! cells (neighbouring bricks share a face), computed with the same f32
+//! operations in the same order as `filters::sobel` (difference or
+//! `[1, 2, 1] / 4` smoothing along x, then y, then z, indices clamped to
+//! the grid one by one), so a cached gradient is **bit-identical** to the
+//! uncached one — the GPU twin, which keeps computing it per sample, stays
+//! within the existing parity tolerance, and the CPU image does not change.
+//!
+//! Only bricks a shaded sample reaches are built (a bone transfer function
+//! on a head CT touches a small part of the volume), on the rendering
+//! threads, once each ([`OnceLock`]). The cache holds at most as many bytes
+//! as the f32 volume itself ([`GradientCache::new`]'s budget); past that a
+//! brick is marked uncached and its samples compute the gradient as before.
+//! [`GradientCache::invalidate`] drops the bricks whose gradients read a
+//! changed voxel (the dirty region of `set_volume`).
+//!
+//! Units: gradients in value units per voxel step × 2 (a difference over
+//! two voxels, as `filters::sobel`); indices are voxel indices, x fastest.
+
+use crate::macrocell::IndexBox;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use voxflex_core::glam::Vec3;
+
+/// Cells per brick edge.
+pub const BRICK: usize = 8;
+/// Corner voxels per brick edge.
+const SIDE: usize = BRICK + 1;
+/// Voxels per brick edge with the one-voxel halo the filter reads.
+const HALO: usize = BRICK + 3;
+/// Gradient components stored per brick (3 per corner).
+const BRICK_FLOATS: usize = 3 * SIDE * SIDE * SIDE;
+/// Bytes of one built brick.
+pub const BRICK_BYTES: usize = 4 * BRICK_FLOATS;
+
+/// One brick's corner gradients, `[(cx + 9 (cy + 9 cz)) · 3 + axis]`.
+type Brick = Box<[f32]>;
+
+/// Sobel gradients of a volume, per 8³-cell brick, built on first use.
+pub struct GradientCache {
+    dims: [usize; 3],
+    bricks: [usize; 3],
+    /// `None` inside: the brick was over budget (computed per sample).
+    slots: Vec<OnceLock<Option<Brick>>>,
+    /// Bricks that may be built.
+    budget: usize,
+    /// Bricks built (or being built).
+    built: AtomicUsize,
+}
+
+impl GradientCache {
+    /// An empty cache for a volume of `dims` voxels holding at most
+    /// `budget_bytes` of gradients.
+    pub fn new(dims: [usize; 3], budget_bytes: usize) -> Self {
+        // Cells (footprint lower corners) per axis: 0 ..= max(n, 2) − 2.
+        let bricks = dims.map(|n| (n.max(2) - 1).div_ceil(BRICK));
+        let count = bricks.iter().product();
+        Self {
+            dims,
+            bricks,
+            slots: (0..count).map(|_| OnceLock::new()).collect(),
+            budget: budget_bytes / BRICK_BYTES,
+            built: AtomicUsize::new(0),
+        }
+    }
+
+    /// The volume size the cache was made for (voxels).
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Bricks built so far.
+    pub fn built(&self) -> usize {
+        self.built.load(Ordering::Relaxed).min(self.budget)
+    }
+
+    /// Drops every brick whose gradients read a voxel of `region` (a corner
+    /// reads its neighbours one voxel away).
+    pub fn invalidate(&mut self, region: IndexBox) {
+        let range = |a: usize| {
+            // Brick b reads voxels 8b − 1 ..= 8b + 9.
+            let lo = region.lo[a].saturating_sub(BRICK + 1).div_ceil(BRICK);
+            let hi = ((region.hi[a] + 1) / BRICK).min(self.bricks[a] - 1);
+            lo..=hi
+        };
+        for bz in range(2) {
+            for by in range(1) {
+                for bx in range(0) {
+                    let slot = &mut self.slots[bx + self.bricks[0] * (by + self.bricks[1] * bz)];
+                    if let Some(Some(_)) = slot.take() {
+                        *self.built.get_mut() -= 1;
+                    }
+                }
+            }
+        }
+        let built = self.built.get_mut();
+        *built = (*built).min(self.budget);
+    }
+
+    /// The Sobel gradient at fractions `f` of the footprint whose lower
+    /// corner is voxel `i`, as [`crate::filters::sobel`] computes it from
+    /// `values` (the volume, x fastest); `None` when the brick is over the
+    /// budget.
+    #[inline]
+    pub fn sobel(&self, values: &[f32], i: [usize; 3], f: Vec3) -> Option<Vec3> {
+        let b = [i[0] / BRICK, i[1] / BRICK, i[2] / BRICK];
+        let slot = &self.slots[b[0] + self.bricks[0] * (b[1] + self.bricks[1] * b[2])];
+        let brick = slot.get_or_init(|| self.build(values, b)).as_deref()?;
+        let l = [
+            i[0] - b[0] * BRICK,
+            i[1] - b[1] * BRICK,
+            i[2] - b[2] * BRICK,
+        ];
+        let at = |dx: usize, dy: usize, dz: usize| {
+            3 * (l[0] + dx + SIDE * (l[1] + dy + SIDE * (l[2] + dz)))
+        };
+        let corners = [
+            at(0, 0, 0),
+            at(1, 0, 0),
+            at(0, 1, 0),
+            at(1, 1, 0),
+            at(0, 0, 1),
+            at(1, 0, 1),
+            at(0, 1, 1),
+            at(1, 1, 1),
+        ];
+        let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
+        let component = |axis: usize| {
+            let c = corners.map(|k| brick[k + axis]);
+            let x00 = lerp(c[0], c[1], f.x);
+            let x10 = lerp(c[2], c[3], f.x);
+            let x01 = lerp(c[4], c[5], f.x);
+            let x11 = lerp(c[6], c[7], f.x);
+            lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z)
+        };
+        Some(Vec3::new(component(0), component(1), component(2)))
+    }
+
+    /// Builds brick `b` (or marks it uncached when the budget is spent).
+    #[cold]
+    fn build(&self, values: &[f32], b: [usize; 3]) -> Option<Brick> {
+        if self.built.fetch_add(1, Ordering::Relaxed) >= self.budget {
+            return None;
+        }
+        Some(brick_gradients(values, self.dims, b))
+    }
+}
+
+/// `filters::tap` for one output: the difference `h2 − h0` or the
+/// smoothing `(h0 + 2 h1 + h2) / 4`, in its operation order.
+#[inline(always)]
+fn tap(h0: f32, h1: f32, h2: f32, diff: bool) -> f32 {
+    if diff {
+        h2 - h0
+    } else {
+        (h0 + 2.0 * h1 + h2) * 0.25
+    }
+}
+
+/// The corner gradients of brick `b`: separable passes over the brick's
+/// 11³ voxels (indices clamped to the grid axis by axis, as `gather` does).
+fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
+    let index = |a: usize, h: usize| (b[a] * BRICK + h).saturating_sub(1).min(dims[a] - 1);
+    let mut halo = vec![0f32; HALO * HALO * HALO];
+    for hz in 0..HALO {
+        for hy in 0..HALO {
+            let row = dims[0] * (index(1, hy) + dims[1] * index(2, hz));
+            for hx in 0..HALO {
+                halo[hx + HALO * (hy + HALO * hz)] = values[row + index(0, hx)];
+            }
+        }
+    }
+    // Along x: [D, S][cx + 9 (hy + 11 hz)].
+    let mut x_pass = [
+        vec![0f32; SIDE * HALO * HALO],
+        vec![0f32; SIDE * HALO * HALO],
+    ];
+    for line in 0..HALO * HALO {
+        let h = &halo[HALO * line..HALO * (line + 1)];
+        for c in 0..SIDE {
+            for (k, out) in x_pass.iter_mut().enumerate() {
+                out[c + SIDE * line] = tap(h[c], h[c + 1], h[c + 2], k == 0);
+            }
+        }
+    }
+    // Along y: DxSy, SxDy, SxSy [cx + 9 (cy + 9 hz)].
+    let y_of = |src: &[f32], diff: bool| {
+        let mut out = vec![0f32; SIDE * SIDE * HALO];
+        for hz in 0..HALO {
+            for cy in 0..SIDE {
+                for cx in 0..SIDE {
+                    let at = |hy: usize| src[cx + SIDE * (hy + HALO * hz)];
+                    out[cx + SIDE * (cy + SIDE * hz)] = tap(at(cy), at(cy + 1), at(cy + 2), diff);
+                }
+            }
+        }
+        out
+    };
+    let y_pass = [
+        y_of(&x_pass[0], false),
+        y_of(&x_pass[1], true),
+        y_of(&x_pass[1], false),
+    ];
+    // Along z: gx = S(DxSy), gy = S(SxDy), gz = D(SxSy).
+    let mut out = vec![0f32; BRICK_FLOATS];
+    for (axis, src) in y_pass.iter().enumerate() {
+        for cz in 0..SIDE {
+            for cy in 0..SIDE {
+                for cx in 0..SIDE {
+                    let at = |hz: usize| src[cx + SIDE * (cy + SIDE * hz)];
+                    out[3 * (cx + SIDE * (cy + SIDE * cz)) + axis] =
+                        tap(at(cz), at(cz + 1), at(cz + 2), axis == 2);
+                }
+            }
+        }
+    }
+    out.into_boxed_slice()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filters::{gather, sobel};
+
+    fn volume(dims: [usize; 3]) -> Vec<f32> {
+        (0..dims.iter().product::<usize>())
+            .map(|l| ((l as u32).wrapping_mul(2_654_435_761) >> 8) as f32 * 1e-3 - 3.0e3)
+            .collect()
+    }
+
+    /// Every cell (footprint lower corner) and a spread of fractions,
+    /// including the grid's faces and 1- and 2-voxel axes.
+    #[test]
+    fn cached_gradients_are_bit_identical_to_filters_sobel() {
+        for dims in [[19, 10, 17], [1, 9, 3], [2, 2, 2], [8, 9, 1], [17, 17, 17]] {
+            let v = volume(dims);
+            let cache = GradientCache::new(dims, usize::MAX);
+            let max0 = dims.map(|n| n.max(2) - 2);
+            for k in 0..=max0[2] {
+                for j in 0..=max0[1] {
+                    for i in 0..=max0[0] {
+                        for f in [Vec3::ZERO, Vec3::new(0.25, 0.5, 0.999), Vec3::ONE] {
+                            let want = sobel(&gather(&v, dims, [i, j, k]), f);
+                            let got = cache.sobel(&v, [i, j, k], f).unwrap();
+                            assert_eq!(
+                                got.to_array().map(f32::to_bits),
+                                want.to_array().map(f32::to_bits),
+                                "{dims:?} cell {:?} f {f}",
+                                [i, j, k]
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn over_budget_bricks_are_left_to_the_caller() {
+        let dims = [20, 20, 20];
+        let v = volume(dims);
+        let cache = GradientCache::new(dims, BRICK_BYTES);
+        assert!(cache.sobel(&v, [0, 0, 0], Vec3::ZERO).is_some());
+        assert!(cache.sobel(&v, [9, 0, 0], Vec3::ZERO).is_none());
+        assert!(cache.sobel(&v, [0, 0, 0], Vec3::ONE).is_some());
+        assert_eq!(cache.built(), 1);
+    }
+
+    /// Builds every brick of `cache`.
+    fn fill(cache: &GradientCache, v: &[f32]) {
+        let [nx, ny, nz] = cache.bricks;
+        for bz in 0..nz {
+            for by in 0..ny {
+                for bx in 0..nx {
+                    cache.sobel(v, [8 * bx, 8 * by, 8 * bz], Vec3::ZERO);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn invalidation_drops_exactly_the_bricks_that_read_the_region() {
+        let dims = [33, 26, 20];
+        for x in [7, 8, 9, 10, 16, 17, 31, 32] {
+            let mut v = volume(dims);
+            let mut cache = GradientCache::new(dims, usize::MAX);
+            fill(&cache, &v);
+            let all = cache.built();
+            v[x + dims[0] * (12 + dims[1] * 4)] += 100.0;
+            cache.invalidate(IndexBox {
+                lo: [x, 12, 4],
+                hi: [x, 12, 4],
+            });
+            // Brick b reads voxels 8b − 1 ..= 8b + 9 along each axis.
+            let along =
+                |v: usize, n: usize| (0..n).filter(|b| 8 * b <= v + 1 && v <= 8 * b + 9).count();
+            let dropped =
+                along(x, cache.bricks[0]) * along(12, cache.bricks[1]) * along(4, cache.bricks[2]);
+            assert_eq!(cache.built(), all - dropped, "voxel x = {x}");
+            // Every gradient is the filter's on the changed volume.
+            let max0 = dims.map(|n| n - 2);
+            for k in 0..=max0[2] {
+                for j in 0..=max0[1] {
+                    for i in 0..=max0[0] {
+                        let f = Vec3::new(0.3, 0.6, 0.9);
+                        let want = sobel(&gather(&v, dims, [i, j, k]), f);
+                        assert_eq!(
+                            cache.sobel(&v, [i, j, k], f),
+                            Some(want),
+                            "x = {x}, cell {:?}",
+                            [i, j, k]
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
