@@ -12,7 +12,7 @@ struct Params {
     blo: vec4<u32>,   // working box lower corner (volume voxel index); w = box voxels
     bdim: vec4<u32>,  // working box dims; w unused
     ext: vec4<f32>,   // d_s, sigma_s, K = 65535 / (lambda sigma_s), cap = (lambda + 2) sigma_s
-    q: vec4<u32>,     // q_min, q_max; z, w unused
+    q: vec4<u32>,     // q_min, q_max; z = 1: face neighbours only (connectivity 6); w unused
 }
 
 // Working-box change (regrow, remap).
@@ -87,3 +87,11 @@ fn inside_box(p: vec3<i32>) -> bool {
 
 var<workgroup> w_count: atomic<u32>;
 var<workgroup> w_base: u32;
+
+// True when offset d (each component in -1..1) is not a neighbour that
+// passes opacity on: the voxel itself, or an edge or corner neighbour
+// under connectivity 6 (frontier.rs: Lattice::for_each_neighbour).
+fn not_a_neighbour(d: vec3<i32>) -> bool {
+    let taxicab = abs(d.x) + abs(d.y) + abs(d.z);
+    return taxicab == 0 || (P.q.z == 1u && taxicab > 1);
+}

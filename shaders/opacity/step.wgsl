@@ -1,7 +1,7 @@
 // The three kernels of one Jacobi step (frontier.rs: enumerate, evaluate,
 // apply), each one invocation per list entry, 3-D-folded dispatch.
 
-// Phase 1: one invocation per frontier voxel u; lists each 26-neighbour v
+// Phase 1: one invocation per frontier voxel u; lists each neighbour v (26, or 6)
 // that u's new value lifts (rise(q_u, e_v) > q_v), once (candidate mark),
 // skipping done voxels, appending per workgroup.
 @compute @workgroup_size(64)
@@ -21,7 +21,7 @@ fn enumerate(
             for (var dy = -1; dy <= 1; dy++) {
                 for (var dx = -1; dx <= 1; dx++) {
                     let p = c + vec3<i32>(dx, dy, dz);
-                    if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                    if (not_a_neighbour(vec3<i32>(dx, dy, dz)) || !inside_box(p)) {
                         continue;
                     }
                     let pc = vec3<u32>(p);
@@ -72,7 +72,7 @@ fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgrou
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let p = c + vec3<i32>(dx, dy, dz);
-                if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                if (not_a_neighbour(vec3<i32>(dx, dy, dz)) || !inside_box(p)) {
                     continue;
                 }
                 m = max(m, field_get(box_linear(vec3<u32>(p))));
@@ -173,7 +173,7 @@ fn pump(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let p = c + vec3<i32>(dx, dy, dz);
-                if ((dx == 0 && dy == 0 && dz == 0) || !inside_box(p)) {
+                if (not_a_neighbour(vec3<i32>(dx, dy, dz)) || !inside_box(p)) {
                     continue;
                 }
                 let pc = vec3<u32>(p);

@@ -563,6 +563,10 @@ struct RoiArgs {
     /// the extinction: 1 is the paper's 1-ring; 2 measures σ on 125 voxels.
     #[arg(long, default_value_t = 2)]
     seed_radius: u32,
+    /// Neighbours that pass opacity on: 6 (faces only: no leak through a
+    /// diagonal contact) or 26 (the paper's).
+    #[arg(long, default_value_t = 6)]
+    connectivity: u32,
     /// Growth steps (default: run to convergence).
     #[arg(long)]
     steps: Option<usize>,
@@ -602,6 +606,7 @@ fn roi(
             o_min: a.o_min,
             o_max: a.o_max,
             seed_radius: a.seed_radius,
+            connectivity: a.connectivity,
             ..GrowthParams::default()
         },
         lambda,

@@ -122,6 +122,14 @@ impl RoiPanel {
             Slider::new(&mut self.params.seed_radius, 1..=MAX_SEED_RADIUS)
                 .text("seed radius (voxels)"),
         );
+        let mut faces = self.params.connectivity == 6;
+        let r = ui
+            .checkbox(&mut faces, "face neighbours only (connectivity 6)")
+            .on_hover_text("26 (the paper's) lets opacity cross a diagonal contact between organs");
+        if r.changed() {
+            self.params.connectivity = if faces { 6 } else { 26 };
+            released = true;
+        }
         if released && let Some(id) = self.selected {
             out.push(Command::RoiParams(id, self.params));
         }

@@ -200,6 +200,10 @@ fn roi_table(r: &RoiInfo) -> Option<toml::Value> {
     t.insert("o_min".into(), f64::from(r.params.o_min).into());
     t.insert("o_max".into(), f64::from(r.params.o_max).into());
     t.insert("seed_radius".into(), i64::from(r.params.seed_radius).into());
+    t.insert(
+        "connectivity".into(),
+        i64::from(r.params.connectivity).into(),
+    );
     Some(t.into())
 }
 

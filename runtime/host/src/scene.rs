@@ -403,6 +403,10 @@ pub struct RoiSettings {
     /// the key's name, like every other bad value.
     #[serde(default = "default_seed_radius")]
     pub seed_radius: i64,
+    /// Neighbours that pass opacity on: 6 (faces only, the default) or 26
+    /// (the paper's; `voxflex_opacity::GrowthParams::connectivity` says why).
+    #[serde(default = "default_connectivity")]
+    pub connectivity: i64,
     /// Growth steps; absent = run to convergence.
     #[serde(default)]
     pub steps: Option<usize>,
@@ -438,6 +442,9 @@ fn default_o_min() -> f32 {
 }
 fn default_o_max() -> f32 {
     1.0
+}
+fn default_connectivity() -> i64 {
+    voxflex_opacity::GrowthParams::default().connectivity.into()
 }
 fn default_seed_radius() -> i64 {
     voxflex_opacity::GrowthParams::default().seed_radius.into()
@@ -755,6 +762,15 @@ impl Scene {
                 return Err(invalid(
                     "max_distance_mm",
                     format!("{d} must be a positive finite distance in mm"),
+                ));
+            }
+            if !matches!(roi.connectivity, 6 | 26) {
+                return Err(invalid(
+                    "connectivity",
+                    format!(
+                        "{} must be 6 (face neighbours) or 26 (faces, edges and corners; the paper's)",
+                        roi.connectivity
+                    ),
                 ));
             }
             if !(1..=voxflex_opacity::MAX_SEED_RADIUS.into()).contains(&roi.seed_radius) {
@@ -1276,7 +1292,7 @@ kind = "release"
         let roi = |extra: &str| format!("{GOOD}\n[[roi]]\nseed = [0.0, 0.0, 0.0]\n{extra}\n");
         let s = Scene::parse(
             &roi(
-                "lambda = \"auto\"\nintensity = [60, 170.5]\nmax_distance_mm = 80\nseed_radius = 1",
+                "lambda = \"auto\"\nintensity = [60, 170.5]\nmax_distance_mm = 80\nseed_radius = 1\nconnectivity = 26",
             ),
             Path::new("t.toml"),
         )
@@ -1287,10 +1303,12 @@ kind = "release"
         assert_eq!(r.max_distance_mm, Some(80.0));
         assert_eq!(r.seed_radius, 1);
         assert_eq!(crate::visualise::roi_request(r).params.seed_radius, 1);
+        assert_eq!(crate::visualise::roi_request(r).params.connectivity, 26);
         let s = Scene::parse(&roi("lambda = 12"), Path::new("t.toml")).unwrap();
         assert_eq!(s.rois[0].lambda, LambdaSetting::Value(12.0));
         assert_eq!(s.rois[0].intensity, None);
         assert_eq!(s.rois[0].seed_radius, 2);
+        assert_eq!(s.rois[0].connectivity, 6);
         let s = Scene::parse(&roi(""), Path::new("t.toml")).unwrap();
         assert_eq!(s.rois[0].lambda, LambdaSetting::Word("auto".into()));
         // An error in the second [[roi]] points at its own line.
@@ -1313,6 +1331,8 @@ kind = "release"
             ("max_distance_mm = 0", "`max_distance_mm`"),
             ("max_distance_mm = inf", "`max_distance_mm`"),
             ("seed_radius = 0", "`seed_radius`"),
+            ("connectivity = 18", "`connectivity`"),
+            ("connectivity = -6", "`connectivity`"),
             ("seed_radius = 9", "`seed_radius`"),
             ("seed_radius = -1", "`seed_radius`"),
         ] {

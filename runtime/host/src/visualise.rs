@@ -54,6 +54,7 @@ pub fn roi_request(roi: &RoiSettings) -> RoiRequest {
             // Checked to lie in 1 ..= MAX_SEED_RADIUS when the scene loaded;
             // anything else is refused again by the growth's own check.
             seed_radius: u32::try_from(roi.seed_radius).unwrap_or(0),
+            connectivity: u32::try_from(roi.connectivity).unwrap_or(0),
             ..GrowthParams::default()
         },
         lambda: match roi.lambda {

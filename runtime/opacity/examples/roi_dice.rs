@@ -3,7 +3,7 @@
 //! kidney (CPU path). Writes a markdown table, a CSV and an SVG plot.
 //!
 //! ```sh
-//! cargo run --release -p voxflex-opacity --example roi_dice -- [--dims 120,94,80] [--out docs] [--seed-radius 2]
+//! cargo run --release -p voxflex-opacity --example roi_dice -- [--dims 120,94,80] [--out docs] [--seed-radius 2] [--connectivity 6]
 //! ```
 //!
 //! Output: `<out>/roi_dice_vs_lambda.md`, `<out>/roi_dice_vs_lambda.csv`,
@@ -140,11 +140,17 @@ fn main() {
                 out = args[i + 1].clone().into();
                 i += 2;
             }
+            "--connectivity" => {
+                params.connectivity = args[i + 1].parse().expect("--connectivity 6|26");
+                i += 2;
+            }
             "--seed-radius" => {
                 params.seed_radius = args[i + 1].parse().expect("--seed-radius N");
                 i += 2;
             }
-            a => panic!("unknown argument {a}; use --dims nx,ny,nz, --out DIR, --seed-radius N"),
+            a => panic!(
+                "unknown argument {a}; use --dims nx,ny,nz, --out DIR, --seed-radius N, --connectivity 6|26"
+            ),
         }
     }
     let t = Instant::now();

@@ -82,7 +82,11 @@ impl CpuGrowth {
                 self.regrow(nb);
                 rep.regrows += 1;
             }
-            let lat = Lattice::new(&self.state.work, self.state.dims);
+            let lat = Lattice::new(
+                &self.state.work,
+                self.state.dims,
+                self.state.params.connectivity,
+            );
             let found = with_voxels!(volume.data, |s| lift(
                 &lat,
                 &self.field,

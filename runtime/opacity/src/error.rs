@@ -92,6 +92,14 @@ pub enum OpacityError {
         /// The `o_max` given.
         o_max: f32,
     },
+    /// `connectivity` is neither 6 nor 26.
+    #[error(
+        "connectivity = {connectivity} must be 6 (faces) or 26 (faces, edges and corners; the paper's)"
+    )]
+    BadConnectivity {
+        /// The value given.
+        connectivity: u32,
+    },
     /// `seed_radius` is outside 1 ..= [`crate::MAX_SEED_RADIUS`].
     #[error(
         "seed_radius = {seed_radius} must be between 1 (the paper's 1-ring) and {max} voxels (default 2)",

@@ -5,7 +5,7 @@
 //! One Jacobi step is four kernels, each one invocation per list entry
 //! (3-D-folded dispatch, workgroups of 64):
 //!
-//! - `enumerate` — per frontier voxel: the 26-neighbours its new value
+//! - `enumerate` — per frontier voxel: the neighbours (26, or 6) its new value
 //!   lifts, skipping voxels marked done, deduplicated by `atomicOr` on a
 //!   candidate mark, appended to the candidate list (one `atomicAdd` per
 //!   workgroup on the global counter);
@@ -448,7 +448,7 @@ impl GpuGrowth {
             q: [
                 self.state.ext.q_min as u32,
                 self.state.ext.q_max as u32,
-                0,
+                (self.state.params.connectivity == 6) as u32,
                 0,
             ],
         };

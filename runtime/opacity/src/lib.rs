@@ -19,7 +19,8 @@
 //! o_v ← clamp(max(o_v, max_n o_n − E_v), o_min, o_max),   E_v = (|d_s − d_v| − σ_s) / (λ σ_s)
 //! ```
 //!
-//! over its 26 neighbours `n`, where `d_v` is the voxel's value and `d_s`,
+//! over its neighbours `n` (the 6 face neighbours by default, all 26 — the
+//! paper's — with [`GrowthParams::connectivity`] = 26), where `d_v` is the voxel's value and `d_s`,
 //! σ_s the mean and standard deviation of the seed's neighbourhood (the
 //! cube of half-width [`GrowthParams::seed_radius`] voxels around it,
 //! [`seed::seed_stats`]; the paper's 1-ring is radius 1, the default is 2 —
@@ -45,7 +46,7 @@
 //! The thesis's kernel swept the whole volume each step, with 0.7–12 % of
 //! the threads doing useful work. Here a step works from the **frontier**,
 //! the voxels that changed in the previous step (with their new values):
-//! each of their 26-neighbours that is not yet at its ceiling is lifted,
+//! each of their neighbours that is not yet at its ceiling is lifted,
 //! `q_v ← max(q_v, rise(q_u, e_v))`, and a voxel is listed once, when it
 //! first rises in the step. A voxel that no changed neighbour lifts cannot
 //! change, so this is the dense sweep's result, step for step (tested

@@ -39,6 +39,14 @@ pub struct GrowthParams {
     /// (8.2–15 HU on 15 HU noise), which decides how far the growth runs
     /// (docs/BENCHMARKS.md, "ROI maps"). 1 ..= [`MAX_SEED_RADIUS`].
     pub seed_radius: u32,
+    /// Which neighbours pass opacity on: 6 (faces only; the default) or 26
+    /// (faces, edges and corners: the paper's). With 26, opacity crosses a
+    /// contact where two organs touch only at a voxel's edge or corner —
+    /// on 3 mm CT that is how a liver map reached the spleen (Dice 0.897
+    /// against 0.971 with 6); over three organs at three grids the
+    /// automatic λ's mean Dice is 0.933 with 6 against 0.906 with 26, and
+    /// no case is worse (docs/BENCHMARKS.md, "ROI maps").
+    pub connectivity: u32,
 }
 
 impl Default for GrowthParams {
@@ -49,6 +57,7 @@ impl Default for GrowthParams {
             lambda: 30.0,
             sigma_floor: 1e-3,
             seed_radius: 2,
+            connectivity: 6,
         }
     }
 }
@@ -71,6 +80,11 @@ impl GrowthParams {
         if !(self.sigma_floor.is_finite() && self.sigma_floor > 0.0) {
             return Err(OpacityError::BadSigmaFloor {
                 sigma_floor: self.sigma_floor,
+            });
+        }
+        if !matches!(self.connectivity, 6 | 26) {
+            return Err(OpacityError::BadConnectivity {
+                connectivity: self.connectivity,
             });
         }
         if !(1..=MAX_SEED_RADIUS).contains(&self.seed_radius) {

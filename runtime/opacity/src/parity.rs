@@ -285,8 +285,9 @@ fn converged_case(
 
 /// The three-sphere phantom (64³, f32, noise σ 3) seeded in spheres A and
 /// B, the phantom with B at 110 (absorbed through pumping pairs), and a
-/// noisy i16 ball with non-default parameters: identical converged maps,
-/// identical step / visit / useful counts.
+/// noisy i16 ball with non-default parameters, and the pumping phantom
+/// with face neighbours only (`connectivity = 6`): identical converged
+/// maps, identical step / visit / useful counts.
 pub fn check_converged_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
     let p = three_spheres(64, 3.0, 21);
     converged_case(
@@ -311,6 +312,16 @@ pub fn check_converged_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
         GrowthParams::default(),
         "B at 110 (pumps)",
     )?;
+    converged_case(
+        gpu,
+        &q.volume,
+        Seed::Voxel(q.a.centre_voxel()),
+        GrowthParams {
+            connectivity: 6,
+            ..GrowthParams::default()
+        },
+        "B at 110 (pumps), connectivity 6",
+    )?;
     let ball = noisy_ball_i16(40, 14.0, 4.0, 5);
     let params = GrowthParams {
         o_min: 0.1,
@@ -328,13 +339,24 @@ pub fn check_converged_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
 }
 
 /// Step by step (1, 1, …, then 5, then to convergence) on the phantom with
-/// B at 110 (the pump shortcut fires): the GPU map equals the CPU map after
-/// every call.
+/// B at 110 (the pump shortcut fires), with 26 and with 6 neighbours: the
+/// GPU map equals the CPU map after every call.
 pub fn check_stepwise_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    for connectivity in [26, 6] {
+        stepwise_case(gpu, connectivity)
+            .map_err(|m| format!("connectivity {connectivity}: {m}"))?;
+    }
+    Ok(())
+}
+
+fn stepwise_case(gpu: &dyn GpuService, connectivity: u32) -> Result<(), String> {
     // B at 110: absorbed through pumping pairs, so the pump shortcut fires.
     let p = three_spheres_with(48, 110.0, 3.0, 22);
     let seed = Seed::Voxel(p.a.centre_voxel());
-    let params = GrowthParams::default();
+    let params = GrowthParams {
+        connectivity,
+        ..GrowthParams::default()
+    };
     let v = p.volume.view();
     let gv = GpuOpacityVolume::upload(gpu, v).map_err(e)?;
     let out = (|| {

@@ -16,6 +16,7 @@ struct Dense {
     dims: [usize; 3],
     ext: Extinction,
     pump: bool,
+    connectivity: u32,
     field: Vec<u16>,
     values: Vec<f32>,
     visits: u64,
@@ -34,6 +35,7 @@ impl Dense {
             dims: g.dims,
             ext,
             pump,
+            connectivity: params.connectivity,
             field,
             values: volume.data.as_slice().to_f32_vec(),
             visits: 0,
@@ -42,7 +44,7 @@ impl Dense {
         }
     }
 
-    /// Linear indices of the 26-neighbours of `(i, j, k)`.
+    /// Linear indices of the neighbours (26, or the 6 faces) of `(i, j, k)`.
     fn neighbours(&self, i: usize, j: usize, k: usize) -> Vec<usize> {
         let [nx, ny, nz] = self.dims.map(|d| d as i64);
         let mut out = Vec::with_capacity(26);
@@ -51,7 +53,9 @@ impl Dense {
                 for di in -1i64..=1 {
                     let (a, b, c) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
                     let inside = a >= 0 && b >= 0 && c >= 0 && a < nx && b < ny && c < nz;
-                    if (di, dj, dk) != (0, 0, 0) && inside {
+                    let taxicab = di.abs() + dj.abs() + dk.abs();
+                    let linked = taxicab == 1 || (taxicab > 1 && self.connectivity == 26);
+                    if linked && inside {
                         out.push((a + nx * (b + ny * c)) as usize);
                     }
                 }
@@ -196,13 +200,17 @@ fn phantom_grows_sphere_a_and_never_enters_c() {
 fn a_neighbour_within_a_few_sigma_is_absorbed() {
     // B at 110 (3.4 σ_s): about 1 % of B's voxels lie within σ_s of d_s and
     // regenerate opacity, and adjacent pairs of them pump to o_max, so at
-    // λ = 30 (and 15, 10) the whole of B ends above 0.5 — the method cannot
-    // separate it. C still stays untouched.
+    // λ = 30 (and 15, 10) with the paper's 26 neighbours the whole of B ends
+    // above 0.5 — the method cannot separate it (with 6, 40 % of B). C
+    // still stays untouched.
     let p = three_spheres_with(64, 110.0, 3.0, 7);
     let mut g = CpuGrowth::new(
         p.volume.view(),
         &Seed::Voxel(p.a.centre_voxel()),
-        GrowthParams::default(),
+        GrowthParams {
+            connectivity: 26,
+            ..GrowthParams::default()
+        },
     )
     .unwrap();
     g.run(p.volume.view()).unwrap();
@@ -266,10 +274,13 @@ fn opacity_never_decreases_and_stays_in_range() {
 fn sparse_equals_dense_at_convergence() {
     // B at 110 so that pumping pairs occur (the shortcut must not change the
     // converged map), and at 115 (none).
-    for b in [110.0, 115.0] {
+    for (b, connectivity) in [(110.0, 26), (115.0, 26), (110.0, 6), (115.0, 6)] {
         let p = three_spheres_with(40, b, 3.0, 5);
         let seed = p.a.centre_voxel();
-        let params = GrowthParams::default();
+        let params = GrowthParams {
+            connectivity,
+            ..GrowthParams::default()
+        };
         let dims = p.volume.grid.dims;
         let mut dense = Dense::new(&p.volume, seed, params, false);
         while dense.sweep() > 0 {}
@@ -279,10 +290,10 @@ fn sparse_equals_dense_at_convergence() {
         let differ = s.iter().zip(&dense.field).filter(|(a, b)| a != b).count();
         assert_eq!(
             differ, 0,
-            "B {b}: {differ} voxels differ from the dense reference"
+            "B {b}, connectivity {connectivity}: {differ} voxels differ from the dense reference"
         );
         eprintln!(
-            "B {b}: dense {} sweeps, {} visits, useful {:.5}; sparse {r:?}",
+            "B {b}, connectivity {connectivity}: dense {} sweeps, {} visits, useful {:.5}; sparse {r:?}",
             dense.sweeps,
             dense.visits,
             dense.useful as f64 / dense.visits as f64,
@@ -298,10 +309,19 @@ fn sparse_equals_dense_at_convergence() {
 fn sparse_equals_dense_step_by_step() {
     // The same rule (with the pump shortcut) swept densely: identical after
     // every step, and the sparse visits are exactly the dense sweep's
-    // changes.
+    // changes; for both connectivities.
+    for connectivity in [26, 6] {
+        sparse_equals_dense_step_by_step_with(connectivity);
+    }
+}
+
+fn sparse_equals_dense_step_by_step_with(connectivity: u32) {
     let p = three_spheres_with(32, 110.0, 3.0, 5);
     let seed = p.a.centre_voxel();
-    let params = GrowthParams::default();
+    let params = GrowthParams {
+        connectivity,
+        ..GrowthParams::default()
+    };
     let dims = p.volume.grid.dims;
     let mut dense = Dense::new(&p.volume, seed, params, true);
     let mut sparse = CpuGrowth::new(p.volume.view(), &Seed::Voxel(seed), params).unwrap();
@@ -315,7 +335,7 @@ fn sparse_equals_dense_step_by_step() {
             let [i, j, k] = g.unlinear(l);
             let nb = dense.neighbours(i, j, k);
             panic!(
-                "differ after sweep {} at {:?}: sparse {} dense {} before {} e {} nb {:?}",
+                "connectivity {connectivity}: differ after sweep {} at {:?}: sparse {} dense {} before {} e {} nb {:?}",
                 dense.sweeps,
                 [i, j, k],
                 sm[l],
@@ -536,6 +556,10 @@ fn bad_input_is_refused_with_the_value() {
         },
     );
     assert!(e.contains("sigma_floor = 0"), "{e}");
+    for connectivity in [0, 8, 18, 27] {
+        let e = err(seed, GrowthParams { connectivity, ..ok });
+        assert!(e.contains(&format!("connectivity = {connectivity}")), "{e}");
+    }
     for seed_radius in [0, crate::MAX_SEED_RADIUS + 1] {
         let e = err(seed, GrowthParams { seed_radius, ..ok });
         assert!(e.contains(&format!("seed_radius = {seed_radius}")), "{e}");
