@@ -233,6 +233,57 @@ fn the_plateau_rule_picks_the_flattest_step() {
 }
 
 #[test]
+fn a_break_ends_the_scan_before_a_later_plateau() {
+    let t = |lambda: f32, voxels: usize| Trial {
+        lambda,
+        voxels,
+        steps: 1,
+        aborted: false,
+    };
+    // Steps 1.10, 1.08, 1.06 (the organ fills), then 1.40 (> 2 × their mean
+    // growth 0.08: the region runs into a neighbour), then a flatter
+    // plateau (1.02) once the neighbour is full. The answer is the organ's
+    // flattest step, from λ = 2; without the break the neighbour's flatter
+    // plateau (from 5.66) would win, as it does on its own.
+    let trials = [
+        t(1.0, 1000),
+        t(1.41, 1100),
+        t(2.0, 1188),
+        t(2.83, 1259),
+        t(4.0, 1763),
+        t(5.66, 1798),
+        t(8.0, 1834),
+    ];
+    assert_eq!(pick(&trials), 2.0);
+    let later = [t(4.0, 1763), t(5.66, 1798), t(8.0, 1834)];
+    assert_eq!(pick(&later), 5.66);
+    // One step before it is not enough to judge a break: 1.78 stays a step
+    // (not flat), and the flat one before it wins.
+    assert_eq!(pick(&[t(1.0, 1000), t(1.41, 1010), t(2.0, 1800)]), 1.0);
+}
+
+/// The scan stops at a break: no λ past it is grown, and the breaking
+/// trial itself is cut short at the break bound.
+#[test]
+fn the_scan_grows_nothing_past_a_break() {
+    let v = phantom().volume.view();
+    let (_, p) = seed_of("kidney");
+    let mut r = CpuRunner {
+        volume: v,
+        values: v,
+        seed: Seed::World(p),
+    };
+    let a = auto_lambda::auto_lambda(&mut r, GrowthParams::default(), None).unwrap();
+    eprintln!("{:?}", a.trials);
+    let last = a.trials.last().unwrap();
+    assert!(
+        last.lambda < *CANDIDATES.last().unwrap(),
+        "the scan ran to the end"
+    );
+    assert!(last.aborted, "the breaking trial ran to convergence");
+}
+
+#[test]
 fn a_trial_past_the_jump_bound_is_cut_short() {
     let ph = phantom();
     let (_, p) = seed_of("liver");
