@@ -12,6 +12,7 @@ struct C {
     counts: vec4<u32>,  // cells per axis, accel offset of the minima
     lo: vec4<u32>,      // first cell of the box, w = total cells
     size: vec4<u32>,    // cells of the box per axis, w = cells in the box
+    base: vec4<u32>,    // x = first element of the bound volume window (a z-slab, raycast.wgsl)
 }
 
 @group(0) @binding(0) var<storage, read> c: C;
@@ -37,7 +38,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         for (var j = v0.y; j <= v1.y; j++) {
             let row = (k * c.dims.y + j) * c.dims.x;
             for (var i = v0.x; i <= v1.x; i++) {
-                let v = vol[row + i];
+                let v = vol[row + i - c.base.x];
                 lo = min(lo, v);
                 hi = max(hi, v);
             }

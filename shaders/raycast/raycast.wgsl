@@ -13,6 +13,17 @@
 //          (even voxel in the low half)
 //   out_px RGBA8 per pixel, R in the low byte (sRGB, straight alpha)
 //   stats  [samples lo, samples hi, rays terminated early]
+//   state  8 words per pixel: a ray's loop state between the passes of a
+//          volume split into z-slabs (plugins/raycast/src/slabs.rs)
+//
+// A volume above one storage binding is bound as z-slabs: each pass binds
+// the voxel planes slab.x − 1 … slab.y + 1 (every tap of a sample whose
+// footprint plane lies in [slab.x, slab.y)) and handles the rays going up
+// in z (PASS_UP, slabs ascending) or down (PASS_DOWN, descending). A ray
+// runs its own loop until a sample's footprint leaves the slab, saves the
+// loop state and resumes in its next slab's pass: the same samples in the
+// same order, so the image of the unsplit volume bit for bit. One pass
+// with every PASS_* flag but PASS_SPLIT renders an unsplit volume.
 
 struct U {
     eye: vec4<f32>,
@@ -35,6 +46,9 @@ struct U {
     counts: vec4<u32>,      // planes, has map, accel offset of cell minima, total cells
     map_origin: vec4<u32>,  // voxels; w = outside (u16 fixed point)
     map_dims: vec4<u32>,
+    slab: vec4<u32>,        // footprint planes [x, y) of this pass; z = first element of the bound
+                            // volume window; w = first word of the bound map window
+    pass_flags: vec4<u32>,  // x = PASS_* flags
 }
 
 @group(0) @binding(0) var<storage, read> u: U;
@@ -44,6 +58,7 @@ struct U {
 @group(0) @binding(4) var<storage, read> maps: array<u32>;
 @group(0) @binding(5) var<storage, read_write> out_px: array<u32>;
 @group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read_write> state: array<u32>;
 
 const FLAG_ESS: u32 = 1u;
 const FLAG_EARLY_TERMINATION: u32 = 2u;
@@ -53,11 +68,21 @@ const FLAG_BACKGROUND: u32 = 16u;
 const FLAG_SOBEL: u32 = 32u;
 const FLAG_TRICUBIC: u32 = 64u;
 const FLAG_JITTER: u32 = 128u;
+const PASS_UP: u32 = 1u;
+const PASS_DOWN: u32 = 2u;
+const PASS_FIRST: u32 = 4u;
+const PASS_LAST: u32 = 8u;
+const PASS_SPLIT: u32 = 16u;
 const T_FAR: f32 = 3.0e38;
 const F32_MIN: f32 = -3.40282347e38;
 
 fn lerp(a: f32, b: f32, t: f32) -> f32 {
     return a + t * (b - a);
+}
+
+// Voxel `i` (linear index in the whole volume) from the bound window.
+fn vx(i: u32) -> f32 {
+    return vol[i - u.slab.z];
 }
 
 struct Fp {
@@ -89,10 +114,10 @@ fn footprint(p_in: vec3<f32>) -> Fp {
 fn value(fp: Fp) -> f32 {
     let o = offsets();
     let b = fp.base;
-    let x00 = lerp(vol[b], vol[b + o.x], fp.f.x);
-    let x10 = lerp(vol[b + o.y], vol[b + o.x + o.y], fp.f.x);
-    let x01 = lerp(vol[b + o.z], vol[b + o.x + o.z], fp.f.x);
-    let x11 = lerp(vol[b + o.y + o.z], vol[b + o.x + o.y + o.z], fp.f.x);
+    let x00 = lerp(vx(b), vx(b + o.x), fp.f.x);
+    let x10 = lerp(vx(b + o.y), vx(b + o.x + o.y), fp.f.x);
+    let x01 = lerp(vx(b + o.z), vx(b + o.x + o.z), fp.f.x);
+    let x11 = lerp(vx(b + o.y + o.z), vx(b + o.x + o.y + o.z), fp.f.x);
     return lerp(lerp(x00, x10, fp.f.y), lerp(x01, x11, fp.f.y), fp.f.z);
 }
 
@@ -115,7 +140,7 @@ fn diff(fp: Fp, axis: u32) -> f32 {
     var acc: array<f32, 4>;
     for (var q = 0u; q < 4u; q++) {
         let r = row0 + select(0u, o[ab], (q & 1u) != 0u) + select(0u, o[ac], (q & 2u) != 0u);
-        acc[q] = (1.0 - fa) * (vol[r + i1 * sa] - vol[r + im * sa]) + fa * (vol[r + i2 * sa] - vol[r + i0 * sa]);
+        acc[q] = (1.0 - fa) * (vx(r + i1 * sa) - vx(r + im * sa)) + fa * (vx(r + i2 * sa) - vx(r + i0 * sa));
     }
     return lerp(lerp(acc[0], acc[1], fb), lerp(acc[2], acc[3], fb), fc);
 }
@@ -193,7 +218,7 @@ fn gather(fp: Fp) -> array<f32, 64> {
             let row = u.dims.x * (iy + u.dims.y * iz);
             for (var x = 0u; x < 4u; x++) {
                 let ix = min(select(0u, fp.i.x + x - 1u, fp.i.x + x >= 1u), last.x);
-                b[x + 4u * (y + 4u * z)] = vol[row + ix];
+                b[x + 4u * (y + 4u * z)] = vx(row + ix);
             }
         }
     }
@@ -275,7 +300,7 @@ fn map_at(i: u32, j: u32, k: u32) -> f32 {
     var q = u.map_origin.w;
     if (x < u.map_dims.x && y < u.map_dims.y && z < u.map_dims.z) {
         let l = x + u.map_dims.x * (y + u.map_dims.y * z);
-        q = (maps[l >> 1u] >> ((l & 1u) * 16u)) & 0xffffu;
+        q = (maps[(l >> 1u) - u.slab.w] >> ((l & 1u) * 16u)) & 0xffffu;
     }
     return f32(q) / 65535.0;
 }
@@ -380,10 +405,66 @@ fn interval(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(t0, t1);
 }
 
-struct Result {
-    rgba: vec4<f32>,
+// A ray's loop state (saved between the passes of a split volume): for
+// composite the accumulated colour and opacity, for MIP the running maximum
+// (a) and the opacity-map factor at it (c.x); the next sample k, the samples
+// taken, the empty-space exit parameter, and DONE / TERMINATED bits.
+struct State {
+    c: vec3<f32>,
+    a: f32,
+    k: u32,
     samples: u32,
-    terminated: u32,
+    exit_t: f32,
+    bits: u32,
+}
+
+const DONE: u32 = 1u;
+const TERMINATED: u32 = 2u;
+const MAXED: u32 = 4u;  // MIP: a maximum was recorded (c.x holds its map factor)
+
+fn fresh_state() -> State {
+    var st: State;
+    st.c = vec3<f32>(0.0);
+    st.a = select(0.0, F32_MIN, u.image.w == 1u);
+    st.k = 0u;
+    st.samples = 0u;
+    st.exit_t = -1.0;
+    st.bits = 0u;
+    return st;
+}
+
+fn load_state(px: u32) -> State {
+    let b = 8u * px;
+    var st: State;
+    st.c = vec3<f32>(bitcast<f32>(state[b]), bitcast<f32>(state[b + 1u]), bitcast<f32>(state[b + 2u]));
+    st.a = bitcast<f32>(state[b + 3u]);
+    st.k = state[b + 4u];
+    st.samples = state[b + 5u];
+    st.exit_t = bitcast<f32>(state[b + 6u]);
+    st.bits = state[b + 7u];
+    return st;
+}
+
+fn store_state(px: u32, st: State) {
+    let b = 8u * px;
+    state[b] = bitcast<u32>(st.c.x);
+    state[b + 1u] = bitcast<u32>(st.c.y);
+    state[b + 2u] = bitcast<u32>(st.c.z);
+    state[b + 3u] = bitcast<u32>(st.a);
+    state[b + 4u] = st.k;
+    state[b + 5u] = st.samples;
+    state[b + 6u] = bitcast<u32>(st.exit_t);
+    state[b + 7u] = st.bits;
+}
+
+// True when sample point p (voxel units) belongs to a later pass: its
+// footprint plane is outside this pass's [slab.x, slab.y).
+fn elsewhere(p: vec3<f32>) -> bool {
+    if ((u.pass_flags.x & PASS_SPLIT) == 0u) {
+        return false;
+    }
+    let iz = footprint(p).i.z;
+    return iz < u.slab.x || iz >= u.slab.y;
 }
 
 // Samples of [t0, t1]: `lead` (0/1) in the jitter step [t0, ts], n_full
@@ -433,7 +514,7 @@ fn next_sample(k: u32, s: Schedule, t_exit: f32) -> u32 {
     return max(next, k + 1u);
 }
 
-fn composite(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
+fn composite(o: vec3<f32>, d: vec3<f32>, s: Schedule, st_in: State) -> State {
     let oi = (o - u.origin.xyz) * u.inv_spacing.xyz;
     let di = d * u.inv_spacing.xyz;
     let flags = u.cells.w;
@@ -441,20 +522,24 @@ fn composite(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
     let et = (flags & FLAG_EARLY_TERMINATION) != 0u;
     let shade = (flags & FLAG_SHADING) != 0u;
     let has_map = u.counts.y != 0u;
-    var c_acc = vec3<f32>(0.0);
-    var a_acc = 0.0;
-    var samples = 0u;
-    var terminated = 0u;
-    var exit_t = -1.0;
-    var k = 0u;
+    var c_acc = st_in.c;
+    var a_acc = st_in.a;
+    var samples = st_in.samples;
+    var bits = st_in.bits;
+    var exit_t = st_in.exit_t;
+    var k = st_in.k;
     loop {
         if (k >= s.n_total) {
+            bits |= DONE;
             break;
         }
         let tl = sample_at(s, k);
         let t = tl.x;
         let len = tl.y;
         let p = oi + di * t;
+        if (elsewhere(p)) {
+            break;
+        }
         if (ess && t >= exit_t) {
             let c = cell_of(p);
             let d = cell_leap(c.l);
@@ -498,32 +583,40 @@ fn composite(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
         c_acc += col * w;
         a_acc += w;
         if (et && a_acc >= u.step.y) {
-            terminated = 1u;
+            bits |= DONE | TERMINATED;
             break;
         }
     }
-    var r: Result;
-    r.rgba = vec4<f32>(c_acc, a_acc);
+    var r: State;
+    r.c = c_acc;
+    r.a = a_acc;
+    r.k = k;
     r.samples = samples;
-    r.terminated = terminated;
+    r.exit_t = exit_t;
+    r.bits = bits;
     return r;
 }
 
-fn mip(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
+fn mip(o: vec3<f32>, d: vec3<f32>, s: Schedule, st_in: State) -> State {
     let oi = (o - u.origin.xyz) * u.inv_spacing.xyz;
     let di = d * u.inv_spacing.xyz;
     let ess = (u.cells.w & FLAG_ESS) != 0u;
-    var vmax = F32_MIN;
-    var pmax = vec3<f32>(0.0);
-    var samples = 0u;
-    var exit_t = -1.0;
-    var k = 0u;
+    var vmax = st_in.a;
+    var factor = st_in.c.x;
+    var samples = st_in.samples;
+    var bits = st_in.bits;
+    var exit_t = st_in.exit_t;
+    var k = st_in.k;
     loop {
         if (k >= s.n_total) {
+            bits |= DONE;
             break;
         }
         let t = sample_at(s, k).x;
         let p = oi + di * t;
+        if (elsewhere(p)) {
+            break;
+        }
         if (ess && t >= exit_t) {
             let c = cell_of(p);
             let e = cell_exit(c.c, 1u, oi, di);
@@ -535,27 +628,50 @@ fn mip(o: vec3<f32>, d: vec3<f32>, s: Schedule) -> Result {
             exit_t = e;
         }
         k += 1u;
-        let v = sample_value(p, footprint(p));
+        let fp = footprint(p);
+        let v = sample_value(p, fp);
         samples += 1u;
         if (v > vmax) {
             vmax = v;
-            pmax = p;
+            bits |= MAXED;
+            // The opacity-map factor at the maximum, taken while its voxels
+            // are bound (the same value the end of the ray would compute).
+            if (u.counts.y != 0u) {
+                factor = map_factor(fp, p);
+            }
         }
     }
-    var r: Result;
-    r.rgba = vec4<f32>(0.0);
+    var r: State;
+    r.c = vec3<f32>(factor, 0.0, 0.0);
+    r.a = vmax;
+    r.k = k;
     r.samples = samples;
-    r.terminated = 0u;
-    if (samples == 0u) {
-        return r;
+    r.exit_t = exit_t;
+    r.bits = bits;
+    return r;
+}
+
+// The pixel of a finished ray (premultiplied linear RGBA).
+fn finish(st: State) -> vec4<f32> {
+    if (u.image.w == 0u) {
+        return vec4<f32>(st.c, st.a);
     }
-    let tf = lut_lookup(vmax);
+    if (st.samples == 0u) {
+        return vec4<f32>(0.0);
+    }
+    let tf = lut_lookup(st.a);
     var alpha = 1.0 - exp(-tf.w * u.step.z);
     if (u.counts.y != 0u) {
-        alpha *= map_factor(footprint(pmax), pmax);
+        if ((st.bits & MAXED) != 0u) {
+            alpha *= st.c.x;
+        } else {
+            // No sample beat F32_MIN (all NaN): the map at voxel 0, as cpu.rs
+            // (bound: the last pass is slab 0's).
+            let p0 = vec3<f32>(0.0);
+            alpha *= map_factor(footprint(p0), p0);
+        }
     }
-    r.rgba = vec4<f32>(tf.xyz * alpha, alpha);
-    return r;
+    return vec4<f32>(tf.xyz * alpha, alpha);
 }
 
 fn linear_to_srgb(c_in: f32) -> f32 {
@@ -584,32 +700,44 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= u.image.x || gid.y >= u.image.y) {
         return;
     }
+    let pixel = gid.x + gid.y * u.image.x;
+    let flags = u.pass_flags.x;
+    let split = (flags & PASS_SPLIT) != 0u;
     let ray = primary_ray(gid.x, gid.y);
-    let iv = interval(ray.o, ray.d);
-    var res: Result;
-    res.rgba = vec4<f32>(0.0);
-    res.samples = 0u;
-    res.terminated = 0u;
-    if (iv.x < iv.y) {
-        let sch = schedule(iv.x, iv.y, gid.x, gid.y);
-        if (u.image.w == 0u) {
-            res = composite(ray.o, ray.d, sch);
+    var st = fresh_state();
+    if (split && (flags & PASS_FIRST) == 0u) {
+        st = load_state(pixel);
+    }
+    let mine = select(PASS_DOWN, PASS_UP, ray.d.z >= 0.0);
+    if ((flags & mine) != 0u && (st.bits & DONE) == 0u) {
+        let iv = interval(ray.o, ray.d);
+        if (iv.x < iv.y) {
+            let sch = schedule(iv.x, iv.y, gid.x, gid.y);
+            if (u.image.w == 0u) {
+                st = composite(ray.o, ray.d, sch, st);
+            } else {
+                st = mip(ray.o, ray.d, sch, st);
+            }
         } else {
-            res = mip(ray.o, ray.d, sch);
+            st.bits |= DONE;
         }
     }
-    var px = res.rgba;
+    if ((flags & PASS_LAST) == 0u) {
+        store_state(pixel, st);
+        return;
+    }
+    var px = finish(st);
     if ((u.cells.w & FLAG_BACKGROUND) != 0u) {
         px += (1.0 - px.w) * u.background;
     }
-    out_px[gid.x + gid.y * u.image.x] = encode(px);
-    if (res.samples > 0u) {
-        let old = atomicAdd(&stats[0], res.samples);
-        if (old + res.samples < old) {
+    out_px[pixel] = encode(px);
+    if (st.samples > 0u) {
+        let old = atomicAdd(&stats[0], st.samples);
+        if (old + st.samples < old) {
             atomicAdd(&stats[1], 1u);
         }
     }
-    if (res.terminated != 0u) {
+    if ((st.bits & TERMINATED) != 0u) {
         atomicAdd(&stats[2], 1u);
     }
 }

@@ -7,7 +7,7 @@
 
 struct Params {
     vdim: vec4<u32>,  // source vertices (= voxels) x, y, z
-    cdim: vec4<u32>,  // cells x, y, z
+    cdim: vec4<u32>,  // cells x, y, z; w = word index of the bound mask range's start
     bdim: vec4<u32>,  // cell blocks x, y, z; w = listed blocks
     inv: vec4<f32>,   // 1 / spacing x, y, z (voxels per mm); w = inclusion epsilon
     oorg: vec4<i32>,  // source index of output voxel (0,0,0); w = 1 when a mask is bound
@@ -15,6 +15,10 @@ struct Params {
     clo: vec4<i32>,   // clip box (voxels that may be written), lower corner, source index units
     chi: vec4<i32>,   // clip box upper corner (inclusive); w = interpolation (0 tetrahedral, 1 trilinear)
     misc: vec4<f32>,  // x = background value
+    slab: vec4<u32>,  // source slab: x = source element index of the bound source/displacement
+                      // window's start; y, z = its first and last vertex z-planes (inclusive)
+    cells: vec4<u32>, // x, y = cell z-planes [x, y) this pass rasterises and fills; z = word index
+                      // of the bound filled-bit range's start; w = 1 when the source is split
 }
 
 @group(0) @binding(0) var<storage, read> P: Params;
@@ -61,6 +65,11 @@ fn plane_at(p: Plane, x: f32, row: f32) -> f32 {
 
 fn plane_eval(p: Plane, q: vec3<f32>) -> f32 {
     return plane_at(p, q.x, plane_row(p, q.y, q.z));
+}
+
+// Index of source vertex (i, j, k) in the bound source/displacement window.
+fn source_index(i: u32, j: u32, k: u32) -> u32 {
+    return i + P.vdim.x * (j + P.vdim.y * k) - P.slab.x;
 }
 
 // Linear output index of a voxel (source index units), relative to the bound slab.

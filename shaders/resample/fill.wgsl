@@ -4,9 +4,34 @@
 // by the trilinear sample of the source at the owner's barycentric rest
 // position (raster.rs: rest_offset, trilinear_axis, trilinear), or the
 // background.
+//
+// Split source (P.cells.w == 1, gpu_slabs.rs): one pass per source slab,
+// each filling only the voxels whose owner cell lies in its cell planes
+// [P.cells.x, P.cells.y) (and the unowned ones); FILLED marks the voxels
+// already holding a value, so no later pass reads a value as a key. A
+// trilinear sample outside the bound window leaves its voxel unfilled and
+// counts it in MISSED[0] (the host then fails the call).
 
 @group(0) @binding(6) var<storage, read_write> OUT: array<u32>;
 @group(0) @binding(8) var<storage, read> VALUES: array<f32>;
+@group(0) @binding(9) var<storage, read_write> FILLED: array<atomic<u32>>;
+@group(0) @binding(10) var<storage, read_write> MISSED: array<atomic<u32>>;
+
+// Bit of output element `o` (bound-slab relative) in the bound FILLED range.
+fn filled_word(o: u32) -> u32 {
+    return (o + P.odim.w) / 32u - P.cells.z;
+}
+
+fn filled_bit(o: u32) -> u32 {
+    return 1u << ((o + P.odim.w) % 32u);
+}
+
+fn set_value(o: u32, v: f32) {
+    OUT[o] = bitcast<u32>(v);
+    if P.cells.w == 1u {
+        atomicOr(&FILLED[filled_word(o)], filled_bit(o));
+    }
+}
 
 @compute @workgroup_size(64)
 fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -19,9 +44,12 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let y = P.clo.y + i32((n / d.x) % d.y);
     let z = P.clo.z + i32(n / (d.x * d.y));
     let o = out_index(x, y, z);
+    if P.cells.w == 1u && (atomicLoad(&FILLED[filled_word(o)]) & filled_bit(o)) != 0u {
+        return;
+    }
     let owner = OUT[o];
     if owner == NO_OWNER {
-        OUT[o] = bitcast<u32>(P.misc.x);
+        set_value(o, P.misc.x);
         return;
     }
     let id = owner & 0x7fffffffu;  // the owner key without WEAK_OWNER
@@ -30,6 +58,9 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let ci = cell % P.cdim.x;
     let cj = (cell / P.cdim.x) % P.cdim.y;
     let ck = cell / (P.cdim.x * P.cdim.y);
+    if ck < P.cells.x || ck >= P.cells.y {
+        return;
+    }
     let parity = (ci + cj + ck) & 1u;
     var p: array<vec3<f32>, 4>;
     var v: vec4<f32>;
@@ -41,7 +72,7 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         let j = cj + oc.y;
         let k = ck + oc.z;
         p[a] = vertex_position(i, j, k);
-        v[a] = VALUES[i + P.vdim.x * (j + P.vdim.y * k)];
+        v[a] = VALUES[source_index(i, j, k)];
         off[a] = vec3<f32>(oc);
     }
     let q = vec3<f32>(f32(x), f32(y), f32(z));
@@ -52,7 +83,12 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         w[a] = select(0.0, plane_eval(f, q) / dd, dd != 0.0);
     }
     if P.chi.w == 1 {
-        OUT[o] = bitcast<u32>(trilinear_at(vec3<i32>(vec3<u32>(ci, cj, ck)), w, off));
+        let t = trilinear_at(vec3<i32>(vec3<u32>(ci, cj, ck)), w, off);
+        if t.inside {
+            set_value(o, t.value);
+        } else {
+            atomicAdd(&MISSED[0], 1u);
+        }
         return;
     }
     var val = ((w.x * v.x + w.y * v.y) + w.z * v.z) + w.w * v.w;
@@ -60,7 +96,7 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if w.z == 1.0 { val = v.z; }
     if w.y == 1.0 { val = v.y; }
     if w.x == 1.0 { val = v.x; }
-    OUT[o] = bitcast<u32>(val);
+    set_value(o, val);
 }
 
 // raster.rs: lerp — exactly `a` when `f == 0` (a NaN neighbour never leaks in).
@@ -72,13 +108,20 @@ fn lerp0(a: f32, b: f32, f: f32) -> f32 {
 }
 
 fn source_at(x: i32, y: i32, z: i32) -> f32 {
-    return VALUES[u32(x) + P.vdim.x * (u32(y) + P.vdim.y * u32(z))];
+    return VALUES[source_index(u32(x), u32(y), u32(z))];
+}
+
+// A trilinear sample, or `inside == false` (and no read) when its z-planes
+// are not all in the bound window [P.slab.y, P.slab.z].
+struct Sample {
+    value: f32,
+    inside: bool,
 }
 
 // Trilinear sample of the source at the rest position `cell + Σ w_a off_a`
 // (or exactly `off_a` where `w_a == 1`), clamped to the grid
 // (raster.rs: rest_offset, trilinear_axis, trilinear).
-fn trilinear_at(cell: vec3<i32>, w: vec4<f32>, off: array<vec3<f32>, 4>) -> f32 {
+fn trilinear_at(cell: vec3<i32>, w: vec4<f32>, off: array<vec3<f32>, 4>) -> Sample {
     var r = ((w.x * off[0] + w.y * off[1]) + w.z * off[2]) + w.w * off[3];
     if w.w == 1.0 { r = off[3]; }
     if w.z == 1.0 { r = off[2]; }
@@ -92,11 +135,14 @@ fn trilinear_at(cell: vec3<i32>, w: vec4<f32>, off: array<vec3<f32>, 4>) -> f32 
     let i1 = min(i0 + vec3<i32>(1), last);
     let clamped = (g < vec3<i32>(0)) | (g > n - vec3<i32>(2));
     let f = select(r - fl, vec3<f32>(0.0), clamped);
+    if i0.z < i32(P.slab.y) || i1.z > i32(P.slab.z) {
+        return Sample(0.0, false);
+    }
     let x00 = lerp0(source_at(i0.x, i0.y, i0.z), source_at(i1.x, i0.y, i0.z), f.x);
     let x10 = lerp0(source_at(i0.x, i1.y, i0.z), source_at(i1.x, i1.y, i0.z), f.x);
     let x01 = lerp0(source_at(i0.x, i0.y, i1.z), source_at(i1.x, i0.y, i1.z), f.x);
     let x11 = lerp0(source_at(i0.x, i1.y, i1.z), source_at(i1.x, i1.y, i1.z), f.x);
     let y0 = lerp0(x00, x10, f.y);
     let y1 = lerp0(x01, x11, f.y);
-    return lerp0(y0, y1, f.z);
+    return Sample(lerp0(y0, y1, f.z), true);
 }

@@ -4,7 +4,8 @@
 // (CellRaster) with the smallest owner key — its id, with WEAK_OWNER set
 // when none of its corners moved, it is inverted, or the voxel centre is
 // the rest position of one of its still corners (sampling_mesh.rs) —
-// atomicMin(key) into the output slab.
+// atomicMin(key) into the output slab. The listed blocks lie in the bound
+// source slab (gpu_slabs.rs), so every vertex read is inside its window.
 
 @group(0) @binding(4) var<storage, read> BLOCKS: array<u32>;
 @group(0) @binding(6) var<storage, read_write> OUT: array<atomic<u32>>;
@@ -82,7 +83,7 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let cell = ci + P.cdim.x * (cj + P.cdim.y * ck);
     var live = 31u;
     if P.oorg.w != 0 {
-        live &= ~((MASK[cell / 4u] >> ((cell % 4u) * 8u)) & 0xffu);
+        live &= ~((MASK[cell / 4u - P.cdim.w] >> ((cell % 4u) * 8u)) & 0xffu);
     }
     let parity = (ci + cj + ck) & 1u;
     for (var f = 0u; f < 16u; f++) {

@@ -13,13 +13,23 @@
 //! - `maps`: the combined opacity map, u16 packed two per u32;
 //! - the output, RGBA8 packed per u32; `stats`: three u32 counters.
 //!
-//! Every binding must fit `max_storage_buffer_binding_size` (128 MiB on
-//! lavapipe, i.e. 32 Mi voxels of f32); larger volumes are refused with an
-//! error that says to render on the CPU.
+//! A volume above `max_storage_buffer_binding_size` (128 MiB on lavapipe,
+//! i.e. 32 Mi voxels of f32) is bound as z-slabs ([`crate::slabs`]): the
+//! macro-cell kernel runs per slab over the cells in it, and the ray caster
+//! runs one pass per slab for the rays going up in z (slabs ascending),
+//! then one per slab for the rays going down (descending), each ray
+//! resuming its loop from a per-pixel state (`state`, 32 bytes per pixel)
+//! where the previous pass stopped; the opacity map is bound per slab too.
+//! The image equals the unsplit one bit for bit. The image, the per-pixel
+//! state and the macro-cell grid must each fit one binding.
 
 use crate::macrocell::{IndexBox, MacroCells};
+use crate::slabs::{self, Slab};
 use crate::transfer::{LUT_SIZE, Lut};
-use crate::uniforms::{ACCEL_CELLS_OFFSET, RayUniforms};
+use crate::uniforms::{
+    ACCEL_CELLS_OFFSET, PASS_DOWN, PASS_FIRST, PASS_LAST, PASS_SPLIT, PASS_UP, PASS_WHOLE,
+    RayUniforms,
+};
 use std::sync::Arc;
 use voxflex_core::error::ModelError;
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt};
@@ -52,6 +62,7 @@ mod bind {
         pub const MAPS: u32 = 4;
         pub const OUT_PX: u32 = 5;
         pub const STATS: u32 = 6;
+        pub const STATE: u32 = 7;
     }
     /// `cells.wgsl`.
     pub mod cells {
@@ -83,6 +94,7 @@ struct CellUniforms {
     counts: [u32; 4],
     lo: [u32; 4],
     size: [u32; 4],
+    base: [u32; 4],
 }
 
 /// Where the GPU volume lives.
@@ -97,8 +109,10 @@ enum VolumeBuffer {
 /// GPU state of one renderer.
 pub struct GpuRenderer {
     gpu: Arc<dyn GpuService>,
-    uniforms: BufferId,
-    cell_uniforms: BufferId,
+    /// Ray uniforms, one buffer per pass.
+    uniforms: Vec<BufferId>,
+    /// Cell uniforms, one buffer per slab.
+    cell_uniforms: Vec<BufferId>,
     stats: BufferId,
     lut: BufferId,
     /// One uniforms buffer per leap pass.
@@ -112,6 +126,8 @@ pub struct GpuRenderer {
     accel_prefix: Option<Vec<u32>>,
     maps: Option<BufferId>,
     output: Option<(BufferId, u64)>,
+    /// The rays' state between passes (a 32-byte stand-in when unsplit).
+    state: (BufferId, u64),
 }
 
 fn too_big(what: &str, bytes: u64, limit: u64) -> ModelError {
@@ -126,14 +142,15 @@ fn too_big(what: &str, bytes: u64, limit: u64) -> ModelError {
 impl GpuRenderer {
     /// Creates the fixed buffers.
     pub fn new(gpu: Arc<dyn GpuService>) -> Result<Self, ModelError> {
-        let uniforms = gpu.create_buffer(
+        let uniforms = vec![gpu.create_buffer(
             std::mem::size_of::<RayUniforms>() as u64,
             "raycast uniforms",
-        )?;
-        let cell_uniforms = gpu.create_buffer(
+        )?];
+        let cell_uniforms = vec![gpu.create_buffer(
             std::mem::size_of::<CellUniforms>() as u64,
             "raycast cell uniforms",
-        )?;
+        )?];
+        let state = (gpu.create_buffer(32, "raycast ray state")?, 32);
         let stats = gpu.create_buffer(16, "raycast stats")?;
         let lut = gpu.create_buffer((LUT_SIZE * 16) as u64, "raycast lut")?;
         let bytes = std::mem::size_of::<LeapUniforms>() as u64;
@@ -155,11 +172,37 @@ impl GpuRenderer {
             accel_prefix: None,
             maps: None,
             output: None,
+            state,
         })
     }
 
     fn max_binding(&self) -> u64 {
         self.gpu.limits().max_storage_buffer_binding_size
+    }
+
+    /// The z-slabs of a volume of `dims` voxels with macro-cells of `cell`.
+    fn slabs(&self, dims: [usize; 3], cell: usize) -> Result<Vec<Slab>, ModelError> {
+        let l = self.gpu.limits();
+        slabs::plan(
+            dims,
+            cell,
+            l.max_storage_buffer_binding_size,
+            l.min_storage_buffer_offset_alignment as u64,
+        )
+    }
+
+    /// `n` buffers of `bytes` each in `list` (grown, never shrunk).
+    fn buffers(
+        gpu: &dyn GpuService,
+        list: &mut Vec<BufferId>,
+        n: usize,
+        bytes: usize,
+        label: &str,
+    ) -> Result<(), ModelError> {
+        while list.len() < n {
+            list.push(gpu.create_buffer(bytes as u64, label)?);
+        }
+        Ok(())
     }
 
     fn volume_id(&self) -> Result<BufferId, ModelError> {
@@ -187,9 +230,6 @@ impl GpuRenderer {
                 id.0
             )));
         }
-        if need > self.max_binding() {
-            return Err(too_big("the volume", need, self.max_binding()));
-        }
         if self.volume != Some(VolumeBuffer::External(id)) {
             self.drop_owned_volume();
         }
@@ -207,8 +247,12 @@ impl GpuRenderer {
     ) -> Result<(), ModelError> {
         let voxels = view.grid.len();
         let need = voxels as u64 * 4;
-        if need > self.max_binding() {
-            return Err(too_big("the volume", need, self.max_binding()));
+        let most = self.gpu.limits().max_buffer_size;
+        if need > most {
+            return Err(ModelError(format!(
+                "the volume needs a {need}-byte GPU buffer (f32) but the device allows {most} \
+                 (max_buffer_size); render on the CPU (backend = \"cpu\") or use a smaller volume"
+            )));
         }
         let mut region = region;
         let fresh = !matches!(self.volume, Some(VolumeBuffer::Owned(_))) || self.voxels != voxels;
@@ -281,41 +325,64 @@ impl GpuRenderer {
             cells.hi[1] + 1 - cells.lo[1],
             cells.hi[2] + 1 - cells.lo[2],
         ];
-        let n = size[0] * size[1] * size[2];
-        let u = CellUniforms {
-            dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, cell as u32],
-            counts: [
-                counts[0] as u32,
-                counts[1] as u32,
-                counts[2] as u32,
-                ACCEL_CELLS_OFFSET as u32,
-            ],
-            lo: [
-                cells.lo[0] as u32,
-                cells.lo[1] as u32,
-                cells.lo[2] as u32,
-                total as u32,
-            ],
-            size: [size[0] as u32, size[1] as u32, size[2] as u32, n as u32],
-        };
-        self.gpu
-            .write_buffer(self.cell_uniforms, 0, bytemuck::bytes_of(&u))?;
+        let slabs = self.slabs(dims, cell)?;
+        Self::buffers(
+            self.gpu.as_ref(),
+            &mut self.cell_uniforms,
+            slabs.len(),
+            std::mem::size_of::<CellUniforms>(),
+            "raycast cell uniforms",
+        )?;
         let pipeline = self.gpu.compile(CELLS_WGSL, "main")?;
         let volume = self.volume_id()?;
-        self.gpu.dispatch(
-            pipeline,
-            &[
-                BufferBinding::whole(bind::cells::C, self.cell_uniforms),
-                BufferBinding {
-                    binding: bind::cells::VOL,
-                    buffer: volume,
-                    offset: 0,
-                    size: self.voxels as u64 * 4,
-                },
-                BufferBinding::whole(bind::cells::ACCEL, accel),
-            ],
-            self.gpu.workgroups_for(n as u64, CELL_WORKGROUP)?,
-        )?;
+        for (n, slab) in slabs.iter().enumerate() {
+            // The cells of the box whose first footprint plane (c·s) lies in
+            // the slab: their voxels (c·s − 1 … (c+1)·s + 1) are bound.
+            let lo = cells.lo[2].max(slab.z0.div_ceil(cell));
+            let hi = if n + 1 == slabs.len() {
+                cells.hi[2]
+            } else {
+                cells.hi[2].min((slab.z1 / cell).saturating_sub(1))
+            };
+            if lo > hi {
+                continue;
+            }
+            let nz = hi + 1 - lo;
+            let count = size[0] * size[1] * nz;
+            let u = CellUniforms {
+                dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, cell as u32],
+                counts: [
+                    counts[0] as u32,
+                    counts[1] as u32,
+                    counts[2] as u32,
+                    ACCEL_CELLS_OFFSET as u32,
+                ],
+                lo: [
+                    cells.lo[0] as u32,
+                    cells.lo[1] as u32,
+                    lo as u32,
+                    total as u32,
+                ],
+                size: [size[0] as u32, size[1] as u32, nz as u32, count as u32],
+                base: [(slab.offset / 4) as u32, 0, 0, 0],
+            };
+            let ub = self.cell_uniforms[n];
+            self.gpu.write_buffer(ub, 0, bytemuck::bytes_of(&u))?;
+            self.gpu.dispatch(
+                pipeline,
+                &[
+                    BufferBinding::whole(bind::cells::C, ub),
+                    BufferBinding {
+                        binding: bind::cells::VOL,
+                        buffer: volume,
+                        offset: slab.offset,
+                        size: slab.bytes,
+                    },
+                    BufferBinding::whole(bind::cells::ACCEL, accel),
+                ],
+                self.gpu.workgroups_for(count as u64, CELL_WORKGROUP)?,
+            )?;
+        }
         Ok(fresh)
     }
 
@@ -407,10 +474,6 @@ impl GpuRenderer {
                 .collect(),
             None => vec![0],
         };
-        let bytes = words.len() as u64 * 4;
-        if bytes > self.max_binding() {
-            return Err(too_big("the opacity map", bytes, self.max_binding()));
-        }
         let words = if words.is_empty() { vec![0] } else { words };
         self.maps = Some(self.gpu.upload(&words, "raycast opacity map")?);
         Ok(())
@@ -468,34 +531,112 @@ impl GpuRenderer {
             self.set_map(None)?;
         }
         let maps = self.maps.expect("map buffer just made");
-        self.gpu
-            .write_buffer(self.uniforms, 0, bytemuck::bytes_of(u))?;
+        let dims = [0, 1, 2].map(|a| u.dims[a] as usize);
+        let slabs = self.slabs(dims, u.dims[3] as usize)?;
+        let split = slabs.len() > 1;
+        let map_bytes = self.gpu.buffer_size(maps)?;
+        if !split && map_bytes > self.max_binding() {
+            return Err(too_big("the opacity map", map_bytes, self.max_binding()));
+        }
+        if split {
+            let need = w * h * 32;
+            if need > self.max_binding() {
+                return Err(too_big(
+                    "the rays' state for a volume split into slabs (32 bytes per pixel)",
+                    need,
+                    self.max_binding(),
+                ));
+            }
+            if self.state.1 < need {
+                self.gpu.destroy_buffer(self.state.0);
+                self.state = (self.gpu.create_buffer(need, "raycast ray state")?, need);
+            }
+        }
+        // Passes: one over an unsplit volume; else every slab ascending for
+        // the rays going up, then every slab descending for those going down.
+        let passes: Vec<(usize, u32)> = if split {
+            let n = slabs.len();
+            (0..n)
+                .map(|i| (i, PASS_UP))
+                .chain((0..n).rev().map(|i| (i, PASS_DOWN)))
+                .collect()
+        } else {
+            vec![(0, PASS_WHOLE)]
+        };
+        Self::buffers(
+            self.gpu.as_ref(),
+            &mut self.uniforms,
+            passes.len(),
+            std::mem::size_of::<RayUniforms>(),
+            "raycast uniforms",
+        )?;
         self.gpu.write_buffer(self.stats, 0, &[0u8; 16])?;
         let pipeline = self.gpu.compile(RAYCAST_WGSL, "main")?;
         let volume = self.volume_id()?;
-        self.gpu.dispatch(
-            pipeline,
-            &[
-                BufferBinding::whole(bind::ray::U, self.uniforms),
-                BufferBinding {
-                    binding: bind::ray::VOL,
-                    buffer: volume,
-                    offset: 0,
-                    size: self.voxels as u64 * 4,
-                },
-                BufferBinding::whole(bind::ray::LUT, self.lut),
-                BufferBinding::whole(bind::ray::ACCEL, accel),
-                BufferBinding::whole(bind::ray::MAPS, maps),
-                BufferBinding {
-                    binding: bind::ray::OUT_PX,
-                    buffer: target,
-                    offset: 0,
-                    size: bytes,
-                },
-                BufferBinding::whole(bind::ray::STATS, self.stats),
-            ],
-            [groups[0] as u32, groups[1] as u32, 1],
-        )?;
+        let align = self.gpu.limits().min_storage_buffer_offset_alignment as u64;
+        let map_origin = [0, 1, 2].map(|a| u.map_origin[a] as usize);
+        let map_dims = [0, 1, 2].map(|a| u.map_dims[a] as usize);
+        for (n, &(slab, dir)) in passes.iter().enumerate() {
+            let sl = &slabs[slab];
+            let mut pu = *u;
+            let (map_offset, map_size) = if split {
+                slabs::map_window(sl, map_origin, map_dims, align)
+            } else {
+                (0, map_bytes)
+            };
+            if split {
+                let mut flags = dir | PASS_SPLIT;
+                if n == 0 {
+                    flags |= PASS_FIRST;
+                }
+                if n + 1 == passes.len() {
+                    flags |= PASS_LAST;
+                }
+                pu.slab = [
+                    sl.z0 as u32,
+                    sl.z1 as u32,
+                    (sl.offset / 4) as u32,
+                    (map_offset / 4) as u32,
+                ];
+                pu.pass_flags = [flags, 0, 0, 0];
+            }
+            let ub = self.uniforms[n];
+            self.gpu.write_buffer(ub, 0, bytemuck::bytes_of(&pu))?;
+            self.gpu.dispatch(
+                pipeline,
+                &[
+                    BufferBinding::whole(bind::ray::U, ub),
+                    BufferBinding {
+                        binding: bind::ray::VOL,
+                        buffer: volume,
+                        offset: sl.offset,
+                        size: sl.bytes,
+                    },
+                    BufferBinding::whole(bind::ray::LUT, self.lut),
+                    BufferBinding::whole(bind::ray::ACCEL, accel),
+                    BufferBinding {
+                        binding: bind::ray::MAPS,
+                        buffer: maps,
+                        offset: map_offset,
+                        size: map_size.min(map_bytes - map_offset),
+                    },
+                    BufferBinding {
+                        binding: bind::ray::OUT_PX,
+                        buffer: target,
+                        offset: 0,
+                        size: bytes,
+                    },
+                    BufferBinding::whole(bind::ray::STATS, self.stats),
+                    BufferBinding {
+                        binding: bind::ray::STATE,
+                        buffer: self.state.0,
+                        offset: 0,
+                        size: if split { w * h * 32 } else { 32 },
+                    },
+                ],
+                [groups[0] as u32, groups[1] as u32, 1],
+            )?;
+        }
         let mut s = [0u32; 4];
         self.gpu.download(self.stats, &mut s)?;
         Ok((
@@ -517,9 +658,11 @@ impl GpuRenderer {
 impl Drop for GpuRenderer {
     fn drop(&mut self) {
         let g = &self.gpu;
-        for id in [self.uniforms, self.cell_uniforms, self.stats, self.lut]
+        for id in [self.stats, self.lut, self.state.0]
             .into_iter()
             .chain(self.leap_uniforms)
+            .chain(self.uniforms.iter().copied())
+            .chain(self.cell_uniforms.iter().copied())
         {
             g.destroy_buffer(id);
         }

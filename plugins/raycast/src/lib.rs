@@ -71,8 +71,11 @@
 //! voxels afterwards); `RenderVolume::Gpu` on the CPU backend is read back
 //! (the dirty z-slab). GPU path ([`gpu`]): `RenderVolume::Gpu` buffers are
 //! bound as they are; `RenderVolume::Cpu` volumes are uploaded once per
-//! version (the dirty z-slab of planes). Volumes, maps and images above the
-//! GPU's largest storage binding are refused with an error.
+//! version (the dirty z-slab of planes). A volume above the GPU's largest
+//! storage binding is bound in z-slabs, one pass per slab and ray
+//! direction, each ray resuming where it stopped (same image bit for bit;
+//! see [`gpu`]); an image, or its 32 bytes per pixel of ray state while the
+//! volume is split, above one binding is refused with an error.
 //!
 //! ## Accuracy and speed (tested in `src/tests.rs`, measured here)
 //!
@@ -112,6 +115,7 @@ pub mod gradient_cache;
 pub mod macrocell;
 pub mod maps;
 pub mod params;
+pub(crate) mod slabs;
 pub mod transfer;
 pub mod uniforms;
 pub mod views;

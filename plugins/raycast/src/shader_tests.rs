@@ -6,7 +6,7 @@ use super::*;
 use crate::macrocell::LEAP_CAP;
 use crate::uniforms::{
     FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_JITTER, FLAG_MAP_NEAREST, FLAG_SHADING,
-    FLAG_SOBEL, FLAG_TRICUBIC, RayUniforms,
+    FLAG_SOBEL, FLAG_TRICUBIC, PASS_DOWN, PASS_FIRST, PASS_LAST, PASS_SPLIT, PASS_UP, RayUniforms,
 };
 use voxflex_wgsl_check::{ShaderSet, assert_struct_layout};
 
@@ -43,6 +43,8 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
             counts,
             map_origin,
             map_dims,
+            slab,
+            pass_flags,
         }
     );
     for (name, rust) in [
@@ -54,6 +56,11 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
         ("FLAG_SOBEL", FLAG_SOBEL),
         ("FLAG_TRICUBIC", FLAG_TRICUBIC),
         ("FLAG_JITTER", FLAG_JITTER),
+        ("PASS_UP", PASS_UP),
+        ("PASS_DOWN", PASS_DOWN),
+        ("PASS_FIRST", PASS_FIRST),
+        ("PASS_LAST", PASS_LAST),
+        ("PASS_SPLIT", PASS_SPLIT),
     ] {
         assert_eq!(ray.const_u32(name), rust, "{name}");
     }
@@ -67,6 +74,7 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
         ("maps", bind::ray::MAPS),
         ("out_px", bind::ray::OUT_PX),
         ("stats", bind::ray::STATS),
+        ("state", bind::ray::STATE),
     ] {
         assert_eq!(ray.binding(var), binding, "ray: `{var}`");
     }
@@ -86,7 +94,8 @@ fn the_render_kernels_validate_and_share_the_rust_constants() {
             dims,
             counts,
             lo,
-            size
+            size,
+            base
         }
     );
 

@@ -558,12 +558,9 @@ fn gpu_renderer(toml: &str, service: &Arc<dyn GpuService>) -> RaycastRenderer {
     r
 }
 
-#[test]
-fn gpu_matches_cpu() {
-    let Some(service) = test_gpu() else { return };
-    let vol = head(48);
-    let g = vol.grid;
-    let maps = [
+/// Two overlapping opacity maps (one textured) for the GPU checks.
+fn test_maps() -> [OpacityMap; 2] {
+    [
         OpacityMap {
             origin: [4, 6, 8],
             dims: [20, 20, 20],
@@ -578,43 +575,54 @@ fn gpu_matches_cpu() {
             outside: to_fixed(0.05),
             values: vec![to_fixed(0.8); 9000],
         },
-    ];
+    ]
+}
+
+/// Settings the GPU checks render with (and whether to add [`test_maps`]).
+const GPU_CASES: [(&str, bool); 15] = [
+    ("", false),
+    ("", true),
+    ("mode = \"mip\"", false),
+    ("mode = \"mip\"", true),
+    (
+        "transfer_function = { preset = \"ct-soft-tissue\" }\nshading = { enabled = false }",
+        true,
+    ),
+    (
+        "opacity_map_interpolation = \"nearest\"\ntransfer_function = { preset = \"ct-soft-tissue\" }",
+        true,
+    ),
+    (
+        "background = [0.1, 0.2, 0.3, 0.5]\ncrop_box = { min = [-60, -200, -200], max = [200, 200, 40] }\n\
+         clip_planes = [{ point = [0, 0, 0], normal = [1, 1, 0] }, { point = [0, -30, 0], normal = [0, 1, 0.2] }]",
+        false,
+    ),
+    ("transfer_function = { preset = \"mri-t1\" }", false),
+    (
+        "sample_distance = 1.3\nempty_space_skipping = false\nearly_termination = false",
+        false,
+    ),
+    // The filters, each alone and together (tricubic also under MIP).
+    ("gradient = \"central\"", false),
+    ("sampling = \"tricubic\"", true),
+    ("sampling = \"tricubic\"\nmode = \"mip\"", false),
+    ("jitter = true\nsample_distance = 1.7", false),
+    ("jitter = true\nmode = \"mip\"", false),
+    (
+        "sampling = \"tricubic\"\ngradient = \"sobel\"\njitter = true\n\
+         transfer_function = { preset = \"ct-soft-tissue\" }",
+        true,
+    ),
+];
+
+#[test]
+fn gpu_matches_cpu() {
+    let Some(service) = test_gpu() else { return };
+    let vol = head(48);
+    let g = vol.grid;
+    let maps = test_maps();
     let cam = fit_camera(&g, 64, 48, 30.0, 20.0, Some(35.0));
-    let cases = [
-        ("", false),
-        ("", true),
-        ("mode = \"mip\"", false),
-        ("mode = \"mip\"", true),
-        (
-            "transfer_function = { preset = \"ct-soft-tissue\" }\nshading = { enabled = false }",
-            true,
-        ),
-        (
-            "opacity_map_interpolation = \"nearest\"\ntransfer_function = { preset = \"ct-soft-tissue\" }",
-            true,
-        ),
-        (
-            "background = [0.1, 0.2, 0.3, 0.5]\ncrop_box = { min = [-60, -200, -200], max = [200, 200, 40] }\n\
-             clip_planes = [{ point = [0, 0, 0], normal = [1, 1, 0] }, { point = [0, -30, 0], normal = [0, 1, 0.2] }]",
-            false,
-        ),
-        ("transfer_function = { preset = \"mri-t1\" }", false),
-        (
-            "sample_distance = 1.3\nempty_space_skipping = false\nearly_termination = false",
-            false,
-        ),
-        // The filters, each alone and together (tricubic also under MIP).
-        ("gradient = \"central\"", false),
-        ("sampling = \"tricubic\"", true),
-        ("sampling = \"tricubic\"\nmode = \"mip\"", false),
-        ("jitter = true\nsample_distance = 1.7", false),
-        ("jitter = true\nmode = \"mip\"", false),
-        (
-            "sampling = \"tricubic\"\ngradient = \"sobel\"\njitter = true\n\
-             transfer_function = { preset = \"ct-soft-tissue\" }",
-            true,
-        ),
-    ];
+    let cases = GPU_CASES;
     for (toml, with_maps) in cases {
         let mut c = with_volume(cpu(toml), &vol);
         let mut gr = gpu_renderer(toml, &service);
@@ -711,4 +719,142 @@ fn gpu_dirty_rebuild_equals_full_rebuild() {
     let (a, _) = rgba8(&mut gr, &cam);
     let (b, _) = rgba8(&mut { full }, &cam);
     assert!(max_diff(&a, &b) <= 2);
+}
+
+/// The service viewed with a storage binding limit of one macro-cell (8
+/// planes) of `vol`'s z-planes plus the halo (3 planes) and the alignment,
+/// which the host enforces on every dispatch; and the number of slabs.
+fn split_gpu(vol: &Volume) -> Option<(Arc<dyn GpuService>, usize)> {
+    let full = test_gpu()?;
+    let g = vol.grid;
+    let align = full.limits().min_storage_buffer_offset_alignment as u64;
+    let limit = 11 * (g.dims[0] * g.dims[1]) as u64 * 4 + align;
+    let n = crate::slabs::plan(g.dims, 8, limit, align).unwrap().len();
+    let capped = voxflex_runtime::gpu_context::testing::test_gpu_with_binding_limit(limit)?;
+    Some((capped as Arc<dyn GpuService>, n))
+}
+
+/// A volume split into z-slabs renders the unsplit image bit for bit (and
+/// the same statistics) for every setting of [`GPU_CASES`], from cameras
+/// whose rays go up, down, both (perspective) and level in z, and builds
+/// the CPU's macro-cells.
+#[test]
+fn gpu_split_volume_matches_unsplit() {
+    let vol = head(48);
+    let Some((capped, n)) = split_gpu(&vol) else {
+        return;
+    };
+    let service = test_gpu().expect("split_gpu found one");
+    assert!(n >= 3, "{n} slabs");
+    let g = vol.grid;
+    let maps = test_maps();
+    let cams = [
+        fit_camera(&g, 48, 40, 30.0, 20.0, Some(35.0)),
+        fit_camera(&g, 48, 40, 200.0, -60.0, None),
+        fit_camera(&g, 48, 40, 120.0, 3.0, Some(60.0)),
+        fit_camera(&g, 48, 40, 0.0, 0.0, None),
+        fit_camera(&g, 48, 40, 75.0, 89.0, None),
+    ];
+    for (toml, with_maps) in GPU_CASES {
+        let mut whole = gpu_renderer(toml, &service);
+        let mut split = gpu_renderer(toml, &capped);
+        for r in [&mut whole, &mut split] {
+            r.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
+                .unwrap();
+            if with_maps {
+                r.set_opacity_maps(&maps).unwrap();
+            }
+        }
+        assert_eq!(
+            split.macro_cells().unwrap(),
+            with_volume(cpu(toml), &vol).macro_cells().unwrap()
+        );
+        for (c, cam) in cams.iter().enumerate() {
+            let (a, sa) = rgba8(&mut whole, cam);
+            let (b, sb) = rgba8(&mut split, cam);
+            assert!(
+                a == b,
+                "{toml:?} maps={with_maps} camera {c}: split differs by up to {}",
+                max_diff(&a, &b)
+            );
+            assert_eq!(sa, sb, "{toml:?} maps={with_maps} camera {c}");
+        }
+    }
+}
+
+/// Split into z-slabs: a dirty rebuild of the macro-cells equals the CPU's
+/// full rebuild, and a volume given as a GPU buffer renders as one uploaded.
+#[test]
+fn gpu_split_dirty_rebuild_and_gpu_volume() {
+    let mut vol = head(40);
+    let Some((capped, n)) = split_gpu(&vol) else {
+        return;
+    };
+    assert!(n >= 3, "{n} slabs");
+    let g = vol.grid;
+    let mut gr = gpu_renderer("", &capped);
+    gr.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
+        .unwrap();
+    if let VoxelData::I16(d) = &mut vol.data {
+        for k in 5..30 {
+            for j in 3..9 {
+                for i in 16..33 {
+                    d[g.linear(i, j, k)] = -500;
+                }
+            }
+        }
+    }
+    let dirty = DirtyRegion::Box {
+        min: g.index_to_world(DVec3::new(16.0, 3.0, 5.0)),
+        max: g.index_to_world(DVec3::new(32.0, 8.0, 29.0)),
+    };
+    gr.set_volume(RenderVolume::Cpu(vol.view()), dirty).unwrap();
+    let mut full = with_volume(cpu(""), &vol);
+    assert_eq!(gr.macro_cells().unwrap(), full.macro_cells().unwrap());
+    let cam = fit_camera(&g, 40, 40, 60.0, 10.0, None);
+    let (a, _) = rgba8(&mut gr, &cam);
+    let (b, _) = rgba8(&mut full, &cam);
+    assert!(max_diff(&a, &b) <= 2);
+    let values = capped
+        .upload(&vol.data.as_slice().to_f32_vec(), "test volume")
+        .unwrap();
+    let mut ext = gpu_renderer("", &capped);
+    ext.set_volume(RenderVolume::Gpu { grid: g, values }, DirtyRegion::All)
+        .unwrap();
+    let (c, _) = rgba8(&mut ext, &cam);
+    assert_eq!(a, c);
+    capped.destroy_buffer(values);
+}
+
+/// Issue 17's goal: a 512³ volume (512 MiB as f32) on a device with
+/// 128 MiB storage bindings (5 slabs) renders as the CPU does, composite
+/// and MIP. About 20 s and a few GiB on lavapipe (mostly the phantom and
+/// the CPU renders), hence ignored; run with `--ignored`.
+#[test]
+#[ignore]
+fn gpu_renders_512_cubed_on_128_mib_bindings() {
+    let Some(gpu) = voxflex_runtime::gpu_context::testing::test_gpu_with_binding_limit(128 << 20)
+    else {
+        return;
+    };
+    let gpu = gpu as Arc<dyn GpuService>;
+    let vol = head(512);
+    let g = vol.grid;
+    assert!(g.len() as u64 * 4 > gpu.limits().max_storage_buffer_binding_size);
+    for toml in ["", "mode = \"mip\""] {
+        let cam = fit_camera(&g, 256, 256, 30.0, 20.0, Some(35.0));
+        let (want, _) = rgba8(&mut with_volume(cpu(toml), &vol), &cam);
+        let t = std::time::Instant::now();
+        let mut gr = gpu_renderer(toml, &gpu);
+        gr.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
+            .unwrap();
+        let (got, _) = rgba8(&mut gr, &cam);
+        let d = max_diff(&got, &want);
+        eprintln!(
+            "512³ {toml:?}: GPU upload + cells + 256² render {:.1} s, max diff {d}/255",
+            t.elapsed().as_secs_f64()
+        );
+        assert!(d <= 2, "{toml:?}: max diff {d}");
+        assert!(got.chunks(4).any(|p| p[3] > 0));
+    }
 }

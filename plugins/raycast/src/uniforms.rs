@@ -33,6 +33,20 @@ pub const FLAG_TRICUBIC: u32 = 64;
 /// `cells[3]` flag: per-pixel ray-start jitter.
 pub const FLAG_JITTER: u32 = 128;
 
+/// `pass_flags[0]` bit: the pass marches the rays going up in z (`d.z ≥ 0`).
+pub const PASS_UP: u32 = 1;
+/// `pass_flags[0]` bit: the pass marches the rays going down in z.
+pub const PASS_DOWN: u32 = 2;
+/// `pass_flags[0]` bit: the first pass (every ray starts afresh).
+pub const PASS_FIRST: u32 = 4;
+/// `pass_flags[0]` bit: the last pass (every ray writes its pixel and stats).
+pub const PASS_LAST: u32 = 8;
+/// `pass_flags[0]` bit: the volume is split into z-slabs (rays keep their
+/// state between passes and stop where a sample leaves `slab`).
+pub const PASS_SPLIT: u32 = 16;
+/// The flags of the one pass over an unsplit volume.
+pub const PASS_WHOLE: u32 = PASS_UP | PASS_DOWN | PASS_FIRST | PASS_LAST;
+
 /// Word offset of the macro-cell minima in the GPU `accel` buffer (after the
 /// [`LUT_SIZE`] + 1 prefix counts, padded to 4 words).
 pub const ACCEL_CELLS_OFFSET: usize = (LUT_SIZE + 1).next_multiple_of(4);
@@ -81,6 +95,12 @@ pub struct RayUniforms {
     pub map_origin: [u32; 4],
     /// Combined opacity map box dims (voxels), unused w.
     pub map_dims: [u32; 4],
+    /// GPU only, a volume split into z-slabs: the footprint z-planes
+    /// `[x, y)` of this pass, the first element of the bound volume window
+    /// (z) and the first word of the bound opacity-map window (w).
+    pub slab: [u32; 4],
+    /// GPU only: `PASS_*` bits (x) of this pass.
+    pub pass_flags: [u32; 4],
 }
 
 /// Bytes of [`RayUniforms`].
@@ -204,6 +224,8 @@ impl RayUniforms {
             ],
             map_origin,
             map_dims,
+            slab: [0, grid.dims[2] as u32, 0, 0],
+            pass_flags: [PASS_WHOLE, 0, 0, 0],
         }
     }
 

@@ -16,14 +16,21 @@
 //!
 //! Bindings (group 0): 0 parameters, 1–3 displacements x/y/z (f32, mm),
 //! 4 block list, 5 block bounds, 6 output (slab), 7 mask (u8 per cell packed
-//! in u32), 8 source values (f32).
+//! in u32), 8 source values (f32), 9 filled bits (one per output voxel),
+//! 10 the count of trilinear samples outside their source slab.
 //!
-//! **Binding limit.** Source values and each displacement array must fit one
-//! storage binding (else [`ResampleError::BindingTooLarge`]). The output may
-//! not: it is then processed in z-slabs, each bound at an offset aligned
-//! down to `min_storage_buffer_offset_alignment` (the kernels subtract the
-//! slab's first element index), and pass 1 runs per slab on the blocks whose
-//! bounds meet the slab, writing only inside it.
+//! **Binding limit** (see [`slabs`]). An output larger than one storage
+//! binding is processed in z-slabs of output planes; pass 1 runs per output
+//! slab on the blocks whose bounds meet it, writing only inside it. A source
+//! larger than one binding (its f32 values, each displacement array) is
+//! bound as z-slabs of whole cell blocks plus a halo of vertex planes; every
+//! kernel runs per source slab on the blocks in it (`atomicMin` keys
+//! accumulate across the passes) and `fill` per source slab on the voxels
+//! whose owner cell is in it, a filled bit per output voxel telling the
+//! values already written from the keys still waiting. The mask is bound
+//! per source slab too. Results do not depend on the split: the kernels do
+//! the same arithmetic on the same values, only the indices are relative to
+//! the bound ranges.
 //!
 //! Each slab has its own parameter and block-list buffers, so the result is
 //! right even if the host batches `write_buffer` calls ahead of earlier
@@ -34,6 +41,7 @@ use super::{Job, KernelConsts, Kernels, OutputGrid, ResampleError, TetMask, Voxe
 use crate::error::GpuError;
 use crate::grid::Grid;
 use crate::volume::VolumeView;
+use slabs::{OutputSlab, SourceSlab};
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
 
 const COMMON: &str = include_str!("../../../shaders/resample/common.wgsl");
@@ -57,7 +65,12 @@ mod bind {
     pub const OUT: u32 = 6;
     pub const MASK: u32 = 7;
     pub const VALUES: u32 = 8;
+    pub const FILLED: u32 = 9;
+    pub const MISSED: u32 = 10;
 }
+
+#[path = "gpu_slabs.rs"]
+pub(crate) mod slabs;
 
 /// The full WGSL source of each kernel (for tools that validate shaders).
 pub fn kernel_sources() -> [(&'static str, String); 4] {
@@ -85,10 +98,12 @@ struct Params {
     clo: [i32; 4],
     chi: [i32; 4],
     misc: [f32; 4],
+    slab: [u32; 4],
+    cells: [u32; 4],
 }
 
-/// A source volume on the GPU: its grid and its values as f32 (one storage
-/// binding, x fastest).
+/// A source volume on the GPU: its grid and its values as f32 (one buffer,
+/// x fastest; bound in z-slabs when larger than one storage binding).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpuSource {
     /// Geometry (mm).
@@ -99,10 +114,11 @@ pub struct GpuSource {
 
 impl GpuSource {
     /// Converts a volume to f32 and uploads it; fails when it does not fit
-    /// one storage binding.
+    /// one buffer (`max_buffer_size`) or when one cell block of its z-planes
+    /// and their halo do not fit one storage binding.
     pub fn upload(gpu: &dyn GpuService, volume: VolumeView<'_>) -> Result<Self, ResampleError> {
         super::check_len("source volume", &volume.grid, volume.data.len())?;
-        check_binding(gpu, "source values (f32)", volume.grid.len() as u64 * 4)?;
+        check_source(gpu, &volume.grid)?;
         let values = volume.data.to_f32_vec();
         let id = gpu.upload(&values, "voxflex.resample.source")?;
         Ok(Self {
@@ -127,6 +143,24 @@ fn check_binding(
         return Err(ResampleError::BindingTooLarge { what, bytes, limit });
     }
     Ok(())
+}
+
+/// The source slabs of a grid on this device, or why it cannot be bound.
+fn check_source(gpu: &dyn GpuService, grid: &Grid) -> Result<Vec<SourceSlab>, ResampleError> {
+    let l = gpu.limits();
+    let bytes = grid.len() as u64 * 4;
+    if bytes > l.max_buffer_size {
+        return Err(ResampleError::Gpu(GpuError(format!(
+            "the source grid {:?} needs {bytes}-byte buffers (f32) but the device allows {} \
+             (max_buffer_size); use the CPU backend or a smaller volume",
+            grid.dims, l.max_buffer_size
+        ))));
+    }
+    slabs::source_slabs(
+        grid.dims,
+        l.max_storage_buffer_binding_size,
+        l.min_storage_buffer_offset_alignment as u64,
+    )
 }
 
 /// Reads `out.len()` f32 from the start of a buffer in pieces of ≤ 64 MiB.
@@ -192,6 +226,12 @@ pub(crate) struct GpuState {
     mask: Option<Owned>,
     mask_generation: Option<u64>,
     dummy: Option<Owned>,
+    /// One bit per output voxel (used while the source is split).
+    filled: Option<Owned>,
+    /// One `u32`: trilinear samples outside their source slab's window.
+    missed: Option<Owned>,
+    /// The source slabs of the prepared source (one when it fits a binding).
+    source_slabs: Vec<SourceSlab>,
 }
 
 impl GpuState {
@@ -204,14 +244,13 @@ impl GpuState {
         mask: Option<&TetMask>,
     ) -> Result<(), ResampleError> {
         let n = source.grid.len() as u64 * 4;
-        check_binding(gpu, "source values (f32)", n)?;
+        self.source_slabs = check_source(gpu, &source.grid)?;
         check_buffer(gpu, "source values buffer", source.values, n)?;
         for (what, id) in [
             ("x displacement buffer", disp[0]),
             ("y displacement buffer", disp[1]),
             ("z displacement buffer", disp[2]),
         ] {
-            check_binding(gpu, what, n)?;
             check_buffer(gpu, what, id, n)?;
         }
         if self.pipelines.is_none() {
@@ -224,11 +263,14 @@ impl GpuState {
             });
         }
         ensure(gpu, &mut self.dummy, 4, "voxflex.resample.dummy")?;
+        ensure(gpu, &mut self.missed, 4, "voxflex.resample.missed")?;
         match mask.filter(|m| !m.is_empty()) {
             None => self.mask_generation = None,
             Some(m) if self.mask_generation != Some(m.generation()) => {
                 let bytes = m.bytes();
-                check_binding(gpu, "tetrahedron mask", bytes.len() as u64)?;
+                if self.source_slabs.len() == 1 {
+                    check_binding(gpu, "tetrahedron mask", bytes.len() as u64)?;
+                }
                 let mut padded = bytes.to_vec();
                 padded.resize(bytes.len().next_multiple_of(4), 0);
                 let id = ensure(
@@ -271,6 +313,8 @@ impl GpuState {
             self.bounds.take(),
             self.mask.take(),
             self.dummy.take(),
+            self.filled.take(),
+            self.missed.take(),
         ];
         all.append(&mut self.params);
         all.append(&mut self.lists);
@@ -330,77 +374,113 @@ pub(crate) struct GpuKernels<'a> {
     has_mask: bool,
 }
 
+/// Positions in `blocks` of the blocks whose cells lie in `slab` (all of
+/// them when `all`); `per_plane` blocks per block z-layer.
+fn blocks_in(slab: &SourceSlab, blocks: &[u32], per_plane: u32, all: bool) -> Vec<usize> {
+    (0..blocks.len())
+        .filter(|&n| {
+            let z = (blocks[n] / per_plane) as usize * super::blocks::BLOCK_EDGE;
+            all || (slab.c0..slab.c1).contains(&z)
+        })
+        .collect()
+}
+
 impl GpuKernels<'_> {
-    fn base_params(&self, c: &KernelConsts) -> Params {
+    fn split(&self) -> bool {
+        self.state.source_slabs.len() > 1
+    }
+
+    /// Parameters of a pass over source slab `s` (mask base word included).
+    fn base_params(&self, c: &KernelConsts, s: &SourceSlab) -> Params {
         let v = c.mesh.vertex_dims();
         let cd = c.mesh.cell_dims();
         let bd = c.layout.block_dims();
         Params {
             vdim: [v[0] as u32, v[1] as u32, v[2] as u32, 0],
-            cdim: [cd[0] as u32, cd[1] as u32, cd[2] as u32, 0],
+            cdim: [
+                cd[0] as u32,
+                cd[1] as u32,
+                cd[2] as u32,
+                (self.mask_range(c, s).0 / 4) as u32,
+            ],
             bdim: [bd[0] as u32, bd[1] as u32, bd[2] as u32, 0],
             inv: [c.inv_spacing[0], c.inv_spacing[1], c.inv_spacing[2], c.eps],
             oorg: [0, 0, 0, self.has_mask as i32],
             chi: [0, 0, 0, c.interpolation.code()],
             misc: [c.background, 0.0, 0.0, 0.0],
+            slab: [(s.offset / 4) as u32, s.v0 as u32, s.v1 as u32, 0],
+            cells: [s.c0 as u32, s.c1 as u32, 0, self.split() as u32],
             ..Default::default()
         }
     }
 
-    fn disp_bindings(&self) -> [BufferBinding; 3] {
-        let n = self.source.grid.len() as u64 * 4;
+    /// Source values, bound over slab `s`'s window.
+    fn values_binding(&self, s: &SourceSlab) -> BufferBinding {
+        BufferBinding {
+            binding: bind::VALUES,
+            buffer: self.source.values,
+            offset: s.offset,
+            size: s.bytes,
+        }
+    }
+
+    /// Displacements x, y, z, bound over slab `s`'s window.
+    fn disp_bindings(&self, s: &SourceSlab) -> [BufferBinding; 3] {
         [bind::DX, bind::DY, bind::DZ].map(|b| BufferBinding {
             binding: b,
             buffer: self.disp[(b - bind::DX) as usize],
-            offset: 0,
-            size: n,
+            offset: s.offset,
+            size: s.bytes,
         })
     }
 
-    fn mask_binding(&self) -> BufferBinding {
+    /// `(byte offset, bytes)` of the mask bytes of slab `s`'s cells (`(0, 0)`:
+    /// the whole buffer).
+    fn mask_range(&self, c: &KernelConsts, s: &SourceSlab) -> (u64, u64) {
+        if !self.has_mask || !self.split() {
+            return (0, 0);
+        }
+        let cd = c.mesh.cell_dims();
+        let plane = (cd[0] * cd[1]) as u64;
+        let align = (self.gpu.limits().min_storage_buffer_offset_alignment as u64).max(4);
+        let offset = s.c0 as u64 * plane / align * align;
+        let end = (s.c1 as u64 * plane).next_multiple_of(4);
+        (offset, (end - offset).max(4))
+    }
+
+    fn mask_binding(&self, c: &KernelConsts, s: &SourceSlab) -> BufferBinding {
         let id = match (self.has_mask, self.state.mask, self.state.dummy) {
             (true, Some(m), _) => m.id,
             (_, _, Some(d)) => d.id,
             _ => unreachable!("prepare() creates the dummy buffer"),
         };
-        BufferBinding::whole(bind::MASK, id)
+        let (offset, size) = self.mask_range(c, s);
+        BufferBinding {
+            binding: bind::MASK,
+            buffer: id,
+            offset,
+            size,
+        }
     }
-}
 
-/// The z-slabs of the output: `(first z, last z, bound byte offset, bound
-/// bytes)` in output voxel indices, covering output planes `z0..=z1`.
-fn slabs(
-    output: &OutputGrid,
-    z0: usize,
-    z1: usize,
-    max_binding: u64,
-    align: u64,
-) -> Result<Vec<(usize, usize, u64, u64)>, ResampleError> {
-    let plane = (output.dims[0] * output.dims[1]) as u64 * 4;
-    let total = output.len() as u64 * 4;
-    if total <= max_binding {
-        return Ok(vec![(z0, z1, 0, total)]);
+    /// The filled bits of output slab `o` (a 4-byte stand-in when the
+    /// source is not split) and the word index of the bound range's start.
+    fn filled_binding(&self, o: &OutputSlab) -> (BufferBinding, u32) {
+        let id = self.state.filled.expect("rasterise() creates it").id;
+        let (offset, size) = if self.split() {
+            let align = self.gpu.limits().min_storage_buffer_offset_alignment as u64;
+            slabs::filled_bits(o.offset / 4, (o.offset + o.bytes) / 4, align)
+        } else {
+            (0, 4)
+        };
+        let b = BufferBinding {
+            binding: bind::FILLED,
+            buffer: id,
+            offset,
+            size,
+        };
+        (b, (offset / 4) as u32)
     }
-    let align = align.max(4);
-    let planes = max_binding.saturating_sub(align) / plane;
-    if planes == 0 {
-        return Err(ResampleError::BindingTooLarge {
-            what: "one output z-plane (plus the offset alignment)",
-            bytes: plane + align,
-            limit: max_binding,
-        });
-    }
-    let mut out = Vec::new();
-    let mut z = z0;
-    while z <= z1 {
-        let e = (z + planes as usize - 1).min(z1);
-        let start = z as u64 * plane;
-        let off = start / align * align;
-        let end = (e as u64 + 1) * plane;
-        out.push((z, e, off, end - off));
-        z = e + 1;
-    }
-    Ok(out)
 }
 
 impl Kernels for GpuKernels<'_> {
@@ -418,44 +498,60 @@ impl Kernels for GpuKernels<'_> {
             .state
             .pipelines
             .expect("prepare() compiles the kernels");
-        let mut p = self.base_params(c);
-        p.bdim[3] = blocks.len() as u32;
-        let (pb, lb) = self.state.slot_buffers(gpu, 0, blocks.len() as u64 * 4)?;
-        let bb = ensure(
-            gpu,
-            &mut self.state.bounds,
-            blocks.len() as u64 * 24,
-            "voxflex.resample.bounds",
-        )?;
-        gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
-        gpu.write_buffer(lb, 0, bytemuck::cast_slice(blocks))?;
-        let mut b = vec![
-            BufferBinding::whole(bind::PARAMS, pb),
-            BufferBinding::whole(bind::BLOCKS, lb),
-            BufferBinding::whole(bind::BOUNDS, bb),
-        ];
-        b.extend(self.disp_bindings());
-        let groups = voxflex_core::gpu::workgroups_1d(
-            blocks.len() as u64,
-            1,
-            gpu.limits().max_compute_workgroups_per_dimension,
-        )?;
-        gpu.dispatch(pl.bounds, &b, groups)?;
-        let mut words = vec![0u32; blocks.len() * 6];
-        gpu.read_buffer(bb, 0, bytemuck::cast_slice_mut(&mut words))?;
-        for (o, w) in out.iter_mut().zip(words.chunks_exact(6)) {
-            *o = BlockBounds {
-                min: [
-                    decode_ordered(w[0]),
-                    decode_ordered(w[1]),
-                    decode_ordered(w[2]),
-                ],
-                max: [
-                    decode_ordered(w[3]),
-                    decode_ordered(w[4]),
-                    decode_ordered(w[5]),
-                ],
+        let bd = c.layout.block_dims();
+        let per_plane = (bd[0] * bd[1]) as u32;
+        let sources = self.state.source_slabs.clone();
+        let all = sources.len() == 1;
+        for (n, src) in sources.iter().enumerate() {
+            // Positions in `blocks` (`None`: all of them, in order).
+            let picked = (!all).then(|| blocks_in(src, blocks, per_plane, false));
+            let list: std::borrow::Cow<'_, [u32]> = match &picked {
+                None => blocks.into(),
+                Some(p) => p.iter().map(|&i| blocks[i]).collect(),
             };
+            if list.is_empty() {
+                continue;
+            }
+            let mut p = self.base_params(c, src);
+            p.bdim[3] = list.len() as u32;
+            let (pb, lb) = self.state.slot_buffers(gpu, n, list.len() as u64 * 4)?;
+            let bb = ensure(
+                gpu,
+                &mut self.state.bounds,
+                list.len() as u64 * 24,
+                "voxflex.resample.bounds",
+            )?;
+            gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
+            gpu.write_buffer(lb, 0, bytemuck::cast_slice(&list[..]))?;
+            let mut b = vec![
+                BufferBinding::whole(bind::PARAMS, pb),
+                BufferBinding::whole(bind::BLOCKS, lb),
+                BufferBinding::whole(bind::BOUNDS, bb),
+            ];
+            b.extend(self.disp_bindings(src));
+            let groups = voxflex_core::gpu::workgroups_1d(
+                list.len() as u64,
+                1,
+                gpu.limits().max_compute_workgroups_per_dimension,
+            )?;
+            gpu.dispatch(pl.bounds, &b, groups)?;
+            let mut words = vec![0u32; list.len() * 6];
+            gpu.read_buffer(bb, 0, bytemuck::cast_slice_mut(&mut words))?;
+            for (k, w) in words.chunks_exact(6).enumerate() {
+                let i = picked.as_ref().map_or(k, |p| p[k]);
+                out[i] = BlockBounds {
+                    min: [
+                        decode_ordered(w[0]),
+                        decode_ordered(w[1]),
+                        decode_ordered(w[2]),
+                    ],
+                    max: [
+                        decode_ordered(w[3]),
+                        decode_ordered(w[4]),
+                        decode_ordered(w[5]),
+                    ],
+                };
+            }
         }
         Ok(())
     }
@@ -492,76 +588,122 @@ impl Kernels for GpuKernels<'_> {
             .pipelines
             .expect("prepare() compiles the kernels");
         let out_id = self.state.output.expect("allocate_output() ran").id;
+        let missed = self.state.missed.expect("prepare() creates it").id;
         let o = job.output;
         let r = job.region;
         let oz0 = (r.lo[2] - o.origin_index[2]) as usize;
         let oz1 = (r.hi[2] - o.origin_index[2]) as usize;
-        let slabs = slabs(
-            o,
+        let outs = slabs::output_slabs(
+            o.dims,
             oz0,
             oz1,
             limits.max_storage_buffer_binding_size,
             limits.min_storage_buffer_offset_alignment as u64,
         )?;
-        let single = slabs.len() == 1;
-        let base = self.base_params(job.consts);
-        let mask = self.mask_binding();
-        let disp = self.disp_bindings();
-        for (s, &(z0, z1, off, bytes)) in slabs.iter().enumerate() {
+        let sources = self.state.source_slabs.clone();
+        let split = self.split();
+        let filled = if split {
+            slabs::filled_bytes(o.len() as u64)
+        } else {
+            4
+        };
+        ensure(
+            gpu,
+            &mut self.state.filled,
+            filled,
+            "voxflex.resample.filled",
+        )?;
+        if split {
+            gpu.write_buffer(missed, 0, &[0; 4])?;
+        }
+        let bd = job.consts.layout.block_dims();
+        let per_plane = (bd[0] * bd[1]) as u32;
+        let missed = BufferBinding {
+            binding: bind::MISSED,
+            buffer: missed,
+            offset: 0,
+            size: 4,
+        };
+        let mut slot = 0;
+        for os in &outs {
             let clip = VoxelBox {
-                lo: [r.lo[0], r.lo[1], z0 as i32 + o.origin_index[2]],
-                hi: [r.hi[0], r.hi[1], z1 as i32 + o.origin_index[2]],
+                lo: [r.lo[0], r.lo[1], os.z0 as i32 + o.origin_index[2]],
+                hi: [r.hi[0], r.hi[1], os.z1 as i32 + o.origin_index[2]],
             };
-            let blocks: Vec<u32> = if single {
-                job.blocks.to_vec()
-            } else {
-                job.blocks
-                    .iter()
-                    .copied()
-                    .filter(|&b| job.bounds[b as usize].touches(clip.lo, clip.hi))
-                    .collect()
-            };
-            let mut p = base;
-            p.bdim[3] = blocks.len() as u32;
-            p.oorg[..3].copy_from_slice(&o.origin_index);
-            p.odim = [
-                o.dims[0] as u32,
-                o.dims[1] as u32,
-                o.dims[2] as u32,
-                (off / 4) as u32,
-            ];
-            p.clo[..3].copy_from_slice(&clip.lo);
-            p.chi[..3].copy_from_slice(&clip.hi);
-            let (pb, lb) = self.state.slot_buffers(gpu, s, blocks.len() as u64 * 4)?;
-            gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
-            if !blocks.is_empty() {
-                gpu.write_buffer(lb, 0, bytemuck::cast_slice(&blocks))?;
-            }
-            let params = BufferBinding::whole(bind::PARAMS, pb);
             let out = BufferBinding {
                 binding: bind::OUT,
                 buffer: out_id,
-                offset: off,
-                size: bytes,
+                offset: os.offset,
+                size: os.bytes,
             };
+            let (filled, filled_base) = self.filled_binding(os);
             let voxels = clip.count();
             let vgroups = gpu.workgroups_for(voxels, WORKGROUP)?;
-            gpu.dispatch(pl.clear, &[params, out], vgroups)?;
-            if !blocks.is_empty() {
-                let mut b = vec![params, out, BufferBinding::whole(bind::BLOCKS, lb), mask];
-                b.extend(disp);
-                let cells = blocks.len() as u64 * CELLS_PER_BLOCK as u64;
+            // Parameters per source slab; clear once; pass 1 for every
+            // source slab; then pass 2 for those that rasterised something
+            // (or the first alone: every voxel gets the background).
+            let mut passes = Vec::with_capacity(sources.len());
+            for src in &sources {
+                let blocks: Vec<u32> = if outs.len() == 1 && !split {
+                    job.blocks.to_vec()
+                } else {
+                    blocks_in(src, job.blocks, per_plane, !split)
+                        .into_iter()
+                        .map(|n| job.blocks[n])
+                        .filter(|&b| job.bounds[b as usize].touches(clip.lo, clip.hi))
+                        .collect()
+                };
+                let mut p = self.base_params(job.consts, src);
+                p.bdim[3] = blocks.len() as u32;
+                p.oorg[..3].copy_from_slice(&o.origin_index);
+                p.odim = [
+                    o.dims[0] as u32,
+                    o.dims[1] as u32,
+                    o.dims[2] as u32,
+                    (os.offset / 4) as u32,
+                ];
+                p.clo[..3].copy_from_slice(&clip.lo);
+                p.chi[..3].copy_from_slice(&clip.hi);
+                p.cells[2] = filled_base;
+                let (pb, lb) = self
+                    .state
+                    .slot_buffers(gpu, slot, blocks.len() as u64 * 4)?;
+                slot += 1;
+                gpu.write_buffer(pb, 0, bytemuck::bytes_of(&p))?;
+                if !blocks.is_empty() {
+                    gpu.write_buffer(lb, 0, bytemuck::cast_slice(&blocks))?;
+                }
+                let params = BufferBinding::whole(bind::PARAMS, pb);
+                passes.push((params, src, lb, blocks.len() as u64));
+            }
+            gpu.dispatch(pl.clear, &[passes[0].0, out, filled], vgroups)?;
+            for &(params, src, lb, n) in passes.iter().filter(|p| p.3 > 0) {
+                let mut b = vec![
+                    params,
+                    out,
+                    BufferBinding::whole(bind::BLOCKS, lb),
+                    self.mask_binding(job.consts, src),
+                ];
+                b.extend(self.disp_bindings(src));
+                let cells = n * CELLS_PER_BLOCK as u64;
                 gpu.dispatch(pl.raster, &b, gpu.workgroups_for(cells, WORKGROUP)?)?;
             }
-            let values = BufferBinding {
-                binding: bind::VALUES,
-                buffer: self.source.values,
-                offset: 0,
-                size: self.source.grid.len() as u64 * 4,
-            };
-            let mut b = vec![params, out, values];
-            b.extend(disp);
-            gpu.dispatch(pl.fill, &b, vgroups)?;
+            let mut fills: Vec<_> = passes.iter().filter(|p| p.3 > 0).collect();
+            if fills.is_empty() {
+                fills.push(&passes[0]);
+            }
+            for &&(params, src, _, _) in &fills {
+                let mut b = vec![params, out, self.values_binding(src), filled, missed];
+                b.extend(self.disp_bindings(src));
+                gpu.dispatch(pl.fill, &b, vgroups)?;
+            }
+        }
+        if split {
+            let mut n = [0u32];
+            gpu.read_buffer(missed.buffer, 0, bytemuck::cast_slice_mut(&mut n))?;
+            if n[0] > 0 {
+                return Err(ResampleError::SlabHaloExceeded { voxels: n[0] });
+            }
         }
         Ok(())
     }
@@ -577,35 +719,8 @@ mod tests {
 
     #[test]
     fn params_layout_matches_wgsl() {
-        // 9 vec4 members of 16 bytes, no padding.
-        assert_eq!(size_of::<Params>(), 144);
-    }
-
-    #[test]
-    fn slabs_cover_the_region_within_the_binding() {
-        let o = OutputGrid {
-            origin_index: [0; 3],
-            dims: [10, 7, 50],
-        };
-        let plane = 10 * 7 * 4;
-        let s = slabs(&o, 3, 44, 5 * plane + 256, 256).unwrap();
-        assert!(s.len() > 1);
-        assert_eq!(s[0].0, 3);
-        assert_eq!(s.last().unwrap().1, 44);
-        for w in s.windows(2) {
-            assert_eq!(w[0].1 + 1, w[1].0);
-        }
-        for &(z0, z1, off, bytes) in &s {
-            assert_eq!(off % 256, 0);
-            assert!(bytes <= 5 * plane + 256);
-            assert!(off <= z0 as u64 * plane);
-            assert_eq!(off + bytes, (z1 as u64 + 1) * plane);
-        }
-        assert_eq!(
-            slabs(&o, 0, 49, 1 << 30, 256).unwrap(),
-            vec![(0, 49, 0, 50 * plane)]
-        );
-        assert!(slabs(&o, 0, 49, 100, 256).is_err());
+        // 11 vec4 members of 16 bytes, no padding.
+        assert_eq!(size_of::<Params>(), 176);
     }
 
     /// The numbers of a `var<private> NAME: array<u32, N> = array<u32, N>(…);` table.

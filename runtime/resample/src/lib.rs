@@ -70,10 +70,17 @@
 //!
 //! ## GPU path
 //!
-//! Source values (as f32) and each displacement array must each fit one
-//! storage binding ([`voxflex_core::gpu::GpuLimits::max_storage_buffer_binding_size`],
-//! 128 MiB on lavapipe: up to 32 Mi voxels); the output may be larger and is
-//! then processed in z-slabs bound at aligned offsets. The deformed block
+//! Source values (as f32), each displacement array and the output must each
+//! fit one buffer (`max_buffer_size`), not one storage binding
+//! ([`voxflex_core::gpu::GpuLimits::max_storage_buffer_binding_size`],
+//! 128 MiB on lavapipe: 32 Mi voxels): larger arrays are bound as z-slabs
+//! at aligned offsets — the output in runs of output planes, the source in
+//! runs of whole cell blocks plus a halo of vertex planes, each kernel run
+//! per source slab, with a filled bit per output voxel (4 bytes per 32
+//! output voxels, only while the source is split). The result does not
+//! depend on the split (bit for bit); a trilinear sample beyond its source
+//! slab's halo (only in nearly degenerate tetrahedra) fails the call with
+//! [`ResampleError::SlabHaloExceeded`] rather than read elsewhere. The deformed block
 //! bounds are computed on the GPU by a workgroup reduction (atomic min/max
 //! on order-preserving `u32` encodings of the f32 coordinates) and read back
 //! (24 bytes per 64 cells) so the CPU can size the output and plan the
@@ -92,6 +99,8 @@ mod lanes;
 pub mod output_grid;
 #[cfg(any(test, feature = "test-support"))]
 pub mod parity;
+#[cfg(any(test, feature = "test-support"))]
+pub mod parity_slabs;
 pub mod plan;
 pub mod raster;
 pub mod sampling_mesh;
@@ -222,6 +231,19 @@ pub enum ResampleError {
         bytes: u64,
         /// The device limit, bytes.
         limit: u64,
+    },
+    /// With the source split into z-slabs, trilinear samples fell outside
+    /// their slab's halo of vertex planes (rest positions more than a cell
+    /// outside the owner's cell: only nearly degenerate tetrahedra, through
+    /// rounding); the output is incomplete.
+    #[error(
+        "GPU: {voxels} trilinear samples fall outside their source slab's halo (nearly \
+         degenerate tetrahedra); use the CPU backend, tetrahedral interpolation, or a device \
+         whose storage bindings hold the whole source"
+    )]
+    SlabHaloExceeded {
+        /// Output voxels left without a value.
+        voxels: u32,
     },
     /// A GPU service call failed.
     #[error(transparent)]

@@ -31,7 +31,9 @@ fn every_kernel_validates_and_shares_the_rust_constants() {
                 odim,
                 clo,
                 chi,
-                misc
+                misc,
+                slab,
+                cells
             }
         );
         assert_eq!(s.binding("P"), bind::PARAMS);
@@ -63,10 +65,13 @@ fn every_kernel_validates_and_shares_the_rust_constants() {
     let fill = by_entry("fill");
     assert_eq!(fill.binding("OUT"), bind::OUT);
     assert_eq!(fill.binding("VALUES"), bind::VALUES);
+    assert_eq!(fill.binding("FILLED"), bind::FILLED);
+    assert_eq!(fill.binding("MISSED"), bind::MISSED);
     assert!(
         fill.source()
             .contains(&format!("owner & 0x{OWNER_ID:08x}u"))
     );
     assert_eq!(by_entry("clear").binding("OUT"), bind::OUT);
+    assert_eq!(by_entry("clear").binding("FILLED"), bind::FILLED);
     set.finish();
 }
