@@ -17,7 +17,7 @@ mod common;
 
 use common::{run_saved_scene, wait, wait_for_writes};
 use egui_kittest::Harness;
-use egui_kittest::kittest::Queryable;
+use egui_kittest::kittest::{NodeT as _, Queryable};
 use std::path::Path;
 use voxflex_runtime::session::GrowthParams;
 use voxflex_viewer::app::ViewerApp;
@@ -88,8 +88,13 @@ fn drag(h: &mut Harness<'static, ViewerApp>, from: Pos2, to: Pos2) {
 /// The ROI row's visibility checkbox: the first checkbox of the Maps &
 /// model tab (the ROI panel is above the parameter form).
 fn roi_checkbox<'a>(h: &'a Harness<'static, ViewerApp>) -> egui_kittest::Node<'a> {
+    // The first checkbox that is not the panel's connectivity setting.
     h.get_all_by_role(egui::accesskit::Role::CheckBox)
-        .next()
+        .find(|n| {
+            !n.accesskit_node()
+                .label()
+                .is_some_and(|l| l.contains("connectivity"))
+        })
         .expect("the map's checkbox")
 }
 

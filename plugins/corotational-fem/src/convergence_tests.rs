@@ -240,3 +240,80 @@ fn an_unconverged_linear_solve_is_counted_in_the_notes() {
     assert!(notes["worst_residual"] > 1e-6, "{notes:?}");
     assert_eq!(notes["worst_residual"], notes["last_residual"], "{notes:?}");
 }
+
+/// The interactive static solve (`static_lag`, one Newton iteration a
+/// frame) under a held load, both ways: it lags, counts and warns about
+/// the frames that end above the tolerance, and catches up with the
+/// converged solve's tip (mirrored for the mirrored load).
+#[test]
+fn the_lagged_static_solve_catches_up_with_the_converged_one_both_ways() {
+    let (h, p) = (0.5, 0.05);
+    let lagged = FemParams {
+        static_lag: true,
+        static_iterations: 1,
+        ..static_default()
+    };
+    let mut tips = vec![];
+    for sign in [1.0, -1.0] {
+        let mut settled = beam(h, sign * p, static_default());
+        settled.step(frame()).unwrap();
+        let want = tip(&settled);
+        let mut m = beam(h, sign * p, lagged.clone());
+        let mut frames = 0;
+        loop {
+            m.step(FrameInfo {
+                frame: frames,
+                frames: 100,
+                dt_s: 0.0,
+            })
+            .unwrap();
+            frames += 1;
+            let notes = m.notes().unwrap();
+            if notes["newton_force_residual"] <= lagged.static_tolerance || frames == 100 {
+                break;
+            }
+        }
+        let notes = m.notes().unwrap();
+        let got = tip(&m);
+        let deflection = (want.z - T / 2.0).abs();
+        eprintln!(
+            "sign {sign}: caught up in {frames} frames, {} lagged; tip {got} against {want}",
+            notes["lagged_frames"]
+        );
+        assert!(frames > 1 && frames < 100, "{frames} frames");
+        assert_eq!(notes["lagged_frames"], (frames - 1) as f64);
+        assert_eq!(notes["newton_iterations"], frames as f64);
+        assert!(
+            (got - want).length() <= 1e-4 * deflection,
+            "{got} against {want}"
+        );
+        tips.push(got);
+    }
+    // Opposite ways, by the same amount to the mesh's own asymmetry (its
+    // five-tetrahedra cells are not mirror images in z).
+    let (a, b) = (tips[0].z - T / 2.0, tips[1].z - T / 2.0);
+    assert!(a < 0.0 && b > 0.0 && (a + b).abs() <= 1e-3 * b, "{a} {b}");
+}
+
+#[test]
+fn static_lag_needs_the_static_solver() {
+    let params = FemParams {
+        static_lag: true,
+        ..FemParams::default()
+    };
+    let grid = Grid::new([3, 3, 3], DVec3::ONE, DVec3::ZERO);
+    let mesh = uniform_proxy(&grid, 1, |_| Some(0)).unwrap();
+    let e = Fem::with_mesh(
+        mesh,
+        vec![ElasticMaterial::new(1000.0, 0.3, 1e-6)],
+        DVec3::ZERO,
+        params,
+    )
+    .err()
+    .expect("refused")
+    .0;
+    assert!(
+        e.contains("static_lag") && e.contains("solver = \"static\""),
+        "{e}"
+    );
+}

@@ -158,6 +158,16 @@ pub struct FemParams {
     #[serde(default = "default_static_tolerance")]
     #[schemars(range(min = 0, max = 1))]
     pub static_tolerance: f64,
+    /// The interactive static solve (default false): each frame runs at
+    /// most `static_iterations` Newton iterations on the whole frame's
+    /// load (no load stepping) and keeps the iterate where they stop, so
+    /// the body lags its equilibrium and catches up over the next frames —
+    /// SOFA's one-solve-per-step loop with `static_iterations = 1`. Frames
+    /// that end above `static_tolerance` are counted (`lagged_frames`) and
+    /// the first one is warned about; `newton_force_residual` is the last
+    /// frame's. Needs `solver = "static"`.
+    #[serde(default)]
+    pub static_lag: bool,
     /// Implicit steps per frame (default 1).
     #[serde(default = "one")]
     #[schemars(range(min = 1))]
@@ -202,6 +212,7 @@ impl Default for FemParams {
             preconditioner: PreconditionerKind::default(),
             static_iterations: default_static_iterations(),
             static_tolerance: default_static_tolerance(),
+            static_lag: false,
             substeps: one(),
             mass_damping: default_mass_damping(),
             stiffness_damping: default_stiffness_damping(),
@@ -216,6 +227,12 @@ impl FemParams {
             .map_err(|m| ModelError(format!("corotational-fem params: {m}")))?;
         if self.static_iterations == 0 || self.substeps == 0 {
             return fail("static_iterations and substeps must be ≥ 1".into());
+        }
+        if self.static_lag && self.solver != SolverKind::Static {
+            return fail(
+                "static_lag = true needs solver = \"static\" (the dynamic solver already takes one implicit step a frame)"
+                    .into(),
+            );
         }
         if !(self.static_tolerance > 0.0 && self.static_tolerance < 1.0) {
             return fail(format!(
@@ -256,6 +273,9 @@ pub struct StaticStats {
     pub load_steps: u64,
     /// The relative force residual at the end of the last static frame.
     pub force_residual: f64,
+    /// Frames of the interactive static solve (`static_lag`) that ended
+    /// above `static_tolerance`.
+    pub lagged_frames: u64,
 }
 
 /// The corotational FEM solver.
@@ -759,7 +779,7 @@ impl MeshSolver for CorotationalFem {
 
     /// `newton_iterations` and `load_steps` summed over the run, and
     /// `newton_force_residual` (relative, at the end of the last static
-    /// frame), for the static solver.
+    /// frame), for the static solver; `lagged_frames` with `static_lag`.
     fn notes(&self, notes: &mut ModelNotes) {
         if self.params.solver == SolverKind::Static {
             notes.insert(
@@ -768,6 +788,9 @@ impl MeshSolver for CorotationalFem {
             );
             notes.insert("load_steps".into(), self.stats.load_steps as f64);
             notes.insert("newton_force_residual".into(), self.stats.force_residual);
+            if self.params.static_lag {
+                notes.insert("lagged_frames".into(), self.stats.lagged_frames as f64);
+            }
         }
         let a = self.amg_stats();
         if self.params.preconditioner == PreconditionerKind::Amg || a.setups > 0 {

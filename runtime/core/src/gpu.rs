@@ -144,8 +144,11 @@ pub fn workgroups_1d(n: u64, workgroup_size: u32, max_per_dim: u32) -> Result<[u
 }
 
 /// A [`GpuService`] that forwards to another but reports a smaller
-/// `max_storage_buffer_binding_size`, so tests exercise the slab splitting
-/// every GPU algorithm needs on devices with small bindings.
+/// `max_storage_buffer_binding_size` **and enforces it**: a dispatch that
+/// binds more bytes than that, or at an offset off the device's storage
+/// alignment, fails as a device with such bindings would. Tests use it to
+/// exercise the slab splitting every GPU algorithm needs on devices with
+/// small bindings.
 #[doc(hidden)]
 pub struct LimitedBinding<'a> {
     /// The real service.
@@ -188,6 +191,20 @@ impl GpuService for LimitedBinding<'_> {
         bindings: &[BufferBinding],
         workgroups: [u32; 3],
     ) -> Result<(), GpuError> {
+        let limit = self.max_storage_buffer_binding_size;
+        let align = u64::from(self.inner.limits().min_storage_buffer_offset_alignment);
+        for b in bindings {
+            let size = match b.size {
+                0 => self.inner.buffer_size(b.buffer)?.saturating_sub(b.offset),
+                s => s,
+            };
+            if size > limit || b.offset % align != 0 {
+                return Err(GpuError(format!(
+                    "@binding({}) binds {size} bytes at offset {} (limit {limit}, alignment {align})",
+                    b.binding, b.offset
+                )));
+            }
+        }
         self.inner.dispatch(pipeline, bindings, workgroups)
     }
 }

@@ -24,7 +24,7 @@ use voxflex_core::gpu::{BufferId, GpuService, GpuServiceExt};
 pub const MAX_COVERAGE_MISMATCH: f64 = 1e-4;
 
 pub use crate::fields::{Field, affine, bend_zx, bump, twist_z};
-pub use crate::parity_slabs::{Capped, check_512_cubed_source, check_source_slabs};
+pub use crate::parity_slabs::{check_512_cubed_source, check_source_slabs};
 
 /// A linear ramp `v = a·X` (X world mm) as an f32 volume.
 pub fn ramp(grid: &Grid, a: DVec3) -> Volume {

@@ -1,6 +1,6 @@
 //! GPU checks of the source split into z-slabs (a storage binding limit far
-//! below the source's size, through [`Capped`], which also refuses any
-//! binding above it): the split output equals the unsplit GPU output bit
+//! below the source's size, through core's `LimitedBinding`, which also
+//! refuses any binding above it): the split output equals the unsplit GPU output bit
 //! for bit and the CPU output as the unsplit checks demand (bit for bit for
 //! identity and folds, within `1e-5` of the data range otherwise), for
 //! deformations that carry tissue across slab boundaries upwards and
@@ -11,71 +11,10 @@ use super::parity::{
     Field, compare, cpu_run, dirty_matches_full, gpu_run, head_i16, ramp, test_grid, twisted,
 };
 use super::{Interpolation, ResampleParams, TetMask};
-use crate::error::GpuError;
 use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
-use voxflex_core::gpu::{BufferBinding, BufferId, GpuLimits, GpuService, PipelineId};
-
-/// A [`GpuService`] that reports a smaller `max_storage_buffer_binding_size`
-/// and refuses dispatches binding more than it (or at a misaligned offset).
-pub struct Capped<'a> {
-    /// The real service.
-    pub inner: &'a dyn GpuService,
-    /// The storage binding limit to report and enforce, bytes.
-    pub limit: u64,
-}
-
-impl GpuService for Capped<'_> {
-    fn adapter_description(&self) -> String {
-        self.inner.adapter_description()
-    }
-    fn limits(&self) -> GpuLimits {
-        GpuLimits {
-            max_storage_buffer_binding_size: self.limit,
-            ..self.inner.limits()
-        }
-    }
-    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
-        self.inner.create_buffer(size_bytes, label)
-    }
-    fn destroy_buffer(&self, id: BufferId) {
-        self.inner.destroy_buffer(id)
-    }
-    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
-        self.inner.buffer_size(id)
-    }
-    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
-        self.inner.write_buffer(id, offset, bytes)
-    }
-    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
-        self.inner.read_buffer(id, offset, out)
-    }
-    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
-        self.inner.compile(wgsl, entry_point)
-    }
-    fn dispatch(
-        &self,
-        pipeline: PipelineId,
-        bindings: &[BufferBinding],
-        workgroups: [u32; 3],
-    ) -> Result<(), GpuError> {
-        let align = self.inner.limits().min_storage_buffer_offset_alignment as u64;
-        for b in bindings {
-            let size = match b.size {
-                0 => self.inner.buffer_size(b.buffer)? - b.offset,
-                s => s,
-            };
-            if size > self.limit || b.offset % align != 0 {
-                return Err(GpuError(format!(
-                    "@binding({}) binds {size} bytes at offset {} (limit {}, alignment {align})",
-                    b.binding, b.offset, self.limit
-                )));
-            }
-        }
-        self.inner.dispatch(pipeline, bindings, workgroups)
-    }
-}
+use voxflex_core::gpu::{GpuService, LimitedBinding};
 
 /// The binding limit that splits `grid`'s source into slabs of one cell
 /// block (4 cell planes, bound with their halo: 7 vertex planes).
@@ -142,7 +81,10 @@ fn source_slabs_match(gpu: &dyn GpuService, interpolation: Interpolation) -> Res
     if n < 3 {
         return Err(format!("the source splits into {n} slabs, not ≥ 3"));
     }
-    let capped = Capped { inner: gpu, limit };
+    let capped = LimitedBinding {
+        inner: gpu,
+        max_storage_buffer_binding_size: limit,
+    };
     let params = ResampleParams {
         background: -3000.0,
         interpolation,
@@ -236,9 +178,9 @@ fn source_slabs_match(gpu: &dyn GpuService, interpolation: Interpolation) -> Res
     dirty_matches_full(&capped, interpolation).map_err(|m| format!("dirty, split: {m}"))?;
 
     // Below one block of planes and its halo: a clear error, no dispatch.
-    let tiny = Capped {
+    let tiny = LimitedBinding {
         inner: gpu,
-        limit: limit - 1,
+        max_storage_buffer_binding_size: limit - 1,
     };
     match gpu_run(&tiny, &ramp, &Field::zero(&grid), None, params) {
         Err(m) if m.contains("max_storage_buffer_binding_size") => Ok(()),
@@ -258,7 +200,10 @@ pub fn check_512_cubed_source(gpu: &dyn GpuService) -> Result<Vec<(Interpolation
     if grid.len() as u64 * 4 <= limit {
         return Err("the 512³ source fits one binding: nothing is split".into());
     }
-    let capped = Capped { inner: gpu, limit };
+    let capped = LimitedBinding {
+        inner: gpu,
+        max_storage_buffer_binding_size: limit,
+    };
     let vol = head_i16(&grid);
     let (tw, _) = crate::fields::twist_z(grid.centre(), 0.4 / (512.0 * 0.5));
     let amp = 3.5 * grid.spacing.z;

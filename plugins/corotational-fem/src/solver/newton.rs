@@ -119,6 +119,9 @@ impl CorotationalFem {
             substeps: 1,
             ..SolveReport::default()
         };
+        if self.params.static_lag {
+            return self.step_static_lagged(bc, &free, state, report);
+        }
         let u0 = state.u.clone();
         let f_int0 = self.elastic_forces(&u0);
         let mut target = u0.clone();
@@ -180,6 +183,53 @@ impl CorotationalFem {
                 self.params.static_iterations,
             )));
         }
+        Ok(report)
+    }
+
+    /// The interactive static frame (`static_lag`): the imposed
+    /// displacements at their targets, then at most `static_iterations`
+    /// Newton iterations on the frame's whole load from the state the last
+    /// frame left, whose iterate is kept whether or not it reached
+    /// `static_tolerance` (counted in `lagged_frames`; the first such frame
+    /// of a run is warned about). Never an error for stopping above the
+    /// tolerance; a failed linear solve still is.
+    fn step_static_lagged(
+        &mut self,
+        bc: &Boundary,
+        free: &[bool],
+        state: &mut NodeState,
+        mut report: SolveReport,
+    ) -> Result<SolveReport, ModelError> {
+        let mut u = state.u.clone();
+        let mut target = u.clone();
+        bc.impose(&mut target);
+        for (n, f) in free.iter().enumerate() {
+            if !f {
+                u[n] = target[n];
+            }
+        }
+        bc.tie(&mut u);
+        let (end, iterations) = self.newton(bc, free, &bc.force, &mut u, &mut report)?;
+        self.stats.newton_iterations += u64::from(iterations);
+        self.stats.load_steps += 1;
+        self.stats.force_residual = end.residual;
+        if end.converged {
+            self.force_scale.record(end.force_scale);
+        } else {
+            if self.stats.lagged_frames == 0 {
+                tracing::warn!(
+                    "corotational-fem: static_lag: a frame ended at relative force residual {:.2e}, above \
+                     static_tolerance {:.1e}, after {iterations} Newton iteration(s): the body lags its \
+                     loads and catches up over the next frames (every such frame is counted in \
+                     lagged_frames; newton_force_residual is the last frame's)",
+                    end.residual,
+                    self.params.static_tolerance,
+                );
+            }
+            self.stats.lagged_frames += 1;
+        }
+        state.u = u;
+        state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
         Ok(report)
     }
 
