@@ -221,7 +221,7 @@ fn auto_lambda_ui(ui: &mut egui::Ui, row: &RoiRow, out: &mut Vec<Command>) {
         if ui
             .checkbox(&mut auto, label)
             .on_hover_text(
-                "choose λ where the map's size is flattest in λ (the scene's lambda = \"auto\")",
+                "choose λ where the map's size is flattest in λ, before it runs into a neighbour (the scene's lambda = \"auto\")",
             )
             .changed()
         {
