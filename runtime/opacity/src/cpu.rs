@@ -154,6 +154,31 @@ impl CpuGrowth {
         }
     }
 
+    /// Voxels at opacity ≥ 0.5 (fixed point ≥ 32768), counted on the field
+    /// itself: what [`crate::runner::voxels_above_half`] gives for
+    /// [`CpuGrowth::map`], without building the map.
+    pub fn voxels_above_half(&self) -> usize {
+        let r = self.state.region;
+        let d = r.dims();
+        (0..d[2])
+            .into_par_iter()
+            .map(|z| {
+                (0..d[1])
+                    .map(|y| {
+                        let start =
+                            self.state
+                                .work
+                                .local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
+                        self.field[start..start + d[0]]
+                            .iter()
+                            .filter(|q| q.load(Relaxed) >= 32768)
+                            .count()
+                    })
+                    .sum::<usize>()
+            })
+            .sum()
+    }
+
     /// Voxels that changed in the last step (the next step's sources).
     pub fn frontier_len(&self) -> usize {
         self.frontier.iter().map(Vec::len).sum()

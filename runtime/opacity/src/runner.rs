@@ -54,12 +54,15 @@ pub trait GrowRunner {
     ) -> Result<Grown, OpacityError>;
 }
 
-/// Runs `step(n)` in chunks of [`CHECK_EVERY`] with the abort check.
+/// Runs `step(n)` in chunks of [`CHECK_EVERY`] with the abort check, which
+/// asks `above_half` for the voxels at opacity ≥ 0.5 (the map is built
+/// once, at the end).
 fn drive(
     steps: Option<usize>,
     abort_above: Option<usize>,
     mut step: impl FnMut(usize) -> Result<GrowthReport, OpacityError>,
     mut map: impl FnMut() -> Result<OpacityMap, OpacityError>,
+    mut above_half: impl FnMut() -> Result<usize, OpacityError>,
 ) -> Result<(GrowthReport, OpacityMap, bool), OpacityError> {
     let mut total = GrowthReport::default();
     let mut left = steps.unwrap_or(usize::MAX);
@@ -76,9 +79,8 @@ fn drive(
         if let Some(n) = abort_above
             && !done
         {
-            let m = map()?;
-            if voxels_above_half(&m) > n {
-                return Ok((total, m, true));
+            if above_half()? > n {
+                return Ok((total, map()?, true));
             }
             continue;
         }
@@ -121,6 +123,7 @@ impl GrowRunner for CpuRunner<'_> {
                 abort_above,
                 |n| cell.borrow_mut().step(values, n),
                 || Ok(cell.borrow().map()),
+                || Ok(cell.borrow().voxels_above_half()),
             )?;
             Ok(Grown {
                 map,
@@ -161,6 +164,7 @@ impl GrowRunner for GpuRunner<'_> {
             abort_above,
             |n| cell.borrow_mut().step(gpu, values, n),
             || cell.borrow().map(gpu),
+            || Ok(voxels_above_half(&cell.borrow().map(gpu)?)),
         );
         let g = cell.into_inner();
         let (stats, ext) = (*g.stats(), *g.extinction());
