@@ -10,83 +10,33 @@
 //! `min_storage_buffer_offset_alignment`.
 
 use voxflex_core::error::ModelError;
+use voxflex_core::z_slabs::{HALO_PLANES, ZSlab, z_slabs};
 
-/// One z-slab of the volume.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Slab {
-    /// First footprint z-plane this slab samples.
-    pub z0: usize,
-    /// One past its last footprint z-plane.
-    pub z1: usize,
-    /// First voxel z-plane of the bound window.
-    pub v0: usize,
-    /// Last voxel z-plane of the bound window (inclusive).
-    pub v1: usize,
-    /// Byte offset of the bound window (aligned).
-    pub offset: u64,
-    /// Bytes bound.
-    pub bytes: u64,
-}
-
-/// Voxel planes a slab binds beyond its footprint planes (one below, two
-/// above the last: `z0 − 1 … z1 + 1`).
-const HALO_PLANES: u64 = 3;
+/// One z-slab of the volume: it owns the footprint planes `[z0, z1)` and
+/// binds voxel planes `v0 ..= v1`.
+pub(crate) type Slab = ZSlab;
 
 /// The slabs of an f32 volume of `dims` voxels with macro-cells of edge
-/// `cell` voxels: one when it fits a binding of `max_binding` bytes.
+/// `cell` voxels ([`z_slabs`]): one when it fits a binding of
+/// `max_binding` bytes.
 pub(crate) fn plan(
     dims: [usize; 3],
     cell: usize,
     max_binding: u64,
     align: u64,
 ) -> Result<Vec<Slab>, ModelError> {
-    let plane = (dims[0] * dims[1]) as u64 * 4;
-    let total = plane * dims[2] as u64;
-    let last = dims[2].saturating_sub(1);
-    let planes = last.max(1);
-    if total <= max_binding {
-        return Ok(vec![Slab {
-            z0: 0,
-            z1: planes,
-            v0: 0,
-            v1: last,
-            offset: 0,
-            bytes: total,
-        }]);
-    }
-    let align = align.max(4);
-    let cell = cell.max(1);
-    let fit = (max_binding.saturating_sub(align) / plane.max(1)).saturating_sub(HALO_PLANES);
-    let k = fit as usize / cell * cell;
-    if k == 0 {
-        let need = (cell as u64 + HALO_PLANES) * plane + align;
-        return Err(ModelError(format!(
-            "one macro-cell of volume z-planes and its halo ({} planes of f32) need {:.1} MiB in \
+    let footprints = dims[2].saturating_sub(1).max(1);
+    z_slabs(dims, footprints, cell, max_binding, align).ok_or_else(|| {
+        let planes = cell.max(1) as u64 + HALO_PLANES;
+        let need = planes * (dims[0] * dims[1]) as u64 * 4 + align.max(4);
+        ModelError(format!(
+            "one macro-cell of volume z-planes and its halo ({planes} planes of f32) need {:.1} MiB in \
              one GPU binding, above this GPU's max_storage_buffer_binding_size of {:.1} MiB; \
              render on the CPU (backend = \"cpu\") or use a smaller volume",
-            cell as u64 + HALO_PLANES,
             need as f64 / 1048576.0,
             max_binding as f64 / 1048576.0
-        )));
-    }
-    let mut out = Vec::new();
-    let mut z0 = 0;
-    while z0 < planes {
-        let z1 = (z0 + k).min(planes);
-        let v0 = z0.saturating_sub(1);
-        let v1 = (z1 + 1).min(last);
-        let offset = v0 as u64 * plane / align * align;
-        out.push(Slab {
-            z0,
-            z1,
-            v0,
-            v1,
-            offset,
-            bytes: (v1 as u64 + 1) * plane - offset,
-        });
-        z0 = z1;
-    }
-    Ok(out)
+        ))
+    })
 }
 
 /// The opacity-map words a slab's window reads, for a map box of `origin`
@@ -111,6 +61,9 @@ pub(crate) fn map_window(s: &Slab, origin: [usize; 3], dims: [usize; 3], align: 
 mod tests {
     use super::*;
 
+    /// The plan owns the footprint planes `0 .. n − 1` in whole
+    /// macro-cells (the tiling itself: `voxflex_core::z_slabs`'s tests),
+    /// and says what to do when one macro-cell does not fit.
     #[test]
     fn slabs_own_whole_cells_and_bind_their_taps() {
         let dims = [9, 7, 61];
@@ -118,20 +71,8 @@ mod tests {
         for (cell, limit) in [(4, 7 * plane + 256), (8, 12 * plane + 256), (4, 30 * plane)] {
             let s = plan(dims, cell, limit, 256).unwrap();
             assert!(s.len() > 1);
-            assert_eq!(s[0].z0, 0);
-            assert_eq!(s.last().unwrap().z1, 60);
-            for w in s.windows(2) {
-                assert_eq!(w[0].z1, w[1].z0);
-                assert_eq!(w[0].z1 % cell, 0);
-            }
-            for s in &s {
-                assert!(s.bytes <= limit);
-                assert_eq!(s.offset % 256, 0);
-                assert_eq!(s.v0, s.z0.saturating_sub(1));
-                assert_eq!(s.v1, (s.z1 + 1).min(60));
-                assert!(s.offset <= s.v0 as u64 * plane);
-                assert_eq!(s.offset + s.bytes, (s.v1 as u64 + 1) * plane);
-            }
+            assert_eq!((s[0].z0, s.last().unwrap().z1), (0, 60));
+            assert!(s.iter().all(|s| s.z0 % cell == 0 && s.bytes <= limit));
         }
         assert_eq!(plan(dims, 4, 61 * plane, 256).unwrap().len(), 1);
         let e = plan(dims, 4, 7 * plane + 255, 256).unwrap_err();

@@ -49,5 +49,6 @@ pub mod test_data;
 pub mod tet_mesh;
 pub mod triangle_surface;
 pub mod volume;
+pub mod z_slabs;
 
 pub use glam;

@@ -380,7 +380,7 @@ fn blocks_in(slab: &SourceSlab, blocks: &[u32], per_plane: u32, all: bool) -> Ve
     (0..blocks.len())
         .filter(|&n| {
             let z = (blocks[n] / per_plane) as usize * super::blocks::BLOCK_EDGE;
-            all || (slab.c0..slab.c1).contains(&z)
+            all || (slab.z0..slab.z1).contains(&z)
         })
         .collect()
 }
@@ -409,7 +409,7 @@ impl GpuKernels<'_> {
             chi: [0, 0, 0, c.interpolation.code()],
             misc: [c.background, 0.0, 0.0, 0.0],
             slab: [(s.offset / 4) as u32, s.v0 as u32, s.v1 as u32, 0],
-            cells: [s.c0 as u32, s.c1 as u32, 0, self.split() as u32],
+            cells: [s.z0 as u32, s.z1 as u32, 0, self.split() as u32],
             ..Default::default()
         }
     }
@@ -443,8 +443,8 @@ impl GpuKernels<'_> {
         let cd = c.mesh.cell_dims();
         let plane = (cd[0] * cd[1]) as u64;
         let align = (self.gpu.limits().min_storage_buffer_offset_alignment as u64).max(4);
-        let offset = s.c0 as u64 * plane / align * align;
-        let end = (s.c1 as u64 * plane).next_multiple_of(4);
+        let offset = s.z0 as u64 * plane / align * align;
+        let end = (s.z1 as u64 * plane).next_multiple_of(4);
         (offset, (end - offset).max(4))
     }
 

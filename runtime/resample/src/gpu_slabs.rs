@@ -4,9 +4,9 @@
 //! range's first element index).
 //!
 //! - **Output slabs** ([`output_slabs`]): runs of output z-planes.
-//! - **Source slabs** ([`source_slabs`]): runs of cell z-planes `[c0, c1)`
+//! - **Source slabs** ([`source_slabs`]): runs of cell z-planes `[z0, z1)`
 //!   (whole cell blocks); each binds the source values and the three
-//!   displacement arrays over the vertex planes `c0 − 1 … c1 + 1`. A cell
+//!   displacement arrays over the vertex planes `z0 − 1 … z1 + 1` (`voxflex_core::z_slabs`). A cell
 //!   `ck` reads vertex planes `ck` and `ck + 1`; the trilinear fill reads
 //!   the source at `ck + ⌊r⌋` and the plane above, `r` the rest position in
 //!   the cell, which lies in `[−ε, 1]` except in nearly degenerate
@@ -20,6 +20,7 @@
 
 use super::ResampleError;
 use crate::blocks::BLOCK_EDGE;
+use voxflex_core::z_slabs::{HALO_PLANES, ZSlab, z_slabs};
 
 /// One output z-slab: output planes `z0..=z1` (output voxel indices) bound
 /// as `bytes` bytes at byte offset `offset`.
@@ -81,79 +82,29 @@ pub(crate) fn output_slabs(
     Ok(out)
 }
 
-/// One source z-slab: the cells of planes `[c0, c1)` (whole blocks), with
-/// source values and displacements bound over vertex planes `v0..=v1`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct SourceSlab {
-    /// First cell z-plane this slab rasterises and fills.
-    pub c0: usize,
-    /// One past its last cell z-plane.
-    pub c1: usize,
-    /// First vertex z-plane of the bound window (`c0 − 1`, or 0).
-    pub v0: usize,
-    /// Last vertex z-plane of the bound window (`c1 + 1`, or the last).
-    pub v1: usize,
-    /// Byte offset of the bound window (aligned).
-    pub offset: u64,
-    /// Bytes bound (source values and each displacement array alike).
-    pub bytes: u64,
-}
-
-/// Vertex planes a slab of `k` cell planes binds beyond them: one below,
-/// two above (`c0 − 1 … c1 + 1` for cells `c0 … c1 − 1`).
-pub(crate) const HALO_PLANES: u64 = 3;
+/// One source z-slab: it owns the cell z-planes `[z0, z1)` (whole
+/// blocks), and binds source values and displacements over vertex planes
+/// `v0 ..= v1` (`z0 − 1`, `z1 + 1`, clamped).
+pub(crate) type SourceSlab = ZSlab;
 
 /// The source z-slabs of a sampling mesh of `vdims` vertices (= source
-/// voxels, f32 each): one covering everything when the source fits one
-/// binding, else slabs of whole cell blocks whose windows fit it.
+/// voxels, f32 each; [`z_slabs`]): one covering everything when the source
+/// fits one binding, else slabs of whole cell blocks whose windows fit it.
 pub(crate) fn source_slabs(
     vdims: [usize; 3],
     max_binding: u64,
     align: u64,
 ) -> Result<Vec<SourceSlab>, ResampleError> {
-    let plane = (vdims[0] * vdims[1]) as u64 * 4;
-    let total = plane * vdims[2] as u64;
     let cells = vdims[2].saturating_sub(1);
-    let last = vdims[2].saturating_sub(1);
-    if total <= max_binding {
-        return Ok(vec![SourceSlab {
-            c0: 0,
-            c1: cells,
-            v0: 0,
-            v1: last,
-            offset: 0,
-            bytes: total,
-        }]);
-    }
-    let align = align.max(4);
-    let fit = (max_binding.saturating_sub(align) / plane).saturating_sub(HALO_PLANES);
-    let k = (fit as usize / BLOCK_EDGE) * BLOCK_EDGE;
-    if k == 0 {
-        return Err(ResampleError::BindingTooLarge {
+    z_slabs(vdims, cells, BLOCK_EDGE, max_binding, align).ok_or_else(|| {
+        ResampleError::BindingTooLarge {
             what: "one cell block of source z-planes and its halo (7 planes of f32, plus the \
                    offset alignment)",
-            bytes: (BLOCK_EDGE as u64 + HALO_PLANES) * plane + align,
+            bytes: (BLOCK_EDGE as u64 + HALO_PLANES) * (vdims[0] * vdims[1]) as u64 * 4
+                + align.max(4),
             limit: max_binding,
-        });
-    }
-    let mut out = Vec::new();
-    let mut c0 = 0;
-    while c0 < cells {
-        let c1 = (c0 + k).min(cells);
-        let v0 = c0.saturating_sub(1);
-        let v1 = (c1 + 1).min(last);
-        let offset = v0 as u64 * plane / align * align;
-        out.push(SourceSlab {
-            c0,
-            c1,
-            v0,
-            v1,
-            offset,
-            bytes: (v1 as u64 + 1) * plane - offset,
-        });
-        c0 = c1;
-    }
-    Ok(out)
+        }
+    })
 }
 
 /// The filled-bit words of the output elements `[e0, e1)` (bit `e % 32` of
@@ -203,6 +154,9 @@ mod tests {
         assert!(output_slabs(dims, 0, 49, 100, 256).is_err());
     }
 
+    /// Source slabs own the cell planes `0 .. n − 1` in whole blocks (the
+    /// tiling itself: `voxflex_core::z_slabs`'s tests, on these dims and
+    /// limits too), and a source too large for one block is refused.
     #[test]
     fn source_slabs_are_whole_blocks_with_their_halo_inside_the_binding() {
         let v = [11, 6, 31];
@@ -210,30 +164,16 @@ mod tests {
         for limit in [7 * plane + 256, 10 * plane + 256, 20 * plane + 300] {
             let s = source_slabs(v, limit, 256).unwrap();
             assert!(s.len() > 1, "{limit}");
-            assert_eq!(s[0].c0, 0);
-            assert_eq!(s.last().unwrap().c1, 30);
-            for w in s.windows(2) {
-                assert_eq!(w[0].c1, w[1].c0);
-            }
-            for s in &s {
-                assert_eq!(s.c0 % BLOCK_EDGE, 0);
-                assert!(s.c1 > s.c0);
-                assert_eq!(s.offset % 256, 0);
-                assert!(s.bytes <= limit);
-                assert_eq!(s.v0, s.c0.saturating_sub(1));
-                assert_eq!(s.v1, (s.c1 + 1).min(30));
-                // The window holds every plane the slab's kernels read.
-                assert!(s.offset <= s.v0 as u64 * plane);
-                assert_eq!(s.offset + s.bytes, (s.v1 as u64 + 1) * plane);
-            }
+            assert_eq!((s[0].z0, s.last().unwrap().z1), (0, 30));
+            assert!(s.iter().all(|s| s.z0 % BLOCK_EDGE == 0 && s.bytes <= limit));
         }
         assert_eq!(source_slabs(v, 7 * plane + 256, 256).unwrap().len(), 8);
         let one = source_slabs(v, 31 * plane, 256).unwrap();
         assert_eq!(
             one,
             vec![SourceSlab {
-                c0: 0,
-                c1: 30,
+                z0: 0,
+                z1: 30,
                 v0: 0,
                 v1: 30,
                 offset: 0,
