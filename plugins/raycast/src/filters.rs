@@ -91,19 +91,35 @@ pub fn tricubic(p: Vec3, upper: Vec3, trilinear: impl Fn(Vec3) -> f32) -> f32 {
 /// is voxel `(i − 1 + x, j − 1 + y, k − 1 + z)`, indices clamped to the grid.
 pub type Block = [f32; 64];
 
-/// Derivative (`d = true`: `b[q+1] − b[q−1]`) or smoothing
-/// (`(b[q−1] + 2 b[q] + b[q+1]) / 4`) at the two inner positions `q = 1, 2`
-/// of a 4-tap line.
+/// One Sobel tap at the middle of three consecutive voxels: the
+/// derivative `h2 − h0` (`d = true`) or the smoothing `(h0 + 2 h1 + h2) / 4`
+/// — the f32 operations every Sobel value, per sample or cached
+/// ([`crate::gradient_cache`]), is made of.
+#[inline(always)]
+pub fn tap3(h0: f32, h1: f32, h2: f32, d: bool) -> f32 {
+    if d {
+        h2 - h0
+    } else {
+        (h0 + 2.0 * h1 + h2) * 0.25
+    }
+}
+
+/// [`tap3`] at the two inner positions `q = 1, 2` of a 4-tap line.
 #[inline(always)]
 fn tap(b: [f32; 4], d: bool) -> [f32; 2] {
-    if d {
-        [b[2] - b[0], b[3] - b[1]]
-    } else {
-        [
-            (b[0] + 2.0 * b[1] + b[2]) * 0.25,
-            (b[1] + 2.0 * b[2] + b[3]) * 0.25,
-        ]
-    }
+    [tap3(b[0], b[1], b[2], d), tap3(b[1], b[2], b[3], d)]
+}
+
+/// Trilinear interpolation of the 8 corners `c[x + 2 (y + 2 z)]` at
+/// fractions `f`: along x, then y, then z.
+#[inline(always)]
+pub fn trilinear8(c: [f32; 8], f: Vec3) -> f32 {
+    let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
+    let x00 = lerp(c[0], c[1], f.x);
+    let x10 = lerp(c[2], c[3], f.x);
+    let x01 = lerp(c[4], c[5], f.x);
+    let x11 = lerp(c[6], c[7], f.x);
+    lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z)
 }
 
 /// One Sobel component: the derivative along `axis` (a difference over two
@@ -144,12 +160,7 @@ fn sobel_component(block: &Block, axis: usize, f: Vec3) -> f32 {
             c[x + 2 * y + 4] = r[1];
         }
     }
-    let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
-    let x00 = lerp(c[0], c[1], f.x);
-    let x10 = lerp(c[2], c[3], f.x);
-    let x01 = lerp(c[4], c[5], f.x);
-    let x11 = lerp(c[6], c[7], f.x);
-    lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z)
+    trilinear8(c, f)
 }
 
 /// The Sobel gradient (voxel units: differences over two voxels, like the

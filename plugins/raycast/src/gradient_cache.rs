@@ -24,6 +24,7 @@
 //! Units: gradients in value units per voxel step × 2 (a difference over
 //! two voxels, as `filters::sobel`); indices are voxel indices, x fastest.
 
+use crate::filters::{tap3, trilinear8};
 use crate::macrocell::IndexBox;
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -131,15 +132,7 @@ impl GradientCache {
             at(0, 1, 1),
             at(1, 1, 1),
         ];
-        let lerp = |a: f32, b: f32, t: f32| a + t * (b - a);
-        let component = |axis: usize| {
-            let c = corners.map(|k| brick[k + axis]);
-            let x00 = lerp(c[0], c[1], f.x);
-            let x10 = lerp(c[2], c[3], f.x);
-            let x01 = lerp(c[4], c[5], f.x);
-            let x11 = lerp(c[6], c[7], f.x);
-            lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z)
-        };
+        let component = |axis: usize| trilinear8(corners.map(|k| brick[k + axis]), f);
         Some(Vec3::new(component(0), component(1), component(2)))
     }
 
@@ -150,17 +143,6 @@ impl GradientCache {
             return None;
         }
         Some(brick_gradients(values, self.dims, b))
-    }
-}
-
-/// `filters::tap` for one output: the difference `h2 − h0` or the
-/// smoothing `(h0 + 2 h1 + h2) / 4`, in its operation order.
-#[inline(always)]
-fn tap(h0: f32, h1: f32, h2: f32, diff: bool) -> f32 {
-    if diff {
-        h2 - h0
-    } else {
-        (h0 + 2.0 * h1 + h2) * 0.25
     }
 }
 
@@ -186,7 +168,7 @@ fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
         let h = &halo[HALO * line..HALO * (line + 1)];
         for c in 0..SIDE {
             for (k, out) in x_pass.iter_mut().enumerate() {
-                out[c + SIDE * line] = tap(h[c], h[c + 1], h[c + 2], k == 0);
+                out[c + SIDE * line] = tap3(h[c], h[c + 1], h[c + 2], k == 0);
             }
         }
     }
@@ -197,7 +179,7 @@ fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
             for cy in 0..SIDE {
                 for cx in 0..SIDE {
                     let at = |hy: usize| src[cx + SIDE * (hy + HALO * hz)];
-                    out[cx + SIDE * (cy + SIDE * hz)] = tap(at(cy), at(cy + 1), at(cy + 2), diff);
+                    out[cx + SIDE * (cy + SIDE * hz)] = tap3(at(cy), at(cy + 1), at(cy + 2), diff);
                 }
             }
         }
@@ -216,7 +198,7 @@ fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
                 for cx in 0..SIDE {
                     let at = |hz: usize| src[cx + SIDE * (cy + SIDE * hz)];
                     out[3 * (cx + SIDE * (cy + SIDE * cz)) + axis] =
-                        tap(at(cz), at(cz + 1), at(cz + 2), axis == 2);
+                        tap3(at(cz), at(cz + 1), at(cz + 2), axis == 2);
                 }
             }
         }

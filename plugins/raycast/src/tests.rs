@@ -23,6 +23,28 @@ fn with_volume(mut r: RaycastRenderer, v: &Volume) -> RaycastRenderer {
     r
 }
 
+/// Sets the voxels `lo ..< hi` (voxel index) of an i16 volume to `value`
+/// and returns that box as a dirty region (world mm).
+fn fill_box(vol: &mut Volume, lo: [usize; 3], hi: [usize; 3], value: i16) -> DirtyRegion {
+    let g = vol.grid;
+    let VoxelData::I16(d) = &mut vol.data else {
+        panic!("an i16 volume")
+    };
+    for k in lo[2]..hi[2] {
+        for j in lo[1]..hi[1] {
+            for i in lo[0]..hi[0] {
+                d[g.linear(i, j, k)] = value;
+            }
+        }
+    }
+    let corner =
+        |c: [usize; 3]| g.index_to_world(DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64));
+    DirtyRegion::Box {
+        min: corner(lo),
+        max: corner(hi.map(|h| h - 1)),
+    }
+}
+
 fn rgba8(r: &mut RaycastRenderer, cam: &Camera) -> (Vec<u8>, RenderStats) {
     let mut out = vec![0u8; cam.width as usize * cam.height as usize * 4];
     let stats = r.render(cam, ImageTarget::Cpu(&mut out)).unwrap();
@@ -295,19 +317,7 @@ fn dirty_rebuild_equals_full_rebuild() {
     };
     every_cell(&r, false);
     // Raise a local block of voxels to bone.
-    if let VoxelData::I16(d) = &mut vol.data {
-        for k in 10..15 {
-            for j in 20..31 {
-                for i in 5..17 {
-                    d[g.linear(i, j, k)] = 1500;
-                }
-            }
-        }
-    }
-    let dirty = DirtyRegion::Box {
-        min: g.index_to_world(DVec3::new(5.0, 20.0, 10.0)),
-        max: g.index_to_world(DVec3::new(16.0, 30.0, 14.0)),
-    };
+    let dirty = fill_box(&mut vol, [5, 20, 10], [17, 31, 15], 1500);
     r.set_volume(RenderVolume::Cpu(vol.view()), dirty).unwrap();
     // Every gradient the cache holds or builds now is the changed volume's
     // (the block may sit behind the skull, so the image alone cannot tell).
@@ -699,19 +709,7 @@ fn gpu_dirty_rebuild_equals_full_rebuild() {
         gr.macro_cells().unwrap(),
         with_volume(cpu(""), &vol).macro_cells().unwrap()
     );
-    if let VoxelData::I16(d) = &mut vol.data {
-        for k in 20..27 {
-            for j in 3..9 {
-                for i in 16..33 {
-                    d[g.linear(i, j, k)] = -500;
-                }
-            }
-        }
-    }
-    let dirty = DirtyRegion::Box {
-        min: g.index_to_world(DVec3::new(16.0, 3.0, 20.0)),
-        max: g.index_to_world(DVec3::new(32.0, 8.0, 26.0)),
-    };
+    let dirty = fill_box(&mut vol, [16, 3, 20], [33, 9, 27], -500);
     gr.set_volume(RenderVolume::Cpu(vol.view()), dirty).unwrap();
     let full = with_volume(cpu(""), &vol);
     assert_eq!(gr.macro_cells().unwrap(), full.macro_cells().unwrap());
@@ -795,19 +793,7 @@ fn gpu_split_dirty_rebuild_and_gpu_volume() {
     let mut gr = gpu_renderer("", &capped);
     gr.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
         .unwrap();
-    if let VoxelData::I16(d) = &mut vol.data {
-        for k in 5..30 {
-            for j in 3..9 {
-                for i in 16..33 {
-                    d[g.linear(i, j, k)] = -500;
-                }
-            }
-        }
-    }
-    let dirty = DirtyRegion::Box {
-        min: g.index_to_world(DVec3::new(16.0, 3.0, 5.0)),
-        max: g.index_to_world(DVec3::new(32.0, 8.0, 29.0)),
-    };
+    let dirty = fill_box(&mut vol, [16, 3, 5], [33, 9, 30], -500);
     gr.set_volume(RenderVolume::Cpu(vol.view()), dirty).unwrap();
     let mut full = with_volume(cpu(""), &vol);
     assert_eq!(gr.macro_cells().unwrap(), full.macro_cells().unwrap());
