@@ -126,6 +126,17 @@ impl CpuGrowth {
         self.frontier.iter().all(Vec::is_empty)
     }
 
+    /// The field's row `(y, z)` of the region's box (box-local indices):
+    /// the voxels `x = 0 .. dims[0]` of that row.
+    fn region_row(&self, y: usize, z: usize) -> &[AtomicU16] {
+        let r = self.state.region;
+        let start = self
+            .state
+            .work
+            .local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
+        &self.field[start..start + r.dims()[0]]
+    }
+
     /// The map as it stands, over the region's box (voxels that ever rose
     /// above `o_min`, plus the seed); `outside` is `o_min`.
     pub fn map(&self) -> OpacityMap {
@@ -137,12 +148,8 @@ impl CpuGrowth {
             .enumerate()
             .for_each(|(z, slab)| {
                 for (y, row) in slab.chunks_mut(d[0]).enumerate() {
-                    let start = self
-                        .state
-                        .work
-                        .local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
-                    for (x, o) in row.iter_mut().enumerate() {
-                        *o = self.field[start + x].load(Relaxed);
+                    for (o, q) in row.iter_mut().zip(self.region_row(y, z)) {
+                        *o = q.load(Relaxed);
                     }
                 }
             });
@@ -158,23 +165,14 @@ impl CpuGrowth {
     /// itself: what [`crate::runner::voxels_above_half`] gives for
     /// [`CpuGrowth::map`], without building the map.
     pub fn voxels_above_half(&self) -> usize {
-        let r = self.state.region;
-        let d = r.dims();
+        let d = self.state.region.dims();
         (0..d[2])
             .into_par_iter()
             .map(|z| {
                 (0..d[1])
-                    .map(|y| {
-                        let start =
-                            self.state
-                                .work
-                                .local_linear([r.lo[0], r.lo[1] + y, r.lo[2] + z]);
-                        self.field[start..start + d[0]]
-                            .iter()
-                            .filter(|q| q.load(Relaxed) >= 32768)
-                            .count()
-                    })
-                    .sum::<usize>()
+                    .flat_map(|y| self.region_row(y, z))
+                    .filter(|q| q.load(Relaxed) >= 32768)
+                    .count()
             })
             .sum()
     }
