@@ -81,7 +81,7 @@ pub fn roi_notes(out: &RoiOutcome) -> serde_json::Value {
             .iter()
             .map(|t| {
                 serde_json::json!({
-                    "lambda": t.lambda, "voxels": t.voxels, "steps": t.steps, "aborted": t.aborted
+                    "lambda": t.lambda, "voxels": t.voxels, "visits": t.visits, "aborted": t.aborted
                 })
             })
             .collect();

@@ -10,13 +10,13 @@
 //! neighbour, so `V` rises again. Between the two `V(λ)` is flattest. The
 //! rule:
 //!
-//! 1. grow at λ = [`CANDIDATES`] (√2 apart, 1 … 32), in increasing order,
-//!    stopping early at a **jump**: `V(λ_{k+1}) > (1 + JUMP) V(λ_k)`
+//! 1. measure `V` at λ = [`CANDIDATES`] (√2 apart, 1 … 32), in increasing
+//!    order, stopping early at a **jump**: `V(λ_{k+1}) > (1 + JUMP) V(λ_k)`
 //!    ([`JUMP`]), or at a **break**: a step whose growth `r − 1` exceeds
 //!    [`BREAK`] times the mean growth of the steps before it (at least two
-//!    of them) — the region has started to run into a neighbour. A growth
+//!    of them) — the region has started to run into a neighbour. A trial
 //!    is cut short as soon as it passes the jump or break bound, so a
-//!    leaking λ costs little, and no λ past it is grown;
+//!    leaking λ costs little, and no λ past it is tried;
 //! 2. for each step taken before a break, the growth ratio
 //!    `r_k = V(λ_{k+1}) / V(λ_k)` (steps from regions under
 //!    [`MIN_VOXELS`] are skipped);
@@ -27,15 +27,20 @@
 //!    favour of a half-grown map). Without any ratio (the first step
 //!    already jumps) it is the last candidate before the jump.
 //!
-//! The map is that trial's growth — kept from the search while the kept
-//! maps fit [`KEPT_BYTES`], else grown once more at that λ (the same map:
-//! a growth is deterministic and resumable). Figures (Dice per organ for
+//! The sizes `V(λ_k)` come from one [`PathCostScan`] that continues from
+//! each λ to the next (the converged map at λ is a λ-independent path cost
+//! compared with thresholds ∝ λ; see that module), not from one growth per
+//! λ; then the map is grown once, at the λ chosen, on the runner's backend.
+//! The scan uses the real-valued rule, the growth fixed point: their
+//! regions can differ by the voxels whose opacity lies within rounding of
+//! ½, so a trial's `voxels` and the map's count may differ by a few. Figures (Dice per organ for
 //! this rule and for fixed λ on `phantom:abdomen`) are in docs/BENCHMARKS.md and in
 //! `docs/roi_dice_vs_lambda.md`.
 
 use super::OpacityError;
 use super::params::GrowthParams;
-use super::runner::{GrowRunner, Grown, voxels_above_half};
+use super::path_cost::PathCostScan;
+use super::runner::{GrowRunner, Grown, ScanInput};
 
 /// λ tried, in order: `2^(k/2)`, k = 0 … 10.
 pub const CANDIDATES: [f32; 11] = [
@@ -73,21 +78,17 @@ pub const FLAT_TOL: f64 = 0.25;
 /// ratio: a seed that has not spread yet.
 pub const MIN_VOXELS: usize = 27;
 
-/// The trials' maps kept for the answer, in bytes at most: the oldest go
-/// first (the rule picks among the later candidates); a map not kept is
-/// grown again.
-pub const KEPT_BYTES: usize = 256 << 20;
-
 /// One candidate λ tried by the search.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trial {
     /// λ.
     pub lambda: f32,
-    /// Voxels at opacity ≥ 0.5 (a lower bound when `aborted`).
+    /// Voxels at opacity ≥ 0.5 (a lower bound when `aborted`), by the
+    /// real-valued rule ([`PathCostScan`]).
     pub voxels: usize,
-    /// Growth steps run.
-    pub steps: u64,
-    /// Cut short at the jump bound.
+    /// Voxels the scan relaxed for this λ (continuing the λ before).
+    pub visits: u64,
+    /// Cut short at the jump or break bound.
     pub aborted: bool,
 }
 
@@ -152,16 +153,34 @@ fn first_break(ratios: &[(f32, f64)]) -> Option<usize> {
     (0..ratios.len()).find(|&k| break_bound(&ratios[..k]).is_some_and(|b| ratios[k].1 - 1.0 > b))
 }
 
-/// Runs the search with `runner` (see the module docs); `params.lambda` is
-/// ignored, the other fields are used as given, `steps` caps every trial.
+/// Runs the search (see the module docs) on `input` — the values
+/// `runner` grows on — then grows the map at the λ chosen on `runner`'s
+/// backend, capped at `steps` steps. `params.lambda` is ignored, the other
+/// fields are used as given.
 pub fn auto_lambda(
+    input: ScanInput<'_>,
     runner: &mut dyn GrowRunner,
     params: GrowthParams,
     steps: Option<usize>,
 ) -> Result<AutoLambda, OpacityError> {
+    let (lambda, trials) = choose_lambda(input, params)?;
+    let grown = runner.grow(GrowthParams { lambda, ..params }, steps)?;
+    Ok(AutoLambda {
+        lambda,
+        trials,
+        grown,
+    })
+}
+
+/// The λ the rule picks on `input` and the trials it measured, from one
+/// [`PathCostScan`] (no map is grown). `params.lambda` is ignored.
+pub fn choose_lambda(
+    input: ScanInput<'_>,
+    params: GrowthParams,
+) -> Result<(f32, Vec<Trial>), OpacityError> {
+    let mut scan = PathCostScan::new(input, params)?;
     let mut trials: Vec<Trial> = Vec::new();
-    let mut kept: Vec<(f32, Grown)> = Vec::new();
-    for &lambda in &CANDIDATES {
+    loop {
         // Cut short past the jump, or past the break when two steps are in.
         let growth = break_bound(&step_ratios(&trials)).map_or(JUMP, |b| b.min(JUMP));
         let bound = trials
@@ -170,39 +189,18 @@ pub fn auto_lambda(
             .map(|t| t.voxels)
             .filter(|&v| v >= MIN_VOXELS)
             .map(|v| ((1.0 + growth) * v as f64).floor() as usize);
-        let grown = runner.grow(GrowthParams { lambda, ..params }, steps, bound)?;
-        let voxels = voxels_above_half(&grown.map);
+        let Some((lambda, found)) = scan.next_phase(bound) else {
+            break;
+        };
         trials.push(Trial {
             lambda,
-            voxels,
-            steps: grown.report.steps,
-            aborted: grown.aborted,
+            voxels: found.voxels,
+            visits: found.visits,
+            aborted: found.cut,
         });
-        if bound.is_some_and(|b| voxels > b) {
+        if found.cut {
             break;
         }
-        keep(&mut kept, lambda, grown);
     }
-    let lambda = pick(&trials);
-    let grown = match kept.into_iter().find(|(l, _)| *l == lambda) {
-        Some((_, grown)) => grown,
-        None => runner.grow(GrowthParams { lambda, ..params }, steps, None)?,
-    };
-    Ok(AutoLambda {
-        lambda,
-        trials,
-        grown,
-    })
-}
-
-/// Keeps a trial's growth (run to its end, not cut short), dropping the
-/// oldest while the kept maps exceed [`KEPT_BYTES`].
-fn keep(kept: &mut Vec<(f32, Grown)>, lambda: f32, grown: Grown) {
-    if grown.aborted {
-        return;
-    }
-    kept.push((lambda, grown));
-    while kept.iter().map(|(_, g)| g.map.bytes()).sum::<usize>() > KEPT_BYTES {
-        kept.remove(0);
-    }
+    Ok((pick(&trials), trials))
 }

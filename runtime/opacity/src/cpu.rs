@@ -161,22 +161,6 @@ impl CpuGrowth {
         }
     }
 
-    /// Voxels at opacity ≥ 0.5 (fixed point ≥ 32768), counted on the field
-    /// itself: what [`crate::runner::voxels_above_half`] gives for
-    /// [`CpuGrowth::map`], without building the map.
-    pub fn voxels_above_half(&self) -> usize {
-        let d = self.state.region.dims();
-        (0..d[2])
-            .into_par_iter()
-            .map(|z| {
-                (0..d[1])
-                    .flat_map(|y| self.region_row(y, z))
-                    .filter(|q| q.load(Relaxed) >= 32768)
-                    .count()
-            })
-            .sum()
-    }
-
     /// Voxels that changed in the last step (the next step's sources).
     pub fn frontier_len(&self) -> usize {
         self.frontier.iter().map(Vec::len).sum()

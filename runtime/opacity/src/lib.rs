@@ -134,6 +134,7 @@ pub mod limits;
 pub mod params;
 #[cfg(any(test, feature = "test-support"))]
 pub mod parity;
+pub mod path_cost;
 pub mod report;
 pub mod roi;
 pub mod runner;
@@ -141,6 +142,8 @@ pub mod seed;
 pub mod set;
 pub mod state;
 
+#[cfg(test)]
+mod path_cost_tests;
 #[cfg(test)]
 mod roi_tests;
 #[cfg(test)]
@@ -157,7 +160,7 @@ pub use limits::{GrowthLimits, LimitHits};
 pub use params::{GrowthParams, MAX_SEED_RADIUS};
 pub use report::GrowthReport;
 pub use roi::{LambdaChoice, RoiOutcome, RoiRequest, grow_roi};
-pub use runner::{CpuRunner, GpuRunner, GrowRunner, Grown};
+pub use runner::{CpuRunner, GpuRunner, GrowRunner, Grown, ScanInput};
 pub use seed::{Seed, SeedStats, seed_stats};
 pub use set::{OpacityMapSet, combine_max};
 pub use state::{Growth, GrowthState};

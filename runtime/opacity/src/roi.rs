@@ -6,7 +6,7 @@ use super::auto_lambda::{AutoLambda, auto_lambda};
 use super::gpu::GpuOpacityVolume;
 use super::limits::{GrowthLimits, LimitHits};
 use super::params::GrowthParams;
-use super::runner::{CpuRunner, GpuRunner, GrowRunner, Grown, voxels_above_half};
+use super::runner::{CpuRunner, GpuRunner, GrowRunner, Grown, ScanInput, voxels_above_half};
 use super::seed::Seed;
 use super::{OpacityError, check_volume};
 use crate::volume::VolumeView;
@@ -143,10 +143,16 @@ pub fn grow_roi(
                         lambda,
                         ..req.params
                     };
-                    Ok((runner.grow(p, req.steps, None)?, lambda, None))
+                    Ok((runner.grow(p, req.steps)?, lambda, None))
                 }
                 LambdaChoice::Auto => {
-                    let a = auto_lambda(runner, req.params, req.steps)?;
+                    let input = ScanInput {
+                        volume,
+                        values,
+                        limits: GrowthLimits::default(),
+                        seed: req.seed,
+                    };
+                    let a = auto_lambda(input, runner, req.params, req.steps)?;
                     Ok((a.grown.clone(), a.lambda, Some(a)))
                 }
             }

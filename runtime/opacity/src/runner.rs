@@ -5,6 +5,7 @@
 use super::cpu::CpuGrowth;
 use super::extinction::Extinction;
 use super::gpu::{GpuGrowth, GpuOpacityVolume};
+use super::limits::GrowthLimits;
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::{Seed, SeedStats};
@@ -12,10 +13,6 @@ use super::state::Growth;
 use super::{OpacityError, OpacityMap};
 use crate::volume::VolumeView;
 use voxflex_core::gpu::GpuService;
-
-/// Steps between two checks of the region's size when a run may be cut
-/// short ([`GrowRunner::grow`]'s `abort_above`).
-pub const CHECK_EVERY: usize = 16;
 
 /// One finished (or cut short) growth.
 #[derive(Clone, Debug)]
@@ -28,10 +25,6 @@ pub struct Grown {
     pub stats: SeedStats,
     /// The update constants used.
     pub ext: Extinction,
-    /// True when the run was stopped because more than `abort_above` voxels
-    /// reached opacity ≥ 0.5 (the growth is monotone, so the converged map
-    /// would have at least as many).
-    pub aborted: bool,
 }
 
 /// Voxels of `map` at opacity ≥ 0.5 (fixed point ≥ 32768); voxels outside
@@ -43,53 +36,23 @@ pub fn voxels_above_half(map: &OpacityMap) -> usize {
 /// Grows maps from one seed on one backend.
 pub trait GrowRunner {
     /// Seeds a growth with `params` and runs it to convergence, or for at
-    /// most `steps` steps; with `abort_above = Some(n)` it stops as soon as
-    /// more than `n` voxels hold opacity ≥ 0.5 (checked every
-    /// [`CHECK_EVERY`] steps and at the end).
-    fn grow(
-        &mut self,
-        params: GrowthParams,
-        steps: Option<usize>,
-        abort_above: Option<usize>,
-    ) -> Result<Grown, OpacityError>;
+    /// most `steps` steps.
+    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError>;
 }
 
-/// Runs `step(n)` in chunks of [`CHECK_EVERY`] with the abort check, which
-/// asks `above_half` for the voxels at opacity ≥ 0.5 (the map is built
-/// once, at the end).
-fn drive(
-    steps: Option<usize>,
-    abort_above: Option<usize>,
-    mut step: impl FnMut(usize) -> Result<GrowthReport, OpacityError>,
-    mut map: impl FnMut() -> Result<OpacityMap, OpacityError>,
-    mut above_half: impl FnMut() -> Result<usize, OpacityError>,
-) -> Result<(GrowthReport, OpacityMap, bool), OpacityError> {
-    let mut total = GrowthReport::default();
-    let mut left = steps.unwrap_or(usize::MAX);
-    let chunk = if abort_above.is_some() {
-        CHECK_EVERY
-    } else {
-        usize::MAX
-    };
-    loop {
-        let r = step(chunk.min(left))?;
-        total.merge(&r);
-        left = left.saturating_sub(r.steps as usize);
-        let done = r.converged || left == 0;
-        if let Some(n) = abort_above
-            && !done
-        {
-            if above_half()? > n {
-                return Ok((total, map()?, true));
-            }
-            continue;
-        }
-        if done {
-            let m = map()?;
-            let aborted = abort_above.is_some_and(|n| voxels_above_half(&m) > n);
-            return Ok((total, m, aborted));
-        }
-    }
+/// What the automatic λ's scan ([`crate::path_cost::PathCostScan`])
+/// reads, on the CPU whatever the growth's backend: the values the growth
+/// reads, as values and the bounds still to apply to them.
+#[derive(Clone, Copy)]
+pub struct ScanInput<'a> {
+    /// The unbounded volume (seed statistics).
+    pub volume: VolumeView<'a>,
+    /// The values the costs come from (the volume or its bounded copy).
+    pub values: VolumeView<'a>,
+    /// Bounds still to apply to `values` (none when already applied).
+    pub limits: GrowthLimits,
+    /// The seed.
+    pub seed: Seed,
 }
 
 /// The CPU backend: statistics from `volume`, values read from `values`
@@ -105,32 +68,18 @@ pub struct CpuRunner<'a> {
 }
 
 impl GrowRunner for CpuRunner<'_> {
-    fn grow(
-        &mut self,
-        params: GrowthParams,
-        steps: Option<usize>,
-        abort_above: Option<usize>,
-    ) -> Result<Grown, OpacityError> {
+    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError> {
         // Each step is four short parallel loops: on a worker they split
         // with no hand-over (a growth of 50 steps on a small volume spent
         // most of its time in hand-overs).
         voxflex_core::on_worker::on_worker(|| {
             let mut g = CpuGrowth::new(self.volume, &self.seed, params)?;
-            let values = self.values;
-            let cell = std::cell::RefCell::new(&mut g);
-            let (report, map, aborted) = drive(
-                steps,
-                abort_above,
-                |n| cell.borrow_mut().step(values, n),
-                || Ok(cell.borrow().map()),
-                || Ok(cell.borrow().voxels_above_half()),
-            )?;
+            let report = g.step(self.values, steps.unwrap_or(usize::MAX))?;
             Ok(Grown {
-                map,
+                map: g.map(),
                 report,
                 stats: *g.stats(),
                 ext: *g.extinction(),
-                aborted,
             })
         })
     }
@@ -150,32 +99,20 @@ pub struct GpuRunner<'a> {
 }
 
 impl GrowRunner for GpuRunner<'_> {
-    fn grow(
-        &mut self,
-        params: GrowthParams,
-        steps: Option<usize>,
-        abort_above: Option<usize>,
-    ) -> Result<Grown, OpacityError> {
+    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError> {
         let (gpu, values) = (self.gpu, self.values);
-        let g = GpuGrowth::new(gpu, values, self.volume, &self.seed, params)?;
-        let cell = std::cell::RefCell::new(g);
-        let out = drive(
-            steps,
-            abort_above,
-            |n| cell.borrow_mut().step(gpu, values, n),
-            || cell.borrow().map(gpu),
-            || Ok(voxels_above_half(&cell.borrow().map(gpu)?)),
-        );
-        let g = cell.into_inner();
+        let mut g = GpuGrowth::new(gpu, values, self.volume, &self.seed, params)?;
+        let out = g
+            .step(gpu, values, steps.unwrap_or(usize::MAX))
+            .and_then(|report| Ok((report, g.map(gpu)?)));
         let (stats, ext) = (*g.stats(), *g.extinction());
         g.release(gpu);
-        let (report, map, aborted) = out?;
+        let (report, map) = out?;
         Ok(Grown {
             map,
             report,
             stats,
             ext,
-            aborted,
         })
     }
 }

@@ -222,25 +222,6 @@ fn a_neighbour_within_a_few_sigma_is_absorbed() {
 }
 
 #[test]
-fn the_field_count_above_half_equals_the_maps() {
-    let p = three_spheres(40, 3.0, 9);
-    let mut g = CpuGrowth::new(
-        p.volume.view(),
-        &Seed::Voxel(p.a.centre_voxel()),
-        GrowthParams::default(),
-    )
-    .unwrap();
-    for n in [0, 1, 3, 10, usize::MAX] {
-        if n > 0 {
-            g.step(p.volume.view(), n).unwrap();
-        }
-        let want = crate::runner::voxels_above_half(&g.map());
-        assert_eq!(g.voxels_above_half(), want, "after {n} more steps");
-    }
-    assert!(g.voxels_above_half() > 1000);
-}
-
-#[test]
 fn stepwise_then_continue_equals_run() {
     let p = three_spheres(48, 3.0, 11);
     let seed = Seed::Voxel(p.a.centre_voxel());

@@ -293,15 +293,6 @@ impl SessionRoi {
         Ok(())
     }
 
-    /// The values its growth reads on `device` (see [`reads`]).
-    pub(crate) fn reads<'a>(
-        &'a self,
-        volume: &'a Volume,
-        device: RoiDevice<'a>,
-    ) -> (VolumeView<'a>, RoiDevice<'a>) {
-        reads(&self.bounded, volume, device)
-    }
-
     /// Re-grows on `device` as far as before when its growth is released
     /// or lives on another device (a CPU growth is dropped; a GPU one must
     /// have been released with its context before).

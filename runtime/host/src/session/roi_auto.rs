@@ -2,12 +2,11 @@
 //! of `voxflex_opacity::auto_lambda` (the scene's `lambda = "auto"`) on
 //! the session's current volume — what the viewer's *auto λ* box drives.
 
-use super::roi::RoiDevice;
 use super::{RoiId, Session, roi_err};
 use crate::pipeline::RunError;
 use std::time::Instant;
-use voxflex_opacity::auto_lambda::{Trial, auto_lambda};
-use voxflex_opacity::{CpuRunner, GpuRunner, GrowthParams, GrowthReport};
+use voxflex_opacity::auto_lambda::{Trial, choose_lambda};
+use voxflex_opacity::{GrowthParams, GrowthReport, ScanInput};
 
 /// What [`Session::roi_auto_lambda`] chose and tried.
 #[derive(Clone, Debug, PartialEq)]
@@ -23,7 +22,7 @@ pub struct AutoLambdaReport {
 
 impl Session {
     /// Chooses ROI map `id`'s λ by the plateau rule (the scene's
-    /// `lambda = "auto"`: trial growths from its seed at λ = 1 … 32, √2
+    /// `lambda = "auto"`: sizes of its region at λ = 1 … 32, √2
     /// apart, on the current volume with its o_min, o_max and σ floor),
     /// makes it the map's λ and grows the map to convergence at it (and
     /// to convergence again on every new volume, at the same λ: the rule
@@ -37,37 +36,18 @@ impl Session {
         let t = Instant::now();
         let (rois, volume, device) = self.roi_parts();
         let (seed, params) = (rois[i].seed, rois[i].params);
-        let view = volume.view();
-        // Bounded, the trials read the bounded values, as the map does.
-        let (values, on) = rois[i].reads(volume, device);
-        let found = match on {
-            RoiDevice::Cpu => auto_lambda(
-                &mut CpuRunner {
-                    volume: view,
-                    values,
-                    seed,
-                },
-                params,
-                None,
-            ),
-            RoiDevice::Gpu { gpu, values } => auto_lambda(
-                &mut GpuRunner {
-                    gpu,
-                    values,
-                    volume: view,
-                    seed,
-                },
-                params,
-                None,
-            ),
-        }
-        .map_err(roi_err)?;
+        // The scan reads the volume with the map's bounds applied, as the
+        // map's growth does, on the CPU whatever the backend.
+        let input = ScanInput {
+            volume: volume.view(),
+            values: volume.view(),
+            limits: rois[i].limits,
+            seed,
+        };
+        let (lambda, trials) = choose_lambda(input, params).map_err(roi_err)?;
         let roi = &mut rois[i];
         let was = (roi.params, roi.lambda_auto, roi.to_end);
-        roi.params = GrowthParams {
-            lambda: found.lambda,
-            ..params
-        };
+        roi.params = GrowthParams { lambda, ..params };
         roi.lambda_auto = true;
         roi.to_end = true;
         let report = match roi.regrow(volume, device) {
@@ -81,8 +61,8 @@ impl Session {
             .stage("roi")
             .record_run(t.elapsed(), report.visits);
         Ok(AutoLambdaReport {
-            lambda: found.lambda,
-            trials: found.trials,
+            lambda,
+            trials,
             report,
         })
     }

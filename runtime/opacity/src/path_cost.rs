@@ -1,0 +1,468 @@
+//! [`PathCostScan`]: the region sizes the automatic λ needs, `V(λ)` for
+//! every candidate, from **one** search instead of one growth per λ.
+//!
+//! # Why one search answers every λ
+//!
+//! In real arithmetic the converged opacity is `o_v = o_max − D_v / (λ σ_s)`
+//! (clamped below at `o_min`), where the **path cost** `D_v` does not depend
+//! on λ:
+//!
+//! ```text
+//! D_seed = 0,   D_v = max(0, min_n D_n + c_v),   c_v = min(|d_s − d_v|, cap) − σ_s
+//! ```
+//!
+//! (value units; `n` over the neighbours that are *reached*). Substituting
+//! `o = o_max − D/(λσ_s)` into the update `o_v = min(o_max, max_n o_n − E_v)`
+//! with `E_v = c_v / (λσ_s)` gives exactly this recurrence: the clamp at
+//! `o_max` is the `max(0, ·)`. λ enters in two places only:
+//!
+//! - **reached** (`o > o_min`, the rule that opacity flows only out of
+//!   reached voxels) is `D < R(λ) = (o_max − o_min) λ σ_s`;
+//! - the region, opacity ≥ ½ (fixed point ≥ 32768), is `D ≤ T(λ) = (o_max
+//!   − 32768/65535) λ σ_s`.
+//!
+//! So the costs for λ₂ > λ₁ are the costs for λ₁ relaxed further from the
+//! voxels whose cost lies in `[R(λ₁), R(λ₂))`: the search runs in
+//! **phases**, one per candidate, each continuing the last, and `V(λ_k)` is
+//! the number of voxels with `D ≤ T(λ_k)` when phase `k` ends. The whole
+//! scan costs about one growth to the largest λ it reaches; the trial
+//! growths it replaces cost one growth each (on `phantom:abdomen` at 1.5 mm,
+//! ten of them: docs/BENCHMARKS.md, "ROI maps").
+//!
+//! # The search
+//!
+//! Costs can be negative (a voxel within σ_s of `d_s`), so this is a
+//! label-correcting search, not Dijkstra's: voxels wait in buckets of cost
+//! (width `R(1)/16`), the lowest bucket is taken first, and a voxel whose
+//! cost drops is queued again. A phase stops when no queued voxel is
+//! reached (`D < R`); those left wait for the next phase. Two neighbours
+//! whose costs sum below zero would lower each other by that sum on every
+//! pass (the growth's *pumping pair*, [`crate::Extinction::pumps`]): as in
+//! the growth, the negative one of a reached pair takes its final cost, 0,
+//! at once.
+//!
+//! Storage: one f32 cost per voxel in 8³ bricks allocated when the search
+//! first reaches them (2 KiB each; the region's bricks only), the bucket
+//! queues (4 bytes per queued voxel).
+//!
+//! # Against the growth
+//!
+//! The growth ([`crate::CpuGrowth`], the WGSL kernels) works in fixed point
+//! and rounds each step's extinction, so its region at λ can differ from
+//! `D ≤ T(λ)` in voxels whose opacity lies within that rounding of ½: a
+//! handful per hundred thousand (the tests bound it on the abdomen's
+//! organs). The scan only chooses λ; the map is then grown at that λ.
+
+use super::OpacityError;
+use super::auto_lambda::CANDIDATES;
+use super::extinction::sanitize;
+use super::limits::GrowthLimits;
+use super::params::GrowthParams;
+use super::runner::ScanInput;
+use super::seed::{SeedStats, seed_stats};
+use crate::opacity_map::to_fixed;
+use crate::volume::{Sample, VolumeView};
+use crate::with_voxels;
+use voxflex_core::fast_div::FastDiv;
+
+/// Cost of a voxel not reached yet.
+const UNSEEN: f32 = f32::INFINITY;
+
+/// Buckets per `R(1)`.
+const BUCKETS_PER_UNIT: f32 = 16.0;
+
+/// Voxels processed between two checks of a phase's bound.
+const CHECK_EVERY: u64 = 4096;
+
+/// What one phase of the scan found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseResult {
+    /// Voxels with `D ≤ T(λ)` (opacity ≥ ½ at λ); a lower bound when `cut`.
+    pub voxels: usize,
+    /// Voxels taken from the queue and relaxed in this phase.
+    pub visits: u64,
+    /// Stopped as soon as `voxels` passed the bound given.
+    pub cut: bool,
+}
+
+/// The path-cost search of one seed over increasing λ (see the module
+/// docs). Voxel indices are linear, x fastest.
+pub struct PathCostScan<'a> {
+    values: VolumeView<'a>,
+    limits: GrowthLimits,
+    seed: [usize; 3],
+    mean: f32,
+    sigma: f32,
+    /// Cap on `|d_s − d_v|`: `(λ_max + 2) σ_s`, as the growth's at λ_max.
+    cap: f32,
+    /// `(o_max − o_min) σ_s` with the opacities in fixed point: `R(λ) =
+    /// reach · λ`.
+    reach: f32,
+    /// Costs at or above this are never reached at any candidate λ.
+    limit: f32,
+    dims: [usize; 3],
+    div_x: FastDiv,
+    div_y: FastDiv,
+    offsets: Vec<[isize; 3]>,
+    costs: Bricks,
+    buckets: Vec<Vec<u32>>,
+    /// Buckets per unit of cost (value units).
+    per_bucket: f32,
+    /// No bucket below this holds a voxel.
+    lowest: usize,
+    /// `bins[k]`: labelled voxels with `T(λ_{k−1}) < D ≤ T(λ_k)`.
+    bins: Vec<usize>,
+    /// `T(λ_k) = (o_max − 32768/65535) σ_s λ_k`, one per candidate.
+    thresholds: Vec<f32>,
+    phase: usize,
+}
+
+impl<'a> PathCostScan<'a> {
+    /// Seeds a scan: statistics from `input.volume` (unbounded, as the
+    /// growth's), costs from `input.values` with `input.limits` blocking
+    /// voxels on top. Nothing is searched yet.
+    pub fn new(input: ScanInput<'a>, params: GrowthParams) -> Result<Self, OpacityError> {
+        let ScanInput {
+            volume,
+            values,
+            limits,
+            seed,
+        } = input;
+        params.validate()?;
+        limits.validate()?;
+        crate::check_volume(&values)?;
+        if values.grid.dims != volume.grid.dims {
+            return Err(OpacityError::VolumeMismatch {
+                expected: volume.grid.dims,
+                actual: values.grid.dims,
+            });
+        }
+        let voxel = seed.resolve(&volume.grid)?;
+        let stats: SeedStats = seed_stats(volume, voxel, &params)?;
+        let (q_min, q_max) = (to_fixed(params.o_min), to_fixed(params.o_max));
+        let sigma = stats.sigma as f64;
+        let reach = (q_max as f64 - q_min as f64) / 65535.0 * sigma;
+        let half = (q_max as f64 - 32768.0) / 65535.0 * sigma;
+        let last = *CANDIDATES.last().unwrap() as f64;
+        let dims = values.grid.dims;
+        let width = (reach / BUCKETS_PER_UNIT as f64) as f32;
+        let buckets = (last * BUCKETS_PER_UNIT as f64).ceil() as usize + 2;
+        let mut scan = Self {
+            values,
+            limits,
+            seed: voxel,
+            mean: stats.mean,
+            sigma: stats.sigma,
+            cap: ((last + 2.0) * sigma) as f32,
+            reach: reach as f32,
+            limit: (reach * last) as f32,
+            dims,
+            div_x: FastDiv::new(dims[0] as u32),
+            div_y: FastDiv::new(dims[1] as u32),
+            offsets: neighbour_offsets(params.connectivity),
+            costs: Bricks::new(dims),
+            buckets: vec![Vec::new(); buckets],
+            per_bucket: 1.0 / width,
+            lowest: 0,
+            bins: vec![0; CANDIDATES.len() + 1],
+            thresholds: CANDIDATES
+                .iter()
+                .map(|&l| (half * l as f64) as f32)
+                .collect(),
+            phase: 0,
+        };
+        let s = voxel[0] + dims[0] * (voxel[1] + dims[1] * voxel[2]);
+        let cell = with_voxels!(values.data, |d| scan.cell(d, voxel));
+        scan.label(s as u32, cell, 0.0);
+        Ok(scan)
+    }
+
+    /// Runs the next phase, `λ = CANDIDATES[k]` for the `k`-th call, and
+    /// returns that λ with what the phase found; `None` after the last
+    /// candidate. With `bound = Some(n)` the phase stops as soon as more
+    /// than `n` voxels hold `D ≤ T(λ)` (the count only grows within a phase).
+    pub fn next_phase(&mut self, bound: Option<usize>) -> Option<(f32, PhaseResult)> {
+        let lambda = *CANDIDATES.get(self.phase)?;
+        let r = self.reach * lambda;
+        let (visits, cut) = with_voxels!(self.values.data, |s| self.relax_below(s, r, bound));
+        let result = PhaseResult {
+            voxels: self.voxels_at(self.phase),
+            visits,
+            cut,
+        };
+        self.phase += 1;
+        Some((lambda, result))
+    }
+
+    /// Voxels at `D ≤ T(λ_k)` now.
+    fn voxels_at(&self, k: usize) -> usize {
+        self.bins[..=k].iter().sum()
+    }
+
+    /// Takes queued voxels of cost below `r` until none is left (or the
+    /// bound is passed) and relaxes their neighbours. Returns the voxels
+    /// relaxed and whether the bound stopped it.
+    fn relax_below<T: Sample>(&mut self, data: &[T], r: f32, bound: Option<usize>) -> (u64, bool) {
+        let mut visits = 0u64;
+        let mut deferred = Vec::new();
+        loop {
+            while self.lowest < self.buckets.len() && self.buckets[self.lowest].is_empty() {
+                self.lowest += 1;
+            }
+            // Every voxel of cost below `r` is in a bucket up to `r`'s
+            // (the same rounding puts both there).
+            let b = self.lowest;
+            if b >= self.buckets.len() || b > self.bucket_of(r) {
+                break;
+            }
+            // Last in, first out: the search runs on from the voxel it just
+            // reached, whose brick is in cache (first in, first out, or a
+            // batch sorted by index, measured 1.2–1.5× slower).
+            let Some(u) = self.buckets[b].pop() else {
+                continue;
+            };
+            let p = self.coords(u);
+            let d = self.costs.pool[self.costs.existing(p)].cost;
+            if self.bucket_of(d) != b {
+                continue; // queued again at a lower cost since
+            }
+            if d >= r {
+                deferred.push(u); // in the bucket that straddles R: next phase
+                continue;
+            }
+            visits += 1;
+            self.relax(data, u, p, d, r);
+            if visits.is_multiple_of(CHECK_EVERY)
+                && bound.is_some_and(|n| self.voxels_at(self.phase) > n)
+            {
+                self.requeue(deferred);
+                return (visits, true);
+            }
+        }
+        self.requeue(deferred);
+        let cut = bound.is_some_and(|n| self.voxels_at(self.phase) > n);
+        (visits, cut)
+    }
+
+    fn requeue(&mut self, deferred: Vec<u32>) {
+        for u in deferred {
+            let d = self.costs.pool[self.costs.existing(self.coords(u))].cost;
+            self.queue(u, d);
+        }
+    }
+
+    /// Lowers the neighbours of reached voxel `u` (at `p`, cost `d < r`).
+    fn relax<T: Sample>(&mut self, data: &[T], u: u32, p: [usize; 3], d: f32, r: f32) {
+        for i in 0..self.offsets.len() {
+            let Some((n, q)) = self.neighbour(u, p, self.offsets[i]) else {
+                continue;
+            };
+            let cell = self.cell(data, q);
+            let Cell { cost, step } = self.costs.pool[cell];
+            let mut nd = (d + step).max(0.0);
+            if nd >= self.limit || nd >= cost {
+                continue;
+            }
+            if step < 0.0 && nd > 0.0 && nd < r && self.pumps(data, n, q, step, nd, r) {
+                nd = 0.0;
+            }
+            self.label(n, cell, nd);
+        }
+    }
+
+    /// Whether voxel `v` (step cost `c < 0`, about to take `nd`, reached)
+    /// has a neighbour that is or becomes reached with which its costs sum
+    /// below zero: then its converged cost is 0 (see the module docs).
+    fn pumps<T: Sample>(
+        &mut self,
+        data: &[T],
+        v: u32,
+        p: [usize; 3],
+        c: f32,
+        nd: f32,
+        r: f32,
+    ) -> bool {
+        for i in 0..self.offsets.len() {
+            let Some((_, q)) = self.neighbour(v, p, self.offsets[i]) else {
+                continue;
+            };
+            let cell = self.cell(data, q);
+            let m = self.costs.pool[cell];
+            if c + m.step < 0.0 && (m.cost < r || (nd + m.step).max(0.0) < r) {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Sets the cost of voxel `v` (its cell `cell`) to `d`, lower than
+    /// before, and queues it.
+    fn label(&mut self, v: u32, cell: usize, d: f32) {
+        let old = std::mem::replace(&mut self.costs.pool[cell].cost, d);
+        if old < UNSEEN {
+            let was = self.bin(old);
+            self.bins[was] -= 1;
+        }
+        let bin = self.bin(d);
+        self.bins[bin] += 1;
+        self.queue(v, d);
+    }
+
+    /// The cell of voxel `p`, its brick filled with step costs first when
+    /// the search reaches it for the first time.
+    #[inline(always)]
+    fn cell<T: Sample>(&mut self, data: &[T], p: [usize; 3]) -> usize {
+        let (b, o) = self.costs.slot(p);
+        let base = match self.costs.table[b] {
+            Bricks::NONE => self.fill(data, b, p.map(|c| c / BRICK * BRICK)),
+            i => i as usize * BRICK3,
+        };
+        base + o
+    }
+
+    /// Allocates brick `b` (first voxel `lo`) and fills its step costs.
+    #[cold]
+    #[inline(never)]
+    fn fill<T: Sample>(&mut self, data: &[T], b: usize, lo: [usize; 3]) -> usize {
+        let base = self.costs.pool.len();
+        self.costs.table[b] = (base / BRICK3) as u32;
+        self.costs.pool.resize(
+            base + BRICK3,
+            Cell {
+                cost: UNSEEN,
+                step: UNSEEN,
+            },
+        );
+        let hi = [0, 1, 2].map(|a| (lo[a] + BRICK).min(self.dims[a]));
+        for z in lo[2]..hi[2] {
+            for y in lo[1]..hi[1] {
+                let row = lo[0] + self.dims[0] * (y + self.dims[1] * z);
+                let at = base + BRICK * ((y - lo[1]) + BRICK * (z - lo[2]));
+                for x in lo[0]..hi[0] {
+                    let c = self.step_cost(data[row + x - lo[0]].to_f32(), [x, y, z]);
+                    self.costs.pool[at + x - lo[0]].step = c;
+                }
+            }
+        }
+        base
+    }
+
+    fn queue(&mut self, v: u32, d: f32) {
+        let b = self.bucket_of(d);
+        self.buckets[b].push(v);
+        self.lowest = self.lowest.min(b);
+    }
+
+    fn bucket_of(&self, d: f32) -> usize {
+        ((d * self.per_bucket) as usize).min(self.buckets.len() - 1)
+    }
+
+    /// The first candidate whose `T(λ)` holds `d`, or one past the last.
+    fn bin(&self, d: f32) -> usize {
+        self.thresholds
+            .iter()
+            .position(|&t| d <= t)
+            .unwrap_or(self.thresholds.len())
+    }
+
+    /// `c_v` (value units) of a voxel of value `x` at `p`: `min(|d_s −
+    /// d_v|, cap) − σ_s`, the cap for a voxel a bound blocks.
+    #[inline]
+    fn step_cost(&self, x: f32, p: [usize; 3]) -> f32 {
+        let blocked = !self.limits.is_none()
+            && self
+                .limits
+                .blocks(x, p, self.seed, self.values.grid.spacing.to_array())
+                .is_some();
+        let a = if blocked {
+            self.cap
+        } else {
+            (self.mean - sanitize(x)).abs().min(self.cap)
+        };
+        a - self.sigma
+    }
+
+    #[inline]
+    fn coords(&self, v: u32) -> [usize; 3] {
+        let (yz, x) = self.div_x.div_rem(v);
+        let (z, y) = self.div_y.div_rem(yz);
+        [x as usize, y as usize, z as usize]
+    }
+
+    /// The neighbour of `v` (at `p`) at offset `o`, when inside the volume.
+    #[inline]
+    fn neighbour(&self, v: u32, p: [usize; 3], o: [isize; 3]) -> Option<(u32, [usize; 3])> {
+        let q = [0, 1, 2].map(|a| p[a].wrapping_add_signed(o[a]));
+        if (0..3).any(|a| q[a] >= self.dims[a]) {
+            return None;
+        }
+        let step = o[0] + self.dims[0] as isize * (o[1] + self.dims[1] as isize * o[2]);
+        Some(((v as isize + step) as u32, q))
+    }
+}
+
+/// The neighbour offsets of a connectivity (6: faces; 26: all).
+fn neighbour_offsets(connectivity: u32) -> Vec<[isize; 3]> {
+    let mut o = Vec::new();
+    for z in -1isize..=1 {
+        for y in -1isize..=1 {
+            for x in -1isize..=1 {
+                let n = x.abs() + y.abs() + z.abs();
+                if n > 0 && (connectivity == 26 || n == 1) {
+                    o.push([x, y, z]);
+                }
+            }
+        }
+    }
+    o
+}
+
+/// Side of a brick of cells, voxels.
+const BRICK: usize = 8;
+/// Cells per brick.
+const BRICK3: usize = BRICK * BRICK * BRICK;
+
+/// One voxel's search state.
+#[derive(Clone, Copy, Debug)]
+struct Cell {
+    /// Path cost `D` so far ([`UNSEEN`] before the voxel is labelled).
+    cost: f32,
+    /// Its step cost `c_v`.
+    step: f32,
+}
+
+/// Cells in 8³ bricks, allocated (and their step costs computed, from
+/// rows of the volume) when the search first touches them.
+struct Bricks {
+    bricks: [usize; 3],
+    table: Vec<u32>,
+    pool: Vec<Cell>,
+}
+
+impl Bricks {
+    const NONE: u32 = u32::MAX;
+
+    fn new(dims: [usize; 3]) -> Self {
+        let bricks = dims.map(|d| d.div_ceil(BRICK));
+        Self {
+            bricks,
+            table: vec![Self::NONE; bricks.iter().product()],
+            pool: Vec::new(),
+        }
+    }
+
+    /// Brick and offset of voxel `p`.
+    #[inline]
+    fn slot(&self, p: [usize; 3]) -> (usize, usize) {
+        let b = p[0] / BRICK + self.bricks[0] * (p[1] / BRICK + self.bricks[1] * (p[2] / BRICK));
+        let o = p[0] % BRICK + BRICK * (p[1] % BRICK + BRICK * (p[2] % BRICK));
+        (b, o)
+    }
+
+    /// The cell of a voxel whose brick exists (a labelled voxel's).
+    #[inline]
+    fn existing(&self, p: [usize; 3]) -> usize {
+        let (b, o) = self.slot(p);
+        self.table[b] as usize * BRICK3 + o
+    }
+}

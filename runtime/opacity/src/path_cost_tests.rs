@@ -1,0 +1,212 @@
+//! Tests of [`crate::path_cost::PathCostScan`] against the growth it stands
+//! in for, on mirrored volumes, with bounds, and on bad input.
+
+use super::OpacityError;
+use super::limits::GrowthLimits;
+use super::params::GrowthParams;
+use super::parity::{three_spheres, three_spheres_with};
+use super::path_cost::PathCostScan;
+use super::runner::{CpuRunner, GrowRunner, ScanInput, voxels_above_half};
+use super::seed::Seed;
+use crate::volume::{Volume, VoxelData};
+
+fn input(values: &Volume, seed: [usize; 3]) -> ScanInput<'_> {
+    ScanInput {
+        volume: values.view(),
+        values: values.view(),
+        limits: GrowthLimits::default(),
+        seed: Seed::Voxel(seed),
+    }
+}
+
+/// Every phase's size, no bound.
+fn sizes(input: ScanInput<'_>, params: GrowthParams) -> Vec<(f32, usize)> {
+    let mut scan = PathCostScan::new(input, params).unwrap();
+    std::iter::from_fn(|| scan.next_phase(None))
+        .map(|(l, r)| {
+            assert!(!r.cut);
+            (l, r.voxels)
+        })
+        .collect()
+}
+
+/// The growth's region (opacity ≥ ½) at `lambda`.
+fn grown(values: &Volume, seed: [usize; 3], params: GrowthParams, lambda: f32) -> usize {
+    let mut r = CpuRunner {
+        volume: values.view(),
+        values: values.view(),
+        seed: Seed::Voxel(seed),
+    };
+    let g = r.grow(GrowthParams { lambda, ..params }, None).unwrap();
+    assert!(g.report.converged);
+    voxels_above_half(&g.map)
+}
+
+/// The scan's `V(λ)` is the growth's at every candidate, on a noisy
+/// phantom whose region runs from one sphere into a touching one 2.7 σ
+/// brighter at λ = 16 (both neighbourhoods). The two differ only where rounding puts a
+/// voxel on the other side of ½: allowed 1 in 10,000 here.
+#[test]
+fn scan_sizes_equal_the_growths_at_every_lambda() {
+    for connectivity in [6, 26] {
+        let p = three_spheres_with(48, 108.0, 3.0, 5);
+        let seed = p.a.centre_voxel();
+        let params = GrowthParams {
+            connectivity,
+            ..GrowthParams::default()
+        };
+        let all = sizes(input(&p.volume, seed), params);
+        assert_eq!(all.len(), crate::auto_lambda::CANDIDATES.len());
+        assert!(all.windows(2).all(|w| w[0].1 <= w[1].1), "{all:?}");
+        for &(lambda, voxels) in &all {
+            let want = grown(&p.volume, seed, params, lambda);
+            eprintln!("connectivity {connectivity}, λ {lambda}: scan {voxels}, growth {want}");
+            assert!(
+                voxels.abs_diff(want) as f64 <= 1e-4 * want as f64 + 1.0,
+                "connectivity {connectivity}, λ {lambda}: scan {voxels}, growth {want}"
+            );
+        }
+        assert!(all[0].1 > 1000 && all.last().unwrap().1 > 3 * all[0].1 / 2);
+    }
+}
+
+/// The volume mirrored along `axis`.
+fn mirrored(v: &Volume, axis: usize) -> Volume {
+    let d = v.grid.dims;
+    let src = v.view().data.to_f32_vec();
+    let mut out = vec![0f32; src.len()];
+    for z in 0..d[2] {
+        for y in 0..d[1] {
+            for x in 0..d[0] {
+                let mut m = [x, y, z];
+                m[axis] = d[axis] - 1 - m[axis];
+                out[m[0] + d[0] * (m[1] + d[1] * m[2])] = src[x + d[0] * (y + d[1] * z)];
+            }
+        }
+    }
+    Volume {
+        grid: v.grid,
+        data: VoxelData::F32(out),
+    }
+}
+
+/// The scan visits voxels in an order set by its queues, but the costs it
+/// converges to are the minimum over paths: mirrored volumes give the same
+/// sizes, exactly, along every axis.
+#[test]
+fn mirrored_volumes_give_the_same_sizes() {
+    let p = three_spheres(40, 3.0, 9);
+    let seed = p.a.centre_voxel();
+    let params = GrowthParams::default();
+    let want = sizes(input(&p.volume, seed), params);
+    for axis in 0..3 {
+        let m = mirrored(&p.volume, axis);
+        let mut s = seed;
+        s[axis] = p.volume.grid.dims[axis] - 1 - s[axis];
+        assert_eq!(sizes(input(&m, s), params), want, "mirrored along {axis}");
+    }
+}
+
+/// Bounds applied by the scan on the fly (the GPU path's case: the bounded
+/// copy lives on the device) give the sizes the bounded copy gives, and
+/// those are the bounded growth's.
+#[test]
+fn bounds_applied_on_the_fly_equal_the_bounded_copy() {
+    let p = three_spheres(40, 3.0, 3);
+    let seed = p.a.centre_voxel();
+    let params = GrowthParams::default();
+    let limits = GrowthLimits {
+        intensity: Some([92.0, 108.0]),
+        max_distance_mm: Some(5.0),
+    };
+    let bounded = limits.apply(p.volume.view(), seed).unwrap().unwrap();
+    let on_the_fly = sizes(
+        ScanInput {
+            limits,
+            ..input(&p.volume, seed)
+        },
+        params,
+    );
+    let copy = sizes(
+        ScanInput {
+            volume: p.volume.view(),
+            ..input(&bounded, seed)
+        },
+        params,
+    );
+    assert_eq!(on_the_fly, copy);
+    let free = sizes(input(&p.volume, seed), params);
+    assert!(copy.last().unwrap().1 < free.last().unwrap().1 * 4 / 5);
+    let mut r = CpuRunner {
+        volume: p.volume.view(),
+        values: bounded.view(),
+        seed: Seed::Voxel(seed),
+    };
+    for &(lambda, voxels) in copy.iter().step_by(3) {
+        let g = r.grow(GrowthParams { lambda, ..params }, None).unwrap();
+        let want = voxels_above_half(&g.map);
+        assert!(voxels.abs_diff(want) <= 1 + want / 10_000, "λ {lambda}");
+    }
+}
+
+/// A phase stops once its size passes the bound, says so, and reports at
+/// least the bound; unbounded, the same phase runs on.
+#[test]
+fn a_phase_past_its_bound_is_cut_short() {
+    let p = three_spheres(64, 3.0, 7);
+    let seed = p.a.centre_voxel();
+    let params = GrowthParams::default();
+    let mut free = PathCostScan::new(input(&p.volume, seed), params).unwrap();
+    let (_, whole) = free.next_phase(None).unwrap();
+    let mut cut = PathCostScan::new(input(&p.volume, seed), params).unwrap();
+    let (lambda, part) = cut.next_phase(Some(1000)).unwrap();
+    assert_eq!(lambda, 1.0);
+    assert!(!whole.cut && part.cut, "{whole:?} {part:?}");
+    assert!(part.voxels > 1000 && part.voxels <= whole.voxels);
+    assert!(part.visits < whole.visits);
+}
+
+#[test]
+fn bad_input_is_refused_with_the_value() {
+    let p = three_spheres(24, 3.0, 1);
+    let seed = p.a.centre_voxel();
+    let other = three_spheres(20, 3.0, 1);
+    let params = GrowthParams::default();
+    let e = PathCostScan::new(
+        ScanInput {
+            values: other.volume.view(),
+            ..input(&p.volume, seed)
+        },
+        params,
+    )
+    .err()
+    .unwrap();
+    assert!(matches!(e, OpacityError::VolumeMismatch { .. }), "{e}");
+    let e = PathCostScan::new(
+        ScanInput {
+            limits: GrowthLimits {
+                intensity: Some([f32::NAN, 1.0]),
+                max_distance_mm: None,
+            },
+            ..input(&p.volume, seed)
+        },
+        params,
+    )
+    .err()
+    .unwrap();
+    assert!(e.to_string().contains("intensity"), "{e}");
+    let e = PathCostScan::new(input(&p.volume, [99, 0, 0]), params)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("99"), "{e}");
+    let e = PathCostScan::new(
+        input(&p.volume, seed),
+        GrowthParams {
+            connectivity: 5,
+            ..params
+        },
+    )
+    .err()
+    .unwrap();
+    assert!(matches!(e, OpacityError::BadConnectivity { .. }), "{e}");
+}
