@@ -187,7 +187,9 @@ fn absolute(path: &Path, dir: Option<&Path>) -> String {
 }
 
 /// A map's `[[roi]]` table (world or voxel seeds; a slice-click seed is
-/// left out: the session keeps it as a world point when the viewer seeds).
+/// left out: the session keeps it as a world point when the viewer seeds):
+/// `lambda = "auto"` when the map's λ was chosen by the rule (so the scene
+/// chooses again on its own volume), and the growth bounds when set.
 fn roi_table(r: &RoiInfo) -> Option<toml::Value> {
     let mut t = toml::Table::new();
     let seed: Vec<toml::Value> = match r.seed {
@@ -196,7 +198,19 @@ fn roi_table(r: &RoiInfo) -> Option<toml::Value> {
     };
     t.insert("name".into(), format!("map-{}", r.id.0).into());
     t.insert("seed".into(), seed.into());
-    t.insert("lambda".into(), f64::from(r.params.lambda).into());
+    let lambda: toml::Value = if r.lambda_auto {
+        "auto".into()
+    } else {
+        f64::from(r.params.lambda).into()
+    };
+    t.insert("lambda".into(), lambda);
+    if let Some([lo, hi]) = r.limits.intensity {
+        let window = vec![toml::Value::from(f64::from(lo)), f64::from(hi).into()];
+        t.insert("intensity".into(), window.into());
+    }
+    if let Some(d) = r.limits.max_distance_mm {
+        t.insert("max_distance_mm".into(), d.into());
+    }
     t.insert("o_min".into(), f64::from(r.params.o_min).into());
     t.insert("o_max".into(), f64::from(r.params.o_max).into());
     t.insert("seed_radius".into(), i64::from(r.params.seed_radius).into());
@@ -263,6 +277,61 @@ mod tests {
         assert_eq!(saved.volume.source, "phantom:head");
         // Only the scene is left in the directory (the temporary file was renamed).
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    /// A map's automatic λ, bounds and constants survive the saved scene:
+    /// it reads back as the same `[[roi]]` request.
+    #[test]
+    fn the_saved_scene_keeps_an_roi_maps_auto_lambda_and_bounds() {
+        use voxflex_core::glam::DVec3;
+        use voxflex_opacity::{GrowthLimits, GrowthParams, Seed};
+        use voxflex_runtime::scene::LambdaSetting;
+        use voxflex_runtime::session::{RoiId, RoiInfo};
+        let base = Scene::parse(BUILT_IN_SCENE, Path::new("configs/chainmail-head.toml")).unwrap();
+        let info = |id, lambda_auto, limits| RoiInfo {
+            id: RoiId(id),
+            seed: Seed::World(DVec3::new(40.0, -2.5, 15.0)),
+            params: GrowthParams {
+                lambda: 5.656_854,
+                seed_radius: 3,
+                connectivity: 26,
+                ..GrowthParams::default()
+            },
+            steps: 12,
+            converged: true,
+            voxels_above_half: 100,
+            lambda_auto,
+            limits,
+        };
+        let bounded = GrowthLimits {
+            intensity: Some([-20.5, 80.0]),
+            max_distance_mm: Some(35.0),
+        };
+        let state = SessionState {
+            rois: vec![
+                info(0, true, bounded),
+                info(1, false, GrowthLimits::default()),
+            ],
+            backend: "cpu",
+            ..SessionState::default()
+        };
+        let text = scene_text(&base, None, &state).unwrap();
+        let saved = Scene::parse(&text, Path::new("s.toml")).unwrap();
+        let [auto, fixed] = &saved.rois[..] else {
+            panic!("two maps: {text}")
+        };
+        assert!(
+            matches!(&auto.lambda, LambdaSetting::Word(w) if w == "auto"),
+            "{text}"
+        );
+        assert_eq!(auto.intensity, Some([-20.5, 80.0]));
+        assert_eq!(auto.max_distance_mm, Some(35.0));
+        assert!(
+            matches!(fixed.lambda, LambdaSetting::Value(l) if l == 5.656_854),
+            "{text}"
+        );
+        assert_eq!((fixed.intensity, fixed.max_distance_mm), (None, None));
+        assert_eq!((fixed.seed_radius, fixed.connectivity), (3, 26));
     }
 
     /// The saved `[render]` gives back the viewer's camera (through the
