@@ -49,9 +49,13 @@
 //!
 //! The growth ([`crate::CpuGrowth`], the WGSL kernels) works in fixed point
 //! and rounds each step's extinction, so its region at λ can differ from
-//! `D ≤ T(λ)` in voxels whose opacity lies within that rounding of ½: a
-//! handful per hundred thousand (the tests bound it on the abdomen's
-//! organs). The scan only chooses λ; the map is then grown at that λ.
+//! `D ≤ T(λ)` in voxels whose opacity lies within that rounding of ½ (half
+//! a fixed-point unit per step of the path): a handful per hundred
+//! thousand. The tests check it voxel by voxel after every phase (a
+//! disagreeing voxel's real-valued opacity must lie within that bound of
+//! ½) on random volumes, opacity ranges and neighbourhoods, and the sizes
+//! on the abdomen's organs. The scan only chooses λ; the map is then grown
+//! at that λ.
 
 use super::OpacityError;
 use super::auto_lambda::CANDIDATES;
@@ -192,6 +196,17 @@ impl<'a> PathCostScan<'a> {
         };
         self.phase += 1;
         Some((lambda, result))
+    }
+
+    /// The path cost `D` of voxel `p` as the search stands (value units;
+    /// infinite when not labelled).
+    #[cfg(test)]
+    pub(crate) fn cost_at(&self, p: [usize; 3]) -> f32 {
+        let (b, o) = self.costs.slot(p);
+        match self.costs.table[b] {
+            Bricks::NONE => UNSEEN,
+            i => self.costs.pool[i as usize * BRICK3 + o].cost,
+        }
     }
 
     /// Voxels at `D ≤ T(λ_k)` now.
