@@ -12,7 +12,12 @@
 //!   (the default before issue 15; the default is Sobel);
 //! - `head256_ct_bone_512_tricubic`: the same with `sampling = "tricubic"`;
 //! - `head256_ct_soft_tissue_512`: the `ct-soft-tissue` preset;
-//! - `head256_mip_512`: maximum intensity projection.
+//! - `head256_mip_512`: maximum intensity projection;
+//! - `head256_macrocells`: the min/max of every 8³ macro cell (halo
+//!   included) from the f32 values, what every volume update rebuilds;
+//! - `head256_volume_update`: a whole-volume `set_volume` on the grid the
+//!   renderer already holds (a deformed frame: conversion to f32, the
+//!   gradient cache dropped, every macro cell rebuilt).
 //!
 //! Measured on the 2-core development machine (criterion median), quiet,
 //! before issue 15 (central differences): ct-bone 58.6 ms, ct-soft-tissue
@@ -27,6 +32,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::render::{ImageTarget, RenderVolume, Renderer};
+use voxflex_raycast::macrocell::{IndexBox, MacroCells};
 use voxflex_raycast::{RaycastRenderer, fit_camera};
 
 fn bench(c: &mut Criterion) {
@@ -67,6 +73,22 @@ fn bench(c: &mut Criterion) {
             b.iter(|| black_box(r.render(&cam, ImageTarget::Cpu(&mut out)).expect("render")))
         });
     }
+    let mut r = RaycastRenderer::create("", None).expect("params");
+    r.init(ExecutionBackend::Cpu).expect("init");
+    r.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
+        .expect("volume");
+    group.bench_function("head256_volume_update", |b| {
+        b.iter(|| {
+            r.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
+                .expect("volume")
+        })
+    });
+    let values = vol.view().data.to_f32_vec();
+    let mut cells = MacroCells::new(vol.grid.dims, 8);
+    let all = IndexBox::all(cells.counts);
+    group.bench_function("head256_macrocells", |b| {
+        b.iter(|| cells.rebuild(black_box(&values), all))
+    });
     group.finish();
 }
 
