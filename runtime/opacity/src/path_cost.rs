@@ -41,9 +41,16 @@
 //! the growth, the negative one of a reached pair takes its final cost, 0,
 //! at once.
 //!
-//! Storage: one f32 cost per voxel in 8³ bricks allocated when the search
-//! first reaches them (2 KiB each; the region's bricks only), the bucket
-//! queues (4 bytes per queued voxel).
+//! Storage: per voxel, its path cost and its step cost (two f32, kept
+//! together so a relaxation reads one cache line), in 8³ bricks allocated
+//! when the search first touches them (4 KiB each: the region's bricks and
+//! a shell of one brick), plus the bucket queues (4 bytes per queued
+//! voxel). That is 8 bytes per voxel of the region's bricks, against the
+//! CPU growth's 2.25 per voxel of its working box: a seed whose region is
+//! the whole volume (the air around a CT, say) costs 8 bytes per voxel of
+//! the volume for the time of the scan. The step costs are stored because
+//! reading the volume's value at every relaxation was the stall of a
+//! third of the first version's profile samples.
 //!
 //! # Against the growth
 //!
