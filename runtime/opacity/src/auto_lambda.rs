@@ -33,14 +33,15 @@
 //! λ; then the map is grown once, at the λ chosen, on the runner's backend.
 //! The scan uses the real-valued rule, the growth fixed point: their
 //! regions can differ by the voxels whose opacity lies within rounding of
-//! ½, so a trial's `voxels` and the map's count may differ by a few. Figures (Dice per organ for
-//! this rule and for fixed λ on `phantom:abdomen`) are in docs/BENCHMARKS.md and in
+//! ½, so a trial's `voxels` and the map's count may differ by a few.
+//! Figures (Dice per organ for this rule and for fixed λ on
+//! `phantom:abdomen`) are in docs/BENCHMARKS.md and in
 //! `docs/roi_dice_vs_lambda.md`.
 
 use super::OpacityError;
 use super::params::GrowthParams;
-use super::path_cost::PathCostScan;
-use super::runner::{GrowRunner, Grown, ScanInput};
+use super::path_cost::{PathCostScan, ScanInput};
+use super::runner::{GrowRunner, Grown};
 
 /// λ tried, in order: `2^(k/2)`, k = 0 … 10.
 pub const CANDIDATES: [f32; 11] = [

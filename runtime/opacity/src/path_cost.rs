@@ -69,8 +69,7 @@ use super::auto_lambda::CANDIDATES;
 use super::extinction::sanitize;
 use super::limits::GrowthLimits;
 use super::params::GrowthParams;
-use super::runner::ScanInput;
-use super::seed::{SeedStats, seed_stats};
+use super::seed::{Seed, SeedStats, seed_stats};
 use crate::opacity_map::to_fixed;
 use crate::volume::{Sample, VolumeView};
 use crate::with_voxels;
@@ -84,6 +83,21 @@ const BUCKETS_PER_UNIT: f32 = 16.0;
 
 /// Voxels processed between two checks of a phase's bound.
 const CHECK_EVERY: u64 = 4096;
+
+/// What a [`PathCostScan`] reads, on the CPU whatever the growth's
+/// backend: the values the growth reads, given as values and the bounds
+/// still to apply to them.
+#[derive(Clone, Copy)]
+pub struct ScanInput<'a> {
+    /// The unbounded volume (seed statistics).
+    pub volume: VolumeView<'a>,
+    /// The values the costs come from (the volume or its bounded copy).
+    pub values: VolumeView<'a>,
+    /// Bounds still to apply to `values` (none when already applied).
+    pub limits: GrowthLimits,
+    /// The seed.
+    pub seed: Seed,
+}
 
 /// What one phase of the scan found.
 #[derive(Clone, Copy, Debug, PartialEq)]

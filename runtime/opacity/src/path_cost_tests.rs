@@ -5,8 +5,8 @@ use super::OpacityError;
 use super::limits::GrowthLimits;
 use super::params::GrowthParams;
 use super::parity::{three_spheres, three_spheres_with};
-use super::path_cost::PathCostScan;
-use super::runner::{CpuRunner, GrowRunner, ScanInput, voxels_above_half};
+use super::path_cost::{PathCostScan, ScanInput};
+use super::runner::{CpuRunner, GrowRunner, voxels_above_half};
 use super::seed::Seed;
 use crate::volume::{Volume, VoxelData};
 

@@ -3,7 +3,8 @@
 
 use super::auto_lambda::{CANDIDATES, Trial, pick};
 use super::limits::{GrowthLimits, Limit};
-use super::runner::{CpuRunner, GrowRunner, ScanInput};
+use super::path_cost::ScanInput;
+use super::runner::{CpuRunner, GrowRunner};
 use super::*;
 use std::sync::OnceLock;
 use voxflex_phantom::abdomen::{SEEDS, dice};

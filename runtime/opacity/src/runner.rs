@@ -5,7 +5,6 @@
 use super::cpu::CpuGrowth;
 use super::extinction::Extinction;
 use super::gpu::{GpuGrowth, GpuOpacityVolume};
-use super::limits::GrowthLimits;
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::{Seed, SeedStats};
@@ -14,7 +13,7 @@ use super::{OpacityError, OpacityMap};
 use crate::volume::VolumeView;
 use voxflex_core::gpu::GpuService;
 
-/// One finished (or cut short) growth.
+/// One growth: converged, or stopped by its steps cap.
 #[derive(Clone, Debug)]
 pub struct Grown {
     /// The map as it stands.
@@ -38,21 +37,6 @@ pub trait GrowRunner {
     /// Seeds a growth with `params` and runs it to convergence, or for at
     /// most `steps` steps.
     fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError>;
-}
-
-/// What the automatic λ's scan ([`crate::path_cost::PathCostScan`])
-/// reads, on the CPU whatever the growth's backend: the values the growth
-/// reads, as values and the bounds still to apply to them.
-#[derive(Clone, Copy)]
-pub struct ScanInput<'a> {
-    /// The unbounded volume (seed statistics).
-    pub volume: VolumeView<'a>,
-    /// The values the costs come from (the volume or its bounded copy).
-    pub values: VolumeView<'a>,
-    /// Bounds still to apply to `values` (none when already applied).
-    pub limits: GrowthLimits,
-    /// The seed.
-    pub seed: Seed,
 }
 
 /// The CPU backend: statistics from `volume`, values read from `values`
