@@ -102,9 +102,18 @@ impl Extinction {
     /// one σ_s of the seed mean.
     #[inline]
     pub fn fixed(&self, value: f32) -> i32 {
-        let a = (self.mean - sanitize(value)).abs().min(self.cap);
-        let e = ((a - self.sigma) * self.scale).clamp(-E_BOUND, E_BOUND);
+        let e = (self.excess(value) * self.scale).clamp(-E_BOUND, E_BOUND);
         round_ties_even_small(e) as i32
+    }
+
+    /// `min(|d_s − d_v|, cap) − σ_s` (value units): how far a voxel of
+    /// value `value` lies beyond one σ_s of the seed mean, capped — `E_v`
+    /// before the scale `1 / (λ σ_s)`. [`Extinction::fixed`] scales and
+    /// rounds it; the automatic λ's path-cost scan adds it up along paths
+    /// ([`crate::path_cost`]).
+    #[inline]
+    pub fn excess(&self, value: f32) -> f32 {
+        (self.mean - sanitize(value)).abs().min(self.cap) - self.sigma
     }
 
     /// `E_v` as a real opacity difference (for display and tests).

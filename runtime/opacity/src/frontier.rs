@@ -116,7 +116,7 @@ pub(crate) fn states_for(
 }
 
 /// The 26 neighbour directions.
-const DIRS: [[isize; 3]; 26] = {
+pub(crate) const DIRS: [[isize; 3]; 26] = {
     let mut d = [[0isize; 3]; 26];
     let mut n = 0;
     let mut z = -1;
@@ -139,7 +139,7 @@ const DIRS: [[isize; 3]; 26] = {
 };
 
 /// Which of [`DIRS`] are face neighbours (one non-zero component).
-const IS_FACE: [bool; 26] = {
+pub(crate) const IS_FACE: [bool; 26] = {
     let mut f = [false; 26];
     let mut n = 0;
     while n < 26 {

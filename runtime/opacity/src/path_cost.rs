@@ -66,11 +66,11 @@
 
 use super::OpacityError;
 use super::auto_lambda::CANDIDATES;
-use super::extinction::sanitize;
+use super::extinction::{Extinction, SANE_MAX};
+use super::frontier::{DIRS, IS_FACE};
 use super::limits::GrowthLimits;
 use super::params::GrowthParams;
-use super::seed::{Seed, SeedStats, seed_stats};
-use crate::opacity_map::to_fixed;
+use super::seed::{Seed, seed_stats};
 use crate::volume::{Sample, VolumeView};
 use crate::with_voxels;
 use voxflex_core::fast_div::FastDiv;
@@ -116,10 +116,9 @@ pub struct PathCostScan<'a> {
     values: VolumeView<'a>,
     limits: GrowthLimits,
     seed: [usize; 3],
-    mean: f32,
-    sigma: f32,
-    /// Cap on `|d_s − d_v|`: `(λ_max + 2) σ_s`, as the growth's at λ_max.
-    cap: f32,
+    /// The growth's constants at the largest candidate λ: its capped
+    /// excess ([`Extinction::excess`]) is the step cost `c_v`.
+    ext: Extinction,
     /// `(o_max − o_min) σ_s` with the opacities in fixed point: `R(λ) =
     /// reach · λ`.
     reach: f32,
@@ -163,12 +162,19 @@ impl<'a> PathCostScan<'a> {
             });
         }
         let voxel = seed.resolve(&volume.grid)?;
-        let stats: SeedStats = seed_stats(volume, voxel, &params)?;
-        let (q_min, q_max) = (to_fixed(params.o_min), to_fixed(params.o_max));
+        let stats = seed_stats(volume, voxel, &params)?;
+        let last = *CANDIDATES.last().unwrap();
+        let ext = Extinction::new(
+            &stats,
+            &GrowthParams {
+                lambda: last,
+                ..params
+            },
+        )?;
+        let last = last as f64;
         let sigma = stats.sigma as f64;
-        let reach = (q_max as f64 - q_min as f64) / 65535.0 * sigma;
-        let half = (q_max as f64 - 32768.0) / 65535.0 * sigma;
-        let last = *CANDIDATES.last().unwrap() as f64;
+        let reach = (ext.q_max as f64 - ext.q_min as f64) / 65535.0 * sigma;
+        let half = (ext.q_max as f64 - 32768.0) / 65535.0 * sigma;
         let dims = values.grid.dims;
         let width = (reach / BUCKETS_PER_UNIT as f64) as f32;
         let buckets = (last * BUCKETS_PER_UNIT as f64).ceil() as usize + 2;
@@ -176,15 +182,18 @@ impl<'a> PathCostScan<'a> {
             values,
             limits,
             seed: voxel,
-            mean: stats.mean,
-            sigma: stats.sigma,
-            cap: ((last + 2.0) * sigma) as f32,
+            ext,
             reach: reach as f32,
             limit: (reach * last) as f32,
             dims,
             div_x: FastDiv::new(dims[0] as u32),
             div_y: FastDiv::new(dims[1] as u32),
-            offsets: neighbour_offsets(params.connectivity),
+            offsets: DIRS
+                .iter()
+                .zip(IS_FACE)
+                .filter(|&(_, face)| face || params.connectivity == 26)
+                .map(|(&d, _)| d)
+                .collect(),
             costs: Bricks::new(dims),
             buckets: vec![Vec::new(); buckets],
             per_bucket: 1.0 / width,
@@ -401,8 +410,9 @@ impl<'a> PathCostScan<'a> {
             .unwrap_or(self.thresholds.len())
     }
 
-    /// `c_v` (value units) of a voxel of value `x` at `p`: `min(|d_s −
-    /// d_v|, cap) − σ_s`, the cap for a voxel a bound blocks.
+    /// `c_v` (value units) of a voxel of value `x` at `p`: the growth's
+    /// capped excess, read as [`SANE_MAX`] where a bound blocks the voxel
+    /// (as [`GrowthLimits::apply`] writes it).
     #[inline]
     fn step_cost(&self, x: f32, p: [usize; 3]) -> f32 {
         let blocked = !self.limits.is_none()
@@ -410,12 +420,7 @@ impl<'a> PathCostScan<'a> {
                 .limits
                 .blocks(x, p, self.seed, self.values.grid.spacing.to_array())
                 .is_some();
-        let a = if blocked {
-            self.cap
-        } else {
-            (self.mean - sanitize(x)).abs().min(self.cap)
-        };
-        a - self.sigma
+        self.ext.excess(if blocked { SANE_MAX } else { x })
     }
 
     #[inline]
@@ -435,22 +440,6 @@ impl<'a> PathCostScan<'a> {
         let step = o[0] + self.dims[0] as isize * (o[1] + self.dims[1] as isize * o[2]);
         Some(((v as isize + step) as u32, q))
     }
-}
-
-/// The neighbour offsets of a connectivity (6: faces; 26: all).
-fn neighbour_offsets(connectivity: u32) -> Vec<[isize; 3]> {
-    let mut o = Vec::new();
-    for z in -1isize..=1 {
-        for y in -1isize..=1 {
-            for x in -1isize..=1 {
-                let n = x.abs() + y.abs() + z.abs();
-                if n > 0 && (connectivity == 26 || n == 1) {
-                    o.push([x, y, z]);
-                }
-            }
-        }
-    }
-    o
 }
 
 /// Side of a brick of cells, voxels.
