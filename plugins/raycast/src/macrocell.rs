@@ -211,9 +211,11 @@ impl MacroCells {
     /// Separably, one layer of cells (z) per task: each voxel row of the
     /// layer's z-span is reduced to its cells' x-spans once, and folded
     /// into the (one or two) cell rows whose y-span holds it. A cell's
-    /// span overlaps its neighbours' by its halo, so each voxel is read
-    /// about `(cell + 3) / cell` times, not `((cell + 3) / cell)³` as
-    /// cell by cell; and no cell waits on one long chain of comparisons.
+    /// span overlaps its neighbours' by its halo (`cell + 3` voxels per
+    /// axis), so each voxel is read about `((cell + 3) / cell)²` times (x
+    /// and z overlap; each row is reduced once per layer), not
+    /// `((cell + 3) / cell)³` as cell by cell; and no cell waits on one
+    /// long chain of comparisons.
     pub fn rebuild(&mut self, values: &[f32], cells: IndexBox) {
         let [nx, ny, _] = self.dims;
         let (x0, w) = (cells.lo[0], cells.hi[0] + 1 - cells.lo[0]);
