@@ -298,6 +298,11 @@ pub struct CorotationalFem {
     stats: StaticStats,
     /// The mean force scale of the converged static load steps (µN).
     force_scale: newton::ForceScale,
+    /// The quadratic constant the last full Newton step showed (relative
+    /// residual after ÷ before²; 0 before any, or after a step that
+    /// backtracked): how loose its next linear solve may be
+    /// ([`Self::newton_settings`]).
+    newton_quadratic: f64,
     /// Rest positions of the solver's nodes (corners, then edge nodes for
     /// P2), mm.
     positions: Vec<DVec3>,
@@ -766,6 +771,7 @@ impl MeshSolver for CorotationalFem {
             gpu: None,
             stats: StaticStats::default(),
             force_scale: newton::ForceScale::default(),
+            newton_quadratic: 0.0,
             deformed: positions.clone(),
             positions,
             compliance_tangent: None,

@@ -14,6 +14,11 @@ use crate::tet_mesh::TetMesh;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
+/// Below this many rows (nodes) the matrix–vector product and the solves'
+/// vector operations ([`super::pcg::dot`]) run on one thread: their work
+/// is then shorter than waking the pool's other threads.
+pub const PARALLEL_ROWS: usize = 8192;
+
 /// A 3 × 3-block sparse matrix on a mesh's node graph.
 #[derive(Clone, Debug)]
 pub struct BlockMatrix {
@@ -157,18 +162,24 @@ impl BlockMatrix {
         }
     }
 
-    /// `y = A x`.
+    /// `y = A x`. Below [`PARALLEL_ROWS`] rows on the calling thread: an
+    /// iterative solve calls this once per iteration between sequential
+    /// steps (the IC(0) triangular solves), and splitting a small product
+    /// woke the pool's other thread every time (on the 2,150-node
+    /// pendulum, 1.5 ms of a 36 ms frame, docs/BENCHMARKS.md).
     pub fn mul(&self, x: &[DVec3], y: &mut [DVec3]) {
-        y.par_iter_mut()
-            .enumerate()
-            .with_min_len(256)
-            .for_each(|(i, yi)| {
-                let (a, b) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
-                *yi = self.col[a..b]
-                    .iter()
-                    .zip(&self.blocks[a..b])
-                    .fold(DVec3::ZERO, |s, (&j, m)| s + *m * x[j as usize]);
-            });
+        let row = |(i, yi): (usize, &mut DVec3)| {
+            let (a, b) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
+            *yi = self.col[a..b]
+                .iter()
+                .zip(&self.blocks[a..b])
+                .fold(DVec3::ZERO, |s, (&j, m)| s + *m * x[j as usize]);
+        };
+        if y.len() < PARALLEL_ROWS {
+            y.iter_mut().enumerate().for_each(row);
+        } else {
+            y.par_iter_mut().enumerate().with_min_len(256).for_each(row);
+        }
     }
 
     /// Sums per-corner values (`per_corner[4 t + a]` for corner `a` of

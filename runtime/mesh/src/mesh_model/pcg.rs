@@ -17,7 +17,7 @@
 //! Warm start: the solve starts from the `x` it is given (last frame's
 //! answer), so a scene that barely changed converges in a few iterations.
 
-use super::block_matrix::BlockMatrix;
+use super::block_matrix::{BlockMatrix, PARALLEL_ROWS};
 use super::boundary::Boundary;
 use super::ichol::IncompleteCholesky;
 use glam::{DMat3, DVec3};
@@ -124,12 +124,9 @@ pub fn warn_unconverged(
     false
 }
 
-/// Below this many nodes the vector operations run on one thread.
-const PARALLEL_NODES: usize = 8192;
-
 /// `Σ aᵢ · bᵢ`.
 pub fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
-    if a.len() < PARALLEL_NODES {
+    if a.len() < PARALLEL_ROWS {
         a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
     } else {
         a.par_iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
