@@ -2,7 +2,7 @@
 //! convergence.
 
 use super::bounds::{VoxelBounds, grown_working_box};
-use super::frontier::{Lattice, count, finish, group, lift, states_for};
+use super::frontier::{Lattice, PARALLEL_ENTRIES, count, finish, group, lift, states_for};
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::Seed;
@@ -36,6 +36,9 @@ pub struct CpuGrowth {
     states: Vec<AtomicU64>,
     /// Voxels that changed in the last step, by group (see `frontier`).
     frontier: Vec<Vec<(u32, u16)>>,
+    /// A step's passes run on the pool from this many frontier entries
+    /// ([`PARALLEL_ENTRIES`]; tests set it to check both schedules).
+    parallel_from: usize,
 }
 
 impl CpuGrowth {
@@ -58,6 +61,7 @@ impl CpuGrowth {
             states: states_for(&mut field, 0..work.len(), ext.q_min, ext.q_max),
             field,
             frontier: group([(s as u32, ext.q_max)], work.dims()),
+            parallel_from: PARALLEL_ENTRIES,
         })
     }
 
@@ -93,7 +97,8 @@ impl CpuGrowth {
                 &self.states,
                 &self.state.ext,
                 s,
-                &self.frontier
+                &self.frontier,
+                self.parallel_from
             ));
             let changes = with_voxels!(volume.data, |s| finish(
                 &lat,
@@ -101,7 +106,8 @@ impl CpuGrowth {
                 &self.states,
                 &self.state.ext,
                 s,
-                &found
+                &found,
+                self.parallel_from
             ));
             for b in changes.iter().filter_map(|c| c.bounds) {
                 self.state.region = self.state.region.union(&b);
@@ -114,6 +120,14 @@ impl CpuGrowth {
         rep.converged = self.is_converged();
         self.state.total.merge(&rep);
         Ok(rep)
+    }
+
+    /// Runs every later step's passes on the pool from `entries` frontier
+    /// entries on (0: always; `usize::MAX`: never) — for the tests that
+    /// check both schedules give the same map.
+    #[cfg(test)]
+    pub(crate) fn set_parallel_from(&mut self, entries: usize) {
+        self.parallel_from = entries;
     }
 
     /// Runs to convergence and reports the steps it took from here.

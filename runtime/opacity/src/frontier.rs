@@ -291,8 +291,45 @@ pub(crate) type Raised = (u32, i32, u16);
 /// fall in: `[g − 1, g, g + 1]`.
 pub(crate) type Found = [Vec<Raised>; 3];
 
+/// Below this many frontier entries (or raised voxels) a step's passes run
+/// on the calling thread. Each pass over the groups is a fork and a join,
+/// four a step, and a step's frontier is small: on the abdomen's liver
+/// ~860 entries a step at 3 mm, ~3,900 at 1.5 mm on average over ~190
+/// steps. Split over the two cores of the benchmark machine, those passes
+/// made the whole growth slower, not faster: medians 13.7–14.9 ms against
+/// 7.3–7.4 ms on one thread at 3 mm, 77–85 against 62–64 ms at 1.5 mm —
+/// waking the pool cost more than the other core gave (docs/BENCHMARKS.md,
+/// "Figures: the growth on one thread").
+pub(crate) const PARALLEL_ENTRIES: usize = 8192;
+
+/// Runs `f` on the items of `items` whose index has parity `parity` (the
+/// groups one pass may touch at once), on the pool when `parallel`. Either
+/// way each item is visited once by its own call, so the results are the
+/// same.
+fn each_of_parity<X: Send>(
+    items: &mut [X],
+    parity: usize,
+    parallel: bool,
+    f: impl Fn((usize, &mut X)) + Sync + Send,
+) {
+    if parallel {
+        items
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(g, _)| g % 2 == parity)
+            .for_each(f);
+    } else {
+        items
+            .iter_mut()
+            .enumerate()
+            .filter(|(g, _)| g % 2 == parity)
+            .for_each(f);
+    }
+}
+
 /// Phase 1: lifts the neighbours of the frontier in place; returns the
-/// raised voxels (see the module docs for the schedule).
+/// raised voxels (see the module docs for the schedule). On the pool once
+/// the frontier holds `parallel_from` entries ([`PARALLEL_ENTRIES`]).
 pub(crate) fn lift<T: Sample>(
     lat: &Lattice,
     field: &[AtomicU16],
@@ -300,6 +337,7 @@ pub(crate) fn lift<T: Sample>(
     ext: &Extinction,
     values: &[T],
     frontier: &[Vec<(u32, u16)>],
+    parallel_from: usize,
 ) -> Vec<Found> {
     /// Lifts neighbour `v` (volume index `vv`) of a frontier voxel that
     /// holds `qu`; records it in `out[slot]` the first time it rises.
@@ -350,66 +388,63 @@ pub(crate) fn lift<T: Sample>(
 
     let (bx, bxy) = (lat.bdim[0], lat.bdim[0] * lat.bdim[1]);
     let mut found: Vec<Found> = (0..frontier.len()).map(|_| Found::default()).collect();
+    let parallel = frontier.iter().map(Vec::len).sum::<usize>() >= parallel_from;
     for parity in 0..2 {
-        found
-            .par_iter_mut()
-            .enumerate()
-            .filter(|(g, _)| g % 2 == parity)
-            .for_each(|(g, out)| {
-                let g0 = g * lat.gs;
-                for &(u, qu) in &frontier[g] {
-                    let l = u as usize;
-                    let c = lat.coords(l);
-                    // Slot of a neighbour at slab z + dz: its group − g + 1.
-                    let zr = c[2] - g0;
-                    let slot = |dz: isize| {
-                        if dz < 0 && zr == 0 {
-                            0
-                        } else if dz > 0 && zr + 1 == lat.gs {
-                            2
-                        } else {
-                            1
-                        }
-                    };
-                    if lat.interior(c) {
-                        // Which of the 27-neighbourhood are done, three per
-                        // row, at bit 2i for cell i.
-                        let mut done = 1u64 << 26;
-                        for row in 0..9 {
-                            let (dy, dz) = (row % 3, row / 3);
-                            let r = (l - 1 + dy * bx + dz * bxy) - bx - bxy;
-                            done |= done3(states, r) << (6 * row);
-                        }
-                        let vl = lat.vol_linear(c);
-                        let cells = if lat.faces_only {
-                            FACES_EVEN
-                        } else {
-                            CELLS_EVEN
-                        };
-                        let mut open = !done & cells;
-                        while open != 0 {
-                            let i = (open.trailing_zeros() / 2) as usize;
-                            open &= open - 1;
-                            let v = l.wrapping_add_signed(lat.off27_box[i]);
-                            let vv = vl.wrapping_add_signed(lat.off27_vol[i]);
-                            lift_one(
-                                field,
-                                states,
-                                ext,
-                                values,
-                                qu,
-                                (v, vv),
-                                slot((i / 9) as isize - 1),
-                                out,
-                            );
-                        }
+        each_of_parity(&mut found, parity, parallel, |(g, out)| {
+            let g0 = g * lat.gs;
+            for &(u, qu) in &frontier[g] {
+                let l = u as usize;
+                let c = lat.coords(l);
+                // Slot of a neighbour at slab z + dz: its group − g + 1.
+                let zr = c[2] - g0;
+                let slot = |dz: isize| {
+                    if dz < 0 && zr == 0 {
+                        0
+                    } else if dz > 0 && zr + 1 == lat.gs {
+                        2
                     } else {
-                        lat.for_each_neighbour(l, c, |v, vv, dz| {
-                            lift_one(field, states, ext, values, qu, (v, vv), slot(dz), out)
-                        });
+                        1
                     }
+                };
+                if lat.interior(c) {
+                    // Which of the 27-neighbourhood are done, three per
+                    // row, at bit 2i for cell i.
+                    let mut done = 1u64 << 26;
+                    for row in 0..9 {
+                        let (dy, dz) = (row % 3, row / 3);
+                        let r = (l - 1 + dy * bx + dz * bxy) - bx - bxy;
+                        done |= done3(states, r) << (6 * row);
+                    }
+                    let vl = lat.vol_linear(c);
+                    let cells = if lat.faces_only {
+                        FACES_EVEN
+                    } else {
+                        CELLS_EVEN
+                    };
+                    let mut open = !done & cells;
+                    while open != 0 {
+                        let i = (open.trailing_zeros() / 2) as usize;
+                        open &= open - 1;
+                        let v = l.wrapping_add_signed(lat.off27_box[i]);
+                        let vv = vl.wrapping_add_signed(lat.off27_vol[i]);
+                        lift_one(
+                            field,
+                            states,
+                            ext,
+                            values,
+                            qu,
+                            (v, vv),
+                            slot((i / 9) as isize - 1),
+                            out,
+                        );
+                    }
+                } else {
+                    lat.for_each_neighbour(l, c, |v, vv, dz| {
+                        lift_one(field, states, ext, values, qu, (v, vv), slot(dz), out)
+                    });
                 }
-            });
+            }
+        });
     }
     found
 }
@@ -443,7 +478,7 @@ pub(crate) fn count(found: &[Found]) -> usize {
 
 /// Phase 2: the pump shortcut ([`Extinction::pumps`]) on the raised voxels,
 /// their states, and the next frontier. One task per group, even groups
-/// then odd ones.
+/// then odd ones; on the pool once `parallel_from` voxels were raised.
 pub(crate) fn finish<T: Sample>(
     lat: &Lattice,
     field: &[AtomicU16],
@@ -451,63 +486,61 @@ pub(crate) fn finish<T: Sample>(
     ext: &Extinction,
     values: &[T],
     found: &[Found],
+    parallel_from: usize,
 ) -> Vec<Changes> {
     let mut changes: Vec<Changes> = (0..found.len()).map(|_| Changes::default()).collect();
+    let parallel = count(found) >= parallel_from;
     for parity in 0..2 {
-        changes
-            .par_iter_mut()
-            .enumerate()
-            .filter(|(g, _)| g % 2 == parity)
-            .for_each(|(g, out)| {
-                let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
-                for &(v, e, first) in raised_in(found, g) {
-                    let l = v as usize;
-                    let c = lat.coords(l);
-                    let ceiling = ext.ceiling(e);
-                    let mut q = first;
-                    if first < ceiling {
-                        // Raised below its ceiling: later lifts of the step may
-                        // have raised it further.
-                        q = field[l].load(Relaxed);
-                        if ext.may_pump(q, e) {
-                            // Neighbours' values after this step's lift: a jump
-                            // of another voxel to q_max does not change whether
-                            // it is reached, so the order of jumps does not
-                            // matter.
-                            let mut pump = false;
-                            lat.for_each_neighbour(l, c, |n, vn, _| {
-                                pump |= ext.pumps(
-                                    q,
-                                    e,
-                                    ext.fixed(values[vn].to_f32()),
-                                    field[n].load(Relaxed),
-                                );
-                            });
-                            if pump {
-                                q = ext.q_max;
-                                field[l].store(q, Relaxed);
-                            }
+        each_of_parity(&mut changes, parity, parallel, |(g, out)| {
+            let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+            for &(v, e, first) in raised_in(found, g) {
+                let l = v as usize;
+                let c = lat.coords(l);
+                let ceiling = ext.ceiling(e);
+                let mut q = first;
+                if first < ceiling {
+                    // Raised below its ceiling: later lifts of the step may
+                    // have raised it further.
+                    q = field[l].load(Relaxed);
+                    if ext.may_pump(q, e) {
+                        // Neighbours' values after this step's lift: a jump
+                        // of another voxel to q_max does not change whether
+                        // it is reached, so the order of jumps does not
+                        // matter.
+                        let mut pump = false;
+                        lat.for_each_neighbour(l, c, |n, vn, _| {
+                            pump |= ext.pumps(
+                                q,
+                                e,
+                                ext.fixed(values[vn].to_f32()),
+                                field[n].load(Relaxed),
+                            );
+                        });
+                        if pump {
+                            q = ext.q_max;
+                            field[l].store(q, Relaxed);
                         }
-                        // Plain load and store: no other task writes this word
-                        // now.
-                        let (w, sh) = mark_slot(l);
-                        let st = if q >= ceiling { DONE } else { REACHED };
-                        let word = states[w].load(Relaxed) & !(3 << sh);
-                        states[w].store(word | (st << sh), Relaxed);
                     }
-                    out.values.push((v, q));
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(c[a]);
-                        hi[a] = hi[a].max(c[a]);
-                    }
+                    // Plain load and store: no other task writes this word
+                    // now.
+                    let (w, sh) = mark_slot(l);
+                    let st = if q >= ceiling { DONE } else { REACHED };
+                    let word = states[w].load(Relaxed) & !(3 << sh);
+                    states[w].store(word | (st << sh), Relaxed);
                 }
-                if !out.values.is_empty() {
-                    out.bounds = Some(VoxelBounds {
-                        lo: lat.voxel(lo),
-                        hi: lat.voxel(hi),
-                    });
+                out.values.push((v, q));
+                for a in 0..3 {
+                    lo[a] = lo[a].min(c[a]);
+                    hi[a] = hi[a].max(c[a]);
                 }
-            });
+            }
+            if !out.values.is_empty() {
+                out.bounds = Some(VoxelBounds {
+                    lo: lat.voxel(lo),
+                    hi: lat.voxel(hi),
+                });
+            }
+        });
     }
     changes
 }

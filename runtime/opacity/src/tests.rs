@@ -309,13 +309,17 @@ fn sparse_equals_dense_at_convergence() {
 fn sparse_equals_dense_step_by_step() {
     // The same rule (with the pump shortcut) swept densely: identical after
     // every step, and the sparse visits are exactly the dense sweep's
-    // changes; for both connectivities.
+    // changes; for both connectivities, with the sparse step's passes on
+    // one thread and on the pool (a frontier this small runs on one thread
+    // by default).
     for connectivity in [26, 6] {
-        sparse_equals_dense_step_by_step_with(connectivity);
+        for parallel_from in [usize::MAX, 0] {
+            sparse_equals_dense_step_by_step_with(connectivity, parallel_from);
+        }
     }
 }
 
-fn sparse_equals_dense_step_by_step_with(connectivity: u32) {
+fn sparse_equals_dense_step_by_step_with(connectivity: u32, parallel_from: usize) {
     let p = three_spheres_with(32, 110.0, 3.0, 5);
     let seed = p.a.centre_voxel();
     let params = GrowthParams {
@@ -325,6 +329,7 @@ fn sparse_equals_dense_step_by_step_with(connectivity: u32) {
     let dims = p.volume.grid.dims;
     let mut dense = Dense::new(&p.volume, seed, params, true);
     let mut sparse = CpuGrowth::new(p.volume.view(), &Seed::Voxel(seed), params).unwrap();
+    sparse.set_parallel_from(parallel_from);
     loop {
         let before = dense.field.clone();
         let changed = dense.sweep();
