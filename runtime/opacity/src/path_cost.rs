@@ -403,11 +403,11 @@ impl<'a> PathCostScan<'a> {
     }
 
     /// The first candidate whose `T(λ)` holds `d`, or one past the last.
+    #[inline]
     fn bin(&self, d: f32) -> usize {
-        self.thresholds
-            .iter()
-            .position(|&t| d <= t)
-            .unwrap_or(self.thresholds.len())
+        // The thresholds ascend: the first `t ≥ d` by bisection (a NaN `d`
+        // cannot occur: costs are sums and maxima of finite step costs).
+        self.thresholds.partition_point(|&t| t < d)
     }
 
     /// `c_v` (value units) of a voxel of value `x` at `p`: the growth's
