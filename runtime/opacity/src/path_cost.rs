@@ -405,8 +405,11 @@ impl<'a> PathCostScan<'a> {
     /// The first candidate whose `T(λ)` holds `d`, or one past the last.
     #[inline]
     fn bin(&self, d: f32) -> usize {
-        // The thresholds ascend: the first `t ≥ d` by bisection (a NaN `d`
-        // cannot occur: costs are sums and maxima of finite step costs).
+        // The first `t ≥ d` by bisection. Costs are ≥ 0 (never NaN: sums
+        // and maxima of finite step costs, clamped at 0), and the thresholds
+        // either ascend (`o_max` > ½) or are all ≤ 0 (`o_max` ≤ ½, where no
+        // voxel reaches ½): in both cases `t < d` holds on a prefix, as
+        // bisection needs, and the answer is the linear search's.
         self.thresholds.partition_point(|&t| t < d)
     }
 

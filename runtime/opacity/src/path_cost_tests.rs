@@ -119,6 +119,29 @@ fn scan_sizes_equal_the_growths_at_every_lambda() {
     }
 }
 
+/// With the ceiling `o_max` at or below ½ the scan's thresholds are not
+/// ascending but all ≤ 0 (`T(λ) ∝ o_max − ½`): below ½ no voxel reaches
+/// ½ in either search, at ½ exactly the voxels of cost 0 do — the scan's
+/// count is the growth's, voxel by voxel, at every λ.
+#[test]
+fn a_ceiling_at_or_below_one_half_counts_as_the_growth_does() {
+    let p = three_spheres_with(24, 108.0, 3.0, 5);
+    let seed = p.a.centre_voxel();
+    for o_max in [0.3, 0.5] {
+        let params = GrowthParams {
+            o_max,
+            ..GrowthParams::default()
+        };
+        let all = sizes(input(&p.volume, seed), params);
+        if o_max < 0.5 {
+            assert!(all.iter().all(|&(_, v)| v == 0), "o_max {o_max}: {all:?}");
+        } else {
+            assert!(all.iter().all(|&(_, v)| v > 0), "o_max {o_max}: {all:?}");
+        }
+        disagreements_within_rounding(&p.volume, seed, params);
+    }
+}
+
 /// The volume mirrored along `axis`.
 fn mirrored(v: &Volume, axis: usize) -> Volume {
     let d = v.grid.dims;
