@@ -9,17 +9,22 @@
 //   sites  u32  [site]               material/flags byte | cut byte << 8
 //   links  u32  [a * M + b] * 5      d.x, d.y, d.z (f32 bits), weight (f32
 //                                    bits), tau; then M elastic fractions
-//   list   u32  [slot]               active block indices
+//   list   u32  [1 + slot]           the block list: its length in word 0,
+//                                    then the block indices (built on the
+//                                    device by schedule.wgsl, or written
+//                                    by the host)
 //   stats  atomic<u32> [slot * 4]    per listed block: face mask, visits,
 //                                    updates, largest move (f32 bits)
-// One workgroup per active block; its threads stride over the block and
-// reduce into workgroup atomics, and one thread writes the block's four
-// result words (so nothing needs clearing between launches).
+// Dispatched indirectly with one workgroup per listed block (the arguments
+// written on the device with the list, folded into x, y; workgroups past
+// the length return at once). A listed block's threads stride over it and reduce into workgroup atomics,
+// and one thread writes the block's four result words (so nothing needs
+// clearing between launches).
 
 struct Params {
     dims: vec4<u32>,   // nx, ny, nz, hx
     blocks: vec4<u32>, // sx, sy, sz, cx
-    counts: vec4<u32>, // cy, half, materials, list length
+    counts: vec4<u32>, // cy, half, materials, unused
     step: vec4<u32>,   // read (current) copy, colour, sites, tolerance (f32 bits)
     spacing: vec4<f32>, // element spacing, mm (x, y, z, unused)
 }
@@ -153,8 +158,13 @@ struct Block {
     size: vec3<u32>,
 }
 
+// Length of the block list.
+fn listed() -> u32 {
+    return list[0];
+}
+
 fn block_of(slot: u32) -> Block {
-    let b = list[slot];
+    let b = list[1u + slot];
     let cx = p.blocks.w;
     let cy = p.counts.x;
     let bc = vec3<u32>(b % cx, (b / cx) % cy, b / (cx * cy));
@@ -184,7 +194,7 @@ fn propagate(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let slot = slot_of(wid, nwg);
-    if (slot >= p.counts.w) {
+    if (slot >= listed()) {
         return;
     }
     clear_workgroup(lid);
@@ -273,7 +283,7 @@ fn relax(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let slot = slot_of(wid, nwg);
-    if (slot >= p.counts.w) {
+    if (slot >= listed()) {
         return;
     }
     clear_workgroup(lid);
@@ -357,7 +367,7 @@ fn sync_copies(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let slot = slot_of(wid, nwg);
-    if (slot >= p.counts.w) {
+    if (slot >= listed()) {
         return;
     }
     let blk = block_of(slot);

@@ -139,6 +139,19 @@ fn chainmail_head_scene_runs_and_swaps_to_every_model_with_one_edit() {
         let g = metrics(&tmp.path().join("g"));
         assert_eq!(g["backend"], "gpu", "{g}");
         assert_eq!(g["plugin"]["name"], "chainmail");
+        // The device builds its own block lists: the same work, frame by
+        // frame, as the rayon schedule.
+        for note in [
+            "propagation_iterations",
+            "relaxation_sweeps",
+            "repair_waves",
+            "conflicting_constraints",
+            "relaxation_blocks_per_frame_max",
+        ] {
+            let at = |m: &serde_json::Value| m["stages"]["model"]["notes"][note].clone();
+            assert_eq!(at(&g), at(&m), "{note}");
+            assert!(at(&m).is_number(), "{note}: {m}");
+        }
         let (differ, of) = differing_voxels(tmp.path(), "cm", "g");
         // Samples on the edge of a moved structure may round the other way;
         // the deformation itself is the same.

@@ -3,32 +3,34 @@
 //! `shaders/chainmail/chainmail.wgsl` (the twins of `sponsor`,
 //! `relax_one` and `copy_identity`).
 //!
-//! The schedule stays on the CPU: [`crate::model::ChainMail`] builds the
-//! active-block lists exactly as for its rayon path (`Blocks::next_active`),
-//! and each iteration is **one** dispatch over its list (two for a
-//! relaxation sweep, one per colour). The kernels write one face mask per
-//! listed block plus the visit/update counts and the largest move, and the
-//! model reads those back — a few bytes per active block — to build the
-//! next list. Reading back is what keeps the GPU and rayon schedules
-//! identical (the parity tests compare them iteration by iteration); a
-//! device-side list builder would save the read-back and is left for when a
-//! real GPU is measured.
+//! The schedule lives on the device too (`crate::gpu_schedule`):
+//! [`crate::model::ChainMail`] hands a run its starting active-block list
+//! (the one its rayon path would build) and a cap, and the device builds
+//! each next list itself, so the host queues batches of iterations and
+//! reads back a dozen words per batch instead of every listed block's
+//! results per iteration. What the model needs from the run — the next
+//! list, the blocks that changed, were activated or ran, the visit and
+//! update counts and the largest relaxation move — comes back at its end.
+//! The lists' order on the device differs from the CPU's ascending order;
+//! a launch's result does not depend on it (a propagation iteration reads
+//! one Jacobi copy and writes the other; a relaxation colour touches no
+//! two linked elements), which the parity tests check iteration by
+//! iteration.
 //!
 //! Buffers (32-bit structure of arrays, see the shader's header): `u` (both
 //! copies, 3 axes: 24 B per site), `keys` (both copies: 8 B), `sites`
 //! (material, flags and cut bits: 4 B), the link table, a control buffer
-//! (both colours' parameters and the block list, written with one call per
-//! launch) and four result words per listed block, which each workgroup
-//! writes whole, so nothing is cleared between launches. A propagation
-//! iteration is one write, one dispatch and one read-back; a relaxation
-//! sweep one write, two dispatches and one read-back. The displacement buffer is bound whole, so a model
+//! (two `Params` slots, written once per run) and four result words per
+//! listed block, which each workgroup writes whole, so nothing is cleared
+//! between launches. A propagation iteration is three dispatches (the
+//! kernel, `schedule`, `retire`); a relaxation sweep four (one per colour,
+//! then the same two). The displacement buffer is bound whole, so a model
 //! needs `24 · sites ≤ max_storage_buffer_binding_size` (128 MiB on
 //! lavapipe: 5.5 M sites); larger ones are refused with what to do.
 
-use crate::blocks::{Blocks, FaceMask};
+use crate::blocks::Blocks;
+use crate::gpu_schedule::{DeviceSchedule, RunReport};
 use crate::lattice::ElementLattice;
-use crate::propagate::IterationReport;
-use crate::relax::SweepReport;
 use crate::state::State;
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
@@ -62,16 +64,6 @@ mod bind {
     pub const OUT_Z: u32 = 9;
 }
 
-/// What the kernels report for one launch.
-struct Results {
-    visits: u64,
-    updates: u64,
-    /// Largest relaxation move, fraction of the spacing.
-    max_move: f64,
-    /// `(block, face mask)` of each listed block.
-    blocks: Vec<(u32, FaceMask)>,
-}
-
 fn gpu_err(e: impl std::fmt::Display) -> ModelError {
     ModelError(format!("chainmail (GPU): {e}"))
 }
@@ -80,12 +72,13 @@ fn gpu_err(e: impl std::fmt::Display) -> ModelError {
 pub struct GpuChainMail {
     gpu: Arc<dyn GpuService>,
     sites: usize,
-    /// One launch's inputs in one buffer, written with one call: the
-    /// `Params` of colour 0 and of colour 1, each at a multiple of the
-    /// device's storage offset alignment, then the block list.
+    /// A run's two `Params` slots, each at a multiple of the device's
+    /// storage offset alignment, written with one call.
     control: BufferId,
-    /// Byte stride of the two `Params` slots (the list starts at twice it).
+    /// Byte stride of the two `Params` slots.
     slot_bytes: u64,
+    /// The active-block lists and their builder.
+    schedule: DeviceSchedule,
     u: BufferId,
     keys: BufferId,
     cells: BufferId,
@@ -160,10 +153,7 @@ impl GpuChainMail {
         let slot_bytes = (4 * PARAM_WORDS as u64).next_multiple_of(align);
         let this = Self {
             control: g
-                .create_buffer(
-                    2 * slot_bytes + 4 * blocks.len().max(1) as u64,
-                    "chainmail params and block list",
-                )
+                .create_buffer(2 * slot_bytes, "chainmail params")
                 .map_err(gpu_err)?,
             slot_bytes,
             u: g.create_buffer(u_bytes, "chainmail u").map_err(gpu_err)?,
@@ -184,6 +174,7 @@ impl GpuChainMail {
             relax: g.compile(CHAINMAIL_WGSL, "relax").map_err(gpu_err)?,
             sync: g.compile(CHAINMAIL_WGSL, "sync_copies").map_err(gpu_err)?,
             map: g.compile(CHAINMAIL_WGSL, "map_identity").map_err(gpu_err)?,
+            schedule: DeviceSchedule::new(g.as_ref(), blocks)?,
             sites: n,
             base,
             gpu,
@@ -265,85 +256,57 @@ impl GpuChainMail {
         Ok(())
     }
 
-    /// Writes one launch's inputs with one call: the `Params` of both
-    /// colours (read copy `copy`, list length, tolerance) and the list.
-    fn write_control(&self, copy: usize, list: &[u32], tol: f32) -> Result<(), ModelError> {
+    /// Writes a run's two `Params` slots with one call: slot `k` reads
+    /// copy `copies[k]` and runs colour `k`, with tolerance `tol`.
+    fn write_control(&self, copies: [usize; 2], tol: f32) -> Result<(), ModelError> {
         let slot = self.slot_bytes as usize / 4;
-        let mut words = vec![0u32; 2 * slot + list.len()];
-        for colour in 0..2 {
+        let mut words = vec![0u32; 2 * slot];
+        for (colour, &copy) in copies.iter().enumerate() {
             let p = &mut words[colour * slot..colour * slot + PARAM_WORDS];
             p.copy_from_slice(&self.base);
-            p[11] = list.len() as u32;
             p[12] = copy as u32;
             p[13] = colour as u32;
             p[15] = tol.to_bits();
         }
-        words[2 * slot..].copy_from_slice(list);
         self.gpu
             .write_buffer(self.control, 0, bytemuck::cast_slice(&words))
             .map_err(gpu_err)
     }
 
-    /// The bindings of the `Params` of `colour` and of a list of `len`.
-    fn control_bindings(&self, colour: usize, len: usize) -> [BufferBinding; 2] {
-        [
-            BufferBinding {
-                binding: bind::PARAMS,
-                buffer: self.control,
-                offset: colour as u64 * self.slot_bytes,
-                size: 4 * PARAM_WORDS as u64,
-            },
-            BufferBinding {
-                binding: bind::LIST,
-                buffer: self.control,
-                offset: 2 * self.slot_bytes,
-                size: 4 * len.max(1) as u64,
-            },
-        ]
+    /// The `Params` binding of slot `k`.
+    fn params(&self, k: usize) -> BufferBinding {
+        BufferBinding {
+            binding: bind::PARAMS,
+            buffer: self.control,
+            offset: k as u64 * self.slot_bytes,
+            size: 4 * PARAM_WORDS as u64,
+        }
     }
 
-    /// Queues `pipeline` over a list of `len` blocks, one workgroup each.
+    /// Queues `pipeline` with `Params` slot `k` over the list of iteration
+    /// `i`, one workgroup per listed block.
     fn launch(
         &self,
         pipeline: PipelineId,
-        colour: usize,
-        len: usize,
+        k: usize,
+        i: u64,
         with: &[(u32, BufferId)],
     ) -> Result<(), ModelError> {
-        let mut bindings: Vec<BufferBinding> = self.control_bindings(colour, len).to_vec();
+        let mut bindings = vec![self.params(k), self.schedule.list(i, bind::LIST)];
         bindings.extend(with.iter().map(|&(b, id)| BufferBinding::whole(b, id)));
-        let groups = self.gpu.workgroups_for(len as u64, 1).map_err(gpu_err)?;
-        self.gpu
-            .dispatch(pipeline, &bindings, groups)
-            .map_err(gpu_err)
+        self.schedule
+            .dispatch_over_list(self.gpu.as_ref(), pipeline, &bindings, i)
     }
 
-    /// Reads the results of the listed blocks.
-    fn results(&self, list: &[u32]) -> Result<Results, ModelError> {
-        let mut words = vec![0u32; STAT_WORDS * list.len()];
-        self.gpu.download(self.stats, &mut words).map_err(gpu_err)?;
-        let mut r = Results {
-            visits: 0,
-            updates: 0,
-            max_move: 0.0,
-            blocks: Vec::with_capacity(list.len()),
-        };
-        for (&b, w) in list.iter().zip(words.chunks_exact(STAT_WORDS)) {
-            r.blocks.push((b, w[0] as FaceMask));
-            r.visits += w[1] as u64;
-            r.updates += w[2] as u64;
-            r.max_move = r.max_move.max(f32::from_bits(w[3]) as f64);
+    /// Up to `max` Jacobi propagation iterations from `active`, the first
+    /// reading copy `rd`; iteration `i` reads copy `rd ^ (i & 1)` (the
+    /// `Params` slot of its parity), so after the run the current copy is
+    /// `rd ^ (iterations & 1)`.
+    pub fn propagate(&self, rd: usize, active: &[u32], max: u64) -> Result<RunReport, ModelError> {
+        if active.is_empty() || max == 0 {
+            return Ok(RunReport::default());
         }
-        Ok(r)
-    }
-
-    /// One Jacobi propagation iteration over `active` (reads copy `rd`,
-    /// writes the other): one write, one dispatch, one read-back.
-    pub fn propagate(&self, rd: usize, active: &[u32]) -> Result<IterationReport, ModelError> {
-        if active.is_empty() {
-            return Ok(IterationReport::default());
-        }
-        self.write_control(rd, active, 0.0)?;
+        self.write_control([rd, 1 - rd], 0.0)?;
         let with = [
             (bind::U, self.u),
             (bind::KEYS, self.keys),
@@ -351,35 +314,34 @@ impl GpuChainMail {
             (bind::LINKS, self.links),
             (bind::STATS, self.stats),
         ];
-        self.launch(self.propagate, 0, active.len(), &with)?;
-        let r = self.results(active)?;
-        Ok(IterationReport {
-            blocks: r.blocks,
-            visits: r.visits,
-            updates: r.updates,
+        let g = self.gpu.as_ref();
+        self.schedule.run(g, active, max, self.stats, |i| {
+            self.launch(self.propagate, (i % 2) as usize, i, &with)
         })
     }
 
-    /// One red-black relaxation sweep over `set`, in place in copy `cur`:
-    /// one write, two dispatches (one per colour), one read-back.
-    pub fn relax(&self, cur: usize, set: &[u32], tol: f64) -> Result<SweepReport, ModelError> {
-        if set.is_empty() {
-            return Ok(SweepReport::default());
+    /// Up to `max` red-black relaxation sweeps from `set`, in place in copy
+    /// `cur`; a sweep is two launches, one per colour.
+    pub fn relax(
+        &self,
+        cur: usize,
+        set: &[u32],
+        tol: f64,
+        max: u64,
+    ) -> Result<RunReport, ModelError> {
+        if set.is_empty() || max == 0 {
+            return Ok(RunReport::default());
         }
-        self.write_control(cur, set, tol as f32)?;
+        self.write_control([cur, cur], tol as f32)?;
         let with = [
             (bind::U, self.u),
             (bind::SITES, self.cells),
             (bind::LINKS, self.links),
             (bind::STATS, self.stats),
         ];
-        for colour in 0..2 {
-            self.launch(self.relax, colour, set.len(), &with)?;
-        }
-        let r = self.results(set)?;
-        Ok(SweepReport {
-            blocks: r.blocks,
-            max_move: r.max_move,
+        let g = self.gpu.as_ref();
+        self.schedule.run(g, set, max, self.stats, |i| {
+            (0..2).try_for_each(|colour| self.launch(self.relax, colour, i, &with))
         })
     }
 
@@ -388,8 +350,9 @@ impl GpuChainMail {
         if blocks.is_empty() {
             return Ok(());
         }
-        self.write_control(from, blocks, 0.0)?;
-        self.launch(self.sync, 0, blocks.len(), &[(bind::U, self.u)])
+        self.write_control([from, from], 0.0)?;
+        self.schedule.write_list(self.gpu.as_ref(), blocks)?;
+        self.launch(self.sync, 0, 0, &[(bind::U, self.u)])
     }
 
     /// The current displacements (copy `cur`) in voxel order into `out`
@@ -400,9 +363,9 @@ impl GpuChainMail {
         voxels: usize,
         out: [BufferId; 3],
     ) -> Result<(), ModelError> {
-        self.write_control(cur, &[], 0.0)?;
+        self.write_control([cur, cur], 0.0)?;
         let bindings = [
-            self.control_bindings(0, 0)[0],
+            self.params(0),
             BufferBinding::whole(bind::U, self.u),
             BufferBinding::whole(bind::OUT_X, out[0]),
             BufferBinding::whole(bind::OUT_Y, out[1]),
@@ -420,6 +383,7 @@ impl GpuChainMail {
 
 impl Drop for GpuChainMail {
     fn drop(&mut self) {
+        self.schedule.destroy(self.gpu.as_ref());
         for id in [
             self.control,
             self.u,

@@ -38,6 +38,7 @@
 pub mod blocks;
 pub mod conflicts;
 pub mod gpu;
+pub mod gpu_schedule;
 pub mod lattice;
 pub mod mapping;
 pub mod model;

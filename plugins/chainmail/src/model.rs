@@ -643,12 +643,12 @@ impl ChainMail {
         let mut changed = !moved.is_empty() || std::mem::take(&mut self.topology_changed);
         match self.params.algorithm {
             Algorithm::Parallel => {
-                for _ in 0..self.params.propagation_iterations {
-                    if !self.propagating() && !self.start_repair_wave() {
-                        break;
-                    }
-                    stats.propagation_blocks += self.active.len() as u64;
-                    changed |= self.propagate_once();
+                let mut left = self.params.propagation_iterations as u64;
+                while left > 0 && (self.propagating() || self.start_repair_wave()) {
+                    let run = self.propagate_some(left);
+                    stats.propagation_blocks += run.blocks;
+                    changed |= run.moved;
+                    left -= run.iterations.max(1);
                 }
             }
             Algorithm::Sequential => {
@@ -657,14 +657,14 @@ impl ChainMail {
                 }
             }
         }
-        for _ in 0..self.params.relaxation_iterations {
-            if self.relax.is_empty() {
-                break;
-            }
-            stats.relaxation_blocks += self.relax.len() as u64;
-            stats.sweeps += 1;
-            changed |= self.relax_once();
+        let mut left = self.params.relaxation_iterations as u64;
+        while left > 0 && !self.relax.is_empty() {
+            let run = self.relax_some(left);
+            stats.relaxation_blocks += run.blocks;
+            stats.sweeps += run.iterations;
+            changed |= run.moved;
             stats.max_move = self.last_max_move;
+            left -= run.iterations.max(1);
         }
         stats.changed = changed;
         if self.propagated_since_check && !self.propagating() {
@@ -819,8 +819,7 @@ impl ChainMail {
     pub fn relax(&mut self, max: u64) -> u64 {
         let mut it = 0;
         while !self.relax.is_empty() && it < max {
-            self.relax_once();
-            it += 1;
+            it += self.relax_some(max - it).iterations.max(1);
         }
         it
     }
@@ -841,8 +840,7 @@ impl ChainMail {
     pub fn propagate(&mut self, max: u64) -> u64 {
         let mut it = 0;
         while it < max && (self.propagating() || self.start_repair_wave()) {
-            self.propagate_once();
-            it += 1;
+            it += self.propagate_some(max - it).iterations.max(1);
         }
         it
     }
@@ -855,20 +853,46 @@ impl ChainMail {
         }
     }
 
+    /// Up to `max` (≥ 1) propagation iterations: on the GPU, one device
+    /// run (the device builds each next list); on the CPU, one iteration.
+    fn propagate_some(&mut self, max: u64) -> Run {
+        if self.gpu.is_none() || self.params.schedule == Schedule::Frontier {
+            let blocks = self.active.len() as u64;
+            let moved = self.propagate_once();
+            return Run {
+                iterations: 1,
+                blocks,
+                moved,
+            };
+        }
+        self.sync_copies();
+        let (cur, active) = (self.state.cur, std::mem::take(&mut self.active));
+        let run = self.on_device(|g, _| g.propagate(cur, &active, max));
+        self.state.cur = cur ^ (run.iterations & 1) as usize;
+        self.cpu_stale = true;
+        self.counts.propagation_iterations += run.iterations;
+        self.counts.visits += run.visits;
+        self.counts.updates += run.updates;
+        self.propagated_since_check = true;
+        for &b in &run.dirty {
+            self.mark_changed(b as usize);
+        }
+        merge_sorted(&mut self.relax, &run.activated, &mut self.merge_scratch);
+        self.active = run.next;
+        Run {
+            iterations: run.iterations,
+            blocks: run.listed_blocks,
+            moved: run.updates > 0,
+        }
+    }
+
+    /// One propagation iteration on the CPU.
     fn propagate_once(&mut self) -> bool {
         self.sync_copies();
         if self.params.schedule == Schedule::Frontier {
             return self.propagate_frontier_once();
         }
-        let rep = if self.gpu.is_some() {
-            let (cur, active) = (self.state.cur, std::mem::take(&mut self.active));
-            let rep = self.on_device(|g, _| g.propagate(cur, &active));
-            self.state.cur = 1 - cur;
-            self.cpu_stale = true;
-            rep
-        } else {
-            jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active)
-        };
+        let rep = jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active);
         self.counts.propagation_iterations += 1;
         self.counts.visits += rep.visits;
         self.counts.updates += rep.updates;
@@ -902,6 +926,41 @@ impl ChainMail {
         !rep.updated.is_empty()
     }
 
+    /// Up to `max` (≥ 1) relaxation sweeps: on the GPU, one device run;
+    /// on the CPU, one sweep.
+    fn relax_some(&mut self, max: u64) -> Run {
+        if self.gpu.is_none() {
+            let blocks = self.relax.len() as u64;
+            let moved = self.relax_once();
+            return Run {
+                iterations: 1,
+                blocks,
+                moved,
+            };
+        }
+        let tol = self.params.rest_tolerance;
+        let (cur, set) = (self.state.cur, std::mem::take(&mut self.relax));
+        self.cpu_stale = true;
+        let run = self.on_device(|g, _| g.relax(cur, &set, tol, max));
+        self.counts.relaxation_iterations += run.iterations;
+        self.last_max_move = run.last_max_move;
+        for &b in &run.listed {
+            if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {
+                self.unsynced.push(b);
+            }
+        }
+        for &b in &run.dirty {
+            self.mark_changed(b as usize);
+        }
+        self.relax = run.next;
+        Run {
+            iterations: run.iterations,
+            blocks: run.listed_blocks,
+            moved: run.any_max_move > 0.0,
+        }
+    }
+
+    /// One relaxation sweep on the CPU.
     fn relax_once(&mut self) -> bool {
         // The sequential baseline sweeps every element, one by one, as
         // Gibson's relaxation does; the parallel model only the active
@@ -911,10 +970,6 @@ impl ChainMail {
         let rep = if sequential {
             let all: Vec<u32> = (0..self.blocks.len() as u32).collect();
             sweep_scalar(&self.lat, &self.state, &self.blocks, &all, tol)
-        } else if self.gpu.is_some() {
-            let (cur, set) = (self.state.cur, std::mem::take(&mut self.relax));
-            self.cpu_stale = true;
-            self.on_device(|g, _| g.relax(cur, &set, tol))
         } else {
             sweep_runs(
                 &self.lat,
@@ -1012,7 +1067,16 @@ impl ChainMail {
     }
 }
 
-/// Adds a block to a short list (the grabbed elements' blocks).
+/// What a stretch of propagation iterations or relaxation sweeps did.
+struct Run {
+    /// Iterations or sweeps whose block list was not empty.
+    iterations: u64,
+    /// Sum of their lists' lengths.
+    blocks: u64,
+    /// Something moved.
+    moved: bool,
+}
+
 /// `list` (ascending, no repeats) merged with `more` (the same), in
 /// linear time; `scratch` is reused storage.
 fn merge_sorted(list: &mut Vec<u32>, more: &[u32], scratch: &mut Vec<u32>) {

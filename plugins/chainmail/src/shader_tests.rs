@@ -2,10 +2,13 @@
 //! as wgpu would accept it, declares exactly the kernels [`GpuChainMail`]
 //! compiles, and agrees with the Rust side on the key layout (wave/time
 //! split), the site flag bits, the block-changed bit, the buffer layouts
-//! (`Params` words, link records, result words) and the workgroup sizes.
+//! (`Params` words, link records, result words) and the workgroup sizes;
+//! the scheduling kernels (`schedule.wgsl`) agree with
+//! [`crate::gpu_schedule`] on the same and on their flag bits and totals.
 
 use super::*;
 use crate::blocks::CHANGED;
+use crate::gpu_schedule::{SCHED_WORDS, SCHEDULE_WGSL, SCHEDULE_WORKGROUP};
 use crate::lattice::{ABSENT, FIXED, HELD};
 use crate::state::{MAX_TIME, MAX_WAVE, TIME_BITS, key};
 use voxflex_wgsl_check::ShaderSet;
@@ -88,5 +91,57 @@ fn the_kernels_validate_and_share_chainmails_constants() {
     ] {
         assert_eq!(s.binding(var), binding, "`{var}`");
     }
+    // The block kernels bind the list the device builds.
+    for k in ["propagate", "relax", "sync_copies"] {
+        assert!(s.storage_buffers(k) <= 8, "{k}: at most 8 storage buffers");
+    }
+    the_schedule_kernels_share_the_hosts_layout(&mut set);
     set.finish();
+}
+
+fn the_schedule_kernels_share_the_hosts_layout(set: &mut ShaderSet) {
+    use crate::gpu_schedule::{bind, flag};
+    let s = set.validate("chainmail/schedule.wgsl", SCHEDULE_WGSL);
+    s.assert_compute_entry_points(&["schedule", "retire"], "DeviceSchedule");
+    for k in ["schedule", "retire"] {
+        assert_eq!(s.workgroup_size(k), [SCHEDULE_WORKGROUP, 1, 1], "{k}");
+        assert!(s.storage_buffers(k) <= 8, "{k}: at most 8 storage buffers");
+    }
+    assert_eq!(s.const_u32("WG"), SCHEDULE_WORKGROUP);
+    assert_eq!(s.const_u32("CHANGED"), u32::from(CHANGED), "CHANGED");
+    assert_eq!(s.const_u32("STAT_WORDS") as usize, STAT_WORDS);
+    assert_eq!(s.const_u32("SCHED_WORDS") as usize, SCHED_WORDS);
+    for (name, bit) in [
+        ("IN_NEXT", flag::IN_NEXT),
+        ("ACTIVATED", flag::ACTIVATED),
+        ("DIRTY", flag::DIRTY),
+        ("LISTED", flag::LISTED),
+    ] {
+        assert_eq!(s.const_u32(name), bit, "flag {name}");
+    }
+    use crate::gpu_schedule::{ARG_WORDS, word};
+    assert_eq!(s.const_u32("ARG_WORDS") as usize, ARG_WORDS, "ARG_WORDS");
+    for (name, at) in [
+        ("S_VISITS", word::VISITS),
+        ("S_UPDATES", word::UPDATES),
+        ("S_BLOCKS", word::BLOCKS),
+        ("S_LAUNCHES", word::LAUNCHES),
+        ("S_LAST_MAX", word::LAST_MAX),
+        ("S_ANY_MAX", word::ANY_MAX),
+        ("S_PENDING", word::PENDING),
+    ] {
+        assert_eq!(s.const_u32(name) as usize, at, "{name}");
+    }
+    for (var, binding) in [
+        ("grid", bind::GRID),
+        ("list", bind::LIST),
+        ("stats", bind::STATS),
+        ("next", bind::NEXT),
+        ("flags", bind::FLAGS),
+        ("sched", bind::SCHED),
+        ("spent", bind::SPENT),
+        ("args", bind::ARGS),
+    ] {
+        assert_eq!(s.binding(var), binding, "`{var}`");
+    }
 }

@@ -596,6 +596,17 @@ pub struct HostApi {
         workgroups: *const [u32; 3],
         err: *mut ErrorBuf,
     ) -> i32,
+    /// `GpuService::dispatch_indirect`: the workgroup counts are three
+    /// `u32`s of buffer `args` at byte `offset`.
+    pub gpu_dispatch_indirect: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        pipeline: u64,
+        bindings: *const BindingDesc,
+        count: u64,
+        args: u64,
+        offset: u64,
+        err: *mut ErrorBuf,
+    ) -> i32,
 }
 
 /// An orbit camera (mirror of `voxflex_core::camera::Camera`).

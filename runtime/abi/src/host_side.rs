@@ -60,6 +60,7 @@ impl HostServices {
                 gpu_read_buffer: host_gpu_read_buffer,
                 gpu_compile: host_gpu_compile,
                 gpu_dispatch: host_gpu_dispatch,
+                gpu_dispatch_indirect: host_gpu_dispatch_indirect,
             },
             _state: state,
         })
@@ -259,24 +260,59 @@ unsafe extern "C" fn host_gpu_dispatch(
     err: *mut ErrorBuf,
 ) -> i32 {
     guard(err, || {
-        let count = usize::try_from(count).map_err(|_| "too many bindings".to_owned())?;
-        if workgroups.is_null() || (count > 0 && bindings.is_null()) {
-            return Err("null bindings or workgroups pointer".into());
+        if workgroups.is_null() {
+            return Err("null workgroups pointer".into());
         }
-        let descs = if count == 0 {
-            &[][..]
-        } else {
-            // SAFETY: `bindings` is non-null (checked above) and the plugin
-            // passes `count` initialised descriptors that outlive this call.
-            unsafe { std::slice::from_raw_parts(bindings, count) }
-        };
-        let bindings: Vec<BufferBinding> = descs.iter().map(|&b| b.into()).collect();
+        // SAFETY: the plugin passes `count` initialised descriptors that
+        // outlive this call.
+        let bindings = unsafe { bindings_of(bindings, count) }?;
         // SAFETY: checked non-null.
         let wg = unsafe { *workgroups };
         gpu_of(ctx)?
             .dispatch(PipelineId(pipeline), &bindings, wg)
             .map_err(|e| e.to_string())
     })
+}
+
+unsafe extern "C" fn host_gpu_dispatch_indirect(
+    ctx: *mut c_void,
+    pipeline: u64,
+    bindings: *const BindingDesc,
+    count: u64,
+    args: u64,
+    offset: u64,
+    err: *mut ErrorBuf,
+) -> i32 {
+    guard(err, || {
+        // SAFETY: the plugin passes `count` initialised descriptors that
+        // outlive this call.
+        let bindings = unsafe { bindings_of(bindings, count) }?;
+        gpu_of(ctx)?
+            .dispatch_indirect(PipelineId(pipeline), &bindings, BufferId(args), offset)
+            .map_err(|e| e.to_string())
+    })
+}
+
+/// The `count` binding descriptors at `bindings`, checked for a null
+/// pointer.
+///
+/// # Safety
+/// A non-null `bindings` must point at `count` initialised descriptors.
+unsafe fn bindings_of(
+    bindings: *const BindingDesc,
+    count: u64,
+) -> Result<Vec<BufferBinding>, String> {
+    let count = usize::try_from(count).map_err(|_| "too many bindings".to_owned())?;
+    if count > 0 && bindings.is_null() {
+        return Err("null bindings pointer".into());
+    }
+    let descs = if count == 0 {
+        &[][..]
+    } else {
+        // SAFETY: non-null (checked above); the caller vouches for `count`.
+        unsafe { std::slice::from_raw_parts(bindings, count) }
+    };
+    Ok(descs.iter().map(|&b| b.into()).collect())
 }
 
 /// A plugin kind's `create` entry point.

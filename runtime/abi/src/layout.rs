@@ -198,7 +198,8 @@ pub const fn compute() -> u64 {
             gpu_write_buffer,
             gpu_read_buffer,
             gpu_compile,
-            gpu_dispatch
+            gpu_dispatch,
+            gpu_dispatch_indirect
         }
     );
     hash_type!(

@@ -187,6 +187,28 @@ impl GpuService for HostGpu {
             )
         })
     }
+
+    fn dispatch_indirect(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        args: BufferId,
+        offset: u64,
+    ) -> Result<(), GpuError> {
+        let descs: Vec<BindingDesc> = bindings.iter().map(|&b| b.into()).collect();
+        // SAFETY: host function; the array is valid during the call.
+        self.call(|api, err| unsafe {
+            (api.gpu_dispatch_indirect)(
+                api.ctx,
+                pipeline.0,
+                descs.as_ptr(),
+                descs.len() as u64,
+                args.0,
+                offset,
+                err,
+            )
+        })
+    }
 }
 
 /// A deformation model that can be exported as a plugin.

@@ -74,6 +74,7 @@ impl DeformationModel for Probe {
                 gpu.write_buffer(x, 0, &7f32.to_le_bytes())?;
                 let p = gpu.compile("wgsl text", "main")?;
                 gpu.dispatch(p, &[BufferBinding::whole(0, x)], [1, 2, 3])?;
+                gpu.dispatch_indirect(p, &[BufferBinding::whole(1, x)], BufferId(6), 12)?;
                 Ok(())
             }
         }
@@ -156,6 +157,19 @@ impl GpuService for RecordingGpu {
             .lock()
             .unwrap()
             .push(format!("dispatch {} {:?} {wg:?}", p.0, b));
+        Ok(())
+    }
+    fn dispatch_indirect(
+        &self,
+        p: PipelineId,
+        b: &[BufferBinding],
+        args: BufferId,
+        offset: u64,
+    ) -> Result<(), GpuError> {
+        self.log
+            .lock()
+            .unwrap()
+            .push(format!("indirect {} {:?} {} {offset}", p.0, b, args.0));
         Ok(())
     }
 }
@@ -268,6 +282,7 @@ fn gpu_calls_reach_the_host_service() {
             "write 5 0 [0, 0, 224, 64]".to_owned(),
             "compile wgsl text main".to_owned(),
             "dispatch 9 [BufferBinding { binding: 0, buffer: BufferId(5), offset: 0, size: 0 }] [1, 2, 3]".to_owned(),
+            "indirect 9 [BufferBinding { binding: 1, buffer: BufferId(5), offset: 0, size: 0 }] 6 12".to_owned(),
         ]
     );
     // Without a GPU the plugin sees none.

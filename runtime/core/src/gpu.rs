@@ -63,8 +63,8 @@ pub struct GpuLimits {
 
 /// Buffers, WGSL pipelines and dispatches on the host's one GPU device.
 ///
-/// Every buffer is usable as storage, uniform, copy source and copy
-/// destination. Every pipeline uses one bind group (group 0) whose layout is
+/// Every buffer is usable as storage, uniform, copy source, copy
+/// destination and indirect dispatch arguments. Every pipeline uses one bind group (group 0) whose layout is
 /// derived from the shader. Calls are ordered: a read-back sees every
 /// earlier write and dispatch.
 pub trait GpuService: Send + Sync {
@@ -91,6 +91,19 @@ pub trait GpuService: Send + Sync {
         pipeline: PipelineId,
         bindings: &[BufferBinding],
         workgroups: [u32; 3],
+    ) -> Result<(), GpuError>;
+    /// Runs a pipeline like [`Self::dispatch`], with the workgroup counts
+    /// read on the device from three `u32`s of `args` at byte `offset` (a
+    /// multiple of 4) when the dispatch executes — so an earlier kernel can
+    /// size a later one without a read-back. Counts above
+    /// [`GpuLimits::max_compute_workgroups_per_dimension`] are the writer's
+    /// error: the device may skip such a dispatch.
+    fn dispatch_indirect(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        args: BufferId,
+        offset: u64,
     ) -> Result<(), GpuError>;
 }
 
@@ -191,6 +204,25 @@ impl GpuService for LimitedBinding<'_> {
         bindings: &[BufferBinding],
         workgroups: [u32; 3],
     ) -> Result<(), GpuError> {
+        self.check(bindings)?;
+        self.inner.dispatch(pipeline, bindings, workgroups)
+    }
+    fn dispatch_indirect(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        args: BufferId,
+        offset: u64,
+    ) -> Result<(), GpuError> {
+        self.check(bindings)?;
+        self.inner
+            .dispatch_indirect(pipeline, bindings, args, offset)
+    }
+}
+
+impl LimitedBinding<'_> {
+    /// Fails as a device with the smaller bindings would.
+    fn check(&self, bindings: &[BufferBinding]) -> Result<(), GpuError> {
         let limit = self.max_storage_buffer_binding_size;
         let align = u64::from(self.inner.limits().min_storage_buffer_offset_alignment);
         for b in bindings {
@@ -205,7 +237,7 @@ impl GpuService for LimitedBinding<'_> {
                 )));
             }
         }
-        self.inner.dispatch(pipeline, bindings, workgroups)
+        Ok(())
     }
 }
 

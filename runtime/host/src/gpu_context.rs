@@ -710,6 +710,110 @@ impl Drop for Shared {
     }
 }
 
+impl WgpuService {
+    /// Binds `bindings` for `pipe`, encodes one compute pass in which
+    /// `run` records the dispatch, and queues it (`what` names the
+    /// workgroup counts in errors).
+    fn encode_dispatch(
+        &self,
+        pipe: &Pipeline,
+        bindings: &[BufferBinding],
+        what: &str,
+        run: impl FnOnce(&mut wgpu::ComputePass<'_>),
+    ) -> Result<(), GpuError> {
+        let mut resolved = Vec::with_capacity(bindings.len());
+        for b in bindings {
+            let buffer = self.buffer(b.buffer)?;
+            let total = buffer.size();
+            let size = if b.size == 0 {
+                total.saturating_sub(b.offset)
+            } else {
+                b.size
+            };
+            if b.offset.checked_add(size).is_none_or(|end| end > total) || size == 0 {
+                return Err(GpuError(format!(
+                    "`{}` @binding({}): range {}..{} does not fit buffer {} of {total} bytes",
+                    pipe.entry,
+                    b.binding,
+                    b.offset,
+                    b.offset.saturating_add(size),
+                    b.buffer.0
+                )));
+            }
+            if let Some(limit) = self.binding_limit_override
+                && size > limit
+            {
+                return Err(GpuError(format!(
+                    "`{}` @binding({}): binds {size} bytes but max_storage_buffer_binding_size is \
+                     {limit} (override); split the data into slabs",
+                    pipe.entry, b.binding
+                )));
+            }
+            resolved.push((b.binding, buffer, b.offset, size));
+        }
+
+        let device = &self.shared.device;
+        let bind_group = match (&pipe.layout, resolved.is_empty()) {
+            (_, true) => None,
+            (None, false) => {
+                return Err(GpuError(format!(
+                    "`{}` binds no resources, but {} binding(s) were given",
+                    pipe.entry,
+                    resolved.len()
+                )));
+            }
+            (Some(layout), false) => Some(self.scoped(
+                || format!("binding buffers for `{}`", pipe.entry),
+                || {
+                    let entries: Vec<wgpu::BindGroupEntry<'_>> = resolved
+                        .iter()
+                        .map(|(binding, buffer, offset, size)| wgpu::BindGroupEntry {
+                            binding: *binding,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer,
+                                offset: *offset,
+                                size: wgpu::BufferSize::new(*size),
+                            }),
+                        })
+                        .collect();
+                    device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some(&pipe.entry),
+                        layout,
+                        entries: &entries,
+                    })
+                },
+            )?),
+        };
+        let commands = self.scoped(
+            || format!("encoding a dispatch of `{}` {what}", pipe.entry),
+            || {
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some(&pipe.entry),
+                });
+                {
+                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some(&pipe.entry),
+                        timestamp_writes: None,
+                    });
+                    pass.set_pipeline(&pipe.pipeline);
+                    if let Some(group) = &bind_group {
+                        pass.set_bind_group(0, group, &[]);
+                    }
+                    run(&mut pass);
+                }
+                encoder.finish()
+            },
+        )?;
+        self.shared.dispatches.fetch_add(1, Ordering::Relaxed);
+        let mut queued = self.shared.queued.lock().expect("dispatch queue poisoned");
+        queued.push(commands);
+        if queued.len() >= MAX_QUEUED_DISPATCHES {
+            self.submit_locked(&mut queued, None)?;
+        }
+        Ok(())
+    }
+}
+
 impl GpuService for WgpuService {
     fn adapter_description(&self) -> String {
         self.shared.summary.to_string()
@@ -747,7 +851,8 @@ impl GpuService for WgpuService {
                     usage: wgpu::BufferUsages::STORAGE
                         | wgpu::BufferUsages::UNIFORM
                         | wgpu::BufferUsages::COPY_SRC
-                        | wgpu::BufferUsages::COPY_DST,
+                        | wgpu::BufferUsages::COPY_DST
+                        | wgpu::BufferUsages::INDIRECT,
                     mapped_at_creation: false,
                 })
             },
@@ -943,8 +1048,7 @@ impl GpuService for WgpuService {
         workgroups: [u32; 3],
     ) -> Result<(), GpuError> {
         let pipe = self.pipeline(pipeline)?;
-        let limits = self.limits();
-        let max_groups = limits.max_compute_workgroups_per_dimension;
+        let max_groups = self.limits().max_compute_workgroups_per_dimension;
         if workgroups.iter().any(|&n| n > max_groups) {
             return Err(GpuError(format!(
                 "dispatch of `{}` with workgroups {workgroups:?}: each dimension is limited to \
@@ -952,96 +1056,33 @@ impl GpuService for WgpuService {
                 pipe.entry
             )));
         }
-        let mut resolved = Vec::with_capacity(bindings.len());
-        for b in bindings {
-            let buffer = self.buffer(b.buffer)?;
-            let total = buffer.size();
-            let size = if b.size == 0 {
-                total.saturating_sub(b.offset)
-            } else {
-                b.size
-            };
-            if b.offset.checked_add(size).is_none_or(|end| end > total) || size == 0 {
-                return Err(GpuError(format!(
-                    "`{}` @binding({}): range {}..{} does not fit buffer {} of {total} bytes",
-                    pipe.entry,
-                    b.binding,
-                    b.offset,
-                    b.offset.saturating_add(size),
-                    b.buffer.0
-                )));
-            }
-            if let Some(limit) = self.binding_limit_override
-                && size > limit
-            {
-                return Err(GpuError(format!(
-                    "`{}` @binding({}): binds {size} bytes but max_storage_buffer_binding_size is \
-                     {limit} (override); split the data into slabs",
-                    pipe.entry, b.binding
-                )));
-            }
-            resolved.push((b.binding, buffer, b.offset, size));
-        }
+        self.encode_dispatch(&pipe, bindings, &format!("{workgroups:?}"), |pass| {
+            pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2])
+        })
+    }
 
-        let device = &self.shared.device;
-        let bind_group = match (&pipe.layout, resolved.is_empty()) {
-            (_, true) => None,
-            (None, false) => {
-                return Err(GpuError(format!(
-                    "`{}` binds no resources, but {} binding(s) were given",
-                    pipe.entry,
-                    resolved.len()
-                )));
-            }
-            (Some(layout), false) => Some(self.scoped(
-                || format!("binding buffers for `{}`", pipe.entry),
-                || {
-                    let entries: Vec<wgpu::BindGroupEntry<'_>> = resolved
-                        .iter()
-                        .map(|(binding, buffer, offset, size)| wgpu::BindGroupEntry {
-                            binding: *binding,
-                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                buffer,
-                                offset: *offset,
-                                size: wgpu::BufferSize::new(*size),
-                            }),
-                        })
-                        .collect();
-                    device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some(&pipe.entry),
-                        layout,
-                        entries: &entries,
-                    })
-                },
-            )?),
-        };
-        let commands = self.scoped(
-            || format!("encoding a dispatch of `{}` {workgroups:?}", pipe.entry),
-            || {
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some(&pipe.entry),
-                });
-                {
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some(&pipe.entry),
-                        timestamp_writes: None,
-                    });
-                    pass.set_pipeline(&pipe.pipeline);
-                    if let Some(group) = &bind_group {
-                        pass.set_bind_group(0, group, &[]);
-                    }
-                    pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
-                }
-                encoder.finish()
-            },
-        )?;
-        self.shared.dispatches.fetch_add(1, Ordering::Relaxed);
-        let mut queued = self.shared.queued.lock().expect("dispatch queue poisoned");
-        queued.push(commands);
-        if queued.len() >= MAX_QUEUED_DISPATCHES {
-            self.submit_locked(&mut queued, None)?;
+    fn dispatch_indirect(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        args: BufferId,
+        offset: u64,
+    ) -> Result<(), GpuError> {
+        let pipe = self.pipeline(pipeline)?;
+        let buffer = self.buffer(args)?;
+        if !offset.is_multiple_of(4) || offset.checked_add(12).is_none_or(|e| e > buffer.size()) {
+            return Err(GpuError(format!(
+                "indirect dispatch of `{}`: 12 bytes of arguments at offset {offset} do not fit \
+                 buffer {} of {} bytes at a multiple of 4",
+                pipe.entry,
+                args.0,
+                buffer.size()
+            )));
         }
-        Ok(())
+        let what = format!("indirect (buffer {} at {offset})", args.0);
+        self.encode_dispatch(&pipe, bindings, &what, |pass| {
+            pass.dispatch_workgroups_indirect(&buffer, offset)
+        })
     }
 }
 
@@ -1460,6 +1501,48 @@ fn inc(@builtin(global_invocation_id) gid: vec3<u32>) {
         assert_eq!(v[1], expect(0, reps));
         assert_eq!(v[0], expect(1000, reps - 10));
         gpu.destroy_buffer(vb);
+    }
+
+    /// A kernel sizes the next dispatch on the device: `size` writes the
+    /// workgroup counts that `mark` then runs with, in the same queue, with
+    /// no read-back between; bad argument ranges are errors.
+    #[test]
+    fn indirect_dispatches_take_counts_written_by_an_earlier_kernel() {
+        let Some(gpu) = test_gpu() else { return };
+        const KERNELS: &str = r#"
+@group(0) @binding(0) var<storage, read_write> args: array<u32>;
+@group(0) @binding(1) var<storage, read_write> v: array<u32>;
+@compute @workgroup_size(1)
+fn size() { args[1] = 3u; args[2] = 2u; args[3] = 1u; }
+@compute @workgroup_size(4)
+fn mark(@builtin(global_invocation_id) gid: vec3<u32>) {
+    v[gid.x + 12u * gid.y] = 1u;
+}
+"#;
+        let (size, mark) = (
+            gpu.compile(KERNELS, "size").unwrap(),
+            gpu.compile(KERNELS, "mark").unwrap(),
+        );
+        let args = gpu.upload(&[0u32; 4], "args").unwrap();
+        let v = gpu.upload(&[0u32; 32], "v").unwrap();
+        gpu.dispatch(size, &[BufferBinding::whole(0, args)], [1, 1, 1])
+            .unwrap();
+        gpu.dispatch_indirect(mark, &[BufferBinding::whole(1, v)], args, 4)
+            .unwrap();
+        let mut got = [0u32; 32];
+        gpu.download(v, &mut got).unwrap();
+        // 3 × 2 workgroups of 4 invocations: 24 marks.
+        assert_eq!(got.iter().sum::<u32>(), 24, "{got:?}");
+        assert_eq!(&got[24..], &[0; 8]);
+        for offset in [2, 8] {
+            let e = gpu
+                .dispatch_indirect(mark, &[BufferBinding::whole(1, v)], args, offset)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("do not fit"), "{e}");
+        }
+        gpu.destroy_buffer(args);
+        gpu.destroy_buffer(v);
     }
 
     #[test]
