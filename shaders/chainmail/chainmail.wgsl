@@ -24,7 +24,7 @@
 struct Params {
     dims: vec4<u32>,   // nx, ny, nz, hx
     blocks: vec4<u32>, // sx, sy, sz, cx
-    counts: vec4<u32>, // cy, half, materials, unused
+    counts: vec4<u32>, // cy, half, materials, largest workgroup count per dimension
     step: vec4<u32>,   // read (current) copy, colour, sites, tolerance (f32 bits)
     spacing: vec4<f32>, // element spacing, mm (x, y, z, unused)
 }
@@ -181,8 +181,14 @@ fn element_of(blk: Block, t: u32) -> vec3<u32> {
     return blk.lo + vec3<u32>(t % s.x, (t / s.x) % s.y, t / (s.x * s.y));
 }
 
-fn slot_of(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
-    return wid.x + wid.y * nwg.x + wid.z * nwg.x * nwg.y;
+// The list slot of a workgroup. Launches over a list are indirect, folded
+// as `workgroups_1d` folds (x = min(slots, limit), then y, then z): a
+// dimension past the first is used only when the ones before it are the
+// device's limit wide, so `num_workgroups` (which D3D12 does not report
+// for unvalidated indirect dispatches) is not needed.
+fn slot_of(wid: vec3<u32>) -> u32 {
+    let limit = p.counts.w;
+    return wid.x + limit * (wid.y + limit * wid.z);
 }
 
 // One Jacobi propagation iteration over the active blocks: reads copy
@@ -190,10 +196,9 @@ fn slot_of(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
 @compute @workgroup_size(64)
 fn propagate(
     @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let slot = slot_of(wid, nwg);
+    let slot = slot_of(wid);
     if (slot >= listed()) {
         return;
     }
@@ -279,10 +284,9 @@ fn propagate(
 @compute @workgroup_size(64)
 fn relax(
     @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let slot = slot_of(wid, nwg);
+    let slot = slot_of(wid);
     if (slot >= listed()) {
         return;
     }
@@ -363,10 +367,9 @@ fn relax(
 @compute @workgroup_size(64)
 fn sync_copies(
     @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let slot = slot_of(wid, nwg);
+    let slot = slot_of(wid);
     if (slot >= listed()) {
         return;
     }

@@ -61,19 +61,27 @@ const S_PENDING: u32 = 10u;    // length of the last list built
 const SCHED_WORDS: u32 = 12u;
 const ARG_WORDS: u32 = 6u;     // per list: block kernels' x, y, z; schedule's
 
-fn flat(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
-    return gid.x + gid.y * (nwg.x * WG) + gid.z * (nwg.x * WG * nwg.y);
+// The flat invocation index of a launch folded as `workgroups_1d` folds
+// (x = min(groups, limit), then y, then z): a dimension past the first is
+// used only when the ones before it are the device's limit wide, so
+// `num_workgroups` is not needed (D3D12 does not report it for
+// unvalidated indirect dispatches).
+fn flat(gid: vec3<u32>) -> u32 {
+    let limit = grid.w;
+    return gid.x + WG * limit * (gid.y + limit * gid.z);
 }
 
-// Workgroups for n items in groups of `per`, folded into (x, y, 1) so no
-// dimension exceeds the device's limit (voxflex_core::gpu::workgroups_1d);
-// zero workgroups for no items.
+// Workgroups for n items in groups of `per`, folded into (x, y, z) as
+// voxflex_core::gpu::workgroups_1d folds them, so no dimension exceeds the
+// device's limit; zero workgroups for no items.
 fn write_args(at: u32, n: u32, per: u32) {
     let groups = (n + per - 1u) / per;
     let x = min(groups, grid.w);
+    let rest = (groups + x - 1u) / max(x, 1u);
+    let y = min(max(rest, 1u), grid.w);
     args[at] = x;
-    args[at + 1u] = select(1u, (groups + x - 1u) / max(x, 1u), x > 0u);
-    args[at + 2u] = 1u;
+    args[at + 1u] = y;
+    args[at + 2u] = (rest + y - 1u) / y;
 }
 
 fn add64(at: u32, v: u32) {
@@ -95,9 +103,8 @@ fn push(b: u32) {
 @compute @workgroup_size(64)
 fn schedule(
     @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
 ) {
-    let slot = flat(gid, nwg);
+    let slot = flat(gid);
     let len = list[0];
     if (slot == 0u && len > 0u) {
         atomicAdd(&sched[S_LAUNCHES], 1u);
@@ -132,9 +139,8 @@ fn schedule(
 @compute @workgroup_size(64)
 fn retire(
     @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
 ) {
-    let slot = flat(gid, nwg);
+    let slot = flat(gid);
     let len = atomicLoad(&next[0]);
     if (slot == 0u) {
         if (atomicLoad(&spent[0]) > 0u) {

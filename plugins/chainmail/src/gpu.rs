@@ -125,6 +125,7 @@ impl GpuChainMail {
         table.extend(lat.materials.iter().map(|mat| mat.elastic.to_bits()));
         let [nx, ny, nz] = lat.dims.map(|d| d as u32);
         let [sx, sy, sz] = blocks.size.map(|s| s as u32);
+        let g_limits = gpu.limits();
         let [cx, cy, _] = blocks.count.map(|c| c as u32);
         let mut base = [0u32; PARAM_WORDS];
         base[..16].copy_from_slice(&[
@@ -139,7 +140,7 @@ impl GpuChainMail {
             cy,
             lat.half as u32,
             m as u32,
-            0,
+            g_limits.max_compute_workgroups_per_dimension,
             0,
             0,
             n as u32,

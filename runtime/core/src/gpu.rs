@@ -97,7 +97,10 @@ pub trait GpuService: Send + Sync {
     /// multiple of 4) when the dispatch executes — so an earlier kernel can
     /// size a later one without a read-back. Counts above
     /// [`GpuLimits::max_compute_workgroups_per_dimension`] are the writer's
-    /// error: the device may skip such a dispatch.
+    /// error, and the device does not check them (the host runs wgpu
+    /// without its indirect-argument validation): fold them as
+    /// [`workgroups_1d`] does, and do not read `num_workgroups` in a kernel
+    /// dispatched this way (D3D12 does not report it).
     fn dispatch_indirect(
         &self,
         pipeline: PipelineId,

@@ -19,6 +19,8 @@
 //! rasterisers (lavapipe / llvmpipe / SwiftShader); adapters without compute
 //! shaders are always refused. The device is opened with the **adapter's own
 //! limits** (wgpu's defaults cap buffers at 256 MiB) and no optional features.
+//! wgpu's check of indirect dispatch arguments is off unless
+//! `WGPU_VALIDATION_INDIRECT_CALL` is set (see `without_indirect_validation`).
 //!
 //! # Errors instead of panics
 //!
@@ -408,11 +410,34 @@ impl fmt::Debug for WgpuService {
     }
 }
 
+/// `flags` without wgpu's validation of indirect dispatch arguments,
+/// unless `WGPU_VALIDATION_INDIRECT_CALL` asks for it (set, not "0").
+///
+/// The validation turns each indirect dispatch into two (a pass that
+/// checks the arguments first): measured on lavapipe, 119–134 µs per
+/// indirect dispatch against 48–64 µs direct, and 58 µs without it
+/// (`cargo run --release -p voxflex-runtime --example dispatch_cost`).
+/// Every indirect dispatch voxflex makes reads counts its own kernels
+/// wrote, clamped to the device's limit the way `workgroups_1d` folds
+/// them (ChainMail's block lists, tested with a limit of 7), and its
+/// kernels never read `num_workgroups` there (D3D12 does not report it
+/// for unvalidated indirect dispatches). [`GpuService::dispatch_indirect`]
+/// says counts past the limit are the writer's error.
+fn without_indirect_validation(flags: wgpu::InstanceFlags) -> wgpu::InstanceFlags {
+    let asked = std::env::var("WGPU_VALIDATION_INDIRECT_CALL").is_ok_and(|v| v != "0");
+    if asked {
+        flags | wgpu::InstanceFlags::VALIDATION_INDIRECT_CALL
+    } else {
+        flags - wgpu::InstanceFlags::VALIDATION_INDIRECT_CALL
+    }
+}
+
 impl WgpuService {
     /// Opens the device on the best adapter `policy` accepts (see the
     /// module docs for the order and the environment variables obeyed).
     pub fn new(policy: AdapterPolicy) -> Result<Self, GpuContextError> {
-        let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.flags = without_indirect_validation(desc.flags);
         let backends = desc.backends;
         let instance = wgpu::Instance::new(desc);
         let adapter = choose_adapter(&instance, backends, policy)?;
