@@ -8,7 +8,7 @@
 // word of `field` (voxel 2w in the low half of word w).
 
 struct Params {
-    vdim: vec4<u32>,  // volume dims x, y, z; w unused
+    vdim: vec4<u32>,  // volume dims x, y, z; w = the device's largest workgroup count per dimension
     blo: vec4<u32>,   // working box lower corner (volume voxel index); w = box voxels
     bdim: vec4<u32>,  // working box dims; w unused
     ext: vec4<f32>,   // d_s, sigma_s, K = 65535 / (lambda sigma_s), cap = (lambda + 2) sigma_s
@@ -43,10 +43,21 @@ const MARK_DONE: u32 = 2u;
 @group(0) @binding(8) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(9) var<storage, read> old_field: array<u32>;
 @group(0) @binding(10) var<storage, read> R: Regrow;
+// Workgroups of the kernels over the candidates (indirect arguments).
+@group(0) @binding(11) var<storage, read_write> args: array<u32>;
 
 // Flat invocation index of a folded 3-D dispatch (gpu.rs: workgroups_1d).
 fn flat_index(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * (nwg.x * WG) + gid.z * (nwg.x * WG * nwg.y);
+}
+
+// The same for an indirect dispatch whose arguments `size_candidates`
+// folded as workgroups_1d does (x, then y, then z, each up to the device's
+// limit P.vdim.w): without `num_workgroups`, which D3D12 does not report
+// for unvalidated indirect dispatches.
+fn folded_index(gid: vec3<u32>) -> u32 {
+    let limit = P.vdim.w;
+    return gid.x + WG * limit * (gid.y + limit * gid.z);
 }
 
 // extinction.rs: Extinction::fixed (values are sanitised on upload).

@@ -1,5 +1,6 @@
-// The three kernels of one Jacobi step (frontier.rs: enumerate, evaluate,
-// apply), each one invocation per list entry, 3-D-folded dispatch.
+// The kernels of one Jacobi step (frontier.rs: enumerate, evaluate, apply;
+// then pump), each one invocation per list entry, 3-D-folded dispatch —
+// evaluate, apply and pump indirect, sized by size_candidates.
 
 // Phase 1: one invocation per frontier voxel u; lists each neighbour v (26, or 6)
 // that u's new value lifts (rise(q_u, e_v) > q_v), once (candidate mark),
@@ -57,10 +58,28 @@ fn enumerate(
     }
 }
 
+// Between phases 1 and 2, one invocation: the workgroups of phases 2–4 (one
+// invocation per candidate) as indirect arguments, folded as
+// workgroups_1d folds them, so the host reads nothing back to size them.
+@compute @workgroup_size(64)
+fn size_candidates(@builtin(local_invocation_index) lid: u32) {
+    if (lid != 0u) {
+        return;
+    }
+    let groups = (atomicLoad(&counters[1]) + WG - 1u) / WG;
+    let limit = P.vdim.w;
+    let x = min(groups, limit);
+    let rest = (groups + x - 1u) / max(x, 1u);
+    let y = min(max(rest, 1u), limit);
+    args[0] = x;
+    args[1] = y;
+    args[2] = (rest + y - 1u) / y;
+}
+
 // Phase 2: one invocation per candidate; the update rule, field read-only.
 @compute @workgroup_size(64)
-fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = flat_index(gid, nwg);
+fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = folded_index(gid);
     if (i >= atomicLoad(&counters[1])) {
         return;
     }
@@ -99,7 +118,6 @@ var<workgroup> w_max: array<atomic<u32>, 3>;
 @compute @workgroup_size(64)
 fn apply(
     @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
     if (lid == 0u) {
@@ -108,7 +126,7 @@ fn apply(
         atomicStore(&w_min[2], NONE);
     }
     workgroupBarrier();
-    let i = flat_index(gid, nwg);
+    let i = folded_index(gid);
     var changed = false;
     var v = 0u;
     if (i < atomicLoad(&counters[1])) {
@@ -155,8 +173,8 @@ fn apply(
 // voxel to q_max does not change whether it is reached (above q_min), so
 // the order of jumps does not matter.
 @compute @workgroup_size(64)
-fn pump(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = flat_index(gid, nwg);
+fn pump(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = folded_index(gid);
     if (i >= atomicLoad(&counters[2])) {
         return;
     }

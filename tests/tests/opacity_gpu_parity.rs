@@ -18,6 +18,20 @@ fn every_step_is_identical() {
     run(parity::check_stepwise_matches_cpu);
 }
 
+/// The same with a device limit of 16 workgroups per dimension: the
+/// kernels over the candidates are dispatched indirectly with counts the
+/// device folds itself, and larger frontiers fold into 2-D and 3-D.
+#[test]
+fn every_step_is_identical_when_dispatches_fold() {
+    run(|gpu| {
+        let limited = voxflex_core::gpu::LimitedWorkgroups {
+            inner: gpu,
+            max: 16,
+        };
+        parity::check_stepwise_matches_cpu(&limited)
+    });
+}
+
 #[test]
 fn several_maps_share_one_volume() {
     run(parity::check_several_maps);

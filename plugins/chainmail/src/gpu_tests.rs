@@ -8,10 +8,7 @@ use crate::model::ChainMail;
 use crate::params::InteractionSpec;
 use crate::tests::{grab, params, volume};
 use std::sync::Arc;
-use voxflex_core::error::GpuError;
-use voxflex_core::gpu::{
-    BufferBinding, BufferId, GpuLimits, GpuService, GpuServiceExt, PipelineId,
-};
+use voxflex_core::gpu::{GpuService, GpuServiceExt, LimitedWorkgroups};
 use voxflex_core::volume::Volume;
 
 fn test_gpu() -> Option<Arc<dyn GpuService>> {
@@ -281,75 +278,13 @@ fn the_gpu_path_refuses_what_it_cannot_run() {
     }
 }
 
-/// A device that reports at most `max` workgroups per dimension (and is
-/// held to it), so every launch over more blocks than that folds into 2-D.
-struct FewWorkgroups {
-    inner: Arc<dyn GpuService>,
-    max: u32,
-}
-
-impl GpuService for FewWorkgroups {
-    fn adapter_description(&self) -> String {
-        self.inner.adapter_description()
-    }
-    fn limits(&self) -> GpuLimits {
-        GpuLimits {
-            max_compute_workgroups_per_dimension: self.max,
-            ..self.inner.limits()
-        }
-    }
-    fn create_buffer(&self, size: u64, label: &str) -> Result<BufferId, GpuError> {
-        self.inner.create_buffer(size, label)
-    }
-    fn destroy_buffer(&self, id: BufferId) {
-        self.inner.destroy_buffer(id)
-    }
-    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
-        self.inner.buffer_size(id)
-    }
-    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
-        self.inner.write_buffer(id, offset, bytes)
-    }
-    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
-        self.inner.read_buffer(id, offset, out)
-    }
-    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
-        self.inner.compile(wgsl, entry_point)
-    }
-    fn dispatch(&self, p: PipelineId, b: &[BufferBinding], wg: [u32; 3]) -> Result<(), GpuError> {
-        if wg.iter().any(|&n| n > self.max) {
-            return Err(GpuError(format!("{wg:?} exceeds {}", self.max)));
-        }
-        self.inner.dispatch(p, b, wg)
-    }
-    fn dispatch_indirect(
-        &self,
-        p: PipelineId,
-        b: &[BufferBinding],
-        args: BufferId,
-        offset: u64,
-    ) -> Result<(), GpuError> {
-        // The counts are on the device: check them there, after the fact.
-        let out = self.inner.dispatch_indirect(p, b, args, offset);
-        let mut wg = [0u32; 3];
-        self.inner
-            .read_buffer(args, offset, bytemuck::cast_slice_mut(&mut wg))?;
-        assert!(
-            wg.iter().all(|&n| n <= self.max),
-            "{wg:?} exceeds {}",
-            self.max
-        );
-        out
-    }
-}
-
 /// Lists longer than the device's workgroup limit fold into rows of that
 /// limit (the kernels find their slot without `num_workgroups`): the same
 /// frames as rayon with a limit of 7 workgroups per dimension.
 #[test]
 fn launches_fold_past_the_workgroup_limit() {
     let Some(gpu) = test_gpu() else { return };
-    let few: Arc<dyn GpuService> = Arc::new(FewWorkgroups { inner: gpu, max: 7 });
+    let few: Arc<dyn GpuService> = Arc::new(LimitedWorkgroups { inner: gpu, max: 7 });
     let (mut cpu, mut gpu_model) = pair(
         few,
         "block = [4, 4, 4]\npropagation_iterations = 6\nrelaxation_iterations = 4",

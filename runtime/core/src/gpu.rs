@@ -244,6 +244,88 @@ impl LimitedBinding<'_> {
     }
 }
 
+/// A [`GpuService`] that forwards to another but reports a smaller
+/// `max_compute_workgroups_per_dimension` and holds dispatches to it —
+/// direct ones before they run, indirect ones by reading their counts back
+/// after they were queued — so tests exercise the folding into 2-D and
+/// 3-D that large lists need on any device, with small lists.
+/// `inner` is `&dyn GpuService` or `Arc<dyn GpuService>`.
+#[doc(hidden)]
+pub struct LimitedWorkgroups<G> {
+    /// The real service.
+    pub inner: G,
+    /// The workgroup limit per dimension to report and enforce.
+    pub max: u32,
+}
+
+impl<G> LimitedWorkgroups<G> {
+    fn check(&self, workgroups: [u32; 3]) -> Result<(), GpuError> {
+        if workgroups.iter().any(|&n| n > self.max) {
+            return Err(GpuError(format!(
+                "workgroups {workgroups:?} exceed the limit of {} per dimension",
+                self.max
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl<G, T> GpuService for LimitedWorkgroups<G>
+where
+    G: std::ops::Deref<Target = T> + Send + Sync,
+    T: GpuService + ?Sized,
+{
+    fn adapter_description(&self) -> String {
+        self.inner.adapter_description()
+    }
+    fn limits(&self) -> GpuLimits {
+        GpuLimits {
+            max_compute_workgroups_per_dimension: self.max,
+            ..self.inner.limits()
+        }
+    }
+    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
+        self.inner.create_buffer(size_bytes, label)
+    }
+    fn destroy_buffer(&self, id: BufferId) {
+        self.inner.destroy_buffer(id)
+    }
+    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
+        self.inner.buffer_size(id)
+    }
+    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
+        self.inner.write_buffer(id, offset, bytes)
+    }
+    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
+        self.inner.read_buffer(id, offset, out)
+    }
+    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
+        self.inner.compile(wgsl, entry_point)
+    }
+    fn dispatch(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        workgroups: [u32; 3],
+    ) -> Result<(), GpuError> {
+        self.check(workgroups)?;
+        self.inner.dispatch(pipeline, bindings, workgroups)
+    }
+    fn dispatch_indirect(
+        &self,
+        pipeline: PipelineId,
+        bindings: &[BufferBinding],
+        args: BufferId,
+        offset: u64,
+    ) -> Result<(), GpuError> {
+        self.inner
+            .dispatch_indirect(pipeline, bindings, args, offset)?;
+        let mut counts = [0u8; 12];
+        self.inner.read_buffer(args, offset, &mut counts)?;
+        self.check(bytemuck::cast(counts))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -24,13 +24,17 @@
 //! an untouched field instead of lifting in place) but every step yields
 //! the same field, the same set of changed voxels and the same counts.
 //!
-//! **Counts.** Dispatch-indirect is not part of [`GpuService`], so each
-//! step reads back 4 bytes (the candidate count, which sizes `evaluate`
-//! and `apply`) and then 32 bytes (next-frontier length and region box,
-//! which size the next `enumerate` and decide whether the working box must
-//! grow): two small read-backs per step. On lavapipe that costs far less
-//! than the kernels; on a real GPU a step is bounded by the sync latency
-//! (tens of µs), which is acceptable for the ~100 steps of a growth.
+//! **Counts.** `size_candidates` (one invocation, between `enumerate` and
+//! `evaluate`) turns the candidate count into the indirect arguments of
+//! `evaluate`, `apply` and `pump` ([`GpuService::dispatch_indirect`]), so
+//! a step reads back once: 40 bytes at its end (candidates, next-frontier
+//! length and region box, which size the next `enumerate` and decide
+//! whether the working box must grow). Before dispatch-indirect each step
+//! also read back the candidate count between `enumerate` and `evaluate`;
+//! on a real GPU a step is bounded by that sync latency (tens of µs), so
+//! this halves it. The candidate and next-frontier lists are sized for the
+//! most a step can produce (26 per frontier entry, at most the working
+//! box).
 //!
 //! **Memory** (all 32-bit storage, one binding each): the volume's values
 //! as f32 (4 bytes per volume voxel, shared by every growth of a
@@ -78,14 +82,16 @@ mod bind {
     pub const COUNTERS: u32 = 8;
     pub const OLD_FIELD: u32 = 9;
     pub const REGROW: u32 = 10;
+    pub const ARGS: u32 = 11;
 }
 
 /// The full WGSL source of each kernel (for tools that validate shaders).
-pub fn kernel_sources() -> [(&'static str, String); 7] {
+pub fn kernel_sources() -> [(&'static str, String); 8] {
     let step = format!("{COMMON}\n{STEP}");
     let regrow = format!("{COMMON}\n{REGROW}");
     [
         ("enumerate", step.clone()),
+        ("size_candidates", step.clone()),
         ("evaluate", step.clone()),
         ("apply", step.clone()),
         ("pump", step),
@@ -165,6 +171,7 @@ fn check_binding(gpu: &dyn GpuService, what: &'static str, bytes: u64) -> Result
 #[derive(Clone, Copy, Debug)]
 struct Pipelines {
     enumerate: PipelineId,
+    size_candidates: PipelineId,
     evaluate: PipelineId,
     apply: PipelineId,
     pump: PipelineId,
@@ -175,9 +182,10 @@ struct Pipelines {
 
 impl Pipelines {
     fn compile(gpu: &dyn GpuService) -> Result<Self, GpuError> {
-        let [a, b, c, p, d, e, f] = kernel_sources();
+        let [a, s, b, c, p, d, e, f] = kernel_sources();
         Ok(Self {
             enumerate: gpu.compile(&a.1, a.0)?,
+            size_candidates: gpu.compile(&s.1, s.0)?,
             evaluate: gpu.compile(&b.1, b.0)?,
             apply: gpu.compile(&c.1, c.0)?,
             pump: gpu.compile(&p.1, p.0)?,
@@ -227,6 +235,8 @@ pub struct GpuGrowth {
     params_buf: Owned,
     regrow_buf: Owned,
     counters: Owned,
+    /// Indirect arguments of the kernels over the candidates.
+    args: Owned,
     field: Owned,
     marks: Owned,
     front: Owned,
@@ -292,6 +302,7 @@ impl GpuGrowth {
                     "voxflex.opacity.regrow",
                 )?,
                 counters: mk(COUNTERS as u64 * 4, "voxflex.opacity.counters")?,
+                args: mk(12, "voxflex.opacity.args")?,
                 marks: mk(marks_bytes(work.len()), "voxflex.opacity.marks")?,
                 field,
                 front,
@@ -409,11 +420,12 @@ impl GpuGrowth {
         }
     }
 
-    fn all(&self) -> [Owned; 9] {
+    fn all(&self) -> [Owned; 10] {
         [
             self.params_buf,
             self.regrow_buf,
             self.counters,
+            self.args,
             self.field,
             self.marks,
             self.front,
@@ -430,7 +442,7 @@ impl GpuGrowth {
                 self.state.dims[0] as u32,
                 self.state.dims[1] as u32,
                 self.state.dims[2] as u32,
-                0,
+                gpu.limits().max_compute_workgroups_per_dimension,
             ],
             blo: [
                 self.state.work.lo[0] as u32,
@@ -468,6 +480,7 @@ impl GpuGrowth {
             .ensure(gpu, bound * 4, "voxflex.opacity.candidates")?;
         self.newval
             .ensure(gpu, bound * 4, "voxflex.opacity.newval")?;
+        self.next.ensure(gpu, bound * 4, "voxflex.opacity.next")?;
         let mut counters = [0u32; COUNTERS];
         counters[0] = self.n_front;
         counters[4..7].fill(u32::MAX);
@@ -485,16 +498,19 @@ impl GpuGrowth {
             ],
             gpu.workgroups_for(self.n_front as u64, WORKGROUP)?,
         )?;
-        let mut n_cand = 0u32;
-        gpu.read_buffer(self.counters.id, 4, bytemuck::bytes_of_mut(&mut n_cand))?;
-        if n_cand == 0 {
-            self.n_front = 0;
-            return Ok((0, 0));
-        }
-        self.next
-            .ensure(gpu, n_cand as u64 * 4, "voxflex.opacity.next")?;
-        let groups = gpu.workgroups_for(n_cand as u64, WORKGROUP)?;
         gpu.dispatch(
+            self.pipes.size_candidates,
+            &[
+                b(bind::PARAMS, &self.params_buf),
+                b(bind::COUNTERS, &self.counters),
+                b(bind::ARGS, &self.args),
+            ],
+            [1, 1, 1],
+        )?;
+        let over_candidates = |pipeline, bindings: &[BufferBinding]| {
+            gpu.dispatch_indirect(pipeline, bindings, self.args.id, 0)
+        };
+        over_candidates(
             self.pipes.evaluate,
             &[
                 b(bind::PARAMS, &self.params_buf),
@@ -505,9 +521,8 @@ impl GpuGrowth {
                 b(bind::NEWVAL, &self.newval),
                 b(bind::COUNTERS, &self.counters),
             ],
-            groups,
         )?;
-        gpu.dispatch(
+        over_candidates(
             self.pipes.apply,
             &[
                 b(bind::PARAMS, &self.params_buf),
@@ -517,9 +532,8 @@ impl GpuGrowth {
                 b(bind::NEXT, &self.next),
                 b(bind::COUNTERS, &self.counters),
             ],
-            groups,
         )?;
-        gpu.dispatch(
+        over_candidates(
             self.pipes.pump,
             &[
                 b(bind::PARAMS, &self.params_buf),
@@ -529,13 +543,12 @@ impl GpuGrowth {
                 b(bind::NEXT, &self.next),
                 b(bind::COUNTERS, &self.counters),
             ],
-            groups,
         )?;
-        let mut tail = [0u32; COUNTERS - 2];
-        gpu.read_buffer(self.counters.id, 8, bytemuck::cast_slice_mut(&mut tail))?;
-        let n_next = tail[0];
+        let mut tail = [0u32; COUNTERS - 1];
+        gpu.read_buffer(self.counters.id, 4, bytemuck::cast_slice_mut(&mut tail))?;
+        let (n_cand, n_next) = (tail[0], tail[1]);
         if n_next > 0 {
-            let (lo, hi) = (&tail[2..5], &tail[6..9]);
+            let (lo, hi) = (&tail[3..6], &tail[7..10]);
             let grown = VoxelBounds {
                 lo: [lo[0] as usize, lo[1] as usize, lo[2] as usize],
                 hi: [hi[0] as usize, hi[1] as usize, hi[2] as usize],
