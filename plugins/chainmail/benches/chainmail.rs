@@ -12,8 +12,8 @@
 //!
 //! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`);
 //! `-- parallel` runs only the parallel model to rest, `-- kernels` times
-//! only the relaxation kernels, `-- gpu` runs the papers' test on the WGSL
-//! path (any adapter).
+//! only the relaxation kernels, `-- local` only the local grabs (three
+//! times), `-- gpu` runs the papers' test on the WGSL path (any adapter).
 
 use std::time::Instant;
 use voxflex_chainmail::model::ChainMail;
@@ -123,6 +123,12 @@ fn main() {
         }
         return;
     }
+    if std::env::args().any(|a| a == "local") {
+        for _ in 0..3 {
+            local_grabs(n, ms);
+        }
+        return;
+    }
     if std::env::args().any(|a| a == "propagation") {
         // Only the parallel propagation, ten times (for profiling).
         for _ in 0..10 {
@@ -202,6 +208,13 @@ fn main() {
         );
     }
 
+    local_grabs(n, &ms);
+}
+
+/// A local grab (~5 % of the model, the same 16-link reach) on an
+/// `n/2`³ and an `n`³ cube: time per frame of 10 + 10 iterations, up to
+/// 60 frames or rest (`-- local` runs only this).
+fn local_grabs(n: usize, ms: impl Fn(std::time::Duration) -> f64) {
     println!("local grab (same 16-link reach on two model sizes; up to 60 frames or rest):");
     for size in [n / 2, n] {
         let v = phantom("cube", [size, size, size]).expect("cube phantom");
