@@ -208,7 +208,7 @@ fn main() {
         );
     }
 
-    local_grabs(n, &ms);
+    local_grabs(n, ms);
 }
 
 /// A local grab (~5 % of the model, the same 16-link reach) on an
