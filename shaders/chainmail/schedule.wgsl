@@ -91,48 +91,83 @@ fn add64(at: u32, v: u32) {
     }
 }
 
-// Adds block b to the list being built, once.
+// This invocation's blocks for the list being built (a changed block and
+// its face neighbours: at most 7), each claimed once by its IN_NEXT flag.
+var<private> mine: array<u32, 7>;
+var<private> mine_n: u32;
+
+// Claims block b for the list being built unless it is in already.
 fn push(b: u32) {
     let old = atomicOr(&flags[b], IN_NEXT | ACTIVATED);
     if ((old & IN_NEXT) == 0u) {
-        let at = atomicAdd(&next[0], 1u);
-        atomicStore(&next[1u + at], b);
+        mine[mine_n] = b;
+        mine_n = mine_n + 1u;
     }
 }
+
+// The workgroup's sums, added to the run totals by one invocation (one
+// global atomic per workgroup and total, not one per listed block).
+var<workgroup> wg_visits: atomic<u32>;
+var<workgroup> wg_updates: atomic<u32>;
+var<workgroup> wg_max: atomic<u32>;
+var<workgroup> wg_pushed: atomic<u32>;
+var<workgroup> wg_base: u32;
 
 @compute @workgroup_size(64)
 fn schedule(
     @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
 ) {
+    if (lid == 0u) {
+        atomicStore(&wg_visits, 0u);
+        atomicStore(&wg_updates, 0u);
+        atomicStore(&wg_max, 0u);
+        atomicStore(&wg_pushed, 0u);
+    }
+    workgroupBarrier();
     let slot = flat(gid);
     let len = list[0];
     if (slot == 0u && len > 0u) {
         atomicAdd(&sched[S_LAUNCHES], 1u);
         add64(S_BLOCKS, len);
     }
-    if (slot >= len) {
-        return;
-    }
-    let b = list[1u + slot];
-    let m = stats[STAT_WORDS * slot];
-    add64(S_VISITS, stats[STAT_WORDS * slot + 1u]);
-    add64(S_UPDATES, stats[STAT_WORDS * slot + 2u]);
-    // Moves are non-negative f32: their bits order as the values do.
-    atomicMax(&sched[S_MAX], stats[STAT_WORDS * slot + 3u]);
-    atomicOr(&flags[b], select(LISTED, LISTED | DIRTY, m != 0u));
-    if ((m & CHANGED) == 0u) {
-        return;
-    }
-    push(b);
-    let c = vec3<u32>(b % grid.x, (b / grid.x) % grid.y, b / (grid.x * grid.y));
-    let stride = vec3<u32>(1u, grid.x, grid.x * grid.y);
-    for (var a = 0u; a < 3u; a = a + 1u) {
-        if ((m & (1u << (2u * a))) != 0u && c[a] > 0u) {
-            push(b - stride[a]);
+    mine_n = 0u;
+    if (slot < len) {
+        let b = list[1u + slot];
+        let m = stats[STAT_WORDS * slot];
+        // A block's visits and updates are at most its elements: the
+        // workgroup's sums fit 32 bits.
+        atomicAdd(&wg_visits, stats[STAT_WORDS * slot + 1u]);
+        atomicAdd(&wg_updates, stats[STAT_WORDS * slot + 2u]);
+        // Moves are non-negative f32: their bits order as the values do.
+        atomicMax(&wg_max, stats[STAT_WORDS * slot + 3u]);
+        atomicOr(&flags[b], select(LISTED, LISTED | DIRTY, m != 0u));
+        if ((m & CHANGED) != 0u) {
+            push(b);
+            let c = vec3<u32>(b % grid.x, (b / grid.x) % grid.y, b / (grid.x * grid.y));
+            let stride = vec3<u32>(1u, grid.x, grid.x * grid.y);
+            for (var a = 0u; a < 3u; a = a + 1u) {
+                if ((m & (1u << (2u * a))) != 0u && c[a] > 0u) {
+                    push(b - stride[a]);
+                }
+                if ((m & (1u << (2u * a + 1u))) != 0u && c[a] + 1u < grid[a]) {
+                    push(b + stride[a]);
+                }
+            }
         }
-        if ((m & (1u << (2u * a + 1u))) != 0u && c[a] + 1u < grid[a]) {
-            push(b + stride[a]);
-        }
+    }
+    let local = atomicAdd(&wg_pushed, mine_n);
+    workgroupBarrier();
+    if (lid == 0u) {
+        add64(S_VISITS, atomicLoad(&wg_visits));
+        add64(S_UPDATES, atomicLoad(&wg_updates));
+        atomicMax(&sched[S_MAX], atomicLoad(&wg_max));
+        wg_base = atomicAdd(&next[0], atomicLoad(&wg_pushed));
+    }
+    workgroupBarrier();
+    let base = wg_base + local;
+    for (var k = 0u; k < mine_n; k = k + 1u) {
+        atomicStore(&next[1u + base + k], mine[k]);
     }
 }
 
