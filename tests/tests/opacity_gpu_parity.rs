@@ -24,10 +24,7 @@ fn every_step_is_identical() {
 #[test]
 fn every_step_is_identical_when_dispatches_fold() {
     run(|gpu| {
-        let limited = voxflex_core::gpu::LimitedWorkgroups {
-            inner: gpu,
-            max: 16,
-        };
+        let limited = voxflex_core::gpu::LimitedDevice::workgroups(gpu, 16);
         parity::check_stepwise_matches_cpu(&limited)
     });
 }

@@ -8,7 +8,7 @@ use crate::model::ChainMail;
 use crate::params::InteractionSpec;
 use crate::tests::{grab, params, volume};
 use std::sync::Arc;
-use voxflex_core::gpu::{GpuService, GpuServiceExt, LimitedWorkgroups};
+use voxflex_core::gpu::{GpuService, GpuServiceExt, LimitedDevice};
 use voxflex_core::volume::Volume;
 
 fn test_gpu() -> Option<Arc<dyn GpuService>> {
@@ -284,7 +284,7 @@ fn the_gpu_path_refuses_what_it_cannot_run() {
 #[test]
 fn launches_fold_past_the_workgroup_limit() {
     let Some(gpu) = test_gpu() else { return };
-    let few: Arc<dyn GpuService> = Arc::new(LimitedWorkgroups { inner: gpu, max: 7 });
+    let few: Arc<dyn GpuService> = Arc::new(LimitedDevice::workgroups(gpu, 7));
     let (mut cpu, mut gpu_model) = pair(
         few,
         "block = [4, 4, 4]\npropagation_iterations = 6\nrelaxation_iterations = 4",

@@ -159,74 +159,55 @@ pub fn workgroups_1d(n: u64, workgroup_size: u32, max_per_dim: u32) -> Result<[u
     Ok([x as u32, y as u32, z as u32])
 }
 
-/// A [`GpuService`] that forwards to another but reports a smaller
-/// `max_storage_buffer_binding_size` **and enforces it**: a dispatch that
-/// binds more bytes than that, or at an offset off the device's storage
-/// alignment, fails as a device with such bindings would. Tests use it to
-/// exercise the slab splitting every GPU algorithm needs on devices with
-/// small bindings.
+/// A [`GpuService`] that forwards to another but reports smaller limits
+/// **and enforces them**, as a device with such limits would fail: a
+/// storage binding limit (a dispatch that binds more bytes than that, or at
+/// an offset off the device's storage alignment, fails) and a workgroup
+/// limit per dimension (direct dispatches are checked before they run,
+/// indirect ones by reading their counts back after they were queued).
+/// Tests use it to exercise, with small data, the slab splitting and the
+/// folding into 2-D and 3-D that every GPU algorithm needs on devices with
+/// small limits. `inner` is `&dyn GpuService` or `Arc<dyn GpuService>`.
 #[doc(hidden)]
-pub struct LimitedBinding<'a> {
+pub struct LimitedDevice<G> {
     /// The real service.
-    pub inner: &'a dyn GpuService,
-    /// The storage binding limit to report, bytes.
-    pub max_storage_buffer_binding_size: u64,
+    pub inner: G,
+    /// The storage binding limit to report, bytes (`None`: the device's).
+    pub max_storage_buffer_binding_size: Option<u64>,
+    /// The workgroup limit per dimension to report (`None`: the device's).
+    pub max_compute_workgroups_per_dimension: Option<u32>,
 }
 
-impl GpuService for LimitedBinding<'_> {
-    fn adapter_description(&self) -> String {
-        self.inner.adapter_description()
-    }
-    fn limits(&self) -> GpuLimits {
-        GpuLimits {
-            max_storage_buffer_binding_size: self.max_storage_buffer_binding_size,
-            ..self.inner.limits()
+impl<G> LimitedDevice<G> {
+    /// `inner` with storage bindings of at most `bytes`.
+    pub fn binding(inner: G, bytes: u64) -> Self {
+        Self {
+            inner,
+            max_storage_buffer_binding_size: Some(bytes),
+            max_compute_workgroups_per_dimension: None,
         }
     }
-    fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
-        self.inner.create_buffer(size_bytes, label)
-    }
-    fn destroy_buffer(&self, id: BufferId) {
-        self.inner.destroy_buffer(id)
-    }
-    fn buffer_size(&self, id: BufferId) -> Result<u64, GpuError> {
-        self.inner.buffer_size(id)
-    }
-    fn write_buffer(&self, id: BufferId, offset: u64, bytes: &[u8]) -> Result<(), GpuError> {
-        self.inner.write_buffer(id, offset, bytes)
-    }
-    fn read_buffer(&self, id: BufferId, offset: u64, out: &mut [u8]) -> Result<(), GpuError> {
-        self.inner.read_buffer(id, offset, out)
-    }
-    fn compile(&self, wgsl: &str, entry_point: &str) -> Result<PipelineId, GpuError> {
-        self.inner.compile(wgsl, entry_point)
-    }
-    fn dispatch(
-        &self,
-        pipeline: PipelineId,
-        bindings: &[BufferBinding],
-        workgroups: [u32; 3],
-    ) -> Result<(), GpuError> {
-        self.check(bindings)?;
-        self.inner.dispatch(pipeline, bindings, workgroups)
-    }
-    fn dispatch_indirect(
-        &self,
-        pipeline: PipelineId,
-        bindings: &[BufferBinding],
-        args: BufferId,
-        offset: u64,
-    ) -> Result<(), GpuError> {
-        self.check(bindings)?;
-        self.inner
-            .dispatch_indirect(pipeline, bindings, args, offset)
+
+    /// `inner` with at most `max` workgroups per dimension.
+    pub fn workgroups(inner: G, max: u32) -> Self {
+        Self {
+            inner,
+            max_storage_buffer_binding_size: None,
+            max_compute_workgroups_per_dimension: Some(max),
+        }
     }
 }
 
-impl LimitedBinding<'_> {
+impl<G, T> LimitedDevice<G>
+where
+    G: std::ops::Deref<Target = T>,
+    T: GpuService + ?Sized,
+{
     /// Fails as a device with the smaller bindings would.
-    fn check(&self, bindings: &[BufferBinding]) -> Result<(), GpuError> {
-        let limit = self.max_storage_buffer_binding_size;
+    fn check_bindings(&self, bindings: &[BufferBinding]) -> Result<(), GpuError> {
+        let Some(limit) = self.max_storage_buffer_binding_size else {
+            return Ok(());
+        };
         let align = u64::from(self.inner.limits().min_storage_buffer_offset_alignment);
         for b in bindings {
             let size = match b.size {
@@ -242,35 +223,19 @@ impl LimitedBinding<'_> {
         }
         Ok(())
     }
-}
 
-/// A [`GpuService`] that forwards to another but reports a smaller
-/// `max_compute_workgroups_per_dimension` and holds dispatches to it —
-/// direct ones before they run, indirect ones by reading their counts back
-/// after they were queued — so tests exercise the folding into 2-D and
-/// 3-D that large lists need on any device, with small lists.
-/// `inner` is `&dyn GpuService` or `Arc<dyn GpuService>`.
-#[doc(hidden)]
-pub struct LimitedWorkgroups<G> {
-    /// The real service.
-    pub inner: G,
-    /// The workgroup limit per dimension to report and enforce.
-    pub max: u32,
-}
-
-impl<G> LimitedWorkgroups<G> {
-    fn check(&self, workgroups: [u32; 3]) -> Result<(), GpuError> {
-        if workgroups.iter().any(|&n| n > self.max) {
-            return Err(GpuError(format!(
-                "workgroups {workgroups:?} exceed the limit of {} per dimension",
-                self.max
-            )));
+    /// Fails as a device with fewer workgroups per dimension would.
+    fn check_workgroups(&self, workgroups: [u32; 3]) -> Result<(), GpuError> {
+        match self.max_compute_workgroups_per_dimension {
+            Some(max) if workgroups.iter().any(|&n| n > max) => Err(GpuError(format!(
+                "workgroups {workgroups:?} exceed the limit of {max} per dimension"
+            ))),
+            _ => Ok(()),
         }
-        Ok(())
     }
 }
 
-impl<G, T> GpuService for LimitedWorkgroups<G>
+impl<G, T> GpuService for LimitedDevice<G>
 where
     G: std::ops::Deref<Target = T> + Send + Sync,
     T: GpuService + ?Sized,
@@ -279,9 +244,15 @@ where
         self.inner.adapter_description()
     }
     fn limits(&self) -> GpuLimits {
+        let l = self.inner.limits();
         GpuLimits {
-            max_compute_workgroups_per_dimension: self.max,
-            ..self.inner.limits()
+            max_storage_buffer_binding_size: self
+                .max_storage_buffer_binding_size
+                .unwrap_or(l.max_storage_buffer_binding_size),
+            max_compute_workgroups_per_dimension: self
+                .max_compute_workgroups_per_dimension
+                .unwrap_or(l.max_compute_workgroups_per_dimension),
+            ..l
         }
     }
     fn create_buffer(&self, size_bytes: u64, label: &str) -> Result<BufferId, GpuError> {
@@ -308,7 +279,8 @@ where
         bindings: &[BufferBinding],
         workgroups: [u32; 3],
     ) -> Result<(), GpuError> {
-        self.check(workgroups)?;
+        self.check_bindings(bindings)?;
+        self.check_workgroups(workgroups)?;
         self.inner.dispatch(pipeline, bindings, workgroups)
     }
     fn dispatch_indirect(
@@ -318,11 +290,15 @@ where
         args: BufferId,
         offset: u64,
     ) -> Result<(), GpuError> {
+        self.check_bindings(bindings)?;
         self.inner
             .dispatch_indirect(pipeline, bindings, args, offset)?;
+        if self.max_compute_workgroups_per_dimension.is_none() {
+            return Ok(());
+        }
         let mut counts = [0u8; 12];
         self.inner.read_buffer(args, offset, &mut counts)?;
-        self.check(bytemuck::cast(counts))
+        self.check_workgroups(bytemuck::cast(counts))
     }
 }
 

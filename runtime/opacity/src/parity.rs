@@ -18,7 +18,7 @@ use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
 use voxflex_core::gpu::GpuService;
-use voxflex_core::gpu::LimitedBinding;
+use voxflex_core::gpu::LimitedDevice;
 
 /// xorshift64* — a tiny deterministic RNG for reproducible noise.
 #[derive(Clone, Debug)]
@@ -442,10 +442,7 @@ pub fn check_several_maps(gpu: &dyn GpuService) -> Result<(), String> {
 /// [`OpacityError::GpuVolumeMismatch`]; nothing panics.
 pub fn check_refusals(gpu: &dyn GpuService) -> Result<(), String> {
     let p = three_spheres(24, 3.0, 24);
-    let small = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: 4096,
-    };
+    let small = LimitedDevice::binding(gpu, 4096);
     match GpuOpacityVolume::upload(&small, p.volume.view()) {
         Err(OpacityError::BindingTooLarge { bytes, limit, .. })
             if bytes == 24 * 24 * 24 * 4 && limit == 4096 => {}

@@ -16,7 +16,7 @@ use crate::deformation::DirtyRegion;
 use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
-use voxflex_core::gpu::LimitedBinding;
+use voxflex_core::gpu::LimitedDevice;
 use voxflex_core::gpu::{BufferId, GpuService, GpuServiceExt};
 
 /// Fraction of voxels allowed to be covered on one backend and background on
@@ -334,10 +334,7 @@ pub fn check_output_slabs(gpu: &dyn GpuService) -> Result<(), String> {
 fn output_slabs(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<(), String> {
     let grid = test_grid();
     let limit = (grid.len() as u64 * 4).next_multiple_of(256) + 256;
-    let small = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: limit,
-    };
+    let small = LimitedDevice::binding(gpu, limit);
     let params = ResampleParams {
         interpolation,
         ..Default::default()
@@ -361,10 +358,7 @@ fn output_slabs(gpu: &dyn GpuService, interpolation: Interpolation) -> Result<()
     let shift = DVec3::new(3.0, -2.0, 5.0);
     let t = Field::from_map(&g2, move |p| p + shift * g2.spacing);
     let vol2 = head_i16(&g2);
-    let small2 = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: (g2.len() as u64 * 4).next_multiple_of(256) + 256,
-    };
+    let small2 = LimitedDevice::binding(gpu, (g2.len() as u64 * 4).next_multiple_of(256) + 256);
     let want = cpu_run(&vol2, &t, None, params)?;
     let got = gpu_run(&small2, &vol2, &t, None, params)?;
     compare(

@@ -1,5 +1,5 @@
 //! GPU checks of the source split into z-slabs (a storage binding limit far
-//! below the source's size, through core's `LimitedBinding`, which also
+//! below the source's size, through core's `LimitedDevice`, which also
 //! refuses any binding above it): the split output equals the unsplit GPU output bit
 //! for bit and the CPU output as the unsplit checks demand (bit for bit for
 //! identity and folds, within `1e-5` of the data range otherwise), for
@@ -14,7 +14,7 @@ use super::{Interpolation, ResampleParams, TetMask};
 use crate::grid::Grid;
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
-use voxflex_core::gpu::{GpuService, LimitedBinding};
+use voxflex_core::gpu::{GpuService, LimitedDevice};
 
 /// The binding limit that splits `grid`'s source into slabs of one cell
 /// block (4 cell planes, bound with their halo: 7 vertex planes).
@@ -81,10 +81,7 @@ fn source_slabs_match(gpu: &dyn GpuService, interpolation: Interpolation) -> Res
     if n < 3 {
         return Err(format!("the source splits into {n} slabs, not ≥ 3"));
     }
-    let capped = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: limit,
-    };
+    let capped = LimitedDevice::binding(gpu, limit);
     let params = ResampleParams {
         background: -3000.0,
         interpolation,
@@ -178,10 +175,7 @@ fn source_slabs_match(gpu: &dyn GpuService, interpolation: Interpolation) -> Res
     dirty_matches_full(&capped, interpolation).map_err(|m| format!("dirty, split: {m}"))?;
 
     // Below one block of planes and its halo: a clear error, no dispatch.
-    let tiny = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: limit - 1,
-    };
+    let tiny = LimitedDevice::binding(gpu, limit - 1);
     match gpu_run(&tiny, &ramp, &Field::zero(&grid), None, params) {
         Err(m) if m.contains("max_storage_buffer_binding_size") => Ok(()),
         Err(m) => Err(format!("unexpected error for a too-small binding: {m}")),
@@ -200,10 +194,7 @@ pub fn check_512_cubed_source(gpu: &dyn GpuService) -> Result<Vec<(Interpolation
     if grid.len() as u64 * 4 <= limit {
         return Err("the 512³ source fits one binding: nothing is split".into());
     }
-    let capped = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: limit,
-    };
+    let capped = LimitedDevice::binding(gpu, limit);
     let vol = head_i16(&grid);
     let (tw, _) = crate::fields::twist_z(grid.centre(), 0.4 / (512.0 * 0.5));
     let amp = 3.5 * grid.spacing.z;

@@ -4,7 +4,7 @@
 //! disagreement beyond `1e-5` mm (GPUs may fuse multiply-adds).
 
 use super::BarycentricBinding;
-use crate::gpu::{BufferId, GpuService, GpuServiceExt, LimitedBinding};
+use crate::gpu::{BufferId, GpuService, GpuServiceExt, LimitedDevice};
 use crate::grid::Grid;
 use crate::proxy::uniform_proxy;
 use crate::tet_mesh::TetMesh;
@@ -106,11 +106,8 @@ pub fn check_map_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
 /// limit is refused with what to do.
 pub fn check_map_slabs(gpu: &dyn GpuService) -> Result<(), String> {
     let (mesh, b, u) = setup();
-    let small = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: (16 * mesh.tets.len() as u64).max(4096),
-    };
-    if 4 * b.len() as u64 <= small.max_storage_buffer_binding_size {
+    let small = LimitedDevice::binding(gpu, (16 * mesh.tets.len() as u64).max(4096));
+    if 4 * b.len() as u64 <= small.limits().max_storage_buffer_binding_size {
         return Err("slab test is not slabbed".into());
     }
     compare(
@@ -118,10 +115,7 @@ pub fn check_map_slabs(gpu: &dyn GpuService) -> Result<(), String> {
         &cpu_map(&mesh, &b, &u),
         &gpu_map(&small, &mesh, &b, &u)?,
     )?;
-    let tiny = LimitedBinding {
-        inner: gpu,
-        max_storage_buffer_binding_size: 256,
-    };
+    let tiny = LimitedDevice::binding(gpu, 256);
     match b.upload(&mesh, &tiny) {
         Err(e) if e.to_string().contains("coarser proxy") => Ok(()),
         Err(e) => Err(format!("unclear refusal: {e}")),
