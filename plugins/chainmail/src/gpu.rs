@@ -304,9 +304,6 @@ impl GpuChainMail {
     /// `Params` slot of its parity), so after the run the current copy is
     /// `rd ^ (iterations & 1)`.
     pub fn propagate(&self, rd: usize, active: &[u32], max: u64) -> Result<RunReport, ModelError> {
-        if active.is_empty() || max == 0 {
-            return Ok(RunReport::default());
-        }
         self.write_control([rd, 1 - rd], 0.0)?;
         let with = [
             (bind::U, self.u),
@@ -330,9 +327,6 @@ impl GpuChainMail {
         tol: f64,
         max: u64,
     ) -> Result<RunReport, ModelError> {
-        if set.is_empty() || max == 0 {
-            return Ok(RunReport::default());
-        }
         self.write_control([cur, cur], tol as f32)?;
         let with = [
             (bind::U, self.u),

@@ -190,7 +190,8 @@ impl DeviceSchedule {
 
     /// Runs up to `max` iterations starting from `list`: `launch(i)` queues
     /// iteration `i`'s kernels over [`Self::list`]`(i, ..)`, which must
-    /// write the per-slot results into `stats`.
+    /// write the per-slot results into `stats`. An empty list or `max = 0`
+    /// runs nothing and hands `list` back as the next.
     pub(crate) fn run(
         &self,
         gpu: &dyn GpuService,

@@ -874,9 +874,7 @@ impl ChainMail {
         self.counts.visits += run.visits;
         self.counts.updates += run.updates;
         self.propagated_since_check = true;
-        for &b in &run.dirty {
-            self.mark_changed(b as usize);
-        }
+        self.mark_all_changed(&run.dirty);
         merge_sorted(&mut self.relax, &run.activated, &mut self.merge_scratch);
         self.active = run.next;
         Run {
@@ -944,14 +942,8 @@ impl ChainMail {
         let run = self.on_device(|g, _| g.relax(cur, &set, tol, max));
         self.counts.relaxation_iterations += run.iterations;
         self.last_max_move = run.last_max_move;
-        for &b in &run.listed {
-            if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {
-                self.unsynced.push(b);
-            }
-        }
-        for &b in &run.dirty {
-            self.mark_changed(b as usize);
-        }
+        self.mark_unsynced(run.listed.iter().copied());
+        self.mark_all_changed(&run.dirty);
         self.relax = run.next;
         Run {
             iterations: run.iterations,
@@ -982,11 +974,7 @@ impl ChainMail {
         };
         self.counts.relaxation_iterations += 1;
         self.last_max_move = rep.max_move;
-        for &(b, _) in &rep.blocks {
-            if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {
-                self.unsynced.push(b);
-            }
-        }
+        self.mark_unsynced(rep.blocks.iter().map(|&(b, _)| b));
         self.note_changes(&rep.blocks);
         self.relax = if sequential {
             if rep.max_move >= tol {
@@ -1028,6 +1016,22 @@ impl ChainMail {
         });
         for b in self.unsynced.drain(..) {
             self.unsynced_flag[b as usize] = false;
+        }
+    }
+
+    /// Blocks relaxed (in the current Jacobi copy only): to be synced.
+    fn mark_unsynced(&mut self, blocks: impl Iterator<Item = u32>) {
+        for b in blocks {
+            if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {
+                self.unsynced.push(b);
+            }
+        }
+    }
+
+    /// Blocks that changed (see [`Self::mark_changed`]).
+    fn mark_all_changed(&mut self, blocks: &[u32]) {
+        for &b in blocks {
+            self.mark_changed(b as usize);
         }
     }
 
