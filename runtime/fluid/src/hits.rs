@@ -1,13 +1,15 @@
-//! Where column centres cross the surface: the 2-D point-in-triangle test
-//! with a fill rule that gives every centre to exactly one triangle of a
-//! tiled region, and the row scan that finds, per triangle and grid row,
-//! the run of consecutive columns it crosses and the height there.
+//! Where column centres cross the surface: per triangle and grid row, the
+//! run of consecutive columns whose centres the fill rule
+//! ([`crate::fill_rule`]) puts inside it, the height there and the
+//! barycentric coordinates the weight pass needs.
 //!
-//! Coordinates: (u, v, h) in the [`crate::GravityFrame`], mm.
+//! Coordinates: (u, v) in the grid's index space ([`IndexSpace`]: column
+//! centres at integers), heights h in the [`crate::GravityFrame`], mm.
 
-use crate::column_grid::ColumnGrid;
-use crate::distribute::{BarycentricPlane, RunBarycentric};
-use crate::projection::{ProjectedSurface, ProjectedTriangle, Side};
+use crate::distribute::RunBarycentric;
+use crate::fill_rule::TriangleTest;
+use crate::index_space::IndexSpace;
+use crate::projection::{ProjectedTriangle, Side, signed_area2};
 use glam::{DVec2, DVec3};
 use wide::f64x4;
 
@@ -62,14 +64,25 @@ impl Run {
     }
 }
 
-/// One triangle set up for the row scan: its fill-rule test, height plane
-/// and crossing tag; its edges for the row spans are set up on first use
-/// (most of a fine mesh's triangles never need them).
+/// One triangle set up for the row scan: its fill-rule test in index
+/// space, what turns the test's edge functions into barycentric
+/// coordinates and heights, and its crossing tag; its edges for the row
+/// spans are set up on first use (most of a fine mesh's triangles never
+/// need them).
 pub struct TriangleRaster {
     test: TriangleTest,
-    height: HeightPlane,
-    barycentric: BarycentricPlane,
     corners: [DVec2; 3],
+    ids: [u32; 3],
+    /// `side / |2·area|` of edges 0 and 1: an edge function times it is
+    /// the opposite corner's barycentric coordinate.
+    to_barycentric: [f64; 2],
+    /// Change of barycentric coordinates 0 and 1 from one column to the next.
+    per_column: [f64; 2],
+    /// Heights of corner 2 and of corners 0 and 1 above it, mm.
+    h2: f64,
+    dh: [f64; 2],
+    /// Height step from one column to the next, mm.
+    step: f64,
     span: Option<SpanEdges>,
     tag: u32,
     /// Candidate columns `i0..i1`.
@@ -77,65 +90,78 @@ pub struct TriangleRaster {
 }
 
 impl TriangleRaster {
-    /// Triangle `t` of `p` (a classified one with candidates).
-    #[inline(always)]
-    pub fn new(p: &ProjectedSurface<'_>, t: usize) -> Self {
-        let ids = p.surface.triangles[t];
-        Self::of(
-            t,
-            ids,
-            ids.map(|v| p.uvh[v as usize]),
-            &p.triangles[t],
-            p.grid.cell.x,
-        )
-    }
-
-    /// Triangle `t` with vertices `ids` at `corners` ((u, v, h), mm),
-    /// classified as `pt` (with candidates), on columns `cell_u` wide (mm).
+    /// Triangle `t` with vertex ids `ids` at `corners` ((u, v, h), mm):
+    /// its classification in `space` — side, and candidates: the centres
+    /// in its bounding box, the rows `j0..j1` to pass to [`Self::run`] —,
+    /// and the raster when it is not vertical and has candidates.
     #[inline(always)]
     pub fn of(
         t: usize,
         ids: [u32; 3],
         corners: [DVec3; 3],
-        pt: &ProjectedTriangle,
-        cell_u: f64,
-    ) -> Self {
-        let q = corners.map(|c| c.truncate());
-        let barycentric = BarycentricPlane::new(ids, q, cell_u);
-        Self {
-            test: TriangleTest::new(ids, q),
-            height: HeightPlane::new(corners, barycentric.inv_area2()),
-            barycentric,
-            corners: q,
-            span: None,
-            tag: t as u32 | if pt.side == Side::Top { TOP } else { 0 },
-            columns: pt.columns.map(|i| i as usize),
+        space: &IndexSpace,
+    ) -> (ProjectedTriangle, Option<Self>) {
+        let q = corners.map(|c| space.to_index(c.truncate()));
+        let area2 = signed_area2(q[0], q[1], q[2]);
+        if area2 == 0.0 || area2.is_nan() {
+            return (ProjectedTriangle::VERTICAL, None);
         }
+        let (columns, rows) = space.within(q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+        let side = if area2 > 0.0 { Side::Top } else { Side::Bottom };
+        let pt = ProjectedTriangle {
+            side,
+            columns,
+            rows,
+        };
+        if pt.candidate_count() == 0 {
+            return (pt, None);
+        }
+        let test = TriangleTest::with_area(ids, q, area2);
+        let inv = 1.0 / area2.abs();
+        let to_barycentric = [test.edges[0].side * inv, test.edges[1].side * inv];
+        // ∂(d × (p − a))/∂p.u = −d.v
+        let per_column = [
+            -test.edges[0].d.y * to_barycentric[0],
+            -test.edges[1].d.y * to_barycentric[1],
+        ];
+        let h2 = corners[2].z;
+        let dh = [corners[0].z - h2, corners[1].z - h2];
+        let raster = Self {
+            test,
+            corners: q,
+            ids,
+            to_barycentric,
+            per_column,
+            h2,
+            dh,
+            step: per_column[0] * dh[0] + per_column[1] * dh[1],
+            span: None,
+            tag: t as u32 | if side == Side::Top { TOP } else { 0 },
+            columns: columns.map(|i| i as usize),
+        };
+        (pt, Some(raster))
     }
 
-    /// The run of row `j` (one of the triangle's candidate rows). In a row
-    /// the centres the fill rule puts inside form one interval (the rule is
-    /// the triangle nudged by a fixed `(ε, ε²)`, still convex). A row of at
-    /// most eight candidates tests each, four at a time;
-    /// a wider one takes the span where the row's centre line crosses the
-    /// triangle and runs the exact test only from each end of it (one
-    /// column of margin each side, so rounding in the span loses no centre)
-    /// until it first succeeds: the centres between are inside. An empty
-    /// run may have `first` past the candidates (its height is then
-    /// meaningless).
+    /// The run of row `j` (one of the triangle's candidate rows) and its
+    /// barycentric coordinates. In a row the centres the fill rule puts
+    /// inside form one interval (the rule is the triangle nudged by a fixed
+    /// `(ε, ε²)`, still convex). A row of at most eight candidates tests
+    /// each, four at a time; a wider one takes the span where the row's
+    /// centre line crosses the triangle and runs the exact test only from
+    /// each end of it (one column of margin each side, so rounding in the
+    /// span loses no centre) until it first succeeds: the centres between
+    /// are inside. An empty run may have `first` past the candidates (its
+    /// height and coordinates are then meaningless).
     #[inline(always)]
-    pub fn run(&mut self, grid: &ColumnGrid, inv_cell_u: f64, j: usize) -> Run {
+    pub fn run(&mut self, j: usize) -> (Run, RunBarycentric) {
         let [i0, i1] = self.columns;
         let [first, last] = if i1 - i0 <= DIRECT_TEST_COLUMNS {
             // one bit per candidate, without a branch per test
-            let py = grid.origin.y + (j as f64 + 0.5) * grid.cell.y;
-            let centres = |i: usize| {
-                let i = f64x4::splat(i as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
-                f64x4::splat(grid.origin.x) + (i + 0.5) * f64x4::splat(grid.cell.x)
-            };
-            let mut inside = self.test.contains4(centres(i0), py);
+            let py = j as f64;
+            let lanes = |i: usize| f64x4::splat(i as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
+            let mut inside = self.test.contains4(lanes(i0), py);
             if i1 - i0 > 4 {
-                inside |= self.test.contains4(centres(i0 + 4), py) << 4;
+                inside |= self.test.contains4(lanes(i0 + 4), py) << 4;
             }
             inside &= (1 << (i1 - i0)) - 1;
             // no branch on an empty row either: then first > last
@@ -144,37 +170,33 @@ impl TriangleRaster {
                 i0 + (u32::BITS - inside.leading_zeros()) as usize,
             ]
         } else {
-            self.scan(grid, inv_cell_u, j)
+            self.scan(j)
         };
-        Run {
+        // the edge functions at the run's first centre, as the test computed them
+        let at = DVec2::new(first as f64, j as f64);
+        let [e0, e1] = [0, 1].map(|e| self.test.edges[e].value(at));
+        let b = [e0 * self.to_barycentric[0], e1 * self.to_barycentric[1]];
+        let run = Run {
             tag: self.tag,
             first: first as u32,
             len: last.saturating_sub(first) as u32,
             row: j as u32,
-            height: self.height.at(grid.centre(first, j)),
-            step: self.height.slope.x * grid.cell.x,
-        }
-    }
-
-    /// [`Self::run`] and the barycentric coordinates along it (the weight
-    /// pass's, [`crate::distribute`]).
-    #[inline(always)]
-    pub fn run_with_barycentric(
-        &mut self,
-        grid: &ColumnGrid,
-        inv_cell_u: f64,
-        j: usize,
-    ) -> (Run, RunBarycentric) {
-        let run = self.run(grid, inv_cell_u, j);
-        let bary = self.barycentric.run(grid.centre(run.first as usize, j));
-        (run, bary)
+            height: self.h2 + b[0] * self.dh[0] + b[1] * self.dh[1],
+            step: self.step,
+        };
+        let barycentric = RunBarycentric {
+            corners: self.ids,
+            at_first: b,
+            per_column: self.per_column,
+        };
+        (run, barycentric)
     }
 
     /// The inside columns `[first, last)` of row `j` from its span.
     #[inline(always)]
-    fn scan(&mut self, grid: &ColumnGrid, inv_cell_u: f64, j: usize) -> [usize; 2] {
+    fn scan(&mut self, j: usize) -> [usize; 2] {
         let [i0, i1] = self.columns;
-        let v = grid.centre(0, j).y;
+        let v = j as f64;
         let corners = self.corners;
         let edges = self.span.get_or_insert_with(|| SpanEdges::new(corners));
         let Some(span) = edges.at(v) else {
@@ -182,11 +204,11 @@ impl TriangleRaster {
         };
         // Index ranges carry their own rounding (about an ulp of the
         // coordinates): widen the span's error bound by it.
-        let err =
-            span.err + 64.0 * f64::EPSILON * (span.lo.abs() + span.hi.abs() + grid.origin.x.abs());
+        let err = span.err + 64.0 * f64::EPSILON * (span.lo.abs() + span.hi.abs());
         let within = |lo: f64, hi: f64| {
-            let [a, b] = grid.columns_within(inv_cell_u, lo, hi);
-            [a.max(i0), b.min(i1)]
+            let a = lo.ceil().max(i0 as f64);
+            let b = (hi.floor() + 1.0).min(i1 as f64);
+            [a as usize, b.max(a) as usize]
         };
         // Centres outside [lo − err, hi + err] are outside the triangle;
         // centres inside [lo + err, hi − err] strictly inside it: only
@@ -202,48 +224,23 @@ impl TriangleRaster {
         } else {
             (last, first)
         };
-        while first < stop_left && !self.test.contains(grid.centre(first, j)) {
+        let centre = |i: usize| DVec2::new(i as f64, v);
+        while first < stop_left && !self.test.contains(centre(first)) {
             first += 1;
         }
-        while last > first.max(stop_right) && !self.test.contains(grid.centre(last - 1, j)) {
+        while last > first.max(stop_right) && !self.test.contains(centre(last - 1)) {
             last -= 1;
         }
         [first, last]
     }
 }
 
-/// The plane through a triangle's corners as height over (u, v).
-struct HeightPlane {
-    origin: DVec3,
-    slope: DVec2,
-}
-
-impl HeightPlane {
-    #[inline(always)]
-    /// Through the corners `c`; `inv_area2` is `1 / n.z` (twice the signed
-    /// projected area's inverse, which the barycentric plane has: `n.z` is
-    /// that area, computed the same way).
-    fn new(c: [DVec3; 3], inv_area2: f64) -> Self {
-        let (e1, e2) = (c[1] - c[0], c[2] - c[0]);
-        let n = e1.cross(e2); // n.z ≠ 0: vertical triangles have no candidates
-        Self {
-            origin: c[0],
-            slope: DVec2::new(-n.x, -n.y) * inv_area2,
-        }
-    }
-
-    #[inline(always)]
-    fn at(&self, p: DVec2) -> f64 {
-        self.origin.z + self.slope.dot(p - self.origin.truncate())
-    }
-}
-
 /// Where a row's centre line crosses a projected triangle.
 struct RowSpan {
-    /// Lowest and highest u of the crossing, mm.
+    /// Lowest and highest u of the crossing (index units).
     lo: f64,
     hi: f64,
-    /// A bound on the rounding error of `lo` and `hi`, mm.
+    /// A bound on the rounding error of `lo` and `hi` (index units).
     err: f64,
     /// The line runs along an edge: the span is boundary, not interior.
     on_edge: bool,
@@ -259,7 +256,7 @@ struct SpanEdge {
     /// `du/dv` along the edge (0 when horizontal).
     du_dv: f64,
     /// A bound on the rounding of the crossing's u at any v between the
-    /// ends (generous: 128 ulps of the interpolation's largest term), mm.
+    /// ends (generous: 128 ulps of the interpolation's largest term) (index units).
     err: f64,
 }
 
@@ -315,117 +312,6 @@ impl SpanEdges {
             s.hi = s.hi.max(u);
         }
         (s.lo <= s.hi).then_some(s)
-    }
-}
-
-/// A projected triangle's inside test. Each edge function is evaluated
-/// along the edge's *canonical* direction (lower vertex index first), so
-/// the two triangles sharing an edge compute bit-identical values of
-/// opposite meaning; a centre exactly on an edge or a vertex is decided by
-/// the sign the edge function takes at `p + (ε, ε²)` (simulation of
-/// simplicity), which gives it to exactly one of the triangles tiling the
-/// region around it.
-struct TriangleTest {
-    /// Canonical edges opposite corners 0, 1, 2.
-    edges: [EdgeFunction; 3],
-    /// Twice the signed area (u, v).
-    #[cfg(test)]
-    area2: f64,
-}
-
-/// One canonical edge of a [`TriangleTest`].
-struct EdgeFunction {
-    /// Start (mm) and direction `end − start` of the canonical edge.
-    a: DVec2,
-    d: DVec2,
-    /// `±1`: whether the triangle's interior is on the canonical edge's left.
-    side: f64,
-    /// Whether a point exactly on the edge's line belongs to the interior
-    /// (the sign at `p + (ε, ε²)`: `−sign(d.v)`, or `sign(d.u)` when the
-    /// edge runs along u, times `side`).
-    tie_inside: bool,
-}
-
-impl TriangleTest {
-    #[inline(always)]
-    fn new(ids: [u32; 3], q: [DVec2; 3]) -> Self {
-        let area2 = crate::projection::signed_area2(q[0], q[1], q[2]);
-        let orient = area2.signum();
-        // Selects on values, not branches or indices: which way an edge
-        // runs is a coin toss. Negating `qb − qa` is exactly `qa − qb`.
-        let edge = |ia: u32, ib: u32, qa: DVec2, qb: DVec2| {
-            let swap = ia > ib;
-            let flip = if swap { -1.0 } else { 1.0 };
-            let a = if swap { qb } else { qa };
-            let d = (qb - qa) * flip;
-            let side = orient * flip;
-            let tie = if d.y != 0.0 {
-                -d.y.signum()
-            } else {
-                d.x.signum()
-            };
-            EdgeFunction {
-                a,
-                d,
-                side,
-                tie_inside: tie * side > 0.0,
-            }
-        };
-        let [q0, q1, q2] = q;
-        Self {
-            // opposite corner 0 is edge 1→2, corner 1: 2→0, corner 2: 0→1
-            edges: [
-                edge(ids[1], ids[2], q1, q2),
-                edge(ids[2], ids[0], q2, q0),
-                edge(ids[0], ids[1], q0, q1),
-            ],
-            #[cfg(test)]
-            area2,
-        }
-    }
-
-    /// Whether the fill rule puts `p` inside.
-    #[inline(always)]
-    fn contains(&self, p: DVec2) -> bool {
-        // `&` and `|`, not `&&` and `||`: no branch per edge
-        self.edges.iter().fold(true, |inside, e| {
-            let value = e.d.perp_dot(p - e.a);
-            inside & ((value * e.side > 0.0) | ((value == 0.0) & e.tie_inside))
-        })
-    }
-
-    /// [`Self::contains`] at four points `(px[l], py)`, bit `l` set when
-    /// inside: the same IEEE operations lane by lane, so the same answers.
-    #[inline(always)]
-    fn contains4(&self, px: f64x4, py: f64) -> u32 {
-        let (zero, py) = (f64x4::ZERO, f64x4::splat(py));
-        let inside = self
-            .edges
-            .iter()
-            .fold(f64x4::splat(-1.0).simd_lt(zero), |inside, e| {
-                let value = f64x4::splat(e.d.x) * (py - f64x4::splat(e.a.y))
-                    - f64x4::splat(e.d.y) * (px - f64x4::splat(e.a.x));
-                // all bits set when a tie is inside: a mask, not a branch
-                let tie = f64x4::splat(f64::from_bits(0u64.wrapping_sub(u64::from(e.tie_inside))));
-                inside
-                    & ((value * f64x4::splat(e.side)).simd_gt(zero) | (value.simd_eq(zero) & tie))
-            });
-        inside.to_bitmask()
-    }
-
-    /// Barycentric coordinates of `p` if the fill rule puts it inside.
-    #[cfg(test)]
-    fn barycentric(&self, p: DVec2) -> Option<[f64; 3]> {
-        if !self.contains(p) {
-            return None;
-        }
-        let e = self
-            .edges
-            .each_ref()
-            .map(|e| e.d.perp_dot(p - e.a) * e.side);
-        let total = self.area2.abs();
-        let (b0, b1) = (e[0] / total, e[1] / total);
-        Some([b0, b1, 1.0 - b0 - b1])
     }
 }
 

@@ -1,89 +1,7 @@
-//! Tests of the fill rule and the row scan.
+//! Tests of the row scan.
 
 use super::*;
-
-fn square_split(diagonal_02: bool) -> [TriangleTest; 2] {
-    // unit square 0=(0,0) 1=(1,0) 2=(1,1) 3=(0,1), both halves CCW
-    let q = [DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y];
-    let tri = |ids: [u32; 3]| TriangleTest::new(ids, ids.map(|i| q[i as usize]));
-    if diagonal_02 {
-        [tri([0, 1, 2]), tri([0, 2, 3])]
-    } else {
-        [tri([0, 1, 3]), tri([1, 2, 3])]
-    }
-}
-
-#[test]
-fn every_point_of_a_tiled_square_falls_in_exactly_one_half() {
-    let pts =
-        (0..=8).flat_map(|i| (0..=8).map(move |j| DVec2::new(i as f64 / 8.0, j as f64 / 8.0)));
-    for diag in [true, false] {
-        let halves = square_split(diag);
-        for p in pts.clone() {
-            let inside = halves.iter().filter(|t| t.barycentric(p).is_some()).count();
-            // The square's own boundary belongs to it or to a neighbour;
-            // inside the open square exactly one half claims the point.
-            let interior = p.x > 0.0 && p.x < 1.0 && p.y > 0.0 && p.y < 1.0;
-            if interior {
-                assert_eq!(inside, 1, "{p} (diagonal 0–2: {diag})");
-            } else {
-                assert!(inside <= 1, "{p}");
-            }
-        }
-    }
-}
-
-/// A fan of triangles around a shared vertex (integer coordinates, so
-/// the vertex and the spokes' midpoints lie exactly on the edges), with
-/// every rotation of the vertex numbering: the centre vertex and each
-/// spoke's midpoint belong to exactly one triangle.
-#[test]
-fn a_shared_vertex_and_its_spokes_belong_to_exactly_one_triangle() {
-    let rim = [
-        DVec2::new(2.0, 0.0),
-        DVec2::new(2.0, 2.0),
-        DVec2::new(-1.0, 2.0),
-        DVec2::new(-2.0, 0.0),
-        DVec2::new(-2.0, -2.0),
-        DVec2::new(1.0, -2.0),
-    ];
-    for shift in 0..7u32 {
-        // vertex ids: the centre gets `shift`, the rim the others in turn
-        let id = |v: usize| (v as u32 + shift) % 7;
-        let points: Vec<DVec2> = std::iter::once(DVec2::ZERO).chain(rim).collect();
-        let fan: Vec<TriangleTest> = (0..6)
-            .map(|r| {
-                let ids = [0, 1 + r, 1 + (r + 1) % 6].map(id);
-                let q = [0, 1 + r, 1 + (r + 1) % 6].map(|v| points[v]);
-                TriangleTest::new(ids, q)
-            })
-            .collect();
-        let mut probes = vec![DVec2::ZERO];
-        probes.extend(rim.iter().map(|&p| p / 2.0));
-        for p in probes {
-            let claims = fan.iter().filter(|t| t.contains(p)).count();
-            assert_eq!(claims, 1, "{p} (numbering shift {shift})");
-        }
-    }
-}
-
-#[test]
-fn barycentric_coordinates_rebuild_the_point() {
-    let q = [
-        DVec2::new(0.0, 0.0),
-        DVec2::new(4.0, 1.0),
-        DVec2::new(1.0, 3.0),
-    ];
-    for ids in [[0u32, 1, 2], [2, 1, 0]] {
-        let t = TriangleTest::new(ids, ids.map(|i| q[i as usize]));
-        let p = DVec2::new(1.5, 1.2);
-        let b = t.barycentric(p).unwrap();
-        let corners = ids.map(|i| q[i as usize]);
-        let back = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
-        assert!((back - p).length() < 1e-12, "{ids:?}: {back}");
-        assert!(t.barycentric(DVec2::new(3.0, 3.0)).is_none());
-    }
-}
+use crate::fill_rule::TriangleTest;
 
 /// A small deterministic generator (no dependency for one test).
 struct Lcg(u64);
@@ -139,23 +57,25 @@ fn the_row_scan_finds_exactly_the_centres_the_fill_rule_puts_inside() {
         vertices,
         triangles,
     };
-    let p = ProjectedSurface::new(&surface, DVec3::NEG_Z, n);
+    let p = crate::projection::ProjectedSurface::new(&surface, DVec3::NEG_Z, n);
     let g = p.grid;
     assert_eq!(g.cell, DVec2::splat(0.5));
-    let inv = 1.0 / g.cell.x;
+    let space = IndexSpace::of(&g);
     let (mut inside_total, mut scanned_rows) = (0, 0);
-    for t in 0..p.triangles.len() {
-        let ids = surface.triangles[t];
-        let q = ids.map(|v| p.uvh[v as usize].truncate());
+    for (t, &ids) in surface.triangles.iter().enumerate() {
+        let corners = ids.map(|v| p.uvh[v as usize]);
+        let q = corners.map(|c| space.to_index(c.truncate()));
         let test = TriangleTest::new(ids, q);
-        let pt = p.triangles[t];
+        let (pt, raster) = TriangleRaster::of(t, ids, corners, &space);
         if pt.side == Side::Vertical {
+            assert!(raster.is_none());
             continue; // zero projected area: no centre is its
         }
+        let centre = |i: usize, j: usize| DVec2::new(i as f64, j as f64);
         let [j0, j1] = pt.rows.map(|j| j as usize);
         let [i0, i1] = pt.columns.map(|i| i as usize);
         for j in 0..n {
-            let truth: Vec<usize> = (0..n).filter(|&i| test.contains(g.centre(i, j))).collect();
+            let truth: Vec<usize> = (0..n).filter(|&i| test.contains(centre(i, j))).collect();
             inside_total += truth.len();
             if truth.is_empty() {
                 continue;
@@ -166,26 +86,49 @@ fn the_row_scan_finds_exactly_the_centres_the_fill_rule_puts_inside() {
                 (pt.columns, pt.rows)
             );
         }
-        if pt.candidate_count() == 0 {
+        let Some(mut r) = raster else {
+            assert_eq!(pt.candidate_count(), 0);
             continue;
-        }
-        let mut r = TriangleRaster::new(&p, t);
+        };
+        // the plane through the corners in mm, and barycentric coordinates
+        // from areas in mm: the references the run is checked against
+        let world = corners.map(|c| c.truncate());
+        let n3 = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
+        let plane = |c: DVec2| {
+            corners[0].z - (n3.x * (c.x - world[0].x) + n3.y * (c.y - world[0].y)) / n3.z
+        };
+        let area2 = signed_area2(world[0], world[1], world[2]);
+        // barycentric coordinates are as ill-conditioned as the triangle
+        // is thin (a sliver's differ in their leading digits between any
+        // two ways of computing them)
+        let perimeter: f64 = (0..3).map(|k| world[k].distance(world[(k + 1) % 3])).sum();
+        let tolerance = 1e-12 * (1.0 + perimeter * perimeter / area2.abs());
         for j in j0..j1 {
-            let truth: Vec<usize> = (i0..i1)
-                .filter(|&i| test.contains(g.centre(i, j)))
-                .collect();
-            let run = r.run(&g, inv, j);
+            let truth: Vec<usize> = (i0..i1).filter(|&i| test.contains(centre(i, j))).collect();
+            let (run, bary) = r.run(j);
             let found: Vec<usize> = (run.first..run.first.saturating_add(run.len))
                 .map(|i| i as usize)
                 .collect();
             assert_eq!(found, truth, "triangle {t} row {j}: run");
-            let [a, b] = r.scan(&g, inv, j);
+            let [a, b] = r.scan(j);
             let scanned: Vec<usize> = (a..b).collect();
             assert_eq!(scanned, truth, "triangle {t} row {j}: span");
             scanned_rows += 1;
-            if run.len > 0 {
-                let h = r.height.at(g.centre(run.first as usize + 1, j));
-                assert!((run.height_at(1) - h).abs() < 1e-12, "triangle {t} row {j}");
+            for m in 0..run.len {
+                let c = g.centre((run.first + m) as usize, j);
+                let scale = 1.0 + plane(c).abs();
+                assert!(
+                    (run.height_at(m) - plane(c)).abs() < 1e-9 * scale,
+                    "triangle {t} row {j}"
+                );
+                let b0 = signed_area2(c, world[1], world[2]) / area2;
+                let b1 = signed_area2(world[0], c, world[2]) / area2;
+                let at = |k: usize| bary.at_first[k] + m as f64 * bary.per_column[k];
+                assert!(
+                    (at(0) - b0).abs() < tolerance && (at(1) - b1).abs() < tolerance,
+                    "triangle {t} row {j}"
+                );
+                assert_eq!(bary.corners, ids);
             }
         }
     }

@@ -11,7 +11,7 @@
 //! bounding box ([`ColumnGrid`]). Triangles whose normal points up are
 //! *top* triangles, those pointing down *bottom* ones. Each column centre
 //! is tested against every projected triangle whose bounding box holds it
-//! (2-D point-in-triangle test with a fill rule, [`hits`]), which records
+//! (2-D point-in-triangle test with a fill rule, [`fill_rule`]), which records
 //! the surface's height there. Per column the crossings are sorted by
 //! height and matched bottom → top into sections (several in a non-convex
 //! cavity, [`sections`]); each section's weight `W = A·h·ρ·g` goes to its
@@ -28,7 +28,11 @@
 //!
 //! The CPU path (rayon) scans rows instead of testing every candidate: in
 //! a row the centres inside a triangle are one run of consecutive columns
-//! ([`hits::Run`]). A row of up to eight candidates tests each, four at a
+//! ([`hits::Run`]). It works in the grid's index space, where the centres
+//! are integer points ([`index_space`]), visits the triangles along a
+//! Z-order curve so neighbours are scanned together
+//! ([`triangle_order`]), and reads the barycentric coordinates and heights
+//! of a run from the fill rule's own edge functions. A row of up to eight candidates tests each, four at a
 //! time in SIMD lanes; a wider one is cut by the triangle's edges and
 //! tests only the run's ends exactly. One pass over the triangles
 //! classifies each and scans its rows while its corners are at hand
@@ -53,9 +57,11 @@
 pub mod column_grid;
 pub mod distribute;
 pub mod error;
+pub mod fill_rule;
 pub mod gpu;
 pub mod gravity_frame;
 pub mod hits;
+pub mod index_space;
 pub mod params;
 #[cfg(feature = "test-support")]
 pub mod parity;
@@ -65,6 +71,7 @@ pub mod schedule;
 pub mod sections;
 #[cfg(feature = "test-support")]
 pub mod test_surfaces;
+pub mod triangle_order;
 pub mod weighing;
 
 pub use column_grid::ColumnGrid;

@@ -1,15 +1,17 @@
 //! The CPU's one pass over the triangles: each is classified (side and
-//! candidate columns, [`crate::projection::Classifier`]) and, when it has
+//! candidate columns, in the grid's index space) and, when it has
 //! candidates, scanned row by row ([`TriangleRaster`]) while its corners
 //! are at hand; its non-empty runs, with their barycentric coordinates, go
 //! to its task's bucket for the band of rows they lie in, so the section
 //! pass finds a band's runs in one bucket per task, with no sort and no
 //! write shared between tasks.
 //!
-//! Coordinates: (u, v, h) in the [`crate::GravityFrame`], mm.
+//! Coordinates: (u, v) in the grid's index space
+//! ([`crate::index_space`]), heights in the [`crate::GravityFrame`], mm.
 
 use crate::distribute::RunBarycentric;
 use crate::hits::{Run, TriangleRaster};
+use crate::index_space::IndexSpace;
 use crate::projection::{CandidateSum, ProjectedSurface};
 use crate::schedule::TaskSplit;
 use rayon::prelude::*;
@@ -95,20 +97,21 @@ impl TaskRuns {
     }
 }
 
-/// Classifies every triangle of `p` as [`ProjectedSurface::classify`] does
-/// and scans those with candidates into `tasks` (one per task of `split`);
-/// returns the mean candidates per non-vertical triangle (the paper's `c`).
-/// The classifications are not kept: the CPU path needs nothing of them
-/// after the scan.
+/// Classifies every triangle of `p` in the grid's index space
+/// ([`TriangleRaster::of`]) and scans those with candidates into `tasks`
+/// (one per task of `split`, which cuts `order`: each triangle's index and
+/// corner ids in visiting order, [`crate::triangle_order`]); returns the mean candidates per non-vertical
+/// triangle (the paper's `c`). The classifications are not kept: the CPU
+/// path needs nothing of them after the scan.
 pub fn scan_triangles(
     p: &ProjectedSurface<'_>,
     split: TaskSplit,
     bands: RowBands,
     tasks: &mut Vec<TaskRuns>,
+    order: &[(u32, [u32; 3])],
 ) -> f64 {
-    let classifier = p.classifier();
-    let (surface, uvh, grid) = (p.surface, &p.uvh, &p.grid);
-    let inv_cell_u = 1.0 / grid.cell.x;
+    let space = IndexSpace::of(&p.grid);
+    let uvh = &p.uvh;
     tasks.resize_with(split.tasks, Default::default);
     tasks.truncate(split.tasks);
     tasks.par_iter_mut().enumerate().for_each(|(b, task)| {
@@ -116,20 +119,16 @@ pub fn scan_triangles(
         task.filled.clear();
         task.filled.resize(bands.bands, 0);
         let mut sum = CandidateSum::default();
-        for t in split.task(b) {
-            let ids = surface.triangles[t];
+        for &(t, ids) in &order[split.task(b)] {
+            let t = t as usize;
             let corners = ids.map(|v| uvh[v as usize]);
-            let pt = classifier.classify(corners.map(|c| c.truncate()));
+            let (pt, raster) = TriangleRaster::of(t, ids, corners, &space);
             sum.add(&pt);
-            if pt.candidate_count() == 0 {
+            let Some(mut raster) = raster else {
                 continue;
-            }
-            let mut raster = TriangleRaster::of(t, ids, corners, &pt, grid.cell.x);
+            };
             for j in pt.rows[0] as usize..pt.rows[1] as usize {
-                task.keep(
-                    bands.band(j),
-                    raster.run_with_barycentric(grid, inv_cell_u, j),
-                );
+                task.keep(bands.band(j), raster.run(j));
             }
         }
         task.sum = sum;

@@ -9,6 +9,7 @@ use crate::projection::ProjectedSurface;
 use crate::row_scan::{RowBands, TaskRuns, scan_triangles};
 use crate::schedule::{TaskSplit, workers_per_triangle};
 use crate::sections::{BandScratch, SectionCount, SectionTally, match_bands};
+use crate::triangle_order::TriangleOrder;
 use voxflex_core::triangle_surface::TriangleSurface;
 
 /// µN per (kg/m³ · m/s² · mm³): 1e-9 N = 1e-3 µN.
@@ -78,10 +79,13 @@ impl FluidWeigher {
 }
 
 /// Working memory of one weighing (capacity reused between calls): the
-/// projection's vertices and triangles, each row-scan task's runs, each
-/// band's matching and weighed runs.
+/// order the row scan visits the triangles in (computed when the
+/// triangles change, [`TriangleOrder`]), the projection's vertices and
+/// triangles, each row-scan task's runs, each band's matching and weighed
+/// runs.
 #[derive(Debug, Default)]
 pub struct Scratch {
+    order: TriangleOrder,
     uvh: Vec<glam::DVec3>,
     triangles: Vec<crate::projection::ProjectedTriangle>,
     tasks: Vec<TaskRuns>,
@@ -158,8 +162,17 @@ impl<'a> FluidWeighing<'a> {
             TASKS_PER_THREAD * rayon::current_num_threads(),
             MIN_TASK_TRIANGLES,
         );
-        self.projected.mean_candidates =
-            scan_triangles(&self.projected, split, self.bands, &mut self.scratch.tasks);
+        let s = &mut *self.scratch;
+        if !s.order.fits(self.projected.surface) {
+            s.order = TriangleOrder::of(self.projected.surface);
+        }
+        self.projected.mean_candidates = scan_triangles(
+            &self.projected,
+            split,
+            self.bands,
+            &mut s.tasks,
+            s.order.visits(),
+        );
         self.set_workers();
     }
 
