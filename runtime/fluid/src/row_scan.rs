@@ -2,7 +2,7 @@
 //! candidate columns, in the grid's index space) and, when it has
 //! candidates, scanned row by row ([`TriangleRaster`]) while its corners
 //! are at hand; its non-empty runs, with their barycentric coordinates, go
-//! to its task's bucket for the band of rows they lie in, so the section
+//! to its task's bucket for the band of rows they lie in ([`BandRuns`]), so the section
 //! pass finds a band's runs in one bucket per task, with no sort and no
 //! write shared between tasks.
 //!
@@ -62,38 +62,87 @@ impl RowBands {
     }
 }
 
-/// One row-scan task's runs (capacity reused between calls).
+/// One task's runs in one band of rows (capacity reused between calls):
+/// top runs apart from bottom runs, so only a bottom run — the only kind
+/// whose fluid is weighed — carries barycentric coordinates. Each vector's
+/// first `filled` entries are the non-empty runs (the rest is kept from
+/// earlier calls, so a weighing neither allocates nor clears).
+#[derive(Debug, Default)]
+pub struct BandRuns {
+    tops: Vec<Run>,
+    bottoms: Vec<Run>,
+    barycentrics: Vec<RunBarycentric>,
+    /// Non-empty top and bottom runs kept.
+    filled: [usize; 2],
+    /// Columns crossed by the kept top and bottom runs.
+    crossings: [usize; 2],
+}
+
+impl BandRuns {
+    /// Forgets every run (keeps the capacity).
+    pub fn clear(&mut self) {
+        self.filled = [0; 2];
+        self.crossings = [0; 2];
+    }
+
+    /// Keeps `run` when it crosses any column (an empty run is written but
+    /// not kept, so it costs no branch).
+    #[inline(always)]
+    pub fn keep(&mut self, (run, barycentric): (Run, RunBarycentric)) {
+        let kept = usize::from(run.len > 0);
+        let [tops, bottoms] = self.filled;
+        if run.top() {
+            if self.tops.len() == tops {
+                self.tops.resize((2 * tops).max(1024), Run::default());
+            }
+            self.tops[tops] = run;
+            self.filled[0] += kept;
+            self.crossings[0] += run.len as usize;
+        } else {
+            if self.bottoms.len() == bottoms {
+                let room = (2 * bottoms).max(1024);
+                self.bottoms.resize(room, Run::default());
+                self.barycentrics.resize(room, RunBarycentric::default());
+            }
+            self.bottoms[bottoms] = run;
+            self.barycentrics[bottoms] = barycentric;
+            self.filled[1] += kept;
+            self.crossings[1] += run.len as usize;
+        }
+    }
+
+    /// The kept top runs.
+    pub fn tops(&self) -> &[Run] {
+        &self.tops[..self.filled[0]]
+    }
+
+    /// The kept bottom runs.
+    pub fn bottoms(&self) -> &[Run] {
+        &self.bottoms[..self.filled[1]]
+    }
+
+    /// The kept bottom runs' barycentric coordinates, in their order.
+    pub fn barycentrics(&self) -> &[RunBarycentric] {
+        &self.barycentrics[..self.filled[1]]
+    }
+
+    /// Columns crossed by the kept top and the kept bottom runs.
+    pub fn crossings(&self) -> [usize; 2] {
+        self.crossings
+    }
+}
+
+/// One row-scan task's runs, per band of rows.
 #[derive(Debug, Default)]
 pub struct TaskRuns {
-    /// Per row band, room for runs and their barycentric coordinates: the
-    /// first `filled[b]` are the non-empty runs this task's triangles cross
-    /// (the rest is kept from earlier calls, so a weighing neither
-    /// allocates nor clears).
-    bands: Vec<(Vec<Run>, Vec<RunBarycentric>)>,
-    filled: Vec<usize>,
+    bands: Vec<BandRuns>,
     sum: CandidateSum,
 }
 
 impl TaskRuns {
-    /// This task's runs of band `b`, and their barycentric coordinates.
-    pub fn band(&self, b: usize) -> (&[Run], &[RunBarycentric]) {
-        let (runs, bary) = &self.bands[b];
-        (&runs[..self.filled[b]], &bary[..self.filled[b]])
-    }
-
-    /// Keeps `run` in band `b` when it crosses any column — written either
-    /// way, so an empty run costs no branch.
-    #[inline(always)]
-    fn keep(&mut self, b: usize, (run, bary): (Run, RunBarycentric)) {
-        let ((runs, barys), at) = (&mut self.bands[b], &mut self.filled[b]);
-        if runs.len() == *at {
-            let room = (2 * *at).max(1024);
-            runs.resize(room, Run::default());
-            barys.resize(room, RunBarycentric::default());
-        }
-        runs[*at] = run;
-        barys[*at] = bary;
-        *at += usize::from(run.len > 0);
+    /// This task's runs of band `b`.
+    pub fn band(&self, b: usize) -> &BandRuns {
+        &self.bands[b]
     }
 }
 
@@ -116,8 +165,7 @@ pub fn scan_triangles(
     tasks.truncate(split.tasks);
     tasks.par_iter_mut().enumerate().for_each(|(b, task)| {
         task.bands.resize_with(bands.bands, Default::default);
-        task.filled.clear();
-        task.filled.resize(bands.bands, 0);
+        task.bands.iter_mut().for_each(BandRuns::clear);
         let mut sum = CandidateSum::default();
         for &(t, ids) in &order[split.task(b)] {
             let t = t as usize;
@@ -128,7 +176,7 @@ pub fn scan_triangles(
                 continue;
             };
             for j in pt.rows[0] as usize..pt.rows[1] as usize {
-                task.keep(bands.band(j), raster.run(j));
+                task.bands[bands.band(j)].keep(raster.run(j));
             }
         }
         task.sum = sum;

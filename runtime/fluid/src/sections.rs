@@ -8,9 +8,9 @@
 //!
 //! Heights in the gravity frame, mm.
 
-use crate::distribute::{Weighted, run_weights};
+use crate::distribute::{RunBarycentric, Weighted, run_weights};
 use crate::hits::{Run, TOP};
-use crate::row_scan::{RowBands, TaskRuns};
+use crate::row_scan::{BandRuns, RowBands, TaskRuns};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -111,13 +111,13 @@ pub fn match_bands(
     scratch.resize_with(bands.bands, Default::default);
     scratch.truncate(bands.bands);
     scratch.par_iter_mut().enumerate().for_each(|(b, s)| {
-        s.tally = s.match_band(tasks.iter().map(|t| t.band(b).0), bands.rows(b), n_u);
+        let band = || tasks.iter().map(|t| t.band(b));
+        s.tally = s.match_band(band(), bands.rows(b), n_u);
         s.weighted.clear();
-        for (t, task) in tasks.iter().enumerate() {
-            let (runs, barycentrics) = task.band(b);
+        for (t, runs) in band().enumerate() {
             let fluid = &s.fluid[s.task_fluid[t]..s.task_fluid[t + 1]];
             let weighted = &mut s.weighted;
-            s.tally.fluid_height += each_bottom(fluid, runs, barycentrics, |bary, result| {
+            s.tally.fluid_height += each_bottom(fluid, runs, |bary, result| {
                 weighted.push(run_weights(bary, result, scale));
             });
         }
@@ -130,31 +130,27 @@ pub fn match_bands(
 }
 
 impl BandScratch {
-    /// Groups the crossings of `runs` (all in `rows`; `n_u` columns per
-    /// row) by cell, sorts each cell's by height, and matches them bottom,
-    /// top, bottom, top… from below — else the cell's column is irregular
-    /// and holds nothing. Each section's height goes to its bottom
-    /// crossing's slot (`fluid`). The tally's `fluid_height` is left 0 (see
+    /// Groups the crossings of every task's runs in the band (`rows`,
+    /// `n_u` columns per row) by cell, sorts each cell's by height, and
+    /// matches them bottom, top, bottom, top… from below — else the cell's
+    /// column is irregular and holds nothing. Each section's height goes to
+    /// its bottom crossing's slot (`fluid`: the tasks' bottom runs'
+    /// crossings in order). The tally's `fluid_height` is left 0 (see
     /// [`each_bottom`]).
     fn match_band<'r>(
         &mut self,
-        segments: impl Iterator<Item = &'r [Run]> + Clone,
+        tasks: impl Iterator<Item = &'r BandRuns> + Clone,
         rows: Range<usize>,
         n_u: usize,
     ) -> SectionTally {
         let mut tally = SectionTally::default();
-        let runs = segments.clone().flatten();
-        let cell = |r: &Run| (r.row as usize - rows.start) * n_u + r.first as usize;
-        let (mut lo, mut hi, mut total, mut bottoms) = (usize::MAX, 0, 0, 0);
+        let (mut total, mut bottoms) = (0, 0);
         self.task_fluid.clear();
         self.task_fluid.push(0);
-        for segment in segments {
-            for r in segment {
-                lo = lo.min(cell(r));
-                hi = hi.max(cell(r) + r.len as usize);
-                total += r.len as usize;
-                bottoms += if r.top() { 0 } else { r.len as usize };
-            }
+        for task in tasks.clone() {
+            let [top, bottom] = task.crossings();
+            total += top + bottom;
+            bottoms += bottom;
             self.task_fluid.push(bottoms);
         }
         self.fluid.clear();
@@ -162,12 +158,17 @@ impl BandScratch {
         if total == 0 {
             return tally;
         }
-        let span = hi - lo;
+        // the band's cells, row-major (a few thousand: see `RowBands`)
+        let span = rows.len() * n_u;
+        let cell = |r: &Run| (r.row as usize - rows.start) * n_u + r.first as usize;
+        let runs = tasks
+            .clone()
+            .flat_map(|t| t.tops().iter().chain(t.bottoms()));
         let ends = &mut self.ends;
         ends.clear();
         ends.resize(span + 1, 0);
-        for r in runs.clone() {
-            let x = cell(r) - lo;
+        for r in runs {
+            let x = cell(r);
             ends[x] = ends[x].wrapping_add(1);
             ends[x + r.len as usize] = ends[x + r.len as usize].wrapping_sub(1);
         }
@@ -178,17 +179,24 @@ impl BandScratch {
             at += count;
         }
         self.entries.resize(total, Entry::default());
-        let mut slot = 0u32;
-        for r in runs {
-            let x = cell(r) - lo;
-            let (tag, step) = if r.top() { (TOP, 0) } else { (0, 1) };
+        let mut fill = |r: &Run, slot: u32, step: u32| {
+            let x = cell(r);
             for (m, end) in ends[x..x + r.len as usize].iter_mut().enumerate() {
                 self.entries[*end as usize] = Entry {
                     height: r.height_at(m as u32),
-                    slot: slot | tag,
+                    slot: slot + m as u32 * step,
                 };
-                slot += step;
                 *end += 1;
+            }
+        };
+        let mut slot = 0u32;
+        for task in tasks {
+            for r in task.tops() {
+                fill(r, TOP, 0);
+            }
+            for r in task.bottoms() {
+                fill(r, slot, 1);
+                slot += r.len;
             }
         }
         let mut start = 0;
@@ -223,25 +231,24 @@ impl BandScratch {
         tally
     }
 
-    /// Task `t`'s bottom crossings in this band, in the order of its runs:
-    /// the heights of their sections (0 when none), mm.
+    /// Task `t`'s bottom crossings in this band, in the order of its bottom
+    /// runs: the heights of their sections (0 when none), mm.
     pub fn task_fluid(&self, t: usize) -> &[f64] {
         &self.fluid[self.task_fluid[t]..self.task_fluid[t + 1]]
     }
 }
 
-/// Calls `f(extra, [Σ h, Σ h·m])` for each bottom run of `runs` holding
-/// fluid, `extra` its companion in `extras` (`fluid`: the runs' crossings'
-/// section heights, in order, as [`BandScratch::task_fluid`] gives them);
-/// returns the sum of every section's height (mm).
-pub fn each_bottom<'r, E>(
+/// Calls `f(barycentric, [Σ h, Σ h·m])` for each bottom run of `runs`
+/// holding fluid (`fluid`: its crossings' section heights, in order, as
+/// [`BandScratch::task_fluid`] gives them); returns the sum of every
+/// section's height (mm).
+pub fn each_bottom<'r>(
     fluid: &[f64],
-    runs: &[Run],
-    extras: &'r [E],
-    mut f: impl FnMut(&'r E, RunResult),
+    runs: &'r BandRuns,
+    mut f: impl FnMut(&'r RunBarycentric, RunResult),
 ) -> f64 {
     let (mut slot, mut total) = (0, 0.0);
-    for (r, extra) in runs.iter().zip(extras).filter(|(r, _)| !r.top()) {
+    for (r, bary) in runs.bottoms().iter().zip(runs.barycentrics()) {
         let held = &fluid[slot..slot + r.len as usize];
         slot += r.len as usize;
         let (h, hm) = held
@@ -250,7 +257,7 @@ pub fn each_bottom<'r, E>(
             .fold((0.0, 0.0), |(h, hm), (m, &x)| (h + x, hm + m as f64 * x));
         if h > 0.0 {
             total += h;
-            f(extra, [h, hm]);
+            f(bary, [h, hm]);
         }
     }
     total
@@ -272,11 +279,23 @@ mod tests {
     }
 
     /// Matches `runs` as one band of rows 4..8, 10 columns each.
+    /// (The runs' tags come back as their barycentrics' first corner.)
     fn matched(runs: &[Run]) -> (SectionTally, Vec<(u32, RunResult)>) {
+        let mut band = BandRuns::default();
+        for r in runs {
+            let corners = [r.tag, 0, 0];
+            band.keep((
+                *r,
+                RunBarycentric {
+                    corners,
+                    ..Default::default()
+                },
+            ));
+        }
         let mut s = BandScratch::default();
-        let mut t = s.match_band(std::iter::once(runs), 4..8, 10);
+        let mut t = s.match_band(std::iter::once(&band), 4..8, 10);
         let mut held = Vec::new();
-        t.fluid_height = each_bottom(s.task_fluid(0), runs, runs, |r, x| held.push((r.tag, x)));
+        t.fluid_height = each_bottom(s.task_fluid(0), &band, |b, x| held.push((b.corners[0], x)));
         (t, held)
     }
 
