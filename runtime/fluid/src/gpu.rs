@@ -264,14 +264,15 @@ impl Buffers {
     fn upload(gpu: &dyn GpuService, w: &FluidWeighing<'_>) -> Result<Self, FluidError> {
         let p = w.projected();
         let h0 = p.uvh.iter().map(|q| q.z).fold(f64::INFINITY, f64::min);
-        let origin = p.grid.origin;
+        // (u, v) from the grid's index space back to mm from its corner
+        let cell = p.grid.cell;
         let uvh: Vec<f32> = p
             .uvh
             .iter()
             .flat_map(|q| {
                 [
-                    (q.x - origin.x) as f32,
-                    (q.y - origin.y) as f32,
+                    ((q.x + 0.5) * cell.x) as f32,
+                    ((q.y + 0.5) * cell.y) as f32,
                     (q.z - h0) as f32,
                 ]
             })

@@ -8,8 +8,7 @@
 
 use crate::distribute::RunBarycentric;
 use crate::fill_rule::TriangleTest;
-use crate::index_space::IndexSpace;
-use crate::projection::{ProjectedTriangle, Side, signed_area2};
+use crate::projection::{ProjectedTriangle, Side, classify};
 use glam::{DVec2, DVec3};
 use wide::f64x4;
 
@@ -90,32 +89,24 @@ pub struct TriangleRaster {
 }
 
 impl TriangleRaster {
-    /// Triangle `t` with vertex ids `ids` at `corners` ((u, v, h), mm):
-    /// its classification in `space` — side, and candidates: the centres
-    /// in its bounding box, the rows `j0..j1` to pass to [`Self::run`] —,
-    /// and the raster when it is not vertical and has candidates.
+    /// Triangle `t` with vertex ids `ids` at `corners` ((u, v) in the
+    /// index space of a grid of `n` columns and rows, h in mm): its
+    /// classification ([`classify`]: side, and candidates — the centres in
+    /// its bounding box, the rows `j0..j1` to pass to [`Self::run`]), and
+    /// the raster when it is not vertical and has candidates.
     #[inline(always)]
     pub fn of(
         t: usize,
         ids: [u32; 3],
         corners: [DVec3; 3],
-        space: &IndexSpace,
+        n: [usize; 2],
     ) -> (ProjectedTriangle, Option<Self>) {
-        let q = corners.map(|c| space.to_index(c.truncate()));
-        let area2 = signed_area2(q[0], q[1], q[2]);
-        if area2 == 0.0 || area2.is_nan() {
-            return (ProjectedTriangle::VERTICAL, None);
-        }
-        let (columns, rows) = space.within(q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
-        let side = if area2 > 0.0 { Side::Top } else { Side::Bottom };
-        let pt = ProjectedTriangle {
-            side,
-            columns,
-            rows,
-        };
+        let q = corners.map(|c| c.truncate());
+        let (pt, area2) = classify(q, n);
         if pt.candidate_count() == 0 {
             return (pt, None);
         }
+        let (side, columns) = (pt.side, pt.columns);
         let test = TriangleTest::with_area(ids, q, area2);
         let inv = 1.0 / area2.abs();
         let to_barycentric = [test.edges[0].side * inv, test.edges[1].side * inv];

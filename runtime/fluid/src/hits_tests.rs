@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::fill_rule::TriangleTest;
+use crate::projection::signed_area2;
 
 /// A small deterministic generator (no dependency for one test).
 struct Lcg(u64);
@@ -60,13 +61,12 @@ fn the_row_scan_finds_exactly_the_centres_the_fill_rule_puts_inside() {
     let p = crate::projection::ProjectedSurface::new(&surface, DVec3::NEG_Z, n);
     let g = p.grid;
     assert_eq!(g.cell, DVec2::splat(0.5));
-    let space = IndexSpace::of(&g);
     let (mut inside_total, mut scanned_rows) = (0, 0);
     for (t, &ids) in surface.triangles.iter().enumerate() {
         let corners = ids.map(|v| p.uvh[v as usize]);
-        let q = corners.map(|c| space.to_index(c.truncate()));
+        let q = corners.map(|c| c.truncate());
         let test = TriangleTest::new(ids, q);
-        let (pt, raster) = TriangleRaster::of(t, ids, corners, &space);
+        let (pt, raster) = TriangleRaster::of(t, ids, corners, g.n);
         if pt.side == Side::Vertical {
             assert!(raster.is_none());
             continue; // zero projected area: no centre is its
@@ -92,11 +92,11 @@ fn the_row_scan_finds_exactly_the_centres_the_fill_rule_puts_inside() {
         };
         // the plane through the corners in mm, and barycentric coordinates
         // from areas in mm: the references the run is checked against
-        let world = corners.map(|c| c.truncate());
-        let n3 = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
-        let plane = |c: DVec2| {
-            corners[0].z - (n3.x * (c.x - world[0].x) + n3.y * (c.y - world[0].y)) / n3.z
-        };
+        let mm = corners.map(|c| ((c.truncate() + 0.5) * g.cell + g.origin).extend(c.z));
+        let world = mm.map(|c| c.truncate());
+        let n3 = (mm[1] - mm[0]).cross(mm[2] - mm[0]);
+        let plane =
+            |c: DVec2| mm[0].z - (n3.x * (c.x - world[0].x) + n3.y * (c.y - world[0].y)) / n3.z;
         let area2 = signed_area2(world[0], world[1], world[2]);
         // barycentric coordinates are as ill-conditioned as the triangle
         // is thin (a sliver's differ in their leading digits between any

@@ -18,8 +18,6 @@ use glam::DVec2;
 pub struct IndexSpace {
     origin: DVec2,
     inv_cell: DVec2,
-    /// Columns along u and v, as floats (the clamp of index ranges).
-    n: DVec2,
 }
 
 impl IndexSpace {
@@ -28,7 +26,6 @@ impl IndexSpace {
         Self {
             origin: grid.origin,
             inv_cell: 1.0 / grid.cell,
-            n: DVec2::new(grid.n[0] as f64, grid.n[1] as f64),
         }
     }
 
@@ -39,12 +36,13 @@ impl IndexSpace {
     }
 
     /// The columns `[i0, i1)` and rows `[j0, j1)` whose centres lie in the
-    /// box `[lo, hi]` (index units), clipped to the grid; empty ranges
-    /// have their start at their end.
+    /// box `[lo, hi]` (index units), clipped to a grid of `n` columns and
+    /// rows; empty ranges have their start at their end.
     #[inline(always)]
-    pub fn within(&self, lo: DVec2, hi: DVec2) -> ([u32; 2], [u32; 2]) {
+    pub fn within(n: [usize; 2], lo: DVec2, hi: DVec2) -> ([u32; 2], [u32; 2]) {
+        let n = DVec2::new(n[0] as f64, n[1] as f64);
         let first = lo.ceil().max(DVec2::ZERO);
-        let last = (hi.floor() + 1.0).min(self.n).max(DVec2::ZERO);
+        let last = (hi.floor() + 1.0).min(n).max(DVec2::ZERO);
         let first = first.min(last);
         (
             [first.x as u32, last.x as u32],
@@ -63,7 +61,7 @@ mod tests {
         let s = IndexSpace::of(&g);
         assert_eq!(s.to_index(g.centre(3, 7)), DVec2::new(3.0, 7.0));
         // centres at 0.5, 1.5, … mm along u (index 0, 1, …); 0.25, 0.75, … along v
-        let box_of = |lo: DVec2, hi: DVec2| s.within(s.to_index(lo), s.to_index(hi));
+        let box_of = |lo: DVec2, hi: DVec2| IndexSpace::within(g.n, s.to_index(lo), s.to_index(hi));
         assert_eq!(
             box_of(DVec2::new(0.5, 0.3), DVec2::new(2.4, 0.75)),
             ([0, 2], [1, 2])

@@ -1,8 +1,10 @@
-//! The cavity surface seen from above: vertices in the gravity frame, each
-//! triangle classified top/bottom and given its candidate columns.
+//! The cavity surface seen from above: vertices in the gravity frame and
+//! then in the column grid's index space, each triangle classified
+//! top/bottom and given its candidate columns.
 
 use crate::column_grid::ColumnGrid;
 use crate::gravity_frame::GravityFrame;
+use crate::index_space::IndexSpace;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use voxflex_core::triangle_surface::TriangleSurface;
@@ -56,7 +58,10 @@ impl ProjectedTriangle {
 pub struct ProjectedSurface<'a> {
     /// The surface (world frame, mm).
     pub surface: &'a TriangleSurface,
-    /// Each vertex's `(u, v, h)` in the [`GravityFrame`], mm.
+    /// Each vertex's `(u, v)` in the grid's [`IndexSpace`] (column
+    /// centres at integers) and its height `h` in the [`GravityFrame`], mm.
+    /// Mapped once per vertex, so the triangles sharing a vertex see
+    /// bit-identical coordinates (the fill rule's premise).
     pub uvh: Vec<DVec3>,
     /// The column grid over the projected bounding box.
     pub grid: ColumnGrid,
@@ -91,7 +96,8 @@ impl<'a> ProjectedSurface<'a> {
     }
 
     /// The vertices in the gravity frame and the grid over their bounds
-    /// (one pass over the vertices, both at once); `triangles` is left empty and
+    /// (one pass over the vertices), then their `(u, v)` in the grid's
+    /// index space (a second); `triangles` is left empty and
     /// `mean_candidates` 0 until [`Self::classify`] (or the CPU's row scan,
     /// [`crate::row_scan`], which classifies as it scans).
     pub fn frame_in(
@@ -118,20 +124,28 @@ impl<'a> ProjectedSurface<'a> {
                 (lo, hi)
             })
             .reduce(empty, |a, b| (a.0.min(b.0), a.1.max(b.1)));
+        let grid = ColumnGrid::spanning(frame, lo, hi, columns_per_side);
+        let space = IndexSpace::of(&grid);
+        uvh.par_chunks_mut(MIN_PIECE).for_each(|out| {
+            for o in out {
+                *o = space.to_index(o.truncate()).extend(o.z);
+            }
+        });
         triangles.clear();
         Self {
             surface,
             uvh,
-            grid: ColumnGrid::spanning(frame, lo, hi, columns_per_side),
+            grid,
             triangles,
             mean_candidates: 0.0,
         }
     }
 
     /// Each triangle's side and candidate columns, and their mean (one
-    /// pass over the triangles).
+    /// pass over the triangles; the CPU's row scan classifies the same way
+    /// as it goes).
     pub fn classify(&mut self) {
-        let classifier = self.classifier();
+        let n = self.grid.n;
         // Every element is overwritten below; resizing to the same length
         // (every call after the first) writes nothing.
         self.triangles
@@ -144,18 +158,13 @@ impl<'a> ProjectedSurface<'a> {
             .map(|(out, ids)| {
                 let mut sums = CandidateSum::default();
                 for (o, tri) in out.iter_mut().zip(ids) {
-                    *o = classifier.classify(tri.map(|v| uvh[v as usize].truncate()));
+                    *o = classify(tri.map(|v| uvh[v as usize].truncate()), n).0;
                     sums.add(o);
                 }
                 sums
             })
             .reduce(CandidateSum::default, CandidateSum::merge);
         self.mean_candidates = sums.mean();
-    }
-
-    /// The per-triangle classification over this projection's grid.
-    pub fn classifier(&self) -> Classifier {
-        Classifier::new(&self.grid)
     }
 
     /// The vectors this projection filled, for the next [`Self::new_in`].
@@ -206,79 +215,29 @@ impl CandidateSum {
     }
 }
 
-/// A triangle's side and candidate columns from its projected corners —
-/// the one classification both paths use.
-#[derive(Clone, Copy, Debug)]
-pub struct Classifier {
-    window: CandidateWindow,
-}
-
-impl Classifier {
-    fn new(grid: &ColumnGrid) -> Self {
-        Self {
-            window: CandidateWindow::new(grid),
-        }
+/// A triangle's side and candidate columns from its corners `q` in the
+/// grid's index space (`n` columns and rows), and twice its signed area
+/// there (0 or NaN for a vertical one) — the one classification both paths
+/// use. The candidates are the integer points of its bounding box, so no
+/// rounding slack is needed: the fill rule, which decides each, works on
+/// the same coordinates.
+#[inline(always)]
+pub fn classify(q: [DVec2; 3], n: [usize; 2]) -> (ProjectedTriangle, f64) {
+    let [a, b, c] = q;
+    let area2 = signed_area2(a, b, c);
+    if area2 == 0.0 || area2.is_nan() {
+        return (ProjectedTriangle::VERTICAL, area2);
     }
-
-    /// Side and candidates of the triangle with projected corners `q` (mm).
-    #[inline(always)]
-    pub fn classify(&self, q: [DVec2; 3]) -> ProjectedTriangle {
-        let [a, b, c] = q;
-        let area2 = signed_area2(a, b, c);
-        if area2 == 0.0 || area2.is_nan() {
-            return ProjectedTriangle::VERTICAL;
-        }
-        let (columns, rows) = self.window.within(a.min(b).min(c), a.max(b).max(c));
+    let (columns, rows) = IndexSpace::within(n, a.min(b).min(c), a.max(b).max(c));
+    let side = if area2 > 0.0 { Side::Top } else { Side::Bottom };
+    (
         ProjectedTriangle {
-            side: if area2 > 0.0 { Side::Top } else { Side::Bottom },
+            side,
             columns,
             rows,
-        }
-    }
-}
-
-/// The grid's column index ranges of (u, v) boxes, by multiplication with
-/// the inverse cell size (no division per triangle). The ranges are
-/// widened by a slack that covers the rounding of the index arithmetic and
-/// of the column centres, so they hold every centre inside the box (and,
-/// rarely, one more).
-#[derive(Clone, Copy, Debug)]
-struct CandidateWindow {
-    origin: DVec2,
-    inv_cell: DVec2,
-    /// Index units (columns).
-    slack: f64,
-    n: [usize; 2],
-}
-
-impl CandidateWindow {
-    /// For boxes within the grid's span (mm, the grid's frame).
-    fn new(grid: &ColumnGrid) -> Self {
-        let inv_cell = 1.0 / grid.cell;
-        let hi = grid.origin + grid.cell * DVec2::new(grid.n[0] as f64, grid.n[1] as f64);
-        let magnitude = hi.abs().max(grid.origin.abs()).max_element();
-        let n = grid.n[0].max(grid.n[1]) as f64;
-        Self {
-            origin: grid.origin,
-            inv_cell,
-            slack: 16.0 * f64::EPSILON * (n + 1.0 + 2.0 * magnitude * inv_cell.max_element()),
-            n: grid.n,
-        }
-    }
-
-    /// Columns `i0..i1` and rows `j0..j1` whose centres may lie in `[lo, hi]`.
-    #[inline]
-    fn within(&self, lo: DVec2, hi: DVec2) -> ([u32; 2], [u32; 2]) {
-        // centre(i) = o + (i + ½)·c ≥ lo  ⇔  i ≥ (lo − o)/c − ½
-        let a = (lo - self.origin) * self.inv_cell - 0.5 - self.slack;
-        let b = (hi - self.origin) * self.inv_cell - 0.5 + self.slack;
-        let range = |a: f64, b: f64, n: usize| {
-            let first = a.ceil().max(0.0) as u32;
-            let last = (b.floor() + 1.0).clamp(0.0, n as f64) as u32;
-            [first.min(last), last]
-        };
-        (range(a.x, b.x, self.n[0]), range(a.y, b.y, self.n[1]))
-    }
+        },
+        area2,
+    )
 }
 
 /// Twice the signed area of the 2-D triangle `(a, b, c)`: positive when
@@ -287,28 +246,4 @@ impl CandidateWindow {
 #[inline]
 pub fn signed_area2(a: DVec2, b: DVec2, c: DVec2) -> f64 {
     (b - a).perp_dot(c - a)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_candidate_window_holds_the_centres_of_the_box_and_at_most_one_more() {
-        let g = crate::column_grid::ten_by_five_mm();
-        let w = CandidateWindow::new(&g);
-        // centres at 0.5, 1.5, … along u; 0.25, 0.75, … along v
-        assert_eq!(
-            w.within(DVec2::new(0.5, 0.3), DVec2::new(2.4, 0.75)),
-            ([0, 2], [1, 2])
-        );
-        assert_eq!(
-            w.within(DVec2::new(0.6, 0.3), DVec2::new(2.4, 0.7)),
-            ([1, 2], [1, 1])
-        );
-        let (u, _) = w.within(DVec2::new(-5.0, 0.0), DVec2::new(-1.0, 1.0));
-        assert_eq!(u[0], u[1], "a box left of the grid holds no centre");
-        let (u, _) = w.within(DVec2::new(-1.0, 0.0), DVec2::new(20.0, 1.0));
-        assert_eq!(u, [0, 10]);
-    }
 }

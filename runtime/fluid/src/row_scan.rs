@@ -11,7 +11,6 @@
 
 use crate::distribute::RunBarycentric;
 use crate::hits::{Run, TriangleRaster};
-use crate::index_space::IndexSpace;
 use crate::projection::{CandidateSum, ProjectedSurface};
 use crate::schedule::TaskSplit;
 use rayon::prelude::*;
@@ -159,7 +158,7 @@ pub fn scan_triangles(
     tasks: &mut Vec<TaskRuns>,
     order: &[(u32, [u32; 3])],
 ) -> f64 {
-    let space = IndexSpace::of(&p.grid);
+    let n = p.grid.n;
     let uvh = &p.uvh;
     tasks.resize_with(split.tasks, Default::default);
     tasks.truncate(split.tasks);
@@ -170,7 +169,7 @@ pub fn scan_triangles(
         for &(t, ids) in &order[split.task(b)] {
             let t = t as usize;
             let corners = ids.map(|v| uvh[v as usize]);
-            let (pt, raster) = TriangleRaster::of(t, ids, corners, &space);
+            let (pt, raster) = TriangleRaster::of(t, ids, corners, n);
             sum.add(&pt);
             let Some(mut raster) = raster else {
                 continue;
