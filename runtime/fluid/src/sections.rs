@@ -76,14 +76,26 @@ impl Entry {
     }
 }
 
+/// A cell of one top and one bottom crossing, in [`BandScratch::cells`]
+/// (a count: one top, one bottom — never a position in `entries`, which
+/// holds far fewer than 2³² crossings).
+const SIMPLE: u64 = 1 | 1 << 32;
+
 /// Working memory of one band of rows (capacity reused between calls),
 /// and what the band found.
 #[derive(Debug, Default)]
 pub struct BandScratch {
     /// Per cell (row-major in the band), first the change in its count of
-    /// crossings, then where its crossings start, then where they end.
-    ends: Vec<u32>,
+    /// top (low half) and bottom (high half) crossings, then [`SIMPLE`] or
+    /// where its next crossing goes in `entries`.
+    cells: Vec<u64>,
+    /// Per cell holding one top and one bottom crossing, the top's height
+    /// (mm; other cells' entries are stale).
+    top_heights: Vec<f64>,
+    /// The crossings of the other cells, grouped by cell.
     entries: Vec<Entry>,
+    /// Each other cell's range in `entries`.
+    mixed: Vec<(u32, u32)>,
     /// Per bottom crossing, in the order of the runs, the height of its
     /// section (0 when none), mm.
     fluid: Vec<f64>,
@@ -131,12 +143,17 @@ pub fn match_bands(
 
 impl BandScratch {
     /// Groups the crossings of every task's runs in the band (`rows`,
-    /// `n_u` columns per row) by cell, sorts each cell's by height, and
-    /// matches them bottom, top, bottom, top… from below — else the cell's
+    /// `n_u` columns per row) by cell and matches each cell's, sorted by
+    /// height, bottom, top, bottom, top… from below — else the cell's
     /// column is irregular and holds nothing. Each section's height goes to
     /// its bottom crossing's slot (`fluid`: the tasks' bottom runs'
     /// crossings in order). The tally's `fluid_height` is left 0 (see
     /// [`each_bottom`]).
+    ///
+    /// Most cells hold one bottom and one top crossing (every cell of a
+    /// convex cavity): counted first, such a cell keeps its top's height
+    /// and its bottom takes the difference directly. Only the other cells'
+    /// crossings are gathered (a counting sort) and sorted.
     fn match_band<'r>(
         &mut self,
         tasks: impl Iterator<Item = &'r BandRuns> + Clone,
@@ -161,59 +178,54 @@ impl BandScratch {
         // the band's cells, row-major (a few thousand: see `RowBands`)
         let span = rows.len() * n_u;
         let cell = |r: &Run| (r.row as usize - rows.start) * n_u + r.first as usize;
-        let runs = tasks
-            .clone()
-            .flat_map(|t| t.tops().iter().chain(t.bottoms()));
-        let ends = &mut self.ends;
-        ends.clear();
-        ends.resize(span + 1, 0);
-        for r in runs {
-            let x = cell(r);
-            ends[x] = ends[x].wrapping_add(1);
-            ends[x + r.len as usize] = ends[x + r.len as usize].wrapping_sub(1);
-        }
-        let (mut count, mut at) = (0u32, 0u32);
-        for e in &mut ends[..span] {
-            count = count.wrapping_add(*e);
-            *e = at;
-            at += count;
-        }
-        self.entries.resize(total, Entry::default());
-        let mut fill = |r: &Run, slot: u32, step: u32| {
-            let x = cell(r);
-            for (m, end) in ends[x..x + r.len as usize].iter_mut().enumerate() {
-                self.entries[*end as usize] = Entry {
-                    height: r.height_at(m as u32),
-                    slot: slot + m as u32 * step,
-                };
-                *end += 1;
+        self.count_cells(tasks.clone(), span, cell);
+        self.top_heights.resize(span, 0.0);
+        let (cells, entries) = (&mut self.cells, &mut self.entries);
+        let top_heights = &mut self.top_heights;
+        for task in tasks.clone() {
+            for r in task.tops() {
+                let x = cell(r);
+                for (m, c) in cells[x..x + r.len as usize].iter_mut().enumerate() {
+                    let height = r.height_at(m as u32);
+                    if *c == SIMPLE {
+                        top_heights[x + m] = height;
+                    } else {
+                        entries[*c as usize] = Entry { height, slot: TOP };
+                        *c += 1;
+                    }
+                }
             }
-        };
+        }
         let mut slot = 0u32;
         for task in tasks {
-            for r in task.tops() {
-                fill(r, TOP, 0);
-            }
             for r in task.bottoms() {
-                fill(r, slot, 1);
-                slot += r.len;
+                let x = cell(r);
+                for (m, c) in cells[x..x + r.len as usize].iter_mut().enumerate() {
+                    let height = r.height_at(m as u32);
+                    if *c == SIMPLE {
+                        let top = top_heights[x + m];
+                        // as the sort would order them: a bottom at its
+                        // top's height makes a zero-height section
+                        if height.total_cmp(&top).is_le() {
+                            self.fluid[slot as usize] = top - height;
+                            tally.count.sections += 1;
+                            tally.count.columns_with_fluid += 1;
+                        } else {
+                            tally.count.irregular_columns += 1;
+                        }
+                        tally.crossings += 2;
+                    } else {
+                        entries[*c as usize] = Entry { height, slot };
+                        *c += 1;
+                    }
+                    slot += 1;
+                }
             }
         }
-        let mut start = 0;
-        for &end in &ends[..span] {
+        for &(start, end) in &self.mixed {
             let column = &mut self.entries[start as usize..end as usize];
-            start = end;
-            if column.is_empty() {
-                continue;
-            }
             tally.crossings += column.len();
-            if column.len() == 2 {
-                if column[0].before(&column[1]).is_gt() {
-                    column.swap(0, 1);
-                }
-            } else {
-                column.sort_unstable_by(Entry::before);
-            }
+            column.sort_unstable_by(Entry::before);
             let alternates = column.len().is_multiple_of(2)
                 && column
                     .chunks_exact(2)
@@ -229,6 +241,47 @@ impl BandScratch {
             }
         }
         tally
+    }
+
+    /// Counts every cell's top and bottom crossings (a difference array
+    /// over the runs, then its running sum) and leaves in `cells`, per
+    /// cell, [`SIMPLE`] for one of each, else where its crossings start in
+    /// `entries` (sized for them); `mixed` lists those cells' ranges.
+    fn count_cells<'r>(
+        &mut self,
+        tasks: impl Iterator<Item = &'r BandRuns>,
+        span: usize,
+        cell: impl Fn(&Run) -> usize,
+    ) {
+        const BOTTOM: u64 = 1 << 32;
+        let changes = &mut self.cells;
+        changes.clear();
+        changes.resize(span + 1, 0);
+        let mut add = |r: &Run, one: u64| {
+            let x = cell(r);
+            changes[x] = changes[x].wrapping_add(one);
+            changes[x + r.len as usize] = changes[x + r.len as usize].wrapping_sub(one);
+        };
+        for task in tasks {
+            task.tops().iter().for_each(|r| add(r, 1));
+            task.bottoms().iter().for_each(|r| add(r, BOTTOM));
+        }
+        self.mixed.clear();
+        let (mut count, mut at) = (0u64, 0u64);
+        for c in &mut changes[..span] {
+            count = count.wrapping_add(*c);
+            // u32 halves: a cell with 2³² crossings of a kind is beyond
+            // any memory this could run in
+            let crossings = (count & 0xffff_ffff) + (count >> 32);
+            if count == SIMPLE || crossings == 0 {
+                *c = SIMPLE;
+                continue;
+            }
+            *c = at;
+            self.mixed.push((at as u32, (at + crossings) as u32));
+            at += crossings;
+        }
+        self.entries.resize(at as usize, Entry::default());
     }
 
     /// Task `t`'s bottom crossings in this band, in the order of its bottom
@@ -348,6 +401,33 @@ mod tests {
         assert_eq!(t.count.irregular_columns, 1);
         assert_eq!(t.count.sections, 0);
         assert!(held.is_empty());
+    }
+
+    #[test]
+    fn one_top_below_its_bottom_or_two_of_a_kind_make_a_column_irregular() {
+        // row 6: column 5 has its top under its bottom (the simple path),
+        // column 6 two tops, column 7 two bottoms (the sorted path); column
+        // 8 is a proper section beside them
+        let (t, held) = matched(&[
+            run(6, 5, 1, false, 2.0, 0.0, 0),
+            run(6, 5, 1, true, 1.0, 0.0, 1),
+            run(6, 6, 1, true, 1.0, 0.0, 2),
+            run(6, 6, 1, true, 3.0, 0.0, 3),
+            run(6, 7, 1, false, 1.0, 0.0, 4),
+            run(6, 7, 1, false, 3.0, 0.0, 5),
+            run(6, 8, 1, false, 1.0, 0.0, 6),
+            run(6, 8, 1, true, 4.0, 0.0, 7),
+        ]);
+        assert_eq!(
+            t.count,
+            SectionCount {
+                sections: 1,
+                columns_with_fluid: 1,
+                irregular_columns: 3
+            }
+        );
+        assert_eq!(t.crossings, 8);
+        assert_eq!(held, vec![(6, [3.0, 0.0])]);
     }
 
     #[test]
