@@ -130,7 +130,7 @@ pub fn match_bands(
             let fluid = &s.fluid[s.task_fluid[t]..s.task_fluid[t + 1]];
             let weighted = &mut s.weighted;
             s.tally.fluid_height += each_bottom(fluid, runs, |bary, result| {
-                weighted.push(run_weights(bary, result, scale));
+                push_merged(weighted, run_weights(bary, result, scale));
             });
         }
     });
@@ -288,6 +288,23 @@ impl BandScratch {
     /// runs: the heights of their sections (0 when none), mm.
     pub fn task_fluid(&self, t: usize) -> &[f64] {
         &self.fluid[self.task_fluid[t]..self.task_fluid[t + 1]]
+    }
+}
+
+/// Appends `w` to `weighted`, or adds it to the last entry when that is
+/// the same triangle's: a triangle's runs in a band come one after another
+/// (its rows are scanned in turn), so the serial pass that adds the
+/// weights onto the vertices ([`crate::distribute::add_weights`]) gets one
+/// entry per triangle and band instead of one per row.
+#[inline]
+fn push_merged(weighted: &mut Vec<Weighted>, w: Weighted) {
+    match weighted.last_mut() {
+        Some(last) if last.corners == w.corners => {
+            for (a, b) in last.weights.iter_mut().zip(w.weights) {
+                *a += b;
+            }
+        }
+        _ => weighted.push(w),
     }
 }
 
