@@ -9,15 +9,14 @@
 //! per column, the same sum up to rounding. The third corner takes
 //! `ρ·g·A·H` less the other two, so the weights sum to the fluid's weight
 //! to rounding. The row scan stores `b_a(c₀)` and `w·∂b_a/∂u` with each
-//! run ([`RunBarycentric`]), so the section pass, which weighs each band's
-//! runs, reads no triangle (a random read per run, which on a large mesh
-//! misses the caches).
+//! bottom run ([`RunBarycentric`], from the fill rule's edge functions:
+//! [`crate::hits`]), so the section pass, which weighs each band's runs,
+//! reads no triangle (a random read per run, which on a large mesh misses
+//! the caches).
 //!
-//! Units: mm, µN; coordinates (u, v) in the [`crate::GravityFrame`].
+//! Units: mm, µN.
 
-use crate::projection::signed_area2;
 use crate::sections::RunResult;
-use glam::DVec2;
 
 /// One bottom triangle's weight on its three corners, µN.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -40,55 +39,6 @@ pub struct RunBarycentric {
     pub at_first: [f64; 2],
     /// `w·∂b₀/∂u, w·∂b₁/∂u`: their change per column.
     pub per_column: [f64; 2],
-}
-
-/// A projected triangle's barycentric coordinates as affine functions of
-/// the point (u, v) (mm).
-#[derive(Clone, Copy, Debug)]
-pub struct BarycentricPlane {
-    corners: [u32; 3],
-    q: [DVec2; 3],
-    inv_area2: f64,
-    per_column: [f64; 2],
-}
-
-impl BarycentricPlane {
-    /// The triangle with vertices `corners` at `q` ((u, v), mm; non-zero
-    /// area) on columns `cell_u` wide (mm).
-    #[inline(always)]
-    pub fn new(corners: [u32; 3], q: [DVec2; 3], cell_u: f64) -> Self {
-        let inv_area2 = 1.0 / signed_area2(q[0], q[1], q[2]);
-        Self {
-            corners,
-            q,
-            inv_area2,
-            // ∂b₀/∂u = (q₁.v − q₂.v)/2A, ∂b₁/∂u = (q₂.v − q₀.v)/2A
-            per_column: [
-                (q[1].y - q[2].y) * inv_area2 * cell_u,
-                (q[2].y - q[0].y) * inv_area2 * cell_u,
-            ],
-        }
-    }
-
-    /// `1 / (twice the signed area)`, 1/mm².
-    #[inline(always)]
-    pub fn inv_area2(&self) -> f64 {
-        self.inv_area2
-    }
-
-    /// The coordinates of a run starting at the column centre `c` (mm).
-    #[inline(always)]
-    pub fn run(&self, c: DVec2) -> RunBarycentric {
-        let q = self.q;
-        RunBarycentric {
-            corners: self.corners,
-            at_first: [
-                signed_area2(c, q[1], q[2]) * self.inv_area2,
-                signed_area2(q[0], c, q[2]) * self.inv_area2,
-            ],
-            per_column: self.per_column,
-        }
-    }
 }
 
 /// The weight a bottom run's fluid puts on its triangle's corners:
@@ -120,32 +70,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_runs_barycentric_coordinates_match_the_pointwise_ones() {
-        let q = [
-            DVec2::new(0.3, -0.2),
-            DVec2::new(4.0, 1.0),
-            DVec2::new(1.0, 3.5),
-        ];
-        let (plane, w) = (BarycentricPlane::new([7, 8, 9], q, 0.25), 0.25);
-        let c0 = DVec2::new(-2.0, 1.1);
-        let run = plane.run(c0);
-        let area2 = signed_area2(q[0], q[1], q[2]);
-        for m in [0.0, 1.0, 7.0, 40.0] {
-            let p = c0 + DVec2::new(m * w, 0.0);
-            let b0 = signed_area2(p, q[1], q[2]) / area2;
-            let b1 = signed_area2(q[0], p, q[2]) / area2;
-            assert!(
-                (run.at_first[0] + m * run.per_column[0] - b0).abs() < 1e-12,
-                "{m}"
-            );
-            assert!(
-                (run.at_first[1] + m * run.per_column[1] - b1).abs() < 1e-12,
-                "{m}"
-            );
-        }
-        // a run's weights sum to its fluid's
-        let w = run_weights(&run, [2.0, 3.0], 1.5);
+    fn a_runs_weights_sum_to_its_fluids_and_follow_the_coordinates() {
+        // columns first + 0 and + 2 hold 2 mm and 1 mm: H = 3, M = 2
+        let b = RunBarycentric {
+            corners: [7, 8, 9],
+            at_first: [0.5, 0.25],
+            per_column: [-0.1, 0.05],
+        };
+        let w = run_weights(&b, [3.0, 2.0], 1.5);
         assert_eq!(w.corners, [7, 8, 9]);
-        assert!((w.weights.iter().sum::<f64>() - 3.0).abs() < 1e-12);
+        assert!((w.weights.iter().sum::<f64>() - 4.5).abs() < 1e-12);
+        // corner 0: 1.5 · (2 · 0.5 + 1 · (0.5 − 0.2)) = 1.95
+        assert!((w.weights[0] - 1.95).abs() < 1e-12, "{:?}", w.weights);
+        // corner 1: 1.5 · (2 · 0.25 + 1 · (0.25 + 0.1)) = 1.275
+        assert!((w.weights[1] - 1.275).abs() < 1e-12, "{:?}", w.weights);
     }
 }

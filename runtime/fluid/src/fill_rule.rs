@@ -129,6 +129,72 @@ impl TriangleTest {
     }
 }
 
+/// A triangle's fill-rule test along the rows of one block of up to eight
+/// consecutive columns: the part of each edge function that depends only
+/// on the column is computed once per triangle, so a row costs one
+/// subtraction and the sign tests per edge and lane. The edge's side is
+/// folded into its coefficients (a sign flip is exact and rounding is
+/// symmetric), so `side·value` comes out bit for bit as
+/// [`TriangleTest::contains`] gets it: the same answers.
+pub struct RowTest {
+    /// Per edge: `side·d.u`, `a.v` and the tie mask (all bits set when a
+    /// point on the edge's line is inside).
+    rows: [(f64, f64, f64x4); 3],
+    /// Per edge, per block of four columns: `side·d.v·(i − a.u)`.
+    columns: [[f64x4; 2]; 3],
+    /// Whether the second block holds any column.
+    second: bool,
+    /// One bit per column of the block.
+    valid: u32,
+}
+
+impl RowTest {
+    /// The test of `test` over the columns `first .. first + count`
+    /// (`count` ≤ 8), whose centres are at `u = first, first + 1, …`.
+    #[inline(always)]
+    pub fn new(test: &TriangleTest, first: usize, count: usize) -> Self {
+        debug_assert!(count <= 8);
+        let lanes =
+            |b: usize| f64x4::splat((first + 4 * b) as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
+        let (block0, block1) = (lanes(0), lanes(1));
+        let edge = |e: &EdgeFunction| {
+            let sy = f64x4::splat(e.side * e.d.y);
+            let ax = f64x4::splat(e.a.x);
+            [sy * (block0 - ax), sy * (block1 - ax)]
+        };
+        let row = |e: &EdgeFunction| {
+            let tie = f64::from_bits(0u64.wrapping_sub(u64::from(e.tie_inside)));
+            (e.side * e.d.x, e.a.y, f64x4::splat(tie))
+        };
+        Self {
+            rows: test.edges.each_ref().map(row),
+            columns: test.edges.each_ref().map(edge),
+            second: count > 4,
+            valid: (1u32 << count) - 1,
+        }
+    }
+
+    /// The columns of the block inside on the row `v = py`: bit `l` for
+    /// column `first + l`.
+    #[inline(always)]
+    pub fn inside(&self, py: f64) -> u32 {
+        let zero = f64x4::ZERO;
+        let block = |b: usize| {
+            let all = f64x4::splat(-1.0).simd_lt(zero);
+            (0..3).fold(all, |inside, e| {
+                let (sx, ay, tie) = self.rows[e];
+                let value = f64x4::splat(sx * (py - ay)) - self.columns[e][b];
+                inside & (value.simd_gt(zero) | (value.simd_eq(zero) & tie))
+            })
+        };
+        let mut inside = block(0).to_bitmask();
+        if self.second {
+            inside |= block(1).to_bitmask() << 4;
+        }
+        inside & self.valid
+    }
+}
+
 impl EdgeFunction {
     /// The edge function at `p`: `d × (p − a)` — the same operations
     /// [`TriangleTest::contains4`] runs lane by lane.

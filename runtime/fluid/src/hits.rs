@@ -7,7 +7,7 @@
 //! centres at integers), heights h in the [`crate::GravityFrame`], mm.
 
 use crate::distribute::RunBarycentric;
-use crate::fill_rule::TriangleTest;
+use crate::fill_rule::{RowTest, TriangleTest};
 use crate::projection::{ProjectedTriangle, Side, classify};
 use glam::{DVec2, DVec3};
 use wide::f64x4;
@@ -21,6 +21,13 @@ pub const TOP: u32 = 1 << 31;
 /// bunny's at 200² — has one or two candidates per row, the icosphere's
 /// about six).
 const DIRECT_TEST_COLUMNS: usize = 8;
+
+/// Triangles with at least this many candidate rows (and at most
+/// [`DIRECT_TEST_COLUMNS`] columns) set up a [`RowTest`], which computes
+/// the column half of each edge function once: it costs about what two
+/// rows of the plain test do (the bunny's triangles, one or two rows at
+/// 200², are faster without; the icosphere's, five or six, with).
+const ROW_TEST_ROWS: u32 = 3;
 
 /// One triangle's crossings in one grid row: the consecutive columns
 /// `first .. first + len` whose centres the fill rule puts inside it
@@ -147,22 +154,51 @@ impl TriangleRaster {
     pub fn run(&mut self, j: usize) -> (Run, RunBarycentric) {
         let [i0, i1] = self.columns;
         let [first, last] = if i1 - i0 <= DIRECT_TEST_COLUMNS {
-            // one bit per candidate, without a branch per test
-            let py = j as f64;
-            let lanes = |i: usize| f64x4::splat(i as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
-            let mut inside = self.test.contains4(lanes(i0), py);
-            if i1 - i0 > 4 {
-                inside |= self.test.contains4(lanes(i0 + 4), py) << 4;
-            }
-            inside &= (1 << (i1 - i0)) - 1;
-            // no branch on an empty row either: then first > last
-            [
-                i0 + inside.trailing_zeros() as usize,
-                i0 + (u32::BITS - inside.leading_zeros()) as usize,
-            ]
+            self.bits(self.direct(j))
         } else {
             self.scan(j)
         };
+        self.finish(first, last, j)
+    }
+
+    /// Whether a [`RowTest`] pays for the candidate `rows`: at most
+    /// [`DIRECT_TEST_COLUMNS`] columns, at least [`ROW_TEST_ROWS`] rows.
+    #[inline(always)]
+    pub fn wants_row_test(&self, rows: [u32; 2]) -> bool {
+        let [i0, i1] = self.columns;
+        i1 - i0 <= DIRECT_TEST_COLUMNS && rows[1] - rows[0] >= ROW_TEST_ROWS
+    }
+
+    /// The [`RowTest`] over this triangle's candidate columns (at most
+    /// [`DIRECT_TEST_COLUMNS`]).
+    #[inline(always)]
+    pub fn row_test(&self) -> RowTest {
+        let [i0, i1] = self.columns;
+        RowTest::new(&self.test, i0, i1 - i0)
+    }
+
+    /// [`Self::run`] with the triangle's [`Self::row_test`].
+    #[inline(always)]
+    pub fn run_with(&self, test: &RowTest, j: usize) -> (Run, RunBarycentric) {
+        let [first, last] = self.bits(test.inside(j as f64));
+        self.finish(first, last, j)
+    }
+
+    /// The inside columns `[first, last)` from one bit per candidate (no
+    /// branch on an empty row either: then `first > last`).
+    #[inline(always)]
+    fn bits(&self, inside: u32) -> [usize; 2] {
+        let i0 = self.columns[0];
+        [
+            i0 + inside.trailing_zeros() as usize,
+            i0 + (u32::BITS - inside.leading_zeros()) as usize,
+        ]
+    }
+
+    /// The run `[first, last)` of row `j` with its height and barycentric
+    /// coordinates.
+    #[inline(always)]
+    fn finish(&self, first: usize, last: usize, j: usize) -> (Run, RunBarycentric) {
         // the edge functions at the run's first centre, as the test computed them
         let at = DVec2::new(first as f64, j as f64);
         let [e0, e1] = [0, 1].map(|e| self.test.edges[e].value(at));
@@ -181,6 +217,20 @@ impl TriangleRaster {
             per_column: self.per_column,
         };
         (run, barycentric)
+    }
+
+    /// The candidates of row `j` (at most eight) inside, tested four at a
+    /// time: bit `l` for column `i0 + l`.
+    #[inline(always)]
+    fn direct(&self, j: usize) -> u32 {
+        let [i0, i1] = self.columns;
+        let py = j as f64;
+        let lanes = |i: usize| f64x4::splat(i as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
+        let mut inside = self.test.contains4(lanes(i0), py);
+        if i1 - i0 > 4 {
+            inside |= self.test.contains4(lanes(i0 + 4), py) << 4;
+        }
+        inside & ((1 << (i1 - i0)) - 1)
     }
 
     /// The inside columns `[first, last)` of row `j` from its span.

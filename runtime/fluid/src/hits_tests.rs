@@ -106,6 +106,14 @@ fn the_row_scan_finds_exactly_the_centres_the_fill_rule_puts_inside() {
         for j in j0..j1 {
             let truth: Vec<usize> = (i0..i1).filter(|&i| test.contains(centre(i, j))).collect();
             let (run, bary) = r.run(j);
+            if i1 - i0 <= DIRECT_TEST_COLUMNS {
+                // the row test (whatever the row count) finds the same run
+                assert_eq!(
+                    r.run_with(&r.row_test(), j),
+                    (run, bary),
+                    "triangle {t} row {j}"
+                );
+            }
             let found: Vec<usize> = (run.first..run.first.saturating_add(run.len))
                 .map(|i| i as usize)
                 .collect();

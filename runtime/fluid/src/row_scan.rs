@@ -174,6 +174,10 @@ pub fn scan_triangles(
             let Some(mut raster) = raster else {
                 continue;
             };
+            if raster.wants_row_test(pt.rows) {
+                scan_with_row_test(&raster, pt.rows, bands, &mut task.bands);
+                continue;
+            }
             for j in pt.rows[0] as usize..pt.rows[1] as usize {
                 task.bands[bands.band(j)].keep(raster.run(j));
             }
@@ -184,6 +188,22 @@ pub fn scan_triangles(
         .iter()
         .fold(CandidateSum::default(), |a, t| a.merge(t.sum))
         .mean()
+}
+
+/// Scans `rows` of `raster` with its [`crate::fill_rule::RowTest`] into `out` — apart from
+/// the plain scan and not inlined into it, so the bunny's many small
+/// triangles run code that does not carry the row test's set-up.
+#[inline(never)]
+fn scan_with_row_test(
+    raster: &TriangleRaster,
+    rows: [u32; 2],
+    bands: RowBands,
+    out: &mut [BandRuns],
+) {
+    let test = raster.row_test();
+    for j in rows[0] as usize..rows[1] as usize {
+        out[bands.band(j)].keep(raster.run_with(&test, j));
+    }
 }
 
 #[cfg(test)]
