@@ -12,8 +12,11 @@
 //!
 //! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`);
 //! `-- parallel` runs only the parallel model to rest, `-- kernels` times
-//! only the relaxation kernels, `-- local` only the local grabs (three
-//! times), `-- gpu` runs the papers' test on the WGSL path (any adapter).
+//! only the relaxation kernels (beside a bare sweep of the same positions
+//! without bookkeeping, and a copy of them, for scale), `-- local` only the
+//! local grabs (three times), `-- gpu` runs the papers' test on the WGSL
+//! path (any adapter). `block=X,Y,Z` sets the block size of `parallel`
+//! and `kernels`.
 
 use std::time::Instant;
 use voxflex_chainmail::model::ChainMail;
@@ -87,10 +90,21 @@ fn main() {
         rest(n);
         return;
     }
+    // `block=X,Y,Z` picks the block size of `parallel` and `kernels`
+    let block = std::env::args()
+        .find_map(|a| {
+            let b: Vec<usize> = a
+                .strip_prefix("block=")?
+                .split(',')
+                .filter_map(|v| v.parse().ok())
+                .collect();
+            (b.len() == 3).then(|| [b[0], b[1], b[2]])
+        })
+        .unwrap_or([8, 4, 4]);
     if std::env::args().any(|a| a == "kernels") {
         // Only the relaxation kernels (for profiling).
         let (.., pm) = run("parallel", [8, 4, 4], 20);
-        relaxation_kernels(&pm, ms);
+        relaxation_kernels(&pm, block, ms);
         return;
     }
     if std::env::args().any(|a| a == "gpu") {
@@ -138,18 +152,7 @@ fn main() {
         return;
     }
     if std::env::args().any(|a| a == "parallel") {
-        // Only the parallel run to rest (for profiling); `block=X,Y,Z`
-        // picks the block size.
-        let block = std::env::args()
-            .find_map(|a| {
-                let b: Vec<usize> = a
-                    .strip_prefix("block=")?
-                    .split(',')
-                    .filter_map(|v| v.parse().ok())
-                    .collect();
-                (b.len() == 3).then(|| [b[0], b[1], b[2]])
-            })
-            .unwrap_or([8, 4, 4]);
+        // Only the parallel run to rest (for profiling).
         let (pp, ppi, pr, pri, ..) = run("parallel", block, RELAX_SWEEPS);
         println!(
             "parallel {block:?}: propagation {:.1} ms ({ppi} iterations), relaxation {:.1} ms ({pri} sweeps), total {:.1} ms",
@@ -189,7 +192,7 @@ fn main() {
     );
     drop(sm);
 
-    relaxation_kernels(&pm, ms);
+    relaxation_kernels(&pm, [8, 4, 4], ms);
     drop(pm);
 
     println!("schedule            propagation (ms)   visits per useful update");
@@ -250,12 +253,14 @@ fn local_grabs(n: usize, ms: impl Fn(std::time::Duration) -> f64) {
 }
 
 /// Times the relaxation kernels on a deformed model: 40 sweeps over every
-/// block.
-fn relaxation_kernels(pm: &ChainMail, ms: impl Fn(std::time::Duration) -> f64) {
+/// block of size `block`; and, for scale, a copy of as many bytes as the
+/// state's positions hold, split over the threads.
+fn relaxation_kernels(pm: &ChainMail, block: [usize; 3], ms: impl Fn(std::time::Duration) -> f64) {
+    use rayon::prelude::*;
     use voxflex_chainmail::blocks::Blocks;
     use voxflex_chainmail::relax_passes::{SweepScratch, sweep_runs};
     let (lat, st) = (pm.lattice(), pm.state());
-    let blocks = Blocks::new(lat.dims, [8, 4, 4]);
+    let blocks = Blocks::new(lat.dims, block);
     let all: Vec<u32> = (0..blocks.len() as u32).collect();
     let mut scratch = SweepScratch::default();
     let t = Instant::now();
@@ -263,9 +268,124 @@ fn relaxation_kernels(pm: &ChainMail, ms: impl Fn(std::time::Duration) -> f64) {
         sweep_runs(lat, st, &blocks, &all, 1e-4, &mut scratch);
     }
     println!(
-        "relaxation over every block: {:.2} ms per sweep",
+        "relaxation over every block {block:?}: {:.2} ms per sweep",
         ms(t.elapsed()) / 40.0
     );
+    bare_sweeps(lat, st, &ms);
+    let words = 3 * lat.len();
+    let (src, mut dst) = (vec![1u32; words], vec![0u32; words]);
+    let t = Instant::now();
+    for _ in 0..40 {
+        dst.par_chunks_mut(1 << 16)
+            .zip(src.par_chunks(1 << 16))
+            .for_each(|(d, s)| d.copy_from_slice(s));
+    }
+    let per = t.elapsed().as_secs_f64() / 40.0;
+    println!(
+        "copy of the positions' {:.1} MB: {:.2} ms ({:.1} GB/s read + write)",
+        words as f64 * 4e-6,
+        per * 1e3,
+        2.0 * words as f64 * 4.0 / per / 1e9
+    );
+    std::hint::black_box(&dst);
+}
+
+/// The question issue 17 asked — why does a sweep cost several copies of
+/// the positions? — answered by a bare red-black sweep over a plain copy
+/// of the same positions, in the same storage order: every inner 8-slot
+/// window of every inner row, the uniform kernel's arithmetic (mean of
+/// the six neighbours, clamped to their box ± the link's rest offset), no
+/// classification of the window, no moves recorded, no block lists. What
+/// the real sweep costs beyond it is its bookkeeping, not memory.
+fn bare_sweeps(
+    lat: &voxflex_chainmail::lattice::ElementLattice,
+    st: &voxflex_chainmail::state::State,
+    ms: &impl Fn(std::time::Duration) -> f64,
+) {
+    use rayon::prelude::*;
+    use std::sync::atomic::Ordering::Relaxed;
+    use wide::f32x8;
+    let order = lat.order();
+    let [_, ny, nz] = order.dims;
+    let hx = order.hx;
+    let mut u: [Vec<f32>; 3] = [0, 1, 2].map(|a| {
+        st.u[st.cur][a]
+            .iter()
+            .map(|x| f32::from_bits(x.load(Relaxed)))
+            .collect()
+    });
+    let d = lat.material_link(0, 0).d;
+    let alpha = f32x8::splat(0.5);
+    let sixth = f32x8::splat(1.0 / 6.0);
+    let sweep = |u: &mut [Vec<f32>; 3]| {
+        for colour in 0..2 {
+            // rows of one k-plane per task: a colour row has one writer,
+            // the other colour is only read
+            let ptr: [usize; 3] = [0, 1, 2].map(|a| u[a].as_mut_ptr() as usize);
+            (1..nz - 1).into_par_iter().for_each(|k| {
+                for j in 1..ny - 1 {
+                    let (own, p) = order.row(colour, j, k);
+                    let other = |j: usize, k: usize| order.row(1 - colour, j, k).0;
+                    let same = other(j, k) + p;
+                    let nb = [
+                        same,
+                        same - 1,
+                        other(j + 1, k),
+                        other(j - 1, k),
+                        other(j, k + 1),
+                        other(j, k - 1),
+                    ];
+                    let mut w = 1;
+                    while w + 9 <= hx {
+                        for (a, &base) in ptr.iter().enumerate() {
+                            let at = |i: usize| {
+                                // SAFETY: `i + 8 ≤ len` (inner rows and
+                                // windows); this task alone writes colour
+                                // `colour`'s row (j, k), the other colour
+                                // is only read during this colour's pass.
+                                f32x8::from(unsafe {
+                                    std::ptr::read_unaligned(
+                                        (base as *const f32).add(i) as *const [f32; 8]
+                                    )
+                                })
+                            };
+                            let x = at(own + w);
+                            let n: [f32x8; 6] = [0, 1, 2, 3, 4, 5].map(|l| at(nb[l] + w));
+                            let sum = n[0] + n[1] + n[2] + n[3] + n[4] + n[5];
+                            let lo = n
+                                .iter()
+                                .fold(f32x8::splat(f32::NEG_INFINITY), |m, &v| m.fast_max(v))
+                                - f32x8::splat(d[a]);
+                            let hi = n
+                                .iter()
+                                .fold(f32x8::splat(f32::INFINITY), |m, &v| m.fast_min(v))
+                                + f32x8::splat(d[a]);
+                            let cand = x + alpha * (sum * sixth - x);
+                            let v = lo.simd_le(hi).select(cand.fast_max(lo).fast_min(hi), x);
+                            // SAFETY: as above.
+                            unsafe {
+                                std::ptr::write_unaligned(
+                                    (base as *mut f32).add(own + w) as *mut [f32; 8],
+                                    v.to_array(),
+                                )
+                            };
+                        }
+                        w += 8;
+                    }
+                }
+            });
+        }
+    };
+    sweep(&mut u);
+    let t = Instant::now();
+    for _ in 0..40 {
+        sweep(&mut u);
+    }
+    println!(
+        "bare sweep, same positions and order (inner windows, no bookkeeping): {:.2} ms per sweep",
+        ms(t.elapsed()) / 40.0
+    );
+    std::hint::black_box(&u);
 }
 
 /// The head pull to rest: an `n³` crop of the head phantom (the head
