@@ -3,8 +3,9 @@
 //! ([`crate::fill_rule`]) puts inside it, the height there and the
 //! barycentric coordinates the weight pass needs.
 //!
-//! Coordinates: (u, v) in the grid's index space ([`IndexSpace`]: column
-//! centres at integers), heights h in the [`crate::GravityFrame`], mm.
+//! Coordinates: (u, v) in the grid's index space
+//! ([`crate::index_space::IndexSpace`]: column centres at integers),
+//! heights h in the [`crate::GravityFrame`], mm.
 
 use crate::distribute::RunBarycentric;
 use crate::fill_rule::{RowTest, TriangleTest};
@@ -20,14 +21,14 @@ pub const TOP: u32 = 1 << 31;
 /// ones compute the row's span first (a small triangle — most of the
 /// bunny's at 200² — has one or two candidates per row, the icosphere's
 /// about six).
-const DIRECT_TEST_COLUMNS: usize = 8;
+pub const DIRECT_TEST_COLUMNS: usize = 8;
 
 /// Triangles with at least this many candidate rows (and at most
 /// [`DIRECT_TEST_COLUMNS`] columns) set up a [`RowTest`], which computes
 /// the column half of each edge function once: it costs about what two
 /// rows of the plain test do (the bunny's triangles, one or two rows at
 /// 200², are faster without; the icosphere's, five or six, with).
-const ROW_TEST_ROWS: u32 = 3;
+pub const ROW_TEST_ROWS: u32 = 3;
 
 /// One triangle's crossings in one grid row: the consecutive columns
 /// `first .. first + len` whose centres the fill rule puts inside it

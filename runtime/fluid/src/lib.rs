@@ -32,17 +32,21 @@
 //! are integer points ([`index_space`]), visits the triangles along a
 //! Z-order curve so neighbours are scanned together
 //! ([`triangle_order`]), and reads the barycentric coordinates and heights
-//! of a run from the fill rule's own edge functions. A row of up to eight candidates tests each, four at a
-//! time in SIMD lanes; a wider one is cut by the triangle's edges and
+//! of a run from the fill rule's own edge functions. A row of up to eight
+//! candidates tests each, four at a time in SIMD lanes (a triangle of
+//! three rows or more computes the column half of each edge function once,
+//! [`fill_rule::RowTest`]); a wider one is cut by the triangle's edges and
 //! tests only the run's ends exactly. One pass over the triangles
 //! classifies each and scans its rows while its corners are at hand
-//! ([`row_scan`]), storing each run with its heights and barycentric
-//! coordinates in a bucket for its band of rows. The section pass then
-//! takes a band at a time and groups its crossings by column in a counting
-//! sort; the weight pass sums each bottom run's sections and puts them on
-//! its triangle's corners ([`distribute`]). No pass sorts the whole grid's
-//! crossings, and no two tasks write to one place. On the CPU a task takes
-//! hundreds of triangles, so `k` changes nothing there (see
+//! ([`row_scan`]), storing each run with its height (and a bottom run with
+//! its barycentric coordinates) in a bucket for its band of rows. The
+//! section pass then takes a band at a time: a cell of one bottom and one
+//! top crossing takes its section directly, the others' crossings are
+//! grouped by cell in a counting sort and sorted by height; the weight
+//! pass sums each bottom run's sections and puts them on its triangle's
+//! corners ([`distribute`]). No pass sorts the whole grid's crossings, and
+//! no two tasks write to one place. On the CPU a task takes hundreds of
+//! triangles, so `k` changes nothing there (see
 //! [`schedule::TaskSplit`]).
 //!
 //! Units: lengths mm, density kg/m³, gravity m/s², weights µN (the

@@ -2,9 +2,9 @@
 //! candidate columns, in the grid's index space) and, when it has
 //! candidates, scanned row by row ([`TriangleRaster`]) while its corners
 //! are at hand; its non-empty runs, with their barycentric coordinates, go
-//! to its task's bucket for the band of rows they lie in ([`BandRuns`]), so the section
-//! pass finds a band's runs in one bucket per task, with no sort and no
-//! write shared between tasks.
+//! to its task's bucket for the band of rows they lie in ([`BandRuns`]),
+//! so the section pass finds a band's runs in one bucket per task, with no
+//! sort and no write shared between tasks.
 //!
 //! Coordinates: (u, v) in the grid's index space
 //! ([`crate::index_space`]), heights in the [`crate::GravityFrame`], mm.
@@ -148,8 +148,8 @@ impl TaskRuns {
 /// Classifies every triangle of `p` in the grid's index space
 /// ([`TriangleRaster::of`]) and scans those with candidates into `tasks`
 /// (one per task of `split`, which cuts `order`: each triangle's index and
-/// corner ids in visiting order, [`crate::triangle_order`]); returns the mean candidates per non-vertical
-/// triangle (the paper's `c`). The classifications are not kept: the CPU
+/// corner ids in visiting order, [`crate::triangle_order`]); returns the
+/// mean candidates per non-vertical triangle (the paper's `c`). The classifications are not kept: the CPU
 /// path needs nothing of them after the scan.
 pub fn scan_triangles(
     p: &ProjectedSurface<'_>,
