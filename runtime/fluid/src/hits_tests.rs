@@ -58,7 +58,7 @@ fn the_row_scan_finds_exactly_the_centres_the_fill_rule_puts_inside() {
         vertices,
         triangles,
     };
-    let p = crate::projection::ProjectedSurface::new(&surface, DVec3::NEG_Z, n);
+    let p = crate::projection::ProjectedSurface::new(&surface, DVec3::NEG_Z, n).expect("finite");
     let g = p.grid;
     assert_eq!(g.cell, DVec2::splat(0.5));
     let (mut inside_total, mut scanned_rows) = (0, 0);

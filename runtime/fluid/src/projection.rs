@@ -3,6 +3,7 @@
 //! top/bottom and given its candidate columns.
 
 use crate::column_grid::ColumnGrid;
+use crate::error::FluidError;
 use crate::gravity_frame::GravityFrame;
 use crate::index_space::IndexSpace;
 use glam::{DVec2, DVec3};
@@ -75,8 +76,13 @@ pub struct ProjectedSurface<'a> {
 
 impl<'a> ProjectedSurface<'a> {
     /// Projects `surface` along `gravity` (any non-zero vector) onto a grid
-    /// of `columns_per_side²` columns.
-    pub fn new(surface: &'a TriangleSurface, gravity: DVec3, columns_per_side: usize) -> Self {
+    /// of `columns_per_side²` columns; refuses a surface with a vertex
+    /// that is not finite.
+    pub fn new(
+        surface: &'a TriangleSurface,
+        gravity: DVec3,
+        columns_per_side: usize,
+    ) -> Result<Self, FluidError> {
         Self::new_in(surface, gravity, columns_per_side, Vec::new(), Vec::new())
     }
 
@@ -89,41 +95,56 @@ impl<'a> ProjectedSurface<'a> {
         columns_per_side: usize,
         uvh: Vec<DVec3>,
         triangles: Vec<ProjectedTriangle>,
-    ) -> Self {
-        let mut p = Self::frame_in(surface, gravity, columns_per_side, uvh, triangles);
+    ) -> Result<Self, FluidError> {
+        let mut p = Self::frame_in(surface, gravity, columns_per_side, uvh, triangles)?;
         p.classify();
-        p
+        Ok(p)
     }
 
     /// The vertices in the gravity frame and the grid over their bounds
     /// (one pass over the vertices), then their `(u, v)` in the grid's
     /// index space (a second); `triangles` is left empty and
     /// `mean_candidates` 0 until [`Self::classify`] (or the CPU's row scan,
-    /// [`crate::row_scan`], which classifies as it scans).
+    /// [`crate::row_scan`], which classifies as it scans). A vertex that is
+    /// not finite (a deformation that diverged) is refused, naming it: it
+    /// would otherwise drop out of the grid and its triangles' fluid with it.
     pub fn frame_in(
         surface: &'a TriangleSurface,
         gravity: DVec3,
         columns_per_side: usize,
         mut uvh: Vec<DVec3>,
         mut triangles: Vec<ProjectedTriangle>,
-    ) -> Self {
+    ) -> Result<Self, FluidError> {
         let frame = GravityFrame::new(gravity);
         // Every element is overwritten below; resizing to the same length
         // (every call after the first) writes nothing.
         uvh.resize(surface.vertices.len(), DVec3::ZERO);
-        let empty = || (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
-        let (lo, hi) = uvh
+        let empty = || {
+            let (lo, hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+            (lo, hi, true)
+        };
+        let (lo, hi, finite) = uvh
             .par_chunks_mut(MIN_PIECE)
             .zip(surface.vertices.par_chunks(MIN_PIECE))
             .map(|(out, world)| {
-                let (mut lo, mut hi) = empty();
+                let (mut lo, mut hi, mut finite) = empty();
                 for (o, &p) in out.iter_mut().zip(world) {
                     *o = frame.to_frame(p);
                     (lo, hi) = (lo.min(o.truncate()), hi.max(o.truncate()));
+                    finite &= o.is_finite();
                 }
-                (lo, hi)
+                (lo, hi, finite)
             })
-            .reduce(empty, |a, b| (a.0.min(b.0), a.1.max(b.1)));
+            .reduce(empty, |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 & b.2));
+        if !finite {
+            let (i, p) = (surface.vertices.iter().enumerate())
+                .find(|(_, p)| !p.is_finite())
+                .expect("a vertex that is not finite");
+            return Err(FluidError::Surface(format!(
+                "cavity vertex {i} is at {p} mm, not a finite position: the deformation \
+                 that moved it has diverged; weigh a surface whose vertices are all finite"
+            )));
+        }
         let grid = ColumnGrid::spanning(frame, lo, hi, columns_per_side);
         let space = IndexSpace::of(&grid);
         uvh.par_chunks_mut(MIN_PIECE).for_each(|out| {
@@ -132,13 +153,13 @@ impl<'a> ProjectedSurface<'a> {
             }
         });
         triangles.clear();
-        Self {
+        Ok(Self {
             surface,
             uvh,
             grid,
             triangles,
             mean_candidates: 0.0,
-        }
+        })
     }
 
     /// Each triangle's side and candidate columns, and their mean (one

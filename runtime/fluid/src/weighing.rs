@@ -126,7 +126,7 @@ impl<'a> FluidWeighing<'a> {
             params.columns_per_side,
             std::mem::take(&mut scratch.uvh),
             std::mem::take(&mut scratch.triangles),
-        );
+        )?;
         let bands = RowBands::new(
             projected.grid.n[1],
             projected.grid.n[0],

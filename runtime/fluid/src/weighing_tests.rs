@@ -197,6 +197,24 @@ fn the_non_convex_bunny_holds_several_sections_per_column_and_its_volume() {
 }
 
 #[test]
+fn a_vertex_that_is_not_finite_is_refused_by_name() {
+    // NaN and both infinities, on the first, a middle and the last vertex
+    let n = cuboid(DVec3::ONE).vertices.len();
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        for i in [0, n / 2, n - 1] {
+            let mut s = cuboid(DVec3::ONE);
+            s.vertices[i].y = bad;
+            let e = fluid_weights(&s, &params(30)).expect_err("refused");
+            let text = e.to_string();
+            assert!(
+                text.contains(&format!("vertex {i} ")) && text.contains("finite"),
+                "{text}"
+            );
+        }
+    }
+}
+
+#[test]
 fn bad_parameters_name_their_key() {
     let s = cuboid(DVec3::ONE);
     for (p, key) in [
