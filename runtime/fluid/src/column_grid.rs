@@ -53,18 +53,6 @@ impl ColumnGrid {
     pub fn centre(&self, i: usize, j: usize) -> DVec2 {
         self.origin + (DVec2::new(i as f64, j as f64) + 0.5) * self.cell
     }
-
-    /// The columns (index range `i0..i1` along u) whose centres lie in
-    /// `[lo, hi]` along u (mm), up to about an ulp of the coordinates at
-    /// the ends; possibly empty. `inv_cell_u` is `1 / w` (the row scan
-    /// computes it once). The row scan's 1-D range.
-    #[inline]
-    pub fn columns_within(&self, inv_cell_u: f64, lo: f64, hi: f64) -> [usize; 2] {
-        let first = ((lo - self.origin.x) * inv_cell_u - 0.5).ceil().max(0.0) as usize;
-        let last = (((hi - self.origin.x) * inv_cell_u - 0.5).floor() + 1.0)
-            .clamp(0.0, self.n[0] as f64) as usize;
-        [first.min(last), last]
-    }
 }
 
 /// The tests' grid: 10 × 10 columns of 1 × 0.5 mm over [0, 10] × [0, 5]
@@ -78,21 +66,4 @@ pub(crate) fn ten_by_five_mm() -> ColumnGrid {
         DVec2::new(10.0, 5.0),
         10,
     )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_row_range_holds_exactly_the_centres_inside_it() {
-        let g = ten_by_five_mm();
-        assert_eq!(g.cell, DVec2::new(1.0, 0.5));
-        // centres at 0.5, 1.5, … along u
-        assert_eq!(g.columns_within(1.0, 0.5, 2.4), [0, 2]);
-        assert_eq!(g.columns_within(1.0, 0.6, 2.5), [1, 3]);
-        let [a, b] = g.columns_within(1.0, -5.0, -1.0);
-        assert_eq!(a, b, "a span left of the grid holds no centre");
-        assert_eq!(g.columns_within(1.0, -1.0, 20.0), [0, 10]);
-    }
 }

@@ -108,8 +108,7 @@ impl TriangleTest {
             .fold(f64x4::splat(-1.0).simd_lt(zero), |inside, e| {
                 let value = f64x4::splat(e.d.x) * (py - f64x4::splat(e.a.y))
                     - f64x4::splat(e.d.y) * (px - f64x4::splat(e.a.x));
-                // all bits set when a tie is inside: a mask, not a branch
-                let tie = f64x4::splat(f64::from_bits(0u64.wrapping_sub(u64::from(e.tie_inside))));
+                let tie = f64x4::splat(e.tie_mask());
                 inside
                     & ((value * f64x4::splat(e.side)).simd_gt(zero) | (value.simd_eq(zero) & tie))
             });
@@ -154,18 +153,13 @@ impl RowTest {
     #[inline(always)]
     pub fn new(test: &TriangleTest, first: usize, count: usize) -> Self {
         debug_assert!(count <= 8);
-        let lanes =
-            |b: usize| f64x4::splat((first + 4 * b) as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
-        let (block0, block1) = (lanes(0), lanes(1));
+        let (block0, block1) = (column_lanes(first), column_lanes(first + 4));
         let edge = |e: &EdgeFunction| {
             let sy = f64x4::splat(e.side * e.d.y);
             let ax = f64x4::splat(e.a.x);
             [sy * (block0 - ax), sy * (block1 - ax)]
         };
-        let row = |e: &EdgeFunction| {
-            let tie = f64::from_bits(0u64.wrapping_sub(u64::from(e.tie_inside)));
-            (e.side * e.d.x, e.a.y, f64x4::splat(tie))
-        };
+        let row = |e: &EdgeFunction| (e.side * e.d.x, e.a.y, f64x4::splat(e.tie_mask()));
         Self {
             rows: test.edges.each_ref().map(row),
             columns: test.edges.each_ref().map(edge),
@@ -195,7 +189,20 @@ impl RowTest {
     }
 }
 
+/// The index-space centres of columns `first .. first + 4` (u), as lanes.
+#[inline(always)]
+pub fn column_lanes(first: usize) -> f64x4 {
+    f64x4::splat(first as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0])
+}
+
 impl EdgeFunction {
+    /// All bits set when a point on the edge's line is inside, else zero:
+    /// the tie rule as a lane mask, not a branch.
+    #[inline(always)]
+    fn tie_mask(&self) -> f64 {
+        f64::from_bits(0u64.wrapping_sub(u64::from(self.tie_inside)))
+    }
+
     /// The edge function at `p`: `d × (p − a)` — the same operations
     /// [`TriangleTest::contains4`] runs lane by lane.
     #[inline(always)]

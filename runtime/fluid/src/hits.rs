@@ -8,10 +8,9 @@
 //! heights h in the [`crate::GravityFrame`], mm.
 
 use crate::distribute::RunBarycentric;
-use crate::fill_rule::{RowTest, TriangleTest};
+use crate::fill_rule::{RowTest, TriangleTest, column_lanes};
 use crate::projection::{ProjectedTriangle, Side, classify};
 use glam::{DVec2, DVec3};
-use wide::f64x4;
 
 /// The bit of [`Run::tag`] that marks a top triangle.
 pub const TOP: u32 = 1 << 31;
@@ -226,10 +225,9 @@ impl TriangleRaster {
     fn direct(&self, j: usize) -> u32 {
         let [i0, i1] = self.columns;
         let py = j as f64;
-        let lanes = |i: usize| f64x4::splat(i as f64) + f64x4::new([0.0, 1.0, 2.0, 3.0]);
-        let mut inside = self.test.contains4(lanes(i0), py);
+        let mut inside = self.test.contains4(column_lanes(i0), py);
         if i1 - i0 > 4 {
-            inside |= self.test.contains4(lanes(i0 + 4), py) << 4;
+            inside |= self.test.contains4(column_lanes(i0 + 4), py) << 4;
         }
         inside & ((1 << (i1 - i0)) - 1)
     }

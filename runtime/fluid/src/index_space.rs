@@ -58,6 +58,7 @@ mod tests {
     #[test]
     fn centres_map_to_integers_and_boxes_to_the_centres_inside() {
         let g = crate::column_grid::ten_by_five_mm();
+        assert_eq!(g.cell, DVec2::new(1.0, 0.5));
         let s = IndexSpace::of(&g);
         assert_eq!(s.to_index(g.centre(3, 7)), DVec2::new(3.0, 7.0));
         // centres at 0.5, 1.5, … mm along u (index 0, 1, …); 0.25, 0.75, … along v
@@ -70,6 +71,9 @@ mod tests {
             box_of(DVec2::new(0.6, 0.3), DVec2::new(2.4, 0.7)),
             ([1, 2], [1, 1])
         );
+        // a box ending exactly on a centre holds it
+        let (u, _) = box_of(DVec2::new(0.6, 0.3), DVec2::new(2.5, 0.7));
+        assert_eq!(u, [1, 3]);
         let (u, _) = box_of(DVec2::new(-5.0, 0.0), DVec2::new(-1.0, 1.0));
         assert_eq!(u[0], u[1], "a box left of the grid holds no centre");
         let (u, _) = box_of(DVec2::new(12.0, 0.0), DVec2::new(20.0, 1.0));

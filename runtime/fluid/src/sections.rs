@@ -125,14 +125,14 @@ pub fn match_bands(
     scratch.par_iter_mut().enumerate().for_each(|(b, s)| {
         let band = || tasks.iter().map(|t| t.band(b));
         s.tally = s.match_band(band(), bands.rows(b), n_u);
-        s.weighted.clear();
+        let mut weighted = std::mem::take(&mut s.weighted);
+        weighted.clear();
         for (t, runs) in band().enumerate() {
-            let fluid = &s.fluid[s.task_fluid[t]..s.task_fluid[t + 1]];
-            let weighted = &mut s.weighted;
-            s.tally.fluid_height += each_bottom(fluid, runs, |bary, result| {
-                push_merged(weighted, run_weights(bary, result, scale));
+            s.tally.fluid_height += each_bottom(s.task_fluid(t), runs, |bary, result| {
+                push_merged(&mut weighted, run_weights(bary, result, scale));
             });
         }
+        s.weighted = weighted;
     });
     let mut tally = SectionTally::default();
     for s in scratch.iter() {
