@@ -1,7 +1,9 @@
 //! Where the automatic λ's time goes: the path-cost scan that chooses λ
 //! (`auto_lambda::choose_lambda`) against one growth at the λ it chose
-//! (CPU), from the liver seed of `phantom:abdomen`, and whether the scan's
-//! region sizes equal the growth's.
+//! (CPU, from a seed-sized working box), the two as `grow_roi` runs them
+//! (`auto_lambda::auto_lambda`: the growth's working box from the scan),
+//! from the liver seed of `phantom:abdomen`, and whether the scan's region
+//! sizes equal the growth's.
 //!
 //! ```sh
 //! cargo run --release -p voxflex-opacity --example auto_lambda_time -- [--dims 240,188,160] [--repeat 9]
@@ -11,7 +13,7 @@
 //! of each, and every trial's size next to a growth's at that λ.
 
 use std::time::{Duration, Instant};
-use voxflex_opacity::auto_lambda::choose_lambda;
+use voxflex_opacity::auto_lambda::{auto_lambda, choose_lambda};
 use voxflex_opacity::runner::voxels_above_half;
 use voxflex_opacity::{CpuRunner, GrowRunner, GrowthLimits, GrowthParams, ScanInput, Seed};
 use voxflex_phantom::abdomen::SEEDS;
@@ -56,7 +58,7 @@ fn main() {
             values: v,
             seed: Seed::World(*p),
         };
-        let (mut scan, mut grow) = (vec![], vec![]);
+        let (mut scan, mut grow, mut whole) = (vec![], vec![], vec![]);
         let (mut lambda, mut trials) = (0.0, vec![]);
         for _ in 0..repeat {
             let t = Instant::now();
@@ -67,10 +69,18 @@ fn main() {
                 .grow(GrowthParams { lambda, ..params }, None)
                 .unwrap();
             grow.push(t.elapsed());
+            let t = Instant::now();
+            let a = auto_lambda(input, &mut runner, params, None).unwrap();
+            whole.push(t.elapsed());
+            assert_eq!(a.lambda, lambda);
         }
         println!("abdomen {dims:?}, liver seed: λ = {lambda}");
         println!("  scan (choose λ):        {}", stats(scan));
         println!("  one growth at that λ:   {}", stats(grow));
+        println!(
+            "  both, as grow_roi runs them (the growth's box from the scan): {}",
+            stats(whole)
+        );
         for t in &trials {
             let g = runner
                 .grow(

@@ -39,6 +39,7 @@
 //! `docs/roi_dice_vs_lambda.md`.
 
 use super::OpacityError;
+use super::bounds::VoxelBounds;
 use super::params::GrowthParams;
 use super::path_cost::{PathCostScan, ScanInput};
 use super::runner::{GrowRunner, Grown};
@@ -164,8 +165,10 @@ pub fn auto_lambda(
     params: GrowthParams,
     steps: Option<usize>,
 ) -> Result<AutoLambda, OpacityError> {
-    let (lambda, trials) = choose_lambda(input, params)?;
-    let grown = runner.grow(GrowthParams { lambda, ..params }, steps)?;
+    let (lambda, trials, room) = search(input, params)?;
+    // The growth's working box starts where the scan found the region at
+    // that λ: allocated once, no larger than it needs.
+    let grown = runner.grow_within(GrowthParams { lambda, ..params }, steps, room)?;
     Ok(AutoLambda {
         lambda,
         trials,
@@ -179,6 +182,15 @@ pub fn choose_lambda(
     input: ScanInput<'_>,
     params: GrowthParams,
 ) -> Result<(f32, Vec<Trial>), OpacityError> {
+    search(input, params).map(|(lambda, trials, _)| (lambda, trials))
+}
+
+/// [`choose_lambda`], with the box of the voxels the scan reached at the
+/// λ chosen (voxel indices).
+fn search(
+    input: ScanInput<'_>,
+    params: GrowthParams,
+) -> Result<(f32, Vec<Trial>, Option<VoxelBounds>), OpacityError> {
     let mut scan = PathCostScan::new(input, params)?;
     let mut trials: Vec<Trial> = Vec::new();
     loop {
@@ -203,5 +215,6 @@ pub fn choose_lambda(
             break;
         }
     }
-    Ok((pick(&trials), trials))
+    let lambda = pick(&trials);
+    Ok((lambda, trials, scan.reached_box(lambda)))
 }

@@ -49,9 +49,23 @@ impl CpuGrowth {
         seed: &Seed,
         params: GrowthParams,
     ) -> Result<Self, OpacityError> {
+        Self::with_room(volume, seed, params, None)
+    }
+
+    /// [`CpuGrowth::new`] with a working box that covers `room` (voxel
+    /// indices) from the start — where the region is expected to end, e.g.
+    /// from the automatic λ's scan — so the field is allocated once instead
+    /// of being copied into larger boxes as the region grows (and never
+    /// larger than the region needs). The map does not depend on it.
+    pub fn with_room(
+        volume: VolumeView<'_>,
+        seed: &Seed,
+        params: GrowthParams,
+        room: Option<VoxelBounds>,
+    ) -> Result<Self, OpacityError> {
         params.validate()?;
         check_volume(&volume)?;
-        let (state, s) = GrowthState::seed(volume, seed, params)?;
+        let (state, s) = GrowthState::seed(volume, seed, params, room)?;
         let (ext, work) = (state.ext, state.work);
         let mut field: Vec<AtomicU16> =
             (0..work.len()).map(|_| AtomicU16::new(ext.q_min)).collect();

@@ -256,6 +256,19 @@ impl GpuGrowth {
         seed: &Seed,
         params: GrowthParams,
     ) -> Result<Self, OpacityError> {
+        Self::with_room(gpu, values, volume, seed, params, None)
+    }
+
+    /// [`GpuGrowth::new`] with a working box that covers `room` (voxel
+    /// indices) from the start, as [`crate::CpuGrowth::with_room`].
+    pub fn with_room(
+        gpu: &dyn GpuService,
+        values: &GpuOpacityVolume,
+        volume: VolumeView<'_>,
+        seed: &Seed,
+        params: GrowthParams,
+        room: Option<VoxelBounds>,
+    ) -> Result<Self, OpacityError> {
         params.validate()?;
         check_volume(&volume)?;
         if values.grid.dims != volume.grid.dims {
@@ -264,7 +277,7 @@ impl GpuGrowth {
                 actual: values.grid.dims,
             });
         }
-        let (state, s) = GrowthState::seed(volume, seed, params)?;
+        let (state, s) = GrowthState::seed(volume, seed, params, room)?;
         let (ext, work) = (state.ext, state.work);
         let pipes = Pipelines::compile(gpu)?;
 

@@ -70,6 +70,7 @@
 
 use super::OpacityError;
 use super::auto_lambda::CANDIDATES;
+use super::bounds::VoxelBounds;
 use super::extinction::{Extinction, SANE_MAX};
 use super::frontier::{DIRS, IS_FACE};
 use super::limits::GrowthLimits;
@@ -250,6 +251,29 @@ impl<'a> PathCostScan<'a> {
             Bricks::NONE => UNSEEN,
             i => self.costs.pool[i as usize * BRICK3 + o].cost,
         }
+    }
+
+    /// Box (voxel indices) of the voxels reached at `lambda` (`D < R(λ)`) as
+    /// the search stands: after the phase of `lambda`, or a superset once
+    /// later phases lowered costs further. `None` when none is.
+    pub fn reached_box(&self, lambda: f32) -> Option<VoxelBounds> {
+        let r = self.reach * lambda;
+        let mut found: Option<VoxelBounds> = None;
+        for (cells, origin) in self.costs.pool.chunks(BRICK3).zip(&self.costs.origin) {
+            let lo = origin.map(|c| c as usize * BRICK);
+            let hi = [0, 1, 2].map(|a| (lo[a] + BRICK).min(self.dims[a]) - 1);
+            if found.is_some_and(|f| f.contains(&VoxelBounds { lo, hi })) {
+                continue; // nothing in this brick can widen the box
+            }
+            for (o, cell) in cells.iter().enumerate() {
+                if cell.cost < r {
+                    let p = [o % BRICK, (o / BRICK) % BRICK, o / (BRICK * BRICK)];
+                    let v = VoxelBounds::point([0, 1, 2].map(|a| lo[a] + p[a]));
+                    found = Some(found.map_or(v, |f| f.union(&v)));
+                }
+            }
+        }
+        found
     }
 
     /// Voxels at `D ≤ T(λ_k)` now.

@@ -120,6 +120,8 @@ fn auto_lambda_reaches_the_stated_dice_on_every_organ() {
         )
         .unwrap();
         assert_eq!(fixed.grown.map, out.grown.map, "{name}");
+        // Its working box came from the scan: it never had to move.
+        assert_eq!(out.grown.report.regrows, 0, "{name}");
     }
 }
 
@@ -127,13 +129,14 @@ fn auto_lambda_reaches_the_stated_dice_on_every_organ() {
 struct Counting<'a>(CpuRunner<'a>, usize);
 
 impl GrowRunner for Counting<'_> {
-    fn grow(
+    fn grow_within(
         &mut self,
         params: GrowthParams,
         steps: Option<usize>,
+        room: Option<crate::VoxelBounds>,
     ) -> Result<runner::Grown, OpacityError> {
         self.1 += 1;
-        self.0.grow(params, steps)
+        self.0.grow_within(params, steps, room)
     }
 }
 

@@ -2,6 +2,7 @@
 //! either backend, so the automatic λ search ([`super::auto_lambda`]) and
 //! [`super::roi`] are written once for the CPU and the GPU.
 
+use super::bounds::VoxelBounds;
 use super::cpu::CpuGrowth;
 use super::extinction::Extinction;
 use super::gpu::{GpuGrowth, GpuOpacityVolume};
@@ -36,7 +37,19 @@ pub fn voxels_above_half(map: &OpacityMap) -> usize {
 pub trait GrowRunner {
     /// Seeds a growth with `params` and runs it to convergence, or for at
     /// most `steps` steps.
-    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError>;
+    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError> {
+        self.grow_within(params, steps, None)
+    }
+
+    /// [`GrowRunner::grow`] with a working box that covers `room` (voxel
+    /// indices) from the start ([`CpuGrowth::with_room`]); the map is the
+    /// same.
+    fn grow_within(
+        &mut self,
+        params: GrowthParams,
+        steps: Option<usize>,
+        room: Option<VoxelBounds>,
+    ) -> Result<Grown, OpacityError>;
 }
 
 /// The CPU backend: statistics from `volume`, values read from `values`
@@ -52,12 +65,17 @@ pub struct CpuRunner<'a> {
 }
 
 impl GrowRunner for CpuRunner<'_> {
-    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError> {
+    fn grow_within(
+        &mut self,
+        params: GrowthParams,
+        steps: Option<usize>,
+        room: Option<VoxelBounds>,
+    ) -> Result<Grown, OpacityError> {
         // Each step is four short parallel loops: on a worker they split
         // with no hand-over (a growth of 50 steps on a small volume spent
         // most of its time in hand-overs).
         voxflex_core::on_worker::on_worker(|| {
-            let mut g = CpuGrowth::new(self.volume, &self.seed, params)?;
+            let mut g = CpuGrowth::with_room(self.volume, &self.seed, params, room)?;
             let report = g.step(self.values, steps.unwrap_or(usize::MAX))?;
             Ok(Grown {
                 map: g.map(),
@@ -83,9 +101,14 @@ pub struct GpuRunner<'a> {
 }
 
 impl GrowRunner for GpuRunner<'_> {
-    fn grow(&mut self, params: GrowthParams, steps: Option<usize>) -> Result<Grown, OpacityError> {
+    fn grow_within(
+        &mut self,
+        params: GrowthParams,
+        steps: Option<usize>,
+        room: Option<VoxelBounds>,
+    ) -> Result<Grown, OpacityError> {
         let (gpu, values) = (self.gpu, self.values);
-        let mut g = GpuGrowth::new(gpu, values, self.volume, &self.seed, params)?;
+        let mut g = GpuGrowth::with_room(gpu, values, self.volume, &self.seed, params, room)?;
         let out = g
             .step(gpu, values, steps.unwrap_or(usize::MAX))
             .and_then(|report| Ok((report, g.map(gpu)?)));

@@ -28,17 +28,28 @@ impl GrowthState {
     /// Seeds a growth on `volume` (already validated with `params`): the
     /// seed's neighbourhood statistics, the update constants and the initial boxes.
     /// Returns the state and the seed's index in the working box.
+    ///
+    /// With `room` (voxel indices, clipped to the volume), the working box
+    /// covers it, plus the two voxels a step reads beyond the region, from
+    /// the start: a growth whose region stays inside `room` never moves its
+    /// field. Only the work depends on it, never the map.
     pub(crate) fn seed(
         volume: VolumeView<'_>,
         seed: &Seed,
         params: GrowthParams,
+        room: Option<VoxelBounds>,
     ) -> Result<(Self, usize), OpacityError> {
         let voxel = seed.resolve(&volume.grid)?;
         let stats = seed_stats(volume, voxel, &params)?;
         let ext = Extinction::new(&stats, &params)?;
         let dims = volume.grid.dims;
         let region = VoxelBounds::point(voxel);
-        let work = initial_working_box(&region, dims);
+        let mut work = initial_working_box(&region, dims);
+        if let Some(room) = room {
+            let hi = [0, 1, 2].map(|a| room.hi[a].min(dims[a] - 1));
+            let lo = [0, 1, 2].map(|a| room.lo[a].min(hi[a]));
+            work = work.union(&VoxelBounds { lo, hi }.dilate([2; 3], dims));
+        }
         let seed_local = work.local_linear(voxel);
         let state = Self {
             dims,

@@ -305,6 +305,48 @@ fn sparse_equals_dense_at_convergence() {
     }
 }
 
+/// A working box given up front ([`CpuGrowth::with_room`]) changes the
+/// work, never the map: a room that holds the region (no regrow at all),
+/// one too small, one elsewhere in the volume and one past its edge.
+#[test]
+fn a_room_given_up_front_changes_the_work_not_the_map() {
+    let p = three_spheres_with(40, 110.0, 3.0, 5);
+    let seed = Seed::Voxel(p.a.centre_voxel());
+    let dims = p.volume.grid.dims;
+    for connectivity in [6, 26] {
+        let params = GrowthParams {
+            connectivity,
+            ..GrowthParams::default()
+        };
+        let mut plain = CpuGrowth::new(p.volume.view(), &seed, params).unwrap();
+        let r = plain.run(p.volume.view()).unwrap();
+        assert!(r.regrows > 0, "the plain growth starts small and moves");
+        let want = plain.map();
+        let region = plain.region();
+        let rooms = [
+            region,
+            VoxelBounds::point(p.a.centre_voxel()),
+            VoxelBounds {
+                lo: [0; 3],
+                hi: [3; 3],
+            },
+            VoxelBounds {
+                lo: [30, 30, 30],
+                hi: [400, 400, 400],
+            },
+        ];
+        for (i, room) in rooms.into_iter().enumerate() {
+            let mut g = CpuGrowth::with_room(p.volume.view(), &seed, params, Some(room)).unwrap();
+            let r = g.run(p.volume.view()).unwrap();
+            assert_eq!(g.map(), want, "room {room:?}, connectivity {connectivity}");
+            assert!(g.working_box().hi.iter().zip(dims).all(|(&h, d)| h < d));
+            if i == 0 {
+                assert_eq!(r.regrows, 0, "a room holding the region is never left");
+            }
+        }
+    }
+}
+
 #[test]
 fn sparse_equals_dense_step_by_step() {
     // The same rule (with the pump shortcut) swept densely: identical after
