@@ -18,6 +18,7 @@
 //! (results differ from another order's in the last bits). Coordinates:
 //! world frame, mm.
 
+use crate::FluidError;
 use glam::DVec3;
 use rayon::prelude::*;
 use voxflex_core::triangle_surface::TriangleSurface;
@@ -33,6 +34,8 @@ const BITS: u32 = 21;
 pub struct TriangleOrder {
     /// The surface's triangles as they were when the order was made.
     source: Vec<[u32; 3]>,
+    /// One past the largest corner id: the vertices a surface must have.
+    needs: usize,
     /// Triangle index and corner ids, in visiting order.
     visits: Vec<(u32, [u32; 3])>,
 }
@@ -40,9 +43,12 @@ pub struct TriangleOrder {
 impl TriangleOrder {
     /// `surface`'s triangles sorted by the Morton key of their centroids
     /// in the vertices' bounding box (ties and non-finite centroids keep
-    /// their index order).
-    pub fn of(surface: &TriangleSurface) -> Self {
+    /// their index order). Refuses a triangle that names a vertex the
+    /// surface does not have, naming the first one: every later call whose
+    /// surface [`TriangleOrder::fits`] this order is then checked for free.
+    pub fn of(surface: &TriangleSurface) -> Result<Self, FluidError> {
         let v = &surface.vertices;
+        let needs = check_corner_ids(surface)?;
         let finite = v.iter().filter(|p| p.is_finite());
         let lo = finite.clone().fold(DVec3::INFINITY, |a, &b| a.min(b));
         let hi = finite.fold(DVec3::NEG_INFINITY, |a, &b| a.max(b));
@@ -58,21 +64,24 @@ impl TriangleOrder {
             .collect();
         keyed.par_sort_unstable();
         let triangles = &surface.triangles;
-        Self {
+        Ok(Self {
             source: triangles.clone(),
+            needs,
             visits: keyed
                 .into_iter()
                 .map(|(_, t)| (t, triangles[t as usize]))
                 .collect(),
-        }
+        })
     }
 
-    /// Whether this order was made for `surface`'s triangles (its vertices
-    /// may have moved since: the order only decides speed).
+    /// Whether this order was made for `surface`'s triangles and `surface`
+    /// has every vertex they name (its vertices may have moved since: the
+    /// order only decides speed).
     pub fn fits(&self, surface: &TriangleSurface) -> bool {
         // compared in pieces on every thread (the bunny's ids are 905 KB)
         let (a, b) = (&self.source, &surface.triangles);
         a.len() == b.len()
+            && surface.vertices.len() >= self.needs
             && a.par_chunks(COMPARED_PER_TASK)
                 .zip(b.par_chunks(COMPARED_PER_TASK))
                 .all(|(a, b)| a == b)
@@ -82,6 +91,28 @@ impl TriangleOrder {
     pub fn visits(&self) -> &[(u32, [u32; 3])] {
         &self.visits
     }
+}
+
+/// One past the largest corner id of `surface`'s triangles; an error
+/// naming the first triangle whose corner is not one of its vertices.
+fn check_corner_ids(surface: &TriangleSurface) -> Result<usize, FluidError> {
+    let n = surface.vertices.len();
+    let largest = surface
+        .triangles
+        .par_iter()
+        .map(|t| t.iter().copied().max().unwrap_or(0))
+        .max()
+        .map_or(0, |m| m as usize + 1);
+    if largest <= n {
+        return Ok(largest);
+    }
+    let (t, ids) = (surface.triangles.iter().enumerate())
+        .find(|(_, ids)| ids.iter().any(|&i| i as usize >= n))
+        .expect("a corner id past the vertices was found above");
+    Err(FluidError::Surface(format!(
+        "triangle {t} names vertices {ids:?}, but the surface has {n} vertices (ids 0..{n}); \
+         fix the cavity mesh's triangle list"
+    )))
 }
 
 /// Interleaves the bits of `p`'s coordinates (each clamped to
@@ -136,7 +167,7 @@ mod tests {
             vertices,
             triangles,
         };
-        let order = TriangleOrder::of(&s);
+        let order = TriangleOrder::of(&s).unwrap();
         assert!(order.fits(&s));
         let mut seen: Vec<u32> = order.visits().iter().map(|v| v.0).collect();
         seen.sort_unstable();
@@ -158,5 +189,15 @@ mod tests {
         assert!(order.fits(&other), "moved vertices keep the order");
         other.triangles.swap(0, 1);
         assert!(!order.fits(&other));
+        // the same triangles over too few vertices do not fit either
+        let mut fewer = s.clone();
+        let largest = s.triangles.iter().flatten().copied().max().unwrap();
+        fewer.vertices.truncate(largest as usize);
+        assert!(!order.fits(&fewer));
+        fewer.vertices.push(DVec3::ZERO);
+        assert!(
+            order.fits(&fewer),
+            "one more vertex and every corner exists"
+        );
     }
 }

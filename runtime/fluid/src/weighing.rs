@@ -120,6 +120,11 @@ impl<'a> FluidWeighing<'a> {
                 surface.triangles.len()
             )));
         }
+        // Made once per mesh; its corner ids are checked when it is made,
+        // so both paths index the vertices safely from here on.
+        if !scratch.order.fits(surface) {
+            scratch.order = TriangleOrder::of(surface)?;
+        }
         let projected = ProjectedSurface::frame_in(
             surface,
             params.gravity_m_s2,
@@ -163,9 +168,6 @@ impl<'a> FluidWeighing<'a> {
             MIN_TASK_TRIANGLES,
         );
         let s = &mut *self.scratch;
-        if !s.order.fits(self.projected.surface) {
-            s.order = TriangleOrder::of(self.projected.surface);
-        }
         self.projected.mean_candidates = scan_triangles(
             &self.projected,
             split,

@@ -215,6 +215,37 @@ fn a_vertex_that_is_not_finite_is_refused_by_name() {
 }
 
 #[test]
+fn a_corner_id_past_the_vertices_is_refused_by_name() {
+    // on the first, a middle and the last triangle; then a weigher that
+    // weighed the mesh once sees the same triangles over one vertex fewer
+    let good = cuboid(DVec3::ONE);
+    let (n, m) = (good.vertices.len(), good.triangles.len());
+    for t in [0, m / 2, m - 1] {
+        let mut s = good.clone();
+        s.triangles[t][1] = n as u32;
+        let text = fluid_weights(&s, &params(30))
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            text.contains(&format!("triangle {t} ")) && text.contains(&format!("{n} vertices")),
+            "{text}"
+        );
+    }
+    let mut weigher = FluidWeigher::default();
+    weigher
+        .weigh(&good, &params(30))
+        .expect("a valid mesh weighs");
+    let mut fewer = good.clone();
+    let last = fewer.triangles.iter().flatten().copied().max().unwrap() as usize;
+    fewer.vertices.truncate(last);
+    let text = weigher
+        .weigh(&fewer, &params(30))
+        .expect_err("refused")
+        .to_string();
+    assert!(text.contains(&format!("{last} vertices")), "{text}");
+}
+
+#[test]
 fn bad_parameters_name_their_key() {
     let s = cuboid(DVec3::ONE);
     for (p, key) in [
