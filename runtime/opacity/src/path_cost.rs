@@ -85,6 +85,9 @@ const UNSEEN: f32 = f32::INFINITY;
 /// Buckets per `R(1)`.
 const BUCKETS_PER_UNIT: f32 = 16.0;
 
+/// Slots of [`PathCostScan`]'s thresholds: the candidates, padded.
+const THRESHOLD_SLOTS: usize = CANDIDATES.len().next_multiple_of(8);
+
 /// Voxels processed between two checks of a phase's bound.
 const CHECK_EVERY: u64 = 4096;
 
@@ -140,8 +143,9 @@ pub struct PathCostScan<'a> {
     lowest: usize,
     /// `bins[k]`: labelled voxels with `T(λ_{k−1}) < D ≤ T(λ_k)`.
     bins: Vec<usize>,
-    /// `T(λ_k) = (o_max − 32768/65535) σ_s λ_k`, one per candidate.
-    thresholds: Vec<f32>,
+    /// `T(λ_k) = (o_max − 32768/65535) σ_s λ_k`, one per candidate, then
+    /// +∞ to a whole number of vector lanes (see [`Self::bin`]).
+    thresholds: [f32; THRESHOLD_SLOTS],
     phase: usize,
 }
 
@@ -213,10 +217,11 @@ impl<'a> PathCostScan<'a> {
             per_bucket: 1.0 / width,
             lowest: 0,
             bins: vec![0; CANDIDATES.len() + 1],
-            thresholds: CANDIDATES
-                .iter()
-                .map(|&l| (half * l as f64) as f32)
-                .collect(),
+            thresholds: std::array::from_fn(|k| {
+                CANDIDATES
+                    .get(k)
+                    .map_or(f32::INFINITY, |&l| (half * l as f64) as f32)
+            }),
             phase: 0,
         };
         let cell = with_voxels!(values.data, |d| scan.cell_of(d, voxel));
@@ -368,6 +373,7 @@ impl<'a> PathCostScan<'a> {
 
     /// Sets the cost of cell `cell` to `d`, lower than before, and queues
     /// it.
+    #[inline(always)]
     fn label(&mut self, cell: usize, d: f32) {
         let old = std::mem::replace(&mut self.costs.pool[cell].cost, d);
         if old < UNSEEN {
@@ -470,12 +476,14 @@ impl<'a> PathCostScan<'a> {
     /// The first candidate whose `T(λ)` holds `d`, or one past the last.
     #[inline]
     fn bin(&self, d: f32) -> usize {
-        // The first `t ≥ d` by bisection. Costs are ≥ 0 (never NaN: sums
-        // and maxima of finite step costs, clamped at 0), and the thresholds
-        // either ascend (`o_max` > ½) or are all ≤ 0 (`o_max` ≤ ½, where no
-        // voxel reaches ½): in both cases `t < d` holds on a prefix, as
-        // bisection needs, and the answer is the linear search's.
-        self.thresholds.partition_point(|&t| t < d)
+        // The first `t ≥ d` is the number of `t < d`: costs are ≥ 0 (never
+        // NaN: sums and maxima of finite step costs, clamped at 0), and the
+        // thresholds either ascend (`o_max` > ½) or are all ≤ 0 (`o_max` ≤
+        // ½, where no voxel reaches ½), so `t < d` holds on a prefix; the
+        // padding (+∞) never counts. Counted without a branch — a few
+        // vector compares — because every label takes one or two bins: a
+        // bisection's branches cost a bare search a third of its time.
+        self.thresholds.iter().map(|&t| (t < d) as usize).sum()
     }
 
     /// `c_v` (value units) of a voxel of value `x` at `p`: the growth's
