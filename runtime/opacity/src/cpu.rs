@@ -2,7 +2,9 @@
 //! convergence.
 
 use super::bounds::{VoxelBounds, grown_working_box};
-use super::frontier::{Lattice, PARALLEL_ENTRIES, count, finish, group, lift, states_for};
+use super::frontier::{
+    Lattice, PARALLEL_ENTRIES, StepLists, count, finish, group, lift, states_for,
+};
 use super::params::GrowthParams;
 use super::report::GrowthReport;
 use super::seed::Seed;
@@ -36,9 +38,9 @@ pub struct CpuGrowth {
     states: Vec<AtomicU64>,
     /// Voxels that changed in the last step, by group (see `frontier`).
     frontier: Vec<Vec<(u32, u16)>>,
-    /// A step's passes run on the pool from this many frontier entries
-    /// ([`PARALLEL_ENTRIES`]; tests set it to check both schedules).
-    parallel_from: usize,
+    /// A step's lists (kept between steps for their capacity) and when its
+    /// passes run on the pool.
+    passes: StepLists,
 }
 
 impl CpuGrowth {
@@ -75,7 +77,7 @@ impl CpuGrowth {
             states: states_for(&mut field, 0..work.len(), ext.q_min, ext.q_max),
             field,
             frontier: group([(s as u32, ext.q_max)], work.dims()),
-            parallel_from: PARALLEL_ENTRIES,
+            passes: StepLists::new(PARALLEL_ENTRIES),
         })
     }
 
@@ -105,30 +107,35 @@ impl CpuGrowth {
                 self.state.dims,
                 self.state.params.connectivity,
             );
-            let found = with_voxels!(volume.data, |s| lift(
+            with_voxels!(volume.data, |s| lift(
                 &lat,
                 &self.field,
                 &self.states,
                 &self.state.ext,
                 s,
                 &self.frontier,
-                self.parallel_from
+                &mut self.passes
             ));
-            let changes = with_voxels!(volume.data, |s| finish(
+            with_voxels!(volume.data, |s| finish(
                 &lat,
                 &self.field,
                 &self.states,
                 &self.state.ext,
                 s,
-                &found,
-                self.parallel_from
+                &mut self.passes
             ));
+            let StepLists { found, changes, .. } = &mut self.passes;
             for b in changes.iter().filter_map(|c| c.bounds) {
                 self.state.region = self.state.region.union(&b);
             }
-            self.frontier = changes.into_iter().map(|c| c.values).collect();
+            // The changes become the frontier; the old frontier's lists the
+            // next step's changes (emptied by `finish`).
+            self.frontier.resize_with(changes.len(), Vec::new);
+            for (f, c) in self.frontier.iter_mut().zip(changes.iter_mut()) {
+                std::mem::swap(f, &mut c.values);
+            }
             rep.steps += 1;
-            rep.visits += count(&found) as u64;
+            rep.visits += count(found) as u64;
             rep.useful += self.frontier_len() as u64;
         }
         rep.converged = self.is_converged();
@@ -141,7 +148,7 @@ impl CpuGrowth {
     /// check both schedules give the same map.
     #[cfg(test)]
     pub(crate) fn set_parallel_from(&mut self, entries: usize) {
-        self.parallel_from = entries;
+        self.passes.parallel_from = entries;
     }
 
     /// Runs to convergence and reports the steps it took from here.
@@ -194,14 +201,16 @@ impl CpuGrowth {
         self.frontier.iter().map(Vec::len).sum()
     }
 
-    /// Bytes of working state held between steps (field, state bits, frontier).
+    /// Bytes of working state held between steps (field, state bits,
+    /// frontier, and the step's lists kept for their capacity).
     pub fn working_bytes(&self) -> usize {
+        let lists = |n: usize, each: usize| n * each;
+        let StepLists { found, changes, .. } = &self.passes;
         self.field.len() * 2
             + self.states.len() * 8
-            + self
-                .frontier
-                .iter()
-                .map(|g| g.capacity() * 8)
+            + (self.frontier.iter().map(|g| lists(g.capacity(), 8)))
+                .chain(changes.iter().map(|c| lists(c.values.capacity(), 8)))
+                .chain(found.iter().flatten().map(|r| lists(r.capacity(), 12)))
                 .sum::<usize>()
     }
 
