@@ -322,12 +322,15 @@ impl StepLists {
 /// on the calling thread. Each pass over the groups is a fork and a join,
 /// four a step, and a step's frontier is small: on the abdomen's liver
 /// ~860 entries a step at 3 mm, ~3,900 at 1.5 mm on average over ~190
-/// steps. Split over the two cores of the benchmark machine, those passes
-/// made the whole growth slower, not faster: medians 13.7–14.9 ms against
-/// 7.3–7.4 ms on one thread at 3 mm, 77–85 against 62–64 ms at 1.5 mm —
-/// waking the pool cost more than the other core gave (docs/BENCHMARKS.md,
-/// "Figures: the growth on one thread").
-pub(crate) const PARALLEL_ENTRIES: usize = 8192;
+/// steps. Split over the two cores of the benchmark machine, every step's
+/// passes made the whole growth slower, not faster (3 mm: 13.7–14.9 ms
+/// against 7.3–7.4 on one thread), so they ran on the pool from 8,192
+/// entries. Since a step keeps its lists ([`StepLists`]) a pass's fork
+/// costs less, and from 1,024 entries the 1.5 mm growth took 46–48 ms
+/// against 48–54 (medians of four interleaved rounds of nine), the 3 mm
+/// one the same (docs/BENCHMARKS.md, "Figures: the growth on one thread"
+/// and after).
+pub(crate) const PARALLEL_ENTRIES: usize = 1024;
 
 /// Runs `f` on the items of `items` whose index has parity `parity` (the
 /// groups one pass may touch at once), on the pool when `parallel`. Either
