@@ -49,8 +49,9 @@
 //! the volume, so a neighbour in the same brick (7 in 8 of them) is a
 //! fixed step away: no division to find the voxel's coordinates and no
 //! table lookup (12 % less time than the volume index on the liver at
-//! 1.5 mm, docs/BENCHMARKS.md). That is 8 bytes per voxel of the region's bricks, against the
-//! CPU growth's 2.25 per voxel of its working box: a seed whose region is
+//! 1.5 mm, docs/BENCHMARKS.md). That is 8 bytes per voxel of the region's
+//! bricks, against the CPU growth's 2.25 per voxel of its working box
+//! (the scan's box, [`PathCostScan::reached_box`]): a seed whose region is
 //! the whole volume (the air around a CT, say) costs 8 bytes per voxel of
 //! the volume for the time of the scan. The step costs are stored because
 //! reading the volume's value at every relaxation was the stall of a
