@@ -8,8 +8,8 @@ use voxflex_core::gpu::GpuService;
 use voxflex_core::volume::Volume;
 use voxflex_core::volume::VolumeView;
 use voxflex_opacity::{
-    CpuGrowth, GpuGrowth, GpuOpacityVolume, GrowthLimits, GrowthParams, GrowthReport, OpacityMap,
-    Seed,
+    CpuGrowth, GpuGrowth, GpuOpacityVolume, Growth, GrowthLimits, GrowthParams, GrowthReport,
+    OpacityMap, Seed, VoxelBounds,
 };
 
 use super::roi_err;
@@ -82,18 +82,30 @@ enum RoiGrowth {
 }
 
 impl RoiGrowth {
+    /// Seeds a growth on `volume` on `device`, its working box covering
+    /// `room` (voxel indices) from the start (only the work depends on it).
     fn seed(
         volume: &Volume,
         device: RoiDevice<'_>,
         seed: &Seed,
         params: GrowthParams,
+        room: Option<VoxelBounds>,
     ) -> Result<Self, voxflex_opacity::OpacityError> {
+        let view = volume.view();
         Ok(match device {
-            RoiDevice::Cpu => RoiGrowth::Cpu(CpuGrowth::new(volume.view(), seed, params)?),
+            RoiDevice::Cpu => RoiGrowth::Cpu(CpuGrowth::with_room(view, seed, params, room)?),
             RoiDevice::Gpu { gpu, values } => {
-                RoiGrowth::Gpu(GpuGrowth::new(gpu, values, volume.view(), seed, params)?)
+                RoiGrowth::Gpu(GpuGrowth::with_room(gpu, values, view, seed, params, room)?)
             }
         })
+    }
+
+    /// The box of the voxels it raised (voxel indices of its volume).
+    fn region(&self) -> VoxelBounds {
+        match self {
+            RoiGrowth::Cpu(g) => g.region(),
+            RoiGrowth::Gpu(g) => g.region(),
+        }
     }
 
     fn runs_on(&self, device: RoiDevice<'_>) -> bool {
@@ -190,7 +202,7 @@ impl SessionRoi {
         seed: Seed,
         params: GrowthParams,
     ) -> Result<Self, RunError> {
-        let growth = RoiGrowth::seed(volume, device, &seed, params).map_err(roi_err)?;
+        let growth = RoiGrowth::seed(volume, device, &seed, params, None).map_err(roi_err)?;
         let map = match growth.map(device) {
             Ok(m) => m,
             Err(e) => {
@@ -267,10 +279,15 @@ impl SessionRoi {
         } else {
             self.steps as usize
         };
+        // The new volume's region is most likely near the old one's: the new
+        // growth's field starts there, instead of at the seed and copied
+        // into larger boxes as it grows. Only the work depends on it (a
+        // box past a smaller new grid is clipped to it), never the map.
+        let room = self.growth.as_ref().map(RoiGrowth::region);
         self.release(device.gpu());
         self.bound(volume, device)?;
         let (_, on) = reads(&self.bounded, volume, device);
-        let growth = RoiGrowth::seed(volume, on, &self.seed, self.params).map_err(roi_err)?;
+        let growth = RoiGrowth::seed(volume, on, &self.seed, self.params, room).map_err(roi_err)?;
         self.growth = Some(growth);
         self.steps = 0;
         self.step(volume, device, steps)

@@ -299,6 +299,25 @@ fn new_roi_params_regrow_the_map_as_far_and_bad_ones_change_nothing() {
     assert!(s.set_roi_params(RoiId(99), raised).is_err());
 }
 
+/// A map grown again (here: the same parameters set again) starts in the
+/// box of the region it had, so it never moves its field, and grows the
+/// same map.
+#[test]
+fn a_regrowth_starts_in_the_last_region_and_grows_the_same_map() {
+    let (mut s, id) = head_session_with_brain_roi();
+    let first = s.roi_run_to_end(id).unwrap();
+    assert!(first.regrows > 0, "from the seed, the box moves: {first:?}");
+    let map = s.roi_map(id).unwrap().clone();
+    let params = s.rois()[0].params;
+    let again = s.set_roi_params(id, params).unwrap();
+    assert!(again.converged, "{again:?}");
+    assert_eq!(
+        again.regrows, 0,
+        "the last region's box holds it: {again:?}"
+    );
+    assert_eq!(s.roi_map(id).unwrap(), &map);
+}
+
 #[test]
 fn a_roi_map_is_written_as_a_volume_and_drawn_over_slices() {
     let mut s = cube_session(16);
