@@ -3,7 +3,7 @@
 
 use super::bounds::{VoxelBounds, grown_working_box};
 use super::frontier::{
-    Lattice, PARALLEL_ENTRIES, StepLists, count, finish, group, lift, states_for,
+    Lattice, PARALLEL_ENTRIES, Raised, StepLists, count, finish, group, lift, states_for,
 };
 use super::params::GrowthParams;
 use super::report::GrowthReport;
@@ -130,7 +130,7 @@ impl CpuGrowth {
             }
             // The changes become the frontier; the old frontier's lists the
             // next step's changes (emptied by `finish`).
-            self.frontier.resize_with(changes.len(), Vec::new);
+            debug_assert_eq!(self.frontier.len(), changes.len(), "one list per group");
             for (f, c) in self.frontier.iter_mut().zip(changes.iter_mut()) {
                 std::mem::swap(f, &mut c.values);
             }
@@ -204,14 +204,18 @@ impl CpuGrowth {
     /// Bytes of working state held between steps (field, state bits,
     /// frontier, and the step's lists kept for their capacity).
     pub fn working_bytes(&self) -> usize {
-        let lists = |n: usize, each: usize| n * each;
+        use std::mem::size_of;
         let StepLists { found, changes, .. } = &self.passes;
-        self.field.len() * 2
-            + self.states.len() * 8
-            + (self.frontier.iter().map(|g| lists(g.capacity(), 8)))
-                .chain(changes.iter().map(|c| lists(c.values.capacity(), 8)))
-                .chain(found.iter().flatten().map(|r| lists(r.capacity(), 12)))
-                .sum::<usize>()
+        let entries = (self
+            .frontier
+            .iter()
+            .chain(changes.iter().map(|c| &c.values)))
+        .map(|g| g.capacity() * size_of::<(u32, u16)>())
+        .sum::<usize>();
+        let raised = (found.iter().flatten())
+            .map(|r| r.capacity() * size_of::<Raised>())
+            .sum::<usize>();
+        self.field.len() * 2 + self.states.len() * 8 + entries + raised
     }
 
     /// Moves the field into a larger working box (`nb ⊇ self.state.work`).

@@ -252,10 +252,9 @@ impl<'a> PathCostScan<'a> {
     #[cfg(test)]
     pub(crate) fn cost_at(&self, p: [usize; 3]) -> f32 {
         let b = self.costs.grid_index(p.map(|c| c / BRICK));
-        let o = p[0] % BRICK + BRICK * (p[1] % BRICK + BRICK * (p[2] % BRICK));
         match self.costs.table[b] {
             Bricks::NONE => UNSEEN,
-            i => self.costs.pool[i as usize * BRICK3 + o].cost,
+            i => self.costs.pool[i as usize * BRICK3 + in_brick(p)].cost,
         }
     }
 
@@ -273,7 +272,7 @@ impl<'a> PathCostScan<'a> {
             }
             for (o, cell) in cells.iter().enumerate() {
                 if cell.cost < r {
-                    let p = [o % BRICK, (o / BRICK) % BRICK, o / (BRICK * BRICK)];
+                    let p = brick_coords(o);
                     let v = VoxelBounds::point([0, 1, 2].map(|a| lo[a] + p[a]));
                     found = Some(found.map_or(v, |f| f.union(&v)));
                 }
@@ -389,9 +388,7 @@ impl<'a> PathCostScan<'a> {
     /// The cell of voxel `p`, its brick filled with step costs first when
     /// the search reaches it for the first time.
     fn cell_of<T: Sample>(&mut self, data: &[T], p: [usize; 3]) -> usize {
-        let brick = p.map(|c| c / BRICK);
-        let o = p[0] % BRICK + BRICK * (p[1] % BRICK + BRICK * (p[2] % BRICK));
-        self.brick_base(data, brick) + o
+        self.brick_base(data, p.map(|c| c / BRICK)) + in_brick(p)
     }
 
     /// The first cell of the brick at brick coordinates `brick`, filled
@@ -411,12 +408,7 @@ impl<'a> PathCostScan<'a> {
     /// hold an infinite step cost, so they are never labelled.
     #[inline(always)]
     fn neighbour<T: Sample>(&mut self, data: &[T], u: usize, o: Offset) -> Option<usize> {
-        let local = u % BRICK3;
-        let at = [
-            local % BRICK,
-            (local / BRICK) % BRICK,
-            local / (BRICK * BRICK),
-        ];
+        let at = brick_coords(u % BRICK3);
         let moved = [0, 1, 2].map(|a| at[a].wrapping_add_signed(o.dir[a]));
         if moved.iter().all(|&m| m < BRICK) {
             return Some(u.wrapping_add_signed(o.within));
@@ -430,8 +422,7 @@ impl<'a> PathCostScan<'a> {
                 return None;
             }
         }
-        let o = moved[0] % BRICK + BRICK * (moved[1] % BRICK + BRICK * (moved[2] % BRICK));
-        Some(self.brick_base(data, brick) + o)
+        Some(self.brick_base(data, brick) + in_brick(moved))
     }
 
     /// Allocates brick `b` (at brick coordinates `brick`) and fills its
@@ -505,6 +496,20 @@ impl<'a> PathCostScan<'a> {
 const BRICK: usize = 8;
 /// Cells per brick.
 const BRICK3: usize = BRICK * BRICK * BRICK;
+
+/// The cell of voxel (or brick-relative position) `p` within its brick:
+/// `x + 8 (y + 8 z)` of `p` modulo the brick.
+#[inline(always)]
+fn in_brick(p: [usize; 3]) -> usize {
+    p[0] % BRICK + BRICK * (p[1] % BRICK + BRICK * (p[2] % BRICK))
+}
+
+/// The position within its brick of cell `o` (`0 .. 512`), x fastest:
+/// [`in_brick`]'s inverse.
+#[inline(always)]
+fn brick_coords(o: usize) -> [usize; 3] {
+    [o % BRICK, (o / BRICK) % BRICK, o / (BRICK * BRICK)]
+}
 
 /// One voxel's search state.
 #[derive(Clone, Copy, Debug)]
