@@ -9,8 +9,9 @@ phantom's liver label, and a ratio is printed only when voxflex's Dice is
 at least the peer's minus ``DICE_SLACK`` and both find the organ
 (Dice ≥ ``DICE_FLOOR``) — the issue's goal is speed "at its Dice or better".
 
-Time: voxflex's growth alone (``grown in … ms``, the automatic λ's scan
-included; not the volume read or the map write); SimpleITK's ``Execute``.
+Time: voxflex's map alone (``made in … ms``: the automatic λ's scan and the map
+written from it, or a fixed λ's growth; not the volume read or the file
+write); SimpleITK's ``Execute``.
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ def run_size(ctx: Context, dims: str) -> list[Row]:
     def voxflex(lam: str):
         def go() -> float:
             out = run_voxflex(ctx, "roi", vol_path, seed_arg, "--lambda", lam, "--out", map_path)
-            return parse_ms(r"grown in ([\d.]+) ms", out)
+            return parse_ms(r"made in ([\d.]+) ms", out)
 
         return go
 

@@ -737,7 +737,9 @@ fn roi_auto_lambda_and_bounds_reach_the_notes_and_the_cli() {
         "{m}"
     );
     assert_eq!(liver["stopped_by"], "converged", "{m}");
+    assert_eq!(liver["made_by"], "lambda scan", "{m}");
     let near = &maps["near"];
+    assert_eq!(near["made_by"], "growth", "{m}");
     assert_eq!(near["lambda"].as_f64(), Some(30.0), "{m}");
     assert!(
         near["stopped_by"]

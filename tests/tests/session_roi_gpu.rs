@@ -250,9 +250,9 @@ fn an_offered_device_is_the_one_the_session_computes_on() {
     }
 }
 
-/// A bounded map (intensity window and distance) and its automatic λ on
-/// the GPU, over its own upload of the bounded values: the CPU's map and
-/// λ, bit for bit.
+/// A bounded map (intensity window and distance) on the GPU, over its own
+/// upload of the bounded values, and its automatic λ (written from the
+/// scan on the CPU on either backend): the CPU's maps and λ, bit for bit.
 #[test]
 fn bounded_and_auto_lambda_maps_on_the_gpu_equal_the_cpus() {
     if voxflex_runtime::gpu_context::testing::test_gpu().is_none() {

@@ -626,12 +626,16 @@ fn roi(
     let written = voxflex_runtime::visualise::map_volume(&volume.grid, map);
     voxflex_io::write_volume(&out, written.view())?;
     println!(
-        "{}: lambda {}{}, {} ({} steps), {} voxels ≥ 0.5, {} visits ({:.0}% useful), map box {:?} ({} bytes), grown in {grow_ms:.1} ms → {}",
+        "{}: lambda {}{}, {} ({}), {} voxels ≥ 0.5, {} visits ({:.0}% useful), map box {:?} ({} bytes), made in {grow_ms:.1} ms → {}",
         source,
         o.lambda,
         if o.auto.is_some() { " (auto)" } else { "" },
         o.stop(),
-        report.steps,
+        if o.from_scan() {
+            "written from the lambda scan".to_string()
+        } else {
+            format!("{} steps", report.steps)
+        },
         o.voxels,
         report.visits,
         100.0 * report.useful as f64 / report.visits.max(1) as f64,

@@ -165,9 +165,15 @@ impl RoiPanel {
         self.styles.insert(id, style);
         let i = &row.info;
         let state = if i.converged { "converged" } else { "growing" };
+        // An automatic-λ map is written from its λ scan, not grown.
+        let made = if i.lambda_auto {
+            "from the λ scan".to_string()
+        } else {
+            format!("{} steps", i.steps)
+        };
         ui.label(format!(
-            "{} steps, {} voxels ≥ ½, {state}",
-            i.steps, i.voxels_above_half
+            "{made}, {} voxels ≥ ½, {state}",
+            i.voxels_above_half
         ));
         auto_lambda_ui(ui, row, out);
         let edit = self
@@ -176,15 +182,20 @@ impl RoiPanel {
             .or_insert_with(|| BoundsEdit::of(row.info.limits));
         bounds_ui(ui, row, edit, out);
         if let Some((report, wall)) = row.last {
-            ui.label(
-                RichText::new(format!(
-                    "last growth: {} steps, useful visits {:.1} %, {:.1} ms",
+            let ms = wall.as_secs_f64() * 1e3;
+            let text = if i.lambda_auto {
+                format!(
+                    "last map: λ scan, {} relaxations, {ms:.1} ms",
+                    report.visits
+                )
+            } else {
+                format!(
+                    "last growth: {} steps, useful visits {:.1} %, {ms:.1} ms",
                     report.steps,
-                    100.0 * report.useful_fraction(),
-                    wall.as_secs_f64() * 1e3
-                ))
-                .color(Color32::GRAY),
-            );
+                    100.0 * report.useful_fraction()
+                )
+            };
+            ui.label(RichText::new(text).color(Color32::GRAY));
         }
         ui.horizontal(|ui| {
             if ui.button("Step").clicked() {

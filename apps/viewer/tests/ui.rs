@@ -790,7 +790,7 @@ fn a_dropped_file_opens_in_place_and_open_recent_keeps_it_newest_first() {
 }
 
 #[test]
-fn the_auto_lambda_box_grows_the_map_at_the_chosen_lambda_and_shows_it() {
+fn the_auto_lambda_box_writes_the_map_at_the_chosen_lambda_and_shows_it() {
     let mut h = open_phantom();
     seed_and_grow(&mut h);
     let fixed = h.state().rois()[0].info.clone();
@@ -806,9 +806,17 @@ fn the_auto_lambda_box_grows_the_map_at_the_chosen_lambda_and_shows_it() {
         "{auto:?}"
     );
     assert!(auto.voxels_above_half > 1000, "{auto:?}");
-    let (report, _) = h.state().rois()[0].last.expect("the growth at auto λ");
-    assert!(report.converged && report.steps > 1, "{report:?}");
+    // Written from the scan that chose λ, not grown.
+    let (report, _) = h.state().rois()[0].last.expect("the map at auto λ");
+    assert!(
+        report.converged && report.steps == 0 && report.visits > 1000,
+        "{report:?}"
+    );
     h.get_by_label(&format!("λ = {:.2} (chosen)", auto.params.lambda));
+    h.get_by_label(&format!(
+        "from the λ scan, {} voxels ≥ ½, converged",
+        auto.voxels_above_half
+    ));
     // Unticked, the λ chosen stays, as a given one.
     h.get_by_label(&format!("auto λ (map {})", fixed.id.0))
         .click();

@@ -88,6 +88,12 @@ pub fn roi_notes(out: &RoiOutcome) -> serde_json::Value {
         m.insert("lambda_auto_trials".into(), trials.into());
     }
     m.insert("stopped_by".into(), out.stop().into());
+    let made = if out.from_scan() {
+        "lambda scan"
+    } else {
+        "growth"
+    };
+    m.insert("made_by".into(), made.into());
     m.insert("steps".into(), out.grown.report.steps.into());
     m.insert("converged".into(), out.grown.report.converged.into());
     m.insert("voxels_above_half".into(), out.voxels.into());

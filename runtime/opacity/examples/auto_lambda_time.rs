@@ -1,9 +1,9 @@
 //! Where the automatic λ's time goes: the path-cost scan that chooses λ
-//! (`auto_lambda::choose_lambda`) against one growth at the λ it chose
-//! (CPU, from a seed-sized working box), the two as `grow_roi` runs them
-//! (`auto_lambda::auto_lambda`: the growth's working box from the scan),
-//! from the liver seed of `phantom:abdomen`, and whether the scan's region
-//! sizes equal the growth's.
+//! (`auto_lambda::choose_lambda`), the scan with the map written from its
+//! costs as `grow_roi` runs it (`auto_lambda::auto_map`), and one growth
+//! at the λ chosen (CPU) for comparison, from the liver seed of
+//! `phantom:abdomen`; then how far the scan's map lies from that growth's
+//! and whether the scan's region sizes equal the growth's.
 //!
 //! ```sh
 //! cargo run --release -p voxflex-opacity --example auto_lambda_time -- [--dims 240,188,160] [--repeat 9]
@@ -13,7 +13,7 @@
 //! of each, and every trial's size next to a growth's at that λ.
 
 use std::time::{Duration, Instant};
-use voxflex_opacity::auto_lambda::{auto_lambda, choose_lambda};
+use voxflex_opacity::auto_lambda::{auto_map, choose_lambda};
 use voxflex_opacity::runner::voxels_above_half;
 use voxflex_opacity::{CpuRunner, GrowRunner, GrowthLimits, GrowthParams, ScanInput, Seed};
 use voxflex_phantom::abdomen::SEEDS;
@@ -70,16 +70,35 @@ fn main() {
                 .unwrap();
             grow.push(t.elapsed());
             let t = Instant::now();
-            let a = auto_lambda(input, &mut runner, params, None).unwrap();
+            let a = auto_map(input, params).unwrap();
             whole.push(t.elapsed());
             assert_eq!(a.lambda, lambda);
         }
         println!("abdomen {dims:?}, liver seed: λ = {lambda}");
         println!("  scan (choose λ):        {}", stats(scan));
         println!("  one growth at that λ:   {}", stats(grow));
+        println!("  scan + its map (grow_roi): {}", stats(whole));
+        let written = auto_map(input, params).unwrap().grown.map.dense(dims);
+        let grown = runner
+            .grow(GrowthParams { lambda, ..params }, None)
+            .unwrap()
+            .map
+            .dense(dims);
+        let differ = written.iter().zip(&grown).filter(|(a, b)| a != b).count();
+        let most = written
+            .iter()
+            .zip(&grown)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max();
+        let side = written
+            .iter()
+            .zip(&grown)
+            .filter(|&(a, b)| (*a >= 32768) != (*b >= 32768))
+            .count();
         println!(
-            "  both, as grow_roi runs them (the growth's box from the scan): {}",
-            stats(whole)
+            "  scan's map against the growth's: {differ} voxels differ (at most {} units), \
+             {side} on the other side of ½",
+            most.unwrap_or(0)
         );
         for t in &trials {
             let g = runner

@@ -30,16 +30,19 @@
 //! The sizes `V(λ_k)` come from one [`PathCostScan`] that continues from
 //! each λ to the next (the converged map at λ is a λ-independent path cost
 //! compared with thresholds ∝ λ; see that module), not from one growth per
-//! λ; then the map is grown once, at the λ chosen, on the runner's backend.
-//! The scan uses the real-valued rule, the growth fixed point: their
-//! regions can differ by the voxels whose opacity lies within rounding of
-//! ½, so a trial's `voxels` and the map's count may differ by a few.
+//! λ. The map is then written from the scan's costs at the λ chosen
+//! ([`PathCostScan::into_map`]), with no growth: its region is the chosen
+//! trial's, voxel for voxel, and its values the real-valued rule rounded
+//! once. A fixed-λ growth at the same λ rounds every step instead, so the
+//! two maps can differ by half a fixed-point unit per step of a path, and
+//! their regions in the voxels whose opacity lies that close to ½ (a
+//! handful per hundred thousand). Only a map capped at a number of steps
+//! is grown, on the runner's backend.
 //! Figures (Dice per organ for this rule and for fixed λ on
 //! `phantom:abdomen`) are in docs/BENCHMARKS.md and in
 //! `docs/roi_dice_vs_lambda.md`.
 
 use super::OpacityError;
-use super::bounds::VoxelBounds;
 use super::params::GrowthParams;
 use super::path_cost::{PathCostScan, ScanInput};
 use super::runner::{GrowRunner, Grown};
@@ -101,7 +104,8 @@ pub struct AutoLambda {
     pub lambda: f32,
     /// Every candidate tried, in order.
     pub trials: Vec<Trial>,
-    /// The growth at the chosen λ.
+    /// The map at the chosen λ: the scan's ([`auto_map`]), or a growth
+    /// capped at a number of steps.
     pub grown: Grown,
 }
 
@@ -156,19 +160,24 @@ fn first_break(ratios: &[(f32, f64)]) -> Option<usize> {
 }
 
 /// Runs the search (see the module docs) on `input` — the values
-/// `runner` grows on — then grows the map at the λ chosen on `runner`'s
-/// backend, capped at `steps` steps. `params.lambda` is ignored, the other
-/// fields are used as given.
+/// `runner` grows on — and makes the map at the λ chosen. Run to
+/// convergence (`steps = None`), the map is the scan's own at that λ
+/// ([`auto_map`]: no growth runs, and `runner` is not used); with a step
+/// cap it is grown on `runner`'s backend for at most `steps` steps, its
+/// working box where the scan found the region. `params.lambda` is
+/// ignored, the other fields are used as given.
 pub fn auto_lambda(
     input: ScanInput<'_>,
     runner: &mut dyn GrowRunner,
     params: GrowthParams,
     steps: Option<usize>,
 ) -> Result<AutoLambda, OpacityError> {
-    let (lambda, trials, room) = search(input, params)?;
-    // The growth's working box starts where the scan found the region at
-    // that λ: allocated once, no larger than it needs.
-    let grown = runner.grow_within(GrowthParams { lambda, ..params }, steps, room)?;
+    let Some(steps) = steps else {
+        return auto_map(input, params);
+    };
+    let (scan, lambda, trials) = search(input, params)?;
+    let room = scan.reached_box(lambda);
+    let grown = runner.grow_within(GrowthParams { lambda, ..params }, Some(steps), room)?;
     Ok(AutoLambda {
         lambda,
         trials,
@@ -176,21 +185,48 @@ pub fn auto_lambda(
     })
 }
 
+/// The search on `input` and the converged map at the λ chosen, written
+/// from the scan's path costs ([`PathCostScan::into_map`]: real arithmetic
+/// rounded once, on the CPU) instead of grown. `params.lambda` is ignored.
+pub fn auto_map(input: ScanInput<'_>, params: GrowthParams) -> Result<AutoLambda, OpacityError> {
+    let (scan, lambda, trials) = search(input, params)?;
+    Ok(AutoLambda {
+        lambda,
+        trials,
+        grown: scan.into_map(lambda)?,
+    })
+}
+
+/// The converged map at `lambda`, one of [`CANDIDATES`], from a scan of
+/// `input` run to that λ's phase — what [`auto_map`] returns for the same
+/// λ, without choosing it again (an automatic-λ map on a new volume).
+/// `params.lambda` is ignored.
+pub fn map_at(
+    input: ScanInput<'_>,
+    params: GrowthParams,
+    lambda: f32,
+) -> Result<Grown, OpacityError> {
+    let mut scan = PathCostScan::new(input, params)?;
+    if CANDIDATES.contains(&lambda) {
+        while scan.next_phase(None).is_some_and(|(l, _)| l < lambda) {}
+    }
+    scan.into_map(lambda)
+}
+
 /// The λ the rule picks on `input` and the trials it measured, from one
-/// [`PathCostScan`] (no map is grown). `params.lambda` is ignored.
+/// [`PathCostScan`] (no map is made). `params.lambda` is ignored.
 pub fn choose_lambda(
     input: ScanInput<'_>,
     params: GrowthParams,
 ) -> Result<(f32, Vec<Trial>), OpacityError> {
-    search(input, params).map(|(lambda, trials, _)| (lambda, trials))
+    search(input, params).map(|(_, lambda, trials)| (lambda, trials))
 }
 
-/// [`choose_lambda`], with the box of the voxels the scan reached at the
-/// λ chosen (voxel indices).
-fn search(
-    input: ScanInput<'_>,
+/// The scan as the rule left it, the λ it picks and the trials.
+fn search<'a>(
+    input: ScanInput<'a>,
     params: GrowthParams,
-) -> Result<(f32, Vec<Trial>, Option<VoxelBounds>), OpacityError> {
+) -> Result<(PathCostScan<'a>, f32, Vec<Trial>), OpacityError> {
     let mut scan = PathCostScan::new(input, params)?;
     let mut trials: Vec<Trial> = Vec::new();
     loop {
@@ -216,5 +252,5 @@ fn search(
         }
     }
     let lambda = pick(&trials);
-    Ok((lambda, trials, scan.reached_box(lambda)))
+    Ok((scan, lambda, trials))
 }

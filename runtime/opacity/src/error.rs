@@ -127,6 +127,18 @@ pub enum OpacityError {
         /// σ_s as used (after the floor).
         sigma: f32,
     },
+    /// A map was asked of a path-cost scan at a λ it did not run to the end.
+    #[error(
+        "lambda = {lambda} is not a candidate the automatic lambda's scan ran to the end \
+         ({scanned} phases run); the automatic lambda takes one of 1, 1.41, 2, … 32 \
+         (powers of sqrt 2): set lambda = \"auto\" again, or give lambda as a number"
+    )]
+    LambdaNotScanned {
+        /// λ asked for.
+        lambda: f32,
+        /// Phases the scan ran.
+        scanned: usize,
+    },
     /// A GPU buffer would exceed the device's storage-binding limit.
     #[error(
         "{what} needs {bytes} bytes in one storage binding but the GPU allows {limit}; use the \

@@ -147,6 +147,8 @@ mod path_cost_tests;
 #[cfg(test)]
 mod roi_tests;
 #[cfg(test)]
+mod scan_map_tests;
+#[cfg(test)]
 mod tests;
 
 pub use auto_lambda::AutoLambda;

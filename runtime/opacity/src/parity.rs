@@ -476,24 +476,34 @@ pub fn check_refusals(gpu: &dyn GpuService) -> Result<(), String> {
 /// Bounded maps and the automatic λ on both paths, through
 /// [`super::grow_roi`]: `phantom:abdomen` (64 × 50 × 43, 5.6 mm) seeded in
 /// the liver with an intensity window, a distance bound, both, and
-/// `lambda = "auto"` — identical maps, counts, λ and bound hits.
+/// `lambda = "auto"` (written from the scan, and grown when capped at a
+/// number of steps) — identical maps, counts, λ and bound hits.
 pub fn check_limits_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
     use super::limits::GrowthLimits;
     use super::roi::{LambdaChoice, RoiRequest, grow_roi};
     let ph = voxflex_phantom::abdomen_labelled([64, 50, 43]);
     let v = ph.volume.view();
     let seed = Seed::World(voxflex_phantom::abdomen::SEEDS[0].2);
+    // The automatic λ's map is written from its scan on the CPU whatever
+    // the backend; capped at a number of steps it is grown on the GPU.
     let cases = [
-        (Some([80.0, 150.0]), None, LambdaChoice::Fixed(30.0)),
-        (None, Some(40.0), LambdaChoice::Fixed(30.0)),
-        (Some([60.0, 170.0]), Some(60.0), LambdaChoice::Fixed(8.0)),
-        (None, None, LambdaChoice::Auto),
+        (Some([80.0, 150.0]), None, LambdaChoice::Fixed(30.0), None),
+        (None, Some(40.0), LambdaChoice::Fixed(30.0), None),
+        (
+            Some([60.0, 170.0]),
+            Some(60.0),
+            LambdaChoice::Fixed(8.0),
+            None,
+        ),
+        (None, None, LambdaChoice::Auto, None),
+        (None, Some(40.0), LambdaChoice::Auto, Some(12)),
     ];
     let gv = GpuOpacityVolume::upload(gpu, v).map_err(e)?;
     let res = (|| {
-        for (intensity, max_distance_mm, lambda) in cases {
+        for (intensity, max_distance_mm, lambda, steps) in cases {
             let what = format!(
-                "intensity {intensity:?}, max_distance_mm {max_distance_mm:?}, lambda {lambda}"
+                "intensity {intensity:?}, max_distance_mm {max_distance_mm:?}, lambda {lambda}, \
+                 steps {steps:?}"
             );
             let req = RoiRequest {
                 seed,
@@ -503,7 +513,7 @@ pub fn check_limits_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
                     intensity,
                     max_distance_mm,
                 },
-                steps: None,
+                steps,
             };
             let g = grow_roi(v, &req, Some((gpu, &gv))).map_err(e)?;
             let c = grow_roi(v, &req, None).map_err(e)?;
@@ -523,7 +533,13 @@ pub fn check_limits_match_cpu(gpu: &dyn GpuService) -> Result<(), String> {
             if intensity.is_some() && c.hits.intensity == 0 {
                 return Err(format!("{what}: the window never held the growth back"));
             }
-            if max_distance_mm.is_some() && c.hits.distance == 0 {
+            if steps.is_some_and(|n| c.grown.report.steps != n as u64) {
+                return Err(format!(
+                    "{what}: not grown to the cap: {:?}",
+                    c.grown.report
+                ));
+            }
+            if max_distance_mm.is_some() && steps.is_none() && c.hits.distance == 0 {
                 return Err(format!("{what}: the distance bound was never reached"));
             }
         }

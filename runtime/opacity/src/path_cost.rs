@@ -76,9 +76,11 @@ use super::extinction::{Extinction, SANE_MAX};
 use super::frontier::{DIRS, IS_FACE};
 use super::limits::GrowthLimits;
 use super::params::GrowthParams;
-use super::seed::{Seed, seed_stats};
+use super::seed::{Seed, SeedStats, seed_stats};
 use crate::volume::{Sample, VolumeView};
 use crate::with_voxels;
+
+mod scan_map;
 
 /// Cost of a voxel not reached yet.
 const UNSEEN: f32 = f32::INFINITY;
@@ -148,6 +150,12 @@ pub struct PathCostScan<'a> {
     /// +∞ to a whole number of vector lanes (see [`Self::bin`]).
     thresholds: [f32; THRESHOLD_SLOTS],
     phase: usize,
+    /// The seed's statistics and the parameters (λ aside) the map is
+    /// written with ([`PathCostScan::into_map`]).
+    stats: SeedStats,
+    params: GrowthParams,
+    /// What the scan can be rewound with (see [`Undo`]).
+    undo: Undo,
 }
 
 impl<'a> PathCostScan<'a> {
@@ -224,6 +232,9 @@ impl<'a> PathCostScan<'a> {
                     .map_or(f32::INFINITY, |&l| (half * l as f64) as f32)
             }),
             phase: 0,
+            stats,
+            params,
+            undo: Undo::default(),
         };
         let cell = with_voxels!(values.data, |d| scan.cell_of(d, voxel));
         scan.label(cell, 0.0);
@@ -237,7 +248,12 @@ impl<'a> PathCostScan<'a> {
     pub fn next_phase(&mut self, bound: Option<usize>) -> Option<(f32, PhaseResult)> {
         let lambda = *CANDIDATES.get(self.phase)?;
         let r = self.reach * lambda;
+        self.undo.below = self
+            .phase
+            .checked_sub(1)
+            .map_or(0.0, |k| self.reach * CANDIDATES[k]);
         let (visits, cut) = with_voxels!(self.values.data, |s| self.relax_below(s, r, bound));
+        self.undo.end_phase(visits, cut);
         let result = PhaseResult {
             voxels: self.voxels_at(self.phase),
             visits,
@@ -263,6 +279,12 @@ impl<'a> PathCostScan<'a> {
     /// later phases lowered costs further. `None` when none is.
     pub fn reached_box(&self, lambda: f32) -> Option<VoxelBounds> {
         let r = self.reach * lambda;
+        self.box_where(|cost| cost < r)
+    }
+
+    /// Box (voxel indices) of the cells whose cost satisfies `keep`; `None`
+    /// when none does.
+    fn box_where(&self, keep: impl Fn(f32) -> bool) -> Option<VoxelBounds> {
         let mut found: Option<VoxelBounds> = None;
         for (cells, origin) in self.costs.pool.chunks(BRICK3).zip(&self.costs.origin) {
             let lo = origin.map(|c| c as usize * BRICK);
@@ -271,7 +293,7 @@ impl<'a> PathCostScan<'a> {
                 continue; // nothing in this brick can widen the box
             }
             for (o, cell) in cells.iter().enumerate() {
-                if cell.cost < r {
+                if keep(cell.cost) {
                     let p = brick_coords(o);
                     let v = VoxelBounds::point([0, 1, 2].map(|a| lo[a] + p[a]));
                     found = Some(found.map_or(v, |f| f.union(&v)));
@@ -376,6 +398,9 @@ impl<'a> PathCostScan<'a> {
     #[inline(always)]
     fn label(&mut self, cell: usize, d: f32) {
         let old = std::mem::replace(&mut self.costs.pool[cell].cost, d);
+        if d < self.undo.below {
+            self.undo.log.push((cell as u32, old));
+        }
         if old < UNSEEN {
             let was = self.bin(old);
             self.bins[was] -= 1;
@@ -489,6 +514,37 @@ impl<'a> PathCostScan<'a> {
                 .blocks(x, p, self.seed, self.values.grid.spacing.to_array())
                 .is_some();
         self.ext.excess(if blocked { SANE_MAX } else { x })
+    }
+}
+
+/// How the scan is rewound to the end of an earlier phase: the map is
+/// written at the λ chosen, whose phase is usually not the last.
+///
+/// In phase `p` a label is logged (cell, cost before) only when its new
+/// cost lies below `R(λ_{p−1})`, the reach of the phase before: a voxel
+/// that stays at or above it was not reached at `λ_{p−1}` (nor at any
+/// smaller λ) before or after, so its exact cost does not matter to a map
+/// at those λ. Undoing a phase's log backwards then restores every cell
+/// reached at the end of the phase before exactly, and leaves every other
+/// one at or above that phase's reach — the first logged change of a cell
+/// records either its cost at the phase's start or one that was already
+/// unreached. Most labels of a later phase are of new voxels beyond
+/// the last reach, which are not logged.
+#[derive(Debug, Default)]
+struct Undo {
+    /// `(cell, cost before)` of each logged label, in order.
+    log: Vec<(u32, f32)>,
+    /// `log.len()` when each phase ended, with its visits and whether it was
+    /// cut short.
+    ends: Vec<(usize, u64, bool)>,
+    /// Labels below this cost are logged (`R(λ_{p−1})`; 0 in the first
+    /// phase, which has nothing before it).
+    below: f32,
+}
+
+impl Undo {
+    fn end_phase(&mut self, visits: u64, cut: bool) {
+        self.ends.push((self.log.len(), visits, cut));
     }
 }
 

@@ -10,7 +10,7 @@ use super::runner::{CpuRunner, GrowRunner, voxels_above_half};
 use super::seed::Seed;
 use crate::volume::{Volume, VoxelData};
 
-fn input(values: &Volume, seed: [usize; 3]) -> ScanInput<'_> {
+pub(crate) fn input(values: &Volume, seed: [usize; 3]) -> ScanInput<'_> {
     ScanInput {
         volume: values.view(),
         values: values.view(),
@@ -143,7 +143,7 @@ fn a_ceiling_at_or_below_one_half_counts_as_the_growth_does() {
 }
 
 /// The volume mirrored along `axis`.
-fn mirrored(v: &Volume, axis: usize) -> Volume {
+pub(crate) fn mirrored(v: &Volume, axis: usize) -> Volume {
     let d = v.grid.dims;
     let src = v.view().data.to_f32_vec();
     let mut out = vec![0f32; src.len()];
@@ -283,13 +283,19 @@ fn bad_input_is_refused_with_the_value() {
     assert!(matches!(e, OpacityError::BadConnectivity { .. }), "{e}");
 }
 
-mod random {
+pub(crate) mod random {
     use super::*;
     use proptest::prelude::*;
 
     /// A small volume of piecewise-constant blobs with noise, i16 (CT's
     /// type) or f32: value `base + step·(x > cut) + noise`.
-    fn volume(dims: [usize; 3], cut: usize, step: f32, noise: Vec<f32>, i16: bool) -> Volume {
+    pub(crate) fn volume(
+        dims: [usize; 3],
+        cut: usize,
+        step: f32,
+        noise: Vec<f32>,
+        i16: bool,
+    ) -> Volume {
         let grid = crate::grid::Grid::new(dims, glam::DVec3::new(0.9, 1.0, 1.3), glam::DVec3::ZERO);
         let values: Vec<f32> = (0..grid.len())
             .map(|l| {

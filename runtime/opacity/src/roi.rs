@@ -89,6 +89,12 @@ impl RoiOutcome {
         s
     }
 
+    /// True when the map was written from the automatic λ's path-cost scan
+    /// rather than grown (`lambda` auto, run to convergence).
+    pub fn from_scan(&self) -> bool {
+        self.auto.is_some() && self.grown.report.steps == 0
+    }
+
     /// True when the map covers more than [`LEAK_FRACTION`] of the volume.
     pub fn leaked(&self) -> bool {
         self.voxels as f64 > LEAK_FRACTION * self.volume_voxels as f64

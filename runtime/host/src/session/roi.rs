@@ -3,13 +3,18 @@
 //! by [`super::Session::render`]. They grow on the session's backend: on
 //! the CPU ([`CpuGrowth`]) or on its GPU ([`GpuGrowth`], over one upload of
 //! the current volume shared by every map), bit for bit the same maps.
+//! A map whose λ is automatic is not grown but written from the path-cost
+//! scan at its λ, on the CPU whatever the backend (what the scene's
+//! `lambda = "auto"` makes, voxel for voxel).
 
 use voxflex_core::gpu::GpuService;
 use voxflex_core::volume::Volume;
 use voxflex_core::volume::VolumeView;
+use voxflex_opacity::auto_lambda::map_at;
+use voxflex_opacity::runner::Grown;
 use voxflex_opacity::{
     CpuGrowth, GpuGrowth, GpuOpacityVolume, Growth, GrowthLimits, GrowthParams, GrowthReport,
-    OpacityMap, Seed, VoxelBounds,
+    OpacityMap, ScanInput, Seed, VoxelBounds,
 };
 
 use super::roi_err;
@@ -74,11 +79,17 @@ impl<'a> RoiDevice<'a> {
     }
 }
 
-/// One map's growth in progress, on the device it was seeded on.
+/// One map's growth in progress, on the device it was seeded on — or an
+/// automatic-λ map written from its path-cost scan, converged, with
+/// nothing left to grow.
 #[derive(Debug)]
 enum RoiGrowth {
     Cpu(CpuGrowth),
     Gpu(GpuGrowth),
+    /// Written by `voxflex_opacity::auto_lambda::map_at` / `auto_map` (on
+    /// the CPU, whatever the backend; the box of its voxels above `o_min`,
+    /// voxel indices). Holds no buffers; the map is [`SessionRoi::map`].
+    Scanned(VoxelBounds),
 }
 
 impl RoiGrowth {
@@ -105,13 +116,16 @@ impl RoiGrowth {
         match self {
             RoiGrowth::Cpu(g) => g.region(),
             RoiGrowth::Gpu(g) => g.region(),
+            RoiGrowth::Scanned(b) => *b,
         }
     }
 
     fn runs_on(&self, device: RoiDevice<'_>) -> bool {
         matches!(
             (self, device),
-            (RoiGrowth::Cpu(_), RoiDevice::Cpu) | (RoiGrowth::Gpu(_), RoiDevice::Gpu { .. })
+            (RoiGrowth::Cpu(_), RoiDevice::Cpu)
+                | (RoiGrowth::Gpu(_), RoiDevice::Gpu { .. })
+                | (RoiGrowth::Scanned(_), _)
         )
     }
 
@@ -119,14 +133,17 @@ impl RoiGrowth {
         match self {
             RoiGrowth::Cpu(g) => g.is_converged(),
             RoiGrowth::Gpu(g) => g.is_converged(),
+            RoiGrowth::Scanned(_) => true,
         }
     }
 
-    /// The map as it stands (a GPU growth reads it back from `device`).
-    fn map(&self, device: RoiDevice<'_>) -> Result<OpacityMap, RunError> {
+    /// The map as it stands (a GPU growth reads it back from `device`);
+    /// `None` for a scanned map, which the session already holds.
+    fn map(&self, device: RoiDevice<'_>) -> Result<Option<OpacityMap>, RunError> {
         match (self, device.gpu()) {
-            (RoiGrowth::Cpu(g), _) => Ok(g.map()),
-            (RoiGrowth::Gpu(g), Some(gpu)) => g.map(gpu).map_err(roi_err),
+            (RoiGrowth::Cpu(g), _) => Ok(Some(g.map())),
+            (RoiGrowth::Gpu(g), Some(gpu)) => g.map(gpu).map(Some).map_err(roi_err),
+            (RoiGrowth::Scanned(_), _) => Ok(None),
             (RoiGrowth::Gpu(_), None) => Err(roi_err(
                 "a map grown on the GPU cannot be read without the GPU; remove it and add it again",
             )),
@@ -204,7 +221,8 @@ impl SessionRoi {
     ) -> Result<Self, RunError> {
         let growth = RoiGrowth::seed(volume, device, &seed, params, None).map_err(roi_err)?;
         let map = match growth.map(device) {
-            Ok(m) => m,
+            Ok(Some(m)) => m,
+            Ok(None) => unreachable!("a seeded growth is never a scanned map"),
             Err(e) => {
                 growth.release(device.gpu());
                 return Err(e);
@@ -240,6 +258,10 @@ impl SessionRoi {
         let report = match (&mut self.growth, on) {
             (Some(RoiGrowth::Cpu(g)), RoiDevice::Cpu) => g.step(view, n),
             (Some(RoiGrowth::Gpu(g)), RoiDevice::Gpu { gpu, values }) => g.step(gpu, values, n),
+            (Some(RoiGrowth::Scanned(_)), _) => Ok(GrowthReport {
+                converged: true,
+                ..GrowthReport::default()
+            }),
             _ => {
                 return Err(roi_err(format!(
                     "map {} is not seeded on the session's {}; remove it and add it again",
@@ -268,12 +290,24 @@ impl SessionRoi {
     /// Seeds again on a new `volume` on `device` and grows as far as
     /// before: the same number of steps, or to convergence if it was run to
     /// the end. The old growth is released (it lived in `device`'s context,
-    /// or on the CPU).
+    /// or on the CPU). An automatic-λ map run to the end is written from a
+    /// path-cost scan at its λ instead ([`SessionRoi::settle`]), on the
+    /// CPU: the map the scene's `lambda = "auto"` makes at that λ.
     pub(crate) fn regrow(
         &mut self,
         volume: &Volume,
         device: RoiDevice<'_>,
     ) -> Result<GrowthReport, RunError> {
+        if self.lambda_auto && self.to_end {
+            let input = ScanInput {
+                volume: volume.view(),
+                values: volume.view(),
+                limits: self.limits,
+                seed: self.seed,
+            };
+            let grown = map_at(input, self.params, self.params.lambda).map_err(roi_err)?;
+            return Ok(self.settle(grown, device));
+        }
         let steps = if self.to_end {
             usize::MAX
         } else {
@@ -291,6 +325,21 @@ impl SessionRoi {
         self.growth = Some(growth);
         self.steps = 0;
         self.step(volume, device, steps)
+    }
+
+    /// Makes `grown` — a converged map written from a path-cost scan on
+    /// the current volume — the map, with nothing left to grow; its old
+    /// growth is released from `device`. Returns its report.
+    pub(crate) fn settle(&mut self, grown: Grown, device: RoiDevice<'_>) -> GrowthReport {
+        self.release(device.gpu());
+        self.bounded = None;
+        let map = grown.map;
+        let hi = [0, 1, 2].map(|a| map.origin[a] + map.dims[a] - 1);
+        self.growth = Some(RoiGrowth::Scanned(VoxelBounds { lo: map.origin, hi }));
+        self.map = map;
+        self.steps = grown.report.steps;
+        self.converged = grown.report.converged;
+        grown.report
     }
 
     /// Applies its bounds to `volume` for a growth on `device` (nothing
@@ -341,8 +390,14 @@ impl SessionRoi {
     }
 
     fn read_map(&mut self, device: RoiDevice<'_>) -> Result<(), RunError> {
-        if let Some(g) = &self.growth {
-            self.map = g.map(device)?;
+        if let Some(map) = self
+            .growth
+            .as_ref()
+            .map(|g| g.map(device))
+            .transpose()?
+            .flatten()
+        {
+            self.map = map;
         }
         Ok(())
     }

@@ -5,7 +5,7 @@
 use super::{RoiId, Session, roi_err};
 use crate::pipeline::RunError;
 use std::time::Instant;
-use voxflex_opacity::auto_lambda::{Trial, choose_lambda};
+use voxflex_opacity::auto_lambda::{Trial, auto_map};
 use voxflex_opacity::{GrowthParams, GrowthReport, ScanInput};
 
 /// What [`Session::roi_auto_lambda`] chose and tried.
@@ -16,7 +16,8 @@ pub struct AutoLambdaReport {
     /// Every candidate λ tried, in increasing order (the last may have
     /// jumped: see `voxflex_opacity::auto_lambda`).
     pub trials: Vec<Trial>,
-    /// The map's growth to convergence at the chosen λ.
+    /// The map's making at the chosen λ: written from the scan, converged,
+    /// no growth step (`visits`: the scan's relaxations up to that λ).
     pub report: GrowthReport,
 }
 
@@ -24,11 +25,12 @@ impl Session {
     /// Chooses ROI map `id`'s λ by the plateau rule (the scene's
     /// `lambda = "auto"`: sizes of its region at λ = 1 … 32, √2
     /// apart, on the current volume with its o_min, o_max and σ floor),
-    /// makes it the map's λ and grows the map to convergence at it (and
-    /// to convergence again on every new volume, at the same λ: the rule
-    /// is not re-run when the volume changes; call this again for that).
-    /// Runs on the session's backend. Errors when there is no map `id`,
-    /// leaving the maps as they were.
+    /// makes it the map's λ and writes the converged map at it from the
+    /// same scan, with no growth (`voxflex_opacity::auto_lambda::auto_map`;
+    /// on every new volume the map is written again from a scan at the
+    /// same λ: the rule is not re-run when the volume changes; call this
+    /// again for that). Runs on the CPU whatever the session's backend.
+    /// Errors when there is no map `id`, leaving the maps as they were.
     pub fn roi_auto_lambda(&mut self, id: RoiId) -> Result<AutoLambdaReport, RunError> {
         let i = self.roi_index(id)?;
         self.ensure_volume()?;
@@ -44,25 +46,21 @@ impl Session {
             limits: rois[i].limits,
             seed,
         };
-        let (lambda, trials) = choose_lambda(input, params).map_err(roi_err)?;
+        let auto = auto_map(input, params).map_err(roi_err)?;
         let roi = &mut rois[i];
-        let was = (roi.params, roi.lambda_auto, roi.to_end);
-        roi.params = GrowthParams { lambda, ..params };
+        roi.params = GrowthParams {
+            lambda: auto.lambda,
+            ..params
+        };
         roi.lambda_auto = true;
         roi.to_end = true;
-        let report = match roi.regrow(volume, device) {
-            Ok(r) => r,
-            Err(e) => {
-                (roi.params, roi.lambda_auto, roi.to_end) = was;
-                return Err(e);
-            }
-        };
+        let report = roi.settle(auto.grown, device);
         self.metrics
             .stage("roi")
             .record_run(t.elapsed(), report.visits);
         Ok(AutoLambdaReport {
-            lambda,
-            trials,
+            lambda: auto.lambda,
+            trials: auto.trials,
             report,
         })
     }
@@ -72,11 +70,13 @@ impl Session {
 mod tests {
     use crate::session::{RoiId, Seed};
     use voxflex_core::glam::DVec3;
-    use voxflex_opacity::auto_lambda::CANDIDATES;
-    use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, grow_roi};
+    use voxflex_opacity::auto_lambda::{CANDIDATES, map_at};
+    use voxflex_opacity::{
+        GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, ScanInput, grow_roi,
+    };
 
     #[test]
-    fn auto_lambda_grows_the_map_the_scene_rule_grows_and_a_given_lambda_ends_it() {
+    fn auto_lambda_writes_the_map_the_scene_rule_writes_and_a_given_lambda_ends_it() {
         let (mut s, id) = crate::session::tests::head_session_with_brain_roi();
         let seed = Seed::World(DVec3::new(40.0, 0.0, 15.0));
         let params = GrowthParams::default();
@@ -102,7 +102,31 @@ mod tests {
         .unwrap();
         assert_eq!(scene.lambda, auto.lambda);
         assert_eq!(s.roi_map(id).unwrap(), &scene.grown.map);
-        // A λ given again makes it a fixed-λ map.
+        // Written from the scan, not grown.
+        assert_eq!((auto.report.steps, s.rois()[0].steps), (0, 0));
+        // Made again (new bounds; a new volume takes the same path) it is
+        // written again from a scan at the same λ, the rule not re-run.
+        let limits = GrowthLimits {
+            intensity: None,
+            max_distance_mm: Some(20.0),
+        };
+        let again = s.set_roi_limits(id, limits).unwrap();
+        assert!(again.converged && again.steps == 0, "{again:?}");
+        let info = &s.rois()[0];
+        assert!(info.lambda_auto && info.params.lambda == auto.lambda);
+        let volume = s.volume().unwrap().clone();
+        let input = ScanInput {
+            volume: volume.view(),
+            values: volume.view(),
+            limits,
+            seed,
+        };
+        let bounded = map_at(input, params, auto.lambda).unwrap();
+        assert_eq!(s.roi_map(id).unwrap(), &bounded.map);
+        assert_ne!(bounded.map, scene.grown.map);
+        s.set_roi_limits(id, GrowthLimits::default()).unwrap();
+        assert_eq!(s.roi_map(id).unwrap(), &scene.grown.map);
+        // A λ given again makes it a fixed-λ map, grown.
         s.set_roi_params(
             id,
             GrowthParams {
@@ -111,7 +135,7 @@ mod tests {
             },
         )
         .unwrap();
-        assert!(!s.rois()[0].lambda_auto);
+        assert!(!s.rois()[0].lambda_auto && s.rois()[0].steps > 0);
         let e = s.roi_auto_lambda(RoiId(99)).unwrap_err().to_string();
         assert!(e.contains("no ROI map 99"), "{e}");
     }
