@@ -23,6 +23,7 @@ use crate::params::GrowthParams;
 use crate::report::GrowthReport;
 use crate::runner::Grown;
 use crate::{OpacityError, OpacityMap};
+use rayon::prelude::*;
 
 /// Fixed-point opacity ½: the region's threshold.
 const HALF: u16 = 32768;
@@ -111,37 +112,78 @@ impl PathCostScan<'_> {
         self.undo.ends.truncate(k + 1);
     }
 
-    /// The map of the voxels `convert` lifts above `o_min`.
+    /// The map of the voxels `convert` lifts above `o_min`. Each layer of
+    /// bricks (one brick z) writes its own slab of the box, in parallel.
     fn write_map(&self, convert: CostToOpacity) -> OpacityMap {
         // The seed (cost 0, o_max > o_min by validation) is always in it.
         let b = self
             .box_where(|d| convert.at(d) > convert.q_min)
             .unwrap_or(VoxelBounds::point(self.seed));
         let dims = b.dims();
-        let mut values = vec![convert.q_min; b.len()];
-        for (cells, origin) in self.costs.pool.chunks(BRICK3).zip(&self.costs.origin) {
-            let lo = origin.map(|c| c as usize * BRICK);
-            let hi = [0, 1, 2].map(|a| (lo[a] + BRICK).min(b.hi[a] + 1));
-            let from = [0, 1, 2].map(|a| lo[a].max(b.lo[a]));
-            if (0..3).any(|a| from[a] >= hi[a]) {
-                continue; // outside the box
-            }
-            // Cells of a brick run x fastest, then y, then z (`in_brick`).
-            for z in from[2]..hi[2] {
-                for y in from[1]..hi[1] {
-                    let row = (y - b.lo[1] + dims[1] * (z - b.lo[2])) * dims[0];
-                    let cell = BRICK * ((y - lo[1]) + BRICK * (z - lo[2]));
-                    for x in from[0]..hi[0] {
-                        values[row + x - b.lo[0]] = convert.at(cells[cell + x - lo[0]].cost);
-                    }
-                }
+        let first = b.lo[2] / BRICK;
+        let mut layers = vec![Vec::new(); b.hi[2] / BRICK + 1 - first];
+        for (i, origin) in self.costs.origin.iter().enumerate() {
+            let layer = (origin[2] as usize).checked_sub(first);
+            if let Some(bricks) = layer.and_then(|l| layers.get_mut(l)) {
+                bricks.push(i);
             }
         }
+        // Zeroed pages are mapped lazily: each slab is filled (and its pages
+        // faulted in) by its own task.
+        let mut values = vec![0u16; b.len()];
+        let mut slabs = Vec::with_capacity(layers.len());
+        let mut rest = values.as_mut_slice();
+        for layer in first..first + layers.len() {
+            let z0 = (layer * BRICK).max(b.lo[2]);
+            let z1 = (layer * BRICK + BRICK).min(b.hi[2] + 1);
+            let (slab, after) = rest.split_at_mut((z1 - z0) * dims[0] * dims[1]);
+            slabs.push((z0, slab));
+            rest = after;
+        }
+        slabs
+            .into_par_iter()
+            .zip(layers)
+            .for_each(|((z0, slab), bricks)| {
+                slab.fill(convert.q_min);
+                for i in bricks {
+                    self.write_brick(i, &b, z0, slab, convert);
+                }
+            });
         OpacityMap {
             origin: b.lo,
             dims,
             outside: convert.q_min,
             values,
+        }
+    }
+
+    /// Writes pool brick `i`'s cells inside box `b` into `slab`, the box's
+    /// slices from `z0` on.
+    fn write_brick(
+        &self,
+        i: usize,
+        b: &VoxelBounds,
+        z0: usize,
+        slab: &mut [u16],
+        convert: CostToOpacity,
+    ) {
+        let cells = &self.costs.pool[i * BRICK3..(i + 1) * BRICK3];
+        let lo = self.costs.origin[i].map(|c| c as usize * BRICK);
+        let hi = [0, 1, 2].map(|a| (lo[a] + BRICK).min(b.hi[a] + 1));
+        let from = [0, 1, 2].map(|a| lo[a].max(b.lo[a]));
+        if (0..3).any(|a| from[a] >= hi[a]) {
+            return; // outside the box
+        }
+        let dims = b.dims();
+        // Cells of a brick run x fastest, then y, then z (`in_brick`).
+        for z in from[2]..hi[2] {
+            for y in from[1]..hi[1] {
+                let row = (y - b.lo[1] + dims[1] * (z - z0)) * dims[0];
+                let cell = BRICK * ((y - lo[1]) + BRICK * (z - lo[2]));
+                for x in from[0]..hi[0] {
+                    slab[row + x - b.lo[0]] = convert.at(cells[cell + x - lo[0]].cost);
+                }
+            }
         }
     }
 }
