@@ -111,8 +111,9 @@
 //! vessels and touching organs of similar enhancement. [`GrowthLimits`]
 //! (an intensity window, a Euclidean distance from the seed) block voxels
 //! outright ([`limits`]); `lambda = "auto"` picks the largest λ before the
-//! region jumps ([`auto_lambda`]); [`grow_roi`] runs either on either
-//! backend and says what stopped the growth ([`roi`]).
+//! region jumps and writes the map at it from the same search
+//! ([`auto_lambda`]); [`grow_roi`] runs either on either backend and says
+//! what stopped the growth ([`roi`]).
 
 //! # Transfer function
 //!

@@ -66,8 +66,9 @@
 //! thousand. The tests check it voxel by voxel after every phase (a
 //! disagreeing voxel's real-valued opacity must lie within that bound of
 //! ½) on random volumes, opacity ranges and neighbourhoods, and the sizes
-//! on the abdomen's organs. The scan only chooses λ; the map is then grown
-//! at that λ.
+//! on the abdomen's organs. The map at the λ chosen is then written from
+//! the same costs ([`PathCostScan::into_map`], rewound to that λ's phase
+//! with the undo log kept by [`PathCostScan::next_phase`]), not grown.
 
 use super::OpacityError;
 use super::auto_lambda::CANDIDATES;
