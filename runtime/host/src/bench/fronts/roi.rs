@@ -78,7 +78,8 @@ pub(super) fn front(quick: bool) -> Result<Front, BenchError> {
              the spleen and the right kidney; grown to convergence on the CPU, no intensity or \
              distance bounds. Error: 1 − Dice of the map ≥ 0.5 against the seed's organ. One \
              series per seed over fixed λ (the automatic rule's candidates, √2 apart, and 30), \
-             and the three `lambda = \"auto\"` runs (its time includes the scan; the scene \
+             and the three `lambda = \"auto\"` runs (its time is the scan and the map written from \
+             it, with no growth; the scene \
              default, ringed). The paper's λ = {PAPER_LAMBDA} is the fixed series' last point."
         ),
         points,
