@@ -479,7 +479,9 @@ impl<'a> Kernel<'a> {
             k += 1;
             let (v, fp) = self.sample(p);
             samples += 1;
-            let [r, g, b, kappa] = lut.lookup(v);
+            let Some([r, g, b, kappa]) = lut.lookup_visible(v) else {
+                continue;
+            };
             if kappa <= 0.0 {
                 continue;
             }

@@ -207,11 +207,19 @@ impl TransferFunction {
             count += (e[3] > 0.0) as u32;
             nonzero_prefix.push(count);
         }
+        let visible = (
+            entries
+                .iter()
+                .position(|e| e[3] > 0.0)
+                .unwrap_or(LUT_SIZE + 1),
+            entries.iter().rposition(|e| e[3] > 0.0).unwrap_or(0),
+        );
         Lut {
             entries,
             lo,
             scale,
             nonzero_prefix,
+            visible,
         }
     }
 }
@@ -230,19 +238,46 @@ pub struct Lut {
     /// `nonzero_prefix[e]` = number of entries before `e` with κ > 0
     /// ([`LUT_SIZE`] + 1 values): the opacity range table of empty-space skipping.
     pub nonzero_prefix: Vec<u32>,
+    /// The first and the last entry with κ > 0 (first > last when none):
+    /// a value whose two entries both lie outside has κ = 0 exactly
+    /// ([`Lut::lookup_visible`]).
+    pub visible: (usize, usize),
 }
 
 impl Lut {
     /// Interpolated `[r, g, b, κ]` at data value `v`.
     #[inline(always)]
     pub fn lookup(&self, v: f32) -> [f32; 4] {
+        let (e0, f) = self.position(v);
+        self.at(e0, f)
+    }
+
+    /// [`Lut::lookup`], or `None` when both table entries around `v` lie
+    /// outside the visible range (then κ is 0 exactly, and the renderer
+    /// skips the sample without reading the table: three in four samples
+    /// of the `ct-bone` head lie in soft tissue next to bone).
+    #[inline(always)]
+    pub fn lookup_visible(&self, v: f32) -> Option<[f32; 4]> {
+        let (e0, f) = self.position(v);
+        let (first, last) = self.visible;
+        (e0 + 1 >= first && e0 <= last).then(|| self.at(e0, f))
+    }
+
+    /// The entry below `v` and the fraction past it.
+    #[inline(always)]
+    fn position(&self, v: f32) -> (usize, f32) {
         // `max` then `min`, not `clamp`: NaN becomes entry 0 instead of
         // passing through.
         let x = ((v - self.lo) * self.scale)
             .max(0.0)
             .min((LUT_SIZE - 1) as f32);
         let e0 = (x as usize).min(LUT_SIZE - 2);
-        let f = x - e0 as f32;
+        (e0, x - e0 as f32)
+    }
+
+    /// Entries `e0` and `e0 + 1` interpolated at fraction `f`.
+    #[inline(always)]
+    fn at(&self, e0: usize, f: f32) -> [f32; 4] {
         let (a, b) = (self.entries[e0], self.entries[e0 + 1]);
         [
             a[0] + f * (b[0] - a[0]),
@@ -270,6 +305,39 @@ impl Lut {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `lookup_visible` is `lookup` wherever it answers, and answers `None`
+    /// only where `lookup`'s κ is 0: every preset (`ct-lung` has two
+    /// visible ranges), a function with nothing visible, values below,
+    /// inside, between and above the table's entries, and NaN.
+    #[test]
+    fn lookup_visible_skips_only_invisible_values() {
+        let mut fns: Vec<TransferFunction> = PRESETS
+            .iter()
+            .map(|p| TransferFunction::preset(p).unwrap())
+            .collect();
+        fns.push(tf(&[
+            [0.0, 1.0, 1.0, 1.0, 0.0],
+            [100.0, 1.0, 1.0, 1.0, 0.0],
+        ]));
+        for f in &fns {
+            let lut = f.lut((-1024.0, 3071.0), 1.0);
+            let mut skipped = 0;
+            for i in -4200..=4200 {
+                let v = i as f32;
+                for v in [v, v + 0.37, f32::NAN] {
+                    match lut.lookup_visible(v) {
+                        Some(x) => assert_eq!(x, lut.lookup(v), "{v}"),
+                        None => {
+                            assert_eq!(lut.lookup(v)[3], 0.0, "{v}");
+                            skipped += 1;
+                        }
+                    }
+                }
+            }
+            assert!(skipped > 0, "{f:?}");
+        }
+    }
 
     fn tf(points: &[[f32; 5]]) -> TransferFunction {
         TransferFunction {
