@@ -92,6 +92,20 @@ fn the_map_at_every_lambda_is_a_scan_stopped_there_and_the_growths_within_roundi
     }
 }
 
+/// With the ceiling at or below ½ no voxel (below) or only the cost-0
+/// voxels (at ½) reach ½: the written maps still hold every check.
+#[test]
+fn a_ceiling_at_or_below_one_half_writes_maps_that_hold() {
+    let p = three_spheres_with(24, 108.0, 3.0, 5);
+    for o_max in [0.3, 0.5] {
+        let params = GrowthParams {
+            o_max,
+            ..GrowthParams::default()
+        };
+        check_every_phase(&p.volume, p.a.centre_voxel(), params);
+    }
+}
+
 /// The written map of a mirrored volume is the mirror of the map, exactly.
 #[test]
 fn mirrored_volumes_give_mirrored_maps() {
