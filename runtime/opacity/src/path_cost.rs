@@ -55,7 +55,10 @@
 //! the whole volume (the air around a CT, say) costs 8 bytes per voxel of
 //! the volume for the time of the scan. The step costs are stored because
 //! reading the volume's value at every relaxation was the stall of a
-//! third of the first version's profile samples.
+//! third of the first version's profile samples. The undo log that rewinds
+//! the scan to the λ chosen (see `Undo`) holds 8 bytes per label of a later
+//! phase landing below the reach of the phase before (70,513 of them on
+//! the liver at 1.5 mm).
 //!
 //! # Against the growth
 //!

@@ -164,6 +164,9 @@ pub fn grow_roi(
                 }
             }
         };
+    // An automatic λ run to convergence writes its map from the scan, on
+    // the CPU: no growth, so nothing to upload.
+    let gpu = gpu.filter(|_| !(req.lambda == LambdaChoice::Auto && req.steps.is_none()));
     let (grown, lambda, auto) = match gpu {
         None => run(&mut CpuRunner {
             volume,
