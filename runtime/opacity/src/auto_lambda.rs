@@ -107,6 +107,8 @@ pub struct AutoLambda {
     /// The map at the chosen λ: the scan's ([`auto_map`]), or a growth
     /// capped at a number of steps.
     pub grown: Grown,
+    /// True when `grown` was written from the scan, not grown.
+    pub from_scan: bool,
 }
 
 /// The λ the rule picks from the trials (in increasing λ; the last may
@@ -182,6 +184,7 @@ pub fn auto_lambda(
         lambda,
         trials,
         grown,
+        from_scan: false,
     })
 }
 
@@ -194,6 +197,7 @@ pub fn auto_map(input: ScanInput<'_>, params: GrowthParams) -> Result<AutoLambda
         lambda,
         trials,
         grown: scan.into_map(lambda)?,
+        from_scan: true,
     })
 }
 

@@ -92,7 +92,7 @@ impl RoiOutcome {
     /// True when the map was written from the automatic λ's path-cost scan
     /// rather than grown (`lambda` auto, run to convergence).
     pub fn from_scan(&self) -> bool {
-        self.auto.is_some() && self.grown.report.steps == 0
+        self.auto.as_ref().is_some_and(|a| a.from_scan)
     }
 
     /// True when the map covers more than [`LEAK_FRACTION`] of the volume.
