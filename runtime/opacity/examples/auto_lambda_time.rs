@@ -1,7 +1,9 @@
 //! Where the automatic λ's time goes: the path-cost scan that chooses λ
 //! (`auto_lambda::choose_lambda`), the scan with the map written from its
-//! costs as `grow_roi` runs it (`auto_lambda::auto_map`), and one growth
-//! at the λ chosen (CPU) for comparison, from the liver seed of
+//! costs as `grow_roi` runs it (`auto_lambda::auto_map`), the map again
+//! at the λ chosen from a scan run only that far (`auto_lambda::map_at`:
+//! what a session pays for an automatic-λ map on each new volume), and
+//! one growth at the λ chosen (CPU) for comparison, from the liver seed of
 //! `phantom:abdomen`; then how far the scan's map lies from that growth's
 //! and whether the scan's region sizes equal the growth's.
 //!
@@ -13,7 +15,7 @@
 //! of each, and every trial's size next to a growth's at that λ.
 
 use std::time::{Duration, Instant};
-use voxflex_opacity::auto_lambda::{auto_map, choose_lambda};
+use voxflex_opacity::auto_lambda::{auto_map, choose_lambda, map_at};
 use voxflex_opacity::runner::voxels_above_half;
 use voxflex_opacity::{CpuRunner, GrowRunner, GrowthLimits, GrowthParams, ScanInput, Seed};
 use voxflex_phantom::abdomen::SEEDS;
@@ -58,7 +60,7 @@ fn main() {
             values: v,
             seed: Seed::World(*p),
         };
-        let (mut scan, mut grow, mut whole) = (vec![], vec![], vec![]);
+        let (mut scan, mut grow, mut whole, mut again) = (vec![], vec![], vec![], vec![]);
         let (mut lambda, mut trials) = (0.0, vec![]);
         for _ in 0..repeat {
             let t = Instant::now();
@@ -73,11 +75,16 @@ fn main() {
             let a = auto_map(input, params).unwrap();
             whole.push(t.elapsed());
             assert_eq!(a.lambda, lambda);
+            let t = Instant::now();
+            let m = map_at(input, params, lambda).unwrap();
+            again.push(t.elapsed());
+            assert_eq!(m.map, a.grown.map);
         }
         println!("abdomen {dims:?}, liver seed: λ = {lambda}");
         println!("  scan (choose λ):        {}", stats(scan));
         println!("  one growth at that λ:   {}", stats(grow));
         println!("  scan + its map (grow_roi): {}", stats(whole));
+        println!("  scan to that λ + its map (map_at): {}", stats(again));
         let written = auto_map(input, params).unwrap().grown.map.dense(dims);
         let grown = runner
             .grow(GrowthParams { lambda, ..params }, None)
