@@ -163,25 +163,7 @@ mod random_volumes {
         /// every phase's map as above, and the automatic λ's map is its
         /// chosen trial's region.
         #[test]
-        fn written_maps_hold_on_random_volumes(
-            dims in prop::array::uniform3(6usize..18),
-            cut in 2usize..16,
-            step in 5.0f32..60.0,
-            noise in prop::collection::vec(-12.0f32..12.0, 97..211),
-            seed in prop::array::uniform3(0usize..6),
-            o_min in 0.0f32..0.3,
-            o_max in 0.6f32..1.0,
-            faces in any::<bool>(),
-            i16 in any::<bool>(),
-        ) {
-            let v = random::volume(dims, cut, step, noise, i16);
-            let params = GrowthParams {
-                o_min,
-                o_max,
-                connectivity: if faces { 6 } else { 26 },
-                seed_radius: 1,
-                ..GrowthParams::default()
-            };
+        fn written_maps_hold_on_random_volumes((v, seed, params) in random::case(18)) {
             check_every_phase(&v, seed, params);
             let a = auto_map(input(&v, seed), params).unwrap();
             let chosen = a.trials.iter().find(|t| t.lambda == a.lambda).unwrap();
