@@ -16,11 +16,13 @@
 use crate::filters;
 use crate::gradient_cache::GradientCache;
 use crate::macrocell::MacroCells;
+use crate::ray_bounds::RayBounds;
 use crate::transfer::Lut;
 use crate::uniforms::{
     FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_JITTER, FLAG_MAP_NEAREST, FLAG_SHADING,
     FLAG_SOBEL, FLAG_TRICUBIC, RayUniforms,
 };
+use crate::visible_cells::VisibleCells;
 use rayon::prelude::*;
 use voxflex_core::glam::Vec3;
 use voxflex_core::opacity_map::{OPACITY_ONE, OpacityMap};
@@ -49,6 +51,13 @@ pub struct Scene<'a> {
     /// Cached Sobel gradients of `values` (bit-identical to computing them
     /// per sample, which is what happens without it).
     pub gradients: Option<&'a GradientCache>,
+    /// Which cells `lut` may show ([`VisibleCells`], made for this volume
+    /// and `lut`); used when empty-space skipping is on and sampling is
+    /// trilinear.
+    pub visible: Option<&'a VisibleCells>,
+    /// The frame's [`RayBounds`] (made from `u` and `leap`); used in
+    /// composite mode when empty-space skipping is on.
+    pub bounds: Option<&'a RayBounds>,
 }
 
 /// One ray's result: linear premultiplied RGBA (background included).
@@ -105,6 +114,10 @@ struct Kernel<'a> {
     shininess_int: Option<i32>,
     flags: u32,
     dt: f32,
+    /// The scene's [`VisibleCells`] when they apply (skipping on, trilinear).
+    visible: Option<&'a VisibleCells>,
+    /// The frame's [`RayBounds`] (composite mode, skipping on).
+    bounds: Option<&'a RayBounds>,
 }
 
 #[inline(always)]
@@ -141,24 +154,19 @@ impl<'a> Kernel<'a> {
             },
             flags: u.flags(),
             dt: u.step[0],
+            visible: s
+                .visible
+                .filter(|_| u.flags() & FLAG_ESS != 0 && u.flags() & FLAG_TRICUBIC == 0),
+            bounds: s
+                .bounds
+                .filter(|_| u.flags() & FLAG_ESS != 0 && u.image[3] == 0),
         }
     }
 
     /// The primary ray of pixel `(px, py)`: origin (mm) and unit direction.
     #[inline]
     fn ray(&self, px: u32, py: u32) -> (Vec3, Vec3) {
-        let u = self.s.u;
-        let nx = 2.0 * (px as f32 + 0.5) / u.image[0] as f32 - 1.0;
-        let ny = 1.0 - 2.0 * (py as f32 + 0.5) / u.image[1] as f32;
-        let eye = Vec3::from_slice(&u.eye[..3]);
-        let right = Vec3::from_slice(&u.right[..3]);
-        let up = Vec3::from_slice(&u.up[..3]);
-        let fwd = Vec3::from_slice(&u.forward[..3]);
-        if u.image[2] == 0 {
-            (eye + right * nx + up * ny, fwd)
-        } else {
-            (eye, (fwd + right * nx + up * ny).normalize())
-        }
+        primary_ray(self.s.u, px, py)
     }
 
     /// The part `[t0, t1]` of the ray inside the box and every clip plane
@@ -221,11 +229,26 @@ impl<'a> Kernel<'a> {
     #[inline(always)]
     fn sample(&self, p: Vec3) -> (f32, Footprint) {
         let fp = self.footprint(p);
+        (self.sample_at(p, &fp), fp)
+    }
+
+    /// The value at voxel position `p` whose footprint is `fp`.
+    #[inline(always)]
+    fn sample_at(&self, p: Vec3, fp: &Footprint) -> f32 {
         if self.flags & FLAG_TRICUBIC != 0 {
-            let v = filters::tricubic(p, self.upper, |q| self.value(&self.footprint(q)));
-            (v, fp)
+            filters::tricubic(p, self.upper, |q| self.value(&self.footprint(q)))
         } else {
-            (self.value(&fp), fp)
+            self.value(fp)
+        }
+    }
+
+    /// False when the sample at footprint `fp` is known to have κ = 0
+    /// without reading the volume ([`VisibleCells`]).
+    #[inline(always)]
+    fn may_show(&self, fp: &Footprint) -> bool {
+        match self.visible {
+            Some(cells) => cells.may_show(self.s.values, self.s.lut, fp.i),
+            None => true,
         }
     }
 
@@ -374,10 +397,11 @@ impl<'a> Kernel<'a> {
         let u = self.s.u;
         let (o, d) = self.ray(px, py);
         let (t0, t1) = self.interval(o, d);
-        let mut out = if t0 < t1 {
+        let reach = self.bounds.map_or([t0, t1], |b| b.at(px, py));
+        let mut out = if t0 < t1 && reach[0] <= reach[1] {
             let sch = self.schedule(t0, t1, px, py);
             if u.image[3] == 0 {
-                self.composite(o, d, &sch)
+                self.composite(o, d, &sch, reach)
             } else {
                 self.mip(o, d, &sch)
             }
@@ -432,17 +456,26 @@ impl<'a> Kernel<'a> {
         }
     }
 
-    /// Index of the first sample at or past ray parameter `t_exit`.
+    /// Index of the first sample past sample `k` at or past ray parameter
+    /// `t_exit`.
     #[inline]
     fn next_sample(&self, k: u32, s: &Schedule, t_exit: f32) -> u32 {
-        let x = ((t_exit - s.ts) * self.inv_dt - 0.5 + s.lead as f32).clamp(0.0, s.n_total as f32);
-        // ceil(x) for x ≥ 0 without a libm call.
-        let i = x as u32;
-        let next = if (i as f32) < x { i + 1 } else { i };
-        next.max(k + 1)
+        self.first_sample_at(s, t_exit).max(k + 1)
     }
 
-    fn composite(&self, o: Vec3, d: Vec3, sch: &Schedule) -> RayResult {
+    /// Index of the first sample at or past ray parameter `t` (to a
+    /// rounding: callers that must not miss one start a sample earlier).
+    #[inline]
+    fn first_sample_at(&self, s: &Schedule, t: f32) -> u32 {
+        let x = ((t - s.ts) * self.inv_dt - 0.5 + s.lead as f32).clamp(0.0, s.n_total as f32);
+        // ceil(x) for x ≥ 0 without a libm call.
+        let i = x as u32;
+        if (i as f32) < x { i + 1 } else { i }
+    }
+
+    /// Composites the samples of `sch` within `reach` (ray parameters,
+    /// mm; samples outside it have κ = 0: [`RayBounds`]).
+    fn composite(&self, o: Vec3, d: Vec3, sch: &Schedule, reach: [f32; 2]) -> RayResult {
         let u = self.s.u;
         let lut = self.s.lut;
         let origin = Vec3::from_slice(&u.origin[..3]);
@@ -461,9 +494,12 @@ impl<'a> Kernel<'a> {
         let mut samples = 0u32;
         let mut terminated = false;
         let mut cell_exit = -1.0f32;
-        let mut k = 0u32;
+        let mut k = self.first_sample_at(sch, reach[0]).saturating_sub(1);
         while k < n_total {
             let (t, len) = self.at(sch, k);
+            if t > reach[1] {
+                break;
+            }
             let p = oi + di * t;
             if ess && t >= cell_exit {
                 let (c, l) = self.cell_of(p);
@@ -477,7 +513,11 @@ impl<'a> Kernel<'a> {
                 cell_exit = self.cell_exit(c, 1, oi, di, inv_di);
             }
             k += 1;
-            let (v, fp) = self.sample(p);
+            let fp = self.footprint(p);
+            if !self.may_show(&fp) {
+                continue;
+            }
+            let v = self.sample_at(p, &fp);
             samples += 1;
             let Some([r, g, b, kappa]) = lut.lookup_visible(v) else {
                 continue;
@@ -571,6 +611,23 @@ impl<'a> Kernel<'a> {
             samples,
             terminated: false,
         }
+    }
+}
+
+/// The primary ray of pixel `(px, py)` (top-left origin) of the frame `u`:
+/// origin (world mm) and unit direction.
+#[inline]
+pub fn primary_ray(u: &RayUniforms, px: u32, py: u32) -> (Vec3, Vec3) {
+    let nx = 2.0 * (px as f32 + 0.5) / u.image[0] as f32 - 1.0;
+    let ny = 1.0 - 2.0 * (py as f32 + 0.5) / u.image[1] as f32;
+    let eye = Vec3::from_slice(&u.eye[..3]);
+    let right = Vec3::from_slice(&u.right[..3]);
+    let up = Vec3::from_slice(&u.up[..3]);
+    let fwd = Vec3::from_slice(&u.forward[..3]);
+    if u.image[2] == 0 {
+        (eye + right * nx + up * ny, fwd)
+    } else {
+        (eye, (fwd + right * nx + up * ny).normalize())
     }
 }
 

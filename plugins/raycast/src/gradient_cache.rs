@@ -15,7 +15,7 @@
 //!
 //! Only bricks a shaded sample reaches are built (a bone transfer function
 //! on a head CT touches a small part of the volume), on the rendering
-//! threads, once each ([`OnceLock`]). The cache holds at most as many bytes
+//! threads, once each ([`crate::lazy_bricks`]). The cache holds at most as many bytes
 //! as the f32 volume itself ([`GradientCache::new`]'s budget); past that a
 //! brick is marked uncached and its samples compute the gradient as before.
 //! [`GradientCache::invalidate`] drops the bricks whose gradients read a
@@ -25,13 +25,12 @@
 //! two voxels, as `filters::sobel`); indices are voxel indices, x fastest.
 
 use crate::filters::{tap3, trilinear8};
+use crate::lazy_bricks::{LazyBricks, Reach};
 use crate::macrocell::IndexBox;
-use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use voxflex_core::glam::Vec3;
 
-/// Cells per brick edge.
-pub const BRICK: usize = 8;
+pub use crate::lazy_bricks::BRICK;
 /// Corner voxels per brick edge.
 const SIDE: usize = BRICK + 1;
 /// Voxels per brick edge with the one-voxel halo the filter reads.
@@ -40,16 +39,19 @@ const HALO: usize = BRICK + 3;
 const BRICK_FLOATS: usize = 3 * SIDE * SIDE * SIDE;
 /// Bytes of one built brick.
 pub const BRICK_BYTES: usize = 4 * BRICK_FLOATS;
+/// The Sobel filter reads one voxel beyond a brick's corners.
+const REACH: Reach = Reach {
+    before: 1,
+    after: 1,
+};
 
 /// One brick's corner gradients, `[(cx + 9 (cy + 9 cz)) · 3 + axis]`.
 type Brick = Box<[f32]>;
 
 /// Sobel gradients of a volume, per 8³-cell brick, built on first use.
 pub struct GradientCache {
-    dims: [usize; 3],
-    bricks: [usize; 3],
     /// `None` inside: the brick was over budget (computed per sample).
-    slots: Vec<OnceLock<Option<Brick>>>,
+    bricks: LazyBricks<Option<Brick>>,
     /// Bricks that may be built.
     budget: usize,
     /// Bricks built (or being built).
@@ -60,13 +62,8 @@ impl GradientCache {
     /// An empty cache for a volume of `dims` voxels holding at most
     /// `budget_bytes` of gradients.
     pub fn new(dims: [usize; 3], budget_bytes: usize) -> Self {
-        // Cells (footprint lower corners) per axis: 0 ..= max(n, 2) − 2.
-        let bricks = dims.map(|n| (n.max(2) - 1).div_ceil(BRICK));
-        let count = bricks.iter().product();
         Self {
-            dims,
-            bricks,
-            slots: (0..count).map(|_| OnceLock::new()).collect(),
+            bricks: LazyBricks::new(dims),
             budget: budget_bytes / BRICK_BYTES,
             built: AtomicUsize::new(0),
         }
@@ -74,7 +71,7 @@ impl GradientCache {
 
     /// The volume size the cache was made for (voxels).
     pub fn dims(&self) -> [usize; 3] {
-        self.dims
+        self.bricks.dims()
     }
 
     /// Bricks built so far.
@@ -85,23 +82,12 @@ impl GradientCache {
     /// Drops every brick whose gradients read a voxel of `region` (a corner
     /// reads its neighbours one voxel away).
     pub fn invalidate(&mut self, region: IndexBox) {
-        let range = |a: usize| {
-            // Brick b reads voxels 8b − 1 ..= 8b + 9.
-            let lo = region.lo[a].saturating_sub(BRICK + 1).div_ceil(BRICK);
-            let hi = ((region.hi[a] + 1) / BRICK).min(self.bricks[a] - 1);
-            lo..=hi
-        };
-        for bz in range(2) {
-            for by in range(1) {
-                for bx in range(0) {
-                    let slot = &mut self.slots[bx + self.bricks[0] * (by + self.bricks[1] * bz)];
-                    if let Some(Some(_)) = slot.take() {
-                        *self.built.get_mut() -= 1;
-                    }
-                }
-            }
-        }
         let built = self.built.get_mut();
+        self.bricks.invalidate(region, REACH, |b| {
+            if b.is_some() {
+                *built -= 1;
+            }
+        });
         *built = (*built).min(self.budget);
     }
 
@@ -111,14 +97,12 @@ impl GradientCache {
     /// budget.
     #[inline]
     pub fn sobel(&self, values: &[f32], i: [usize; 3], f: Vec3) -> Option<Vec3> {
-        let b = [i[0] / BRICK, i[1] / BRICK, i[2] / BRICK];
-        let slot = &self.slots[b[0] + self.bricks[0] * (b[1] + self.bricks[1] * b[2])];
-        let brick = slot.get_or_init(|| self.build(values, b)).as_deref()?;
-        let l = [
-            i[0] - b[0] * BRICK,
-            i[1] - b[1] * BRICK,
-            i[2] - b[2] * BRICK,
-        ];
+        let place = self.bricks.place(i);
+        let brick = self
+            .bricks
+            .get_or_build(&place, |b| self.build(values, b))
+            .as_deref()?;
+        let l = place.local;
         let at = |dx: usize, dy: usize, dz: usize| {
             3 * (l[0] + dx + SIDE * (l[1] + dy + SIDE * (l[2] + dz)))
         };
@@ -147,7 +131,7 @@ impl GradientCache {
         if self.built.fetch_add(1, Ordering::Relaxed) >= self.budget {
             return None;
         }
-        Some(brick_gradients(values, self.dims, b))
+        Some(brick_gradients(values, self.bricks.dims(), b))
     }
 }
 
@@ -262,7 +246,7 @@ mod tests {
 
     /// Builds every brick of `cache`.
     fn fill(cache: &GradientCache, v: &[f32]) {
-        let [nx, ny, nz] = cache.bricks;
+        let [nx, ny, nz] = cache.bricks.counts();
         for bz in 0..nz {
             for by in 0..ny {
                 for bx in 0..nx {
@@ -288,8 +272,9 @@ mod tests {
             // Brick b reads voxels 8b − 1 ..= 8b + 9 along each axis.
             let along =
                 |v: usize, n: usize| (0..n).filter(|b| 8 * b <= v + 1 && v <= 8 * b + 9).count();
-            let dropped =
-                along(x, cache.bricks[0]) * along(12, cache.bricks[1]) * along(4, cache.bricks[2]);
+            let dropped = along(x, cache.bricks.counts()[0])
+                * along(12, cache.bricks.counts()[1])
+                * along(4, cache.bricks.counts()[2]);
             assert_eq!(cache.built(), all - dropped, "voxel x = {x}");
             // Every gradient is the filter's on the changed volume.
             let max0 = dims.map(|n| n - 2);

@@ -112,13 +112,16 @@ pub mod cpu;
 pub mod filters;
 pub mod gpu;
 pub mod gradient_cache;
+pub mod lazy_bricks;
 pub mod macrocell;
 pub mod maps;
 pub mod params;
+pub mod ray_bounds;
 pub(crate) mod slabs;
 pub mod transfer;
 pub mod uniforms;
 pub mod views;
+pub mod visible_cells;
 
 pub use params::RaycastParams;
 pub use views::{fit_camera, turntable};
@@ -126,10 +129,12 @@ pub use views::{fit_camera, turntable};
 use gpu::GpuRenderer;
 use gradient_cache::GradientCache;
 use macrocell::{IndexBox, MacroCells, convert_region, dirty_voxels};
+use ray_bounds::RayBounds;
 use rayon::prelude::*;
 use std::sync::Arc;
 use transfer::{Lut, TransferFunction, ValueUnits};
 use uniforms::RayUniforms;
+use visible_cells::VisibleCells;
 use voxflex_core::camera::{Camera, Projection};
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::error::ModelError;
@@ -163,6 +168,13 @@ pub struct RaycastRenderer {
     cells: MacroCells,
     /// CPU backend: Sobel gradients per brick, built on first use.
     gradients: Option<GradientCache>,
+    /// CPU backend: the cells the table may show, per brick, for the LUT
+    /// generation kept beside them.
+    visible: Option<(u64, VisibleCells)>,
+    /// CPU backend: skip with [`VisibleCells`] and [`RayBounds`] (always
+    /// on; off only where a test counts samples against the GPU path,
+    /// which walks the macro cells alone).
+    fine_skipping: bool,
     /// Bumped whenever the cells change.
     cells_version: u64,
     /// The external GPU buffer of the current volume, if any.
@@ -210,6 +222,8 @@ impl RaycastRenderer {
             grid: None,
             values: Vec::new(),
             gradients: None,
+            visible: None,
+            fine_skipping: true,
             cells_version: 0,
             external: None,
             range: None,
@@ -405,14 +419,26 @@ impl RaycastRenderer {
                 self.cells.leap_distances(lut),
             ));
         }
+        let dims = self.grid.as_ref().expect("checked by frame").dims;
+        if !matches!(&self.visible, Some((g, v)) if *g == generation && v.dims() == dims) {
+            self.visible = Some((generation, VisibleCells::new(dims)));
+        }
+        let leap = &self.leap.as_ref().expect("made above").2;
+        let bounds = self.fine_skipping.then(|| RayBounds::build(&u, leap));
         let scene = cpu::Scene {
             u: &u,
             values: &self.values,
             lut,
             cells: &self.cells,
-            leap: &self.leap.as_ref().expect("made above").2,
+            leap,
             map: self.combined.as_ref().and_then(|m| m.as_ref()),
             gradients: self.gradients.as_ref(),
+            visible: self
+                .visible
+                .as_ref()
+                .filter(|_| self.fine_skipping)
+                .map(|(_, v)| v),
+            bounds: bounds.as_ref(),
         };
         Ok(cpu::render(&scene))
     }
@@ -428,8 +454,14 @@ impl RaycastRenderer {
             self.values = vec![0.0; grid.len()];
             // At most as many bytes of gradients as the volume itself.
             self.gradients = Some(GradientCache::new(grid.dims, 4 * grid.len()));
-        } else if let Some(g) = &mut self.gradients {
-            g.invalidate(region);
+            self.visible = None;
+        } else {
+            if let Some(g) = &mut self.gradients {
+                g.invalidate(region);
+            }
+            if let Some((_, v)) = &mut self.visible {
+                v.invalidate(region);
+            }
         }
         match volume {
             RenderVolume::Cpu(view) => convert_region(&view, region, &mut self.values),
@@ -564,6 +596,7 @@ impl Renderer for RaycastRenderer {
         self.external = None;
         self.range = None;
         self.leap = None;
+        self.visible = None;
         self.combined = None;
         self.gpu_map_current = false;
         self.gpu_lut_generation = u64::MAX;

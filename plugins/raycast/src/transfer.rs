@@ -263,6 +263,23 @@ impl Lut {
         (e0 + 1 >= first && e0 <= last).then(|| self.at(e0, f))
     }
 
+    /// The table entry below `v` (the one [`Lut::lookup`] interpolates
+    /// from); non-decreasing in `v`, entry 0 for NaN.
+    #[inline(always)]
+    pub fn entry(&self, v: f32) -> usize {
+        self.position(v).0
+    }
+
+    /// False only when no value whose entry ([`Lut::entry`]) is *within one
+    /// entry* of `[e_lo, e_hi]` is shown: then every value interpolated from
+    /// values with entries in `[e_lo, e_hi]` — even one rounded a step past
+    /// them — has κ = 0, and [`Lut::lookup_visible`] answers `None`.
+    #[inline]
+    pub fn entries_may_show(&self, e_lo: usize, e_hi: usize) -> bool {
+        let (first, last) = self.visible;
+        e_hi + 2 >= first && e_lo <= last + 1
+    }
+
     /// The entry below `v` and the fraction past it.
     #[inline(always)]
     fn position(&self, v: f32) -> (usize, f32) {

@@ -1,0 +1,239 @@
+//! [`VisibleCells`]: per cell (trilinear footprint), whether the transfer
+//! function may show any value inside it — the CPU path's empty-space
+//! skipping below the macro cells.
+//!
+//! A macro cell is 8³ cells; one that holds a single visible voxel is
+//! sampled everywhere, and on the `ct-bone` head three in four of those
+//! samples lie in soft tissue next to bone and come out with κ = 0 (a
+//! trilinear fetch of eight voxels, mostly cache misses, for nothing). A
+//! trilinear value lies between the smallest and the largest of its cell's
+//! eight corners (to a rounding), so a cell whose corners' table entries
+//! all lie more than one entry outside the visible range
+//! ([`crate::transfer::Lut::entries_may_show`]) can only give κ = 0: its
+//! samples are skipped without reading the volume. The images do not
+//! change, bit for bit; only the count of samples taken does.
+//!
+//! One bit per cell, 512 per 8³-cell brick (one cache line), built per
+//! brick the first time a sample reaches it ([`LazyBricks`]): separable
+//! min/max passes over the brick's 9³ corner voxels' table entries. The
+//! bits depend on the volume and on the table, so the renderer drops the
+//! bricks a volume update reaches ([`VisibleCells::invalidate`]) and
+//! starts over when the table changes. Not used with tricubic sampling
+//! (its footprint is 4³ voxels) nor when empty-space skipping is off.
+
+use crate::lazy_bricks::{BRICK, LazyBricks, Reach};
+use crate::macrocell::IndexBox;
+use crate::transfer::Lut;
+
+/// Corner voxels per brick edge.
+const SIDE: usize = BRICK + 1;
+
+/// A brick's cells read their own corners only.
+const REACH: Reach = Reach {
+    before: 0,
+    after: 0,
+};
+
+/// One bit per cell of a brick: word `lz`, bit `lx + 8 ly`.
+type Bits = [u64; BRICK];
+
+/// Which cells of a volume the current transfer function may show, per
+/// brick, built on first use.
+pub struct VisibleCells {
+    bricks: LazyBricks<Bits>,
+}
+
+impl VisibleCells {
+    /// Nothing built yet, for a volume of `dims` voxels.
+    pub fn new(dims: [usize; 3]) -> Self {
+        Self {
+            bricks: LazyBricks::new(dims),
+        }
+    }
+
+    /// The volume size (voxels).
+    pub fn dims(&self) -> [usize; 3] {
+        self.bricks.dims()
+    }
+
+    /// Drops every brick with a corner voxel in `region`.
+    pub fn invalidate(&mut self, region: IndexBox) {
+        self.bricks.invalidate(region, REACH, drop);
+    }
+
+    /// False only when every trilinear value in the cell whose lower corner
+    /// is voxel `i` has κ = 0 under `lut` (`values`: the volume, x fastest;
+    /// `lut`: the table this cache was made for).
+    #[inline(always)]
+    pub fn may_show(&self, values: &[f32], lut: &Lut, i: [usize; 3]) -> bool {
+        let place = self.bricks.place(i);
+        let bits = self
+            .bricks
+            .get_or_build(&place, |b| brick_bits(values, self.bricks.dims(), lut, b));
+        let [lx, ly, lz] = place.local;
+        bits[lz] >> (lx + BRICK * ly) & 1 != 0
+    }
+}
+
+/// The bits of brick `b`: min/max of the table entries of each cell's
+/// corners, separably along x, y, z (voxel indices clamped to the grid, so
+/// a 1-voxel axis reads its one voxel twice).
+#[cold]
+fn brick_bits(values: &[f32], dims: [usize; 3], lut: &Lut, b: [usize; 3]) -> Bits {
+    let index = |a: usize, h: usize| (b[a] * BRICK + h).min(dims[a] - 1);
+    // Entries of the 9³ corner voxels, then [min, max] over x pairs, y, z.
+    let mut lo = [0u16; SIDE * SIDE * SIDE];
+    let mut hi = [0u16; SIDE * SIDE * SIDE];
+    for hz in 0..SIDE {
+        for hy in 0..SIDE {
+            let row = dims[0] * (index(1, hy) + dims[1] * index(2, hz));
+            let out = SIDE * (hy + SIDE * hz);
+            let mut prev = lut.entry(values[row + index(0, 0)]) as u16;
+            for hx in 0..BRICK {
+                let next = lut.entry(values[row + index(0, hx + 1)]) as u16;
+                lo[out + hx] = prev.min(next);
+                hi[out + hx] = prev.max(next);
+                prev = next;
+            }
+        }
+    }
+    fold(&mut lo, &mut hi, SIDE);
+    fold(&mut lo, &mut hi, SIDE * SIDE);
+    let mut bits = [0u64; BRICK];
+    for (lz, word) in bits.iter_mut().enumerate() {
+        for ly in 0..BRICK {
+            for lx in 0..BRICK {
+                let at = lx + SIDE * (ly + SIDE * lz);
+                let show = lut.entries_may_show(lo[at] as usize, hi[at] as usize);
+                *word |= (show as u64) << (lx + BRICK * ly);
+            }
+        }
+    }
+    bits
+}
+
+/// Folds each element with the one `stride` above it (min into `lo`, max
+/// into `hi`): after strides 9 and 81, element `(x, y, z)` covers the cell
+/// `[x, x+1] × [y, y+1] × [z, z+1]`.
+fn fold(lo: &mut [u16], hi: &mut [u16], stride: usize) {
+    for at in 0..lo.len() - stride {
+        lo[at] = lo[at].min(lo[at + stride]);
+        hi[at] = hi[at].max(hi[at + stride]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filters::trilinear8;
+    use crate::transfer::TransferFunction;
+    use voxflex_core::glam::Vec3;
+
+    fn volume(dims: [usize; 3], seed: u32) -> Vec<f32> {
+        (0..dims.iter().product::<usize>())
+            .map(|l| {
+                let h = (l as u32 ^ seed).wrapping_mul(2_654_435_761) >> 20;
+                // Mostly soft tissue, a few bone voxels.
+                if h.is_multiple_of(23) {
+                    900.0
+                } else {
+                    (h % 97) as f32
+                }
+            })
+            .collect()
+    }
+
+    /// Every cell: the bit is the brute-force answer (the entry span of
+    /// the cell's corners, one entry wider, shown) on grids with partial
+    /// bricks and 1- and 2-voxel axes; a cell is never hidden while one of
+    /// its trilinear values is shown.
+    #[test]
+    fn bits_are_the_cells_entry_spans() {
+        let lut = TransferFunction::preset("ct-bone")
+            .unwrap()
+            .lut((-1024.0, 3071.0), 1.0);
+        let (mut hidden, mut shown) = (0, 0);
+        for dims in [[19, 10, 17], [1, 9, 3], [2, 2, 2], [8, 9, 1], [17, 17, 17]] {
+            let v = volume(dims, 7);
+            let cells = VisibleCells::new(dims);
+            let max0 = dims.map(|n| n.max(2) - 2);
+            for k in 0..=max0[2] {
+                for j in 0..=max0[1] {
+                    for i in 0..=max0[0] {
+                        let corners: [f32; 8] = std::array::from_fn(|c| {
+                            let at = |a: usize, d: usize| ([i, j, k][a] + d).min(dims[a] - 1);
+                            let (x, y, z) = (at(0, c & 1), at(1, c >> 1 & 1), at(2, c >> 2));
+                            v[x + dims[0] * (y + dims[1] * z)]
+                        });
+                        let entries = corners.map(|c| lut.entry(c));
+                        let lo = *entries.iter().min().unwrap();
+                        let hi = *entries.iter().max().unwrap();
+                        let want = lut.entries_may_show(lo, hi);
+                        let got = cells.may_show(&v, &lut, [i, j, k]);
+                        assert_eq!(got, want, "{dims:?} cell {:?}", [i, j, k]);
+                        if got {
+                            shown += 1;
+                            continue;
+                        }
+                        hidden += 1;
+                        for f in [0.0, 0.31, 0.5, 0.999, 1.0] {
+                            let f = Vec3::new(f, 1.0 - f, 0.5 * f);
+                            let value = trilinear8(corners, f);
+                            assert!(lut.lookup_visible(value).is_none(), "{value}");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            shown > 100 && hidden > 100,
+            "{shown} shown, {hidden} hidden"
+        );
+    }
+
+    /// The margin of one table entry: a cell whose corners reach the entry
+    /// just below the first visible one is shown.
+    #[test]
+    fn cells_next_to_the_visible_range_are_shown() {
+        let lut = TransferFunction::preset("ct-bone")
+            .unwrap()
+            .lut((-1024.0, 3071.0), 1.0);
+        let first = lut.visible.0;
+        let value_of = |e: usize| lut.lo + (e as f32 + 0.5) / lut.scale;
+        for (e, shown) in [(first - 3, false), (first - 2, true), (first, true)] {
+            let dims = [2, 2, 2];
+            let v = vec![value_of(e); 8];
+            assert_eq!(lut.entry(v[0]), e);
+            let cells = VisibleCells::new(dims);
+            assert_eq!(
+                cells.may_show(&v, &lut, [0, 0, 0]),
+                shown,
+                "entry {e} (first visible {first})"
+            );
+        }
+    }
+
+    /// A changed voxel drops its brick: the bit follows the new value.
+    #[test]
+    fn invalidated_bricks_are_rebuilt_from_the_new_volume() {
+        let lut = TransferFunction::preset("ct-bone")
+            .unwrap()
+            .lut((-1024.0, 3071.0), 1.0);
+        let dims = [12, 3, 3];
+        let mut v = vec![0.0; 12 * 9];
+        let mut cells = VisibleCells::new(dims);
+        assert!(!cells.may_show(&v, &lut, [9, 0, 0]));
+        v[10 + 12 * (1 + 3)] = 1000.0;
+        assert!(
+            !cells.may_show(&v, &lut, [9, 0, 0]),
+            "not dropped: still the old bits"
+        );
+        cells.invalidate(IndexBox {
+            lo: [10, 1, 1],
+            hi: [10, 1, 1],
+        });
+        assert!(cells.may_show(&v, &lut, [9, 0, 0]));
+        assert!(cells.may_show(&v, &lut, [10, 1, 1]));
+        assert!(!cells.may_show(&v, &lut, [0, 0, 0]));
+    }
+}
