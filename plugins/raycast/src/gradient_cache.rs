@@ -24,19 +24,20 @@
 //! Units: gradients in value units per voxel step × 2 (a difference over
 //! two voxels, as `filters::sobel`); indices are voxel indices, x fastest.
 
-use crate::filters::{tap3, trilinear8};
+use crate::filters::tap3;
 use crate::lazy_bricks::{LazyBricks, Reach};
 use crate::macrocell::IndexBox;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use voxflex_core::glam::Vec3;
+use voxflex_core::glam::{Vec3, Vec4};
 
 pub use crate::lazy_bricks::BRICK;
 /// Corner voxels per brick edge.
 const SIDE: usize = BRICK + 1;
 /// Voxels per brick edge with the one-voxel halo the filter reads.
 const HALO: usize = BRICK + 3;
-/// Gradient components stored per brick (3 per corner).
-const BRICK_FLOATS: usize = 3 * SIDE * SIDE * SIDE;
+/// Gradient components stored per brick (3 per corner, padded to 4 so a
+/// corner is one SIMD load and the three components interpolate together).
+const BRICK_FLOATS: usize = 4 * SIDE * SIDE * SIDE;
 /// Bytes of one built brick.
 pub const BRICK_BYTES: usize = 4 * BRICK_FLOATS;
 /// The Sobel filter reads one voxel beyond a brick's corners.
@@ -45,8 +46,8 @@ const REACH: Reach = Reach {
     after: 1,
 };
 
-/// One brick's corner gradients, `[(cx + 9 (cy + 9 cz)) · 3 + axis]`.
-type Brick = Box<[f32]>;
+/// One brick's corner gradients, `[cx + 9 (cy + 9 cz)] = [gx, gy, gz, 0]`.
+type Brick = Box<[Vec4]>;
 
 /// Sobel gradients of a volume, per 8³-cell brick, built on first use.
 pub struct GradientCache {
@@ -104,25 +105,17 @@ impl GradientCache {
             .as_deref()?;
         let l = place.local;
         let at = |dx: usize, dy: usize, dz: usize| {
-            3 * (l[0] + dx + SIDE * (l[1] + dy + SIDE * (l[2] + dz)))
+            brick[l[0] + dx + SIDE * (l[1] + dy + SIDE * (l[2] + dz))]
         };
-        let corners = [
-            at(0, 0, 0),
-            at(1, 0, 0),
-            at(0, 1, 0),
-            at(1, 1, 0),
-            at(0, 0, 1),
-            at(1, 0, 1),
-            at(0, 1, 1),
-            at(1, 1, 1),
-        ];
-        // Written out: `corners.map(..)` was left as a call per component
-        // (`array::try_map` was 7 % of a steady frame's profile).
-        let component = |axis: usize| {
-            let c = |n: usize| brick[corners[n] + axis];
-            trilinear8([c(0), c(1), c(2), c(3), c(4), c(5), c(6), c(7)], f)
-        };
-        Some(Vec3::new(component(0), component(1), component(2)))
+        // `trilinear8`'s operations, on the three components at once (lane
+        // by lane the same f32 operations in the same order).
+        let lerp = |a: Vec4, b: Vec4, t: f32| a + Vec4::splat(t) * (b - a);
+        let x00 = lerp(at(0, 0, 0), at(1, 0, 0), f.x);
+        let x10 = lerp(at(0, 1, 0), at(1, 1, 0), f.x);
+        let x01 = lerp(at(0, 0, 1), at(1, 0, 1), f.x);
+        let x11 = lerp(at(0, 1, 1), at(1, 1, 1), f.x);
+        let g = lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z);
+        Some(g.truncate())
     }
 
     /// Builds brick `b` (or marks it uncached when the budget is spent).
@@ -180,13 +173,13 @@ fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
         y_of(&x_pass[1], false),
     ];
     // Along z: gx = S(DxSy), gy = S(SxDy), gz = D(SxSy).
-    let mut out = vec![0f32; BRICK_FLOATS];
+    let mut out = vec![Vec4::ZERO; SIDE * SIDE * SIDE];
     for (axis, src) in y_pass.iter().enumerate() {
         for cz in 0..SIDE {
             for cy in 0..SIDE {
                 for cx in 0..SIDE {
                     let at = |hz: usize| src[cx + SIDE * (cy + SIDE * hz)];
-                    out[3 * (cx + SIDE * (cy + SIDE * cz)) + axis] =
+                    out[cx + SIDE * (cy + SIDE * cz)][axis] =
                         tap3(at(cz), at(cz + 1), at(cz + 2), axis == 2);
                 }
             }
