@@ -129,7 +129,7 @@ pub use views::{fit_camera, turntable};
 use gpu::GpuRenderer;
 use gradient_cache::GradientCache;
 use macrocell::{IndexBox, MacroCells, convert_region, dirty_voxels};
-use ray_bounds::RayBounds;
+use ray_bounds::{RayBounds, ShownCells};
 use rayon::prelude::*;
 use std::sync::Arc;
 use transfer::{Lut, TransferFunction, ValueUnits};
@@ -424,7 +424,20 @@ impl RaycastRenderer {
             self.visible = Some((generation, VisibleCells::new(dims)));
         }
         let leap = &self.leap.as_ref().expect("made above").2;
-        let bounds = self.fine_skipping.then(|| RayBounds::build(&u, leap));
+        // Visible cells hold for trilinear footprints only; they narrow the
+        // ray bounds where a macro cell is one brick (the default edge).
+        let visible = (self.fine_skipping && self.params.sampling == params::Sampling::Trilinear)
+            .then(|| &self.visible.as_ref().expect("made above").1);
+        let shown = visible
+            .filter(|_| self.cell() == lazy_bricks::BRICK)
+            .map(|cells| ShownCells {
+                cells,
+                values: &self.values,
+                lut,
+            });
+        let bounds = self
+            .fine_skipping
+            .then(|| RayBounds::build(&u, leap, shown));
         let scene = cpu::Scene {
             u: &u,
             values: &self.values,
@@ -433,11 +446,7 @@ impl RaycastRenderer {
             leap,
             map: self.combined.as_ref().and_then(|m| m.as_ref()),
             gradients: self.gradients.as_ref(),
-            visible: self
-                .visible
-                .as_ref()
-                .filter(|_| self.fine_skipping)
-                .map(|(_, v)| v),
+            visible,
             bounds: bounds.as_ref(),
         };
         Ok(cpu::render(&scene))

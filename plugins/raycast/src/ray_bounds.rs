@@ -27,7 +27,9 @@
 //! Units: `t` in mm along the unit ray direction, as [`crate::cpu`]; pixel
 //! `(0, 0)` top-left; voxel index space `p = (x − origin) / spacing`.
 
+use crate::transfer::Lut;
 use crate::uniforms::RayUniforms;
+use crate::visible_cells::VisibleCells;
 use rayon::prelude::*;
 use voxflex_core::glam::DVec3;
 
@@ -53,13 +55,38 @@ struct Footprint {
     t: [f32; 2],
 }
 
+/// What the table may show inside each brick ([`VisibleCells`]), for a
+/// trilinear frame: the volume and the table the cells were made for.
+#[derive(Clone, Copy)]
+pub struct ShownCells<'a> {
+    /// The visible cells of `values` under `lut`.
+    pub cells: &'a VisibleCells,
+    /// The volume (x fastest).
+    pub values: &'a [f32],
+    /// The frame's table.
+    pub lut: &'a Lut,
+}
+
 impl RayBounds {
     /// The bounds of the frame `u` for the cells whose leap distance
-    /// (`leap`, one per macro cell, x fastest) is 0.
-    pub fn build(u: &RayUniforms, leap: &[u8]) -> Self {
+    /// (`leap`, one per macro cell, x fastest) is 0 — each narrowed to the
+    /// box of its cells the table may show when `shown` is given (building
+    /// those bricks of [`VisibleCells`] that are not built yet), and left
+    /// out when it shows none. `shown` requires macro cells of one brick
+    /// (edge [`crate::lazy_bricks::BRICK`]): cell `c` is brick `c`.
+    pub fn build(u: &RayUniforms, leap: &[u8], shown: Option<ShownCells<'_>>) -> Self {
+        assert!(
+            shown.is_none() || u.dims[3] as usize == crate::lazy_bricks::BRICK,
+            "shown cells narrow macro cells of one brick only"
+        );
         let camera = Projector::new(u);
-        let footprints: Vec<Footprint> = non_empty_cells(u, leap)
-            .filter_map(|(lo, hi)| camera.footprint(lo, hi))
+        let non_empty: Vec<usize> = (0..leap.len()).filter(|&l| leap[l] == 0).collect();
+        let footprints: Vec<Footprint> = non_empty
+            .par_iter()
+            .filter_map(|&l| {
+                let (lo, hi) = cell_box(u, l, shown)?;
+                camera.footprint(lo, hi)
+            })
             .collect();
         let (w, h) = (u.image[0] as usize, u.image[1] as usize);
         let mut bounds = vec![[f32::INFINITY, f32::NEG_INFINITY]; w * h];
@@ -90,37 +117,43 @@ impl RayBounds {
     }
 }
 
-/// The world boxes (mm, lower and upper corner) of the cells with leap
-/// distance 0, each widened by [`MARGIN`] voxels.
-fn non_empty_cells<'a>(
-    u: &RayUniforms,
-    leap: &'a [u8],
-) -> impl Iterator<Item = (DVec3, DVec3)> + 'a {
+/// The world box (mm, lower and upper corner) of macro cell `l` (linear,
+/// x fastest), widened by [`MARGIN`] voxels: the whole cell, or the box of
+/// the positions of its shown cells (`None` when it has none).
+fn cell_box(u: &RayUniforms, l: usize, shown: Option<ShownCells<'_>>) -> Option<(DVec3, DVec3)> {
     let counts = [
         u.cells[0] as usize,
         u.cells[1] as usize,
         u.cells[2] as usize,
     ];
+    let c = [
+        l % counts[0],
+        (l / counts[0]) % counts[1],
+        l / (counts[0] * counts[1]),
+    ];
     let edge = u.step[3] as f64;
+    let (lo, hi) = match shown {
+        // A trilinear cell i holds the positions [i, i + 1] per axis.
+        Some(s) => {
+            let cells = s.cells.shown_cells(s.values, s.lut, c)?;
+            let lo = DVec3::from_array(cells.lo.map(|i| i as f64));
+            let hi = DVec3::from_array(cells.hi.map(|i| i as f64 + 1.0));
+            (lo, hi)
+        }
+        None => {
+            let c = DVec3::from_array(c.map(|c| c as f64));
+            (c * edge, (c + 1.0) * edge)
+        }
+    };
     let origin = DVec3::new(u.origin[0] as f64, u.origin[1] as f64, u.origin[2] as f64);
     let spacing = DVec3::new(
         1.0 / u.inv_spacing[0] as f64,
         1.0 / u.inv_spacing[1] as f64,
         1.0 / u.inv_spacing[2] as f64,
     );
-    leap.iter()
-        .enumerate()
-        .filter(|(_, d)| **d == 0)
-        .map(move |(l, _)| {
-            let c = DVec3::new(
-                (l % counts[0]) as f64,
-                ((l / counts[0]) % counts[1]) as f64,
-                (l / (counts[0] * counts[1])) as f64,
-            );
-            let lo = (c * edge - MARGIN) * spacing + origin;
-            let hi = ((c + 1.0) * edge + MARGIN) * spacing + origin;
-            (lo.min(hi), lo.max(hi))
-        })
+    let lo = (lo - MARGIN) * spacing + origin;
+    let hi = (hi + MARGIN) * spacing + origin;
+    Some((lo.min(hi), lo.max(hi)))
 }
 
 /// The camera of a frame, in f64.
@@ -280,7 +313,7 @@ mod tests {
             let hi = lo + DVec3::splat(edge);
             for cam in &cameras {
                 let u = r.frame(cam).unwrap();
-                let bounds = RayBounds::build(&u, &leap);
+                let bounds = RayBounds::build(&u, &leap, None);
                 let v = |a: [f32; 4]| DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
                 let (origin, inv) = (v(u.origin), v(u.inv_spacing));
                 for py in 0..u.image[1] {
@@ -303,5 +336,95 @@ mod tests {
             }
         }
         assert!(hits > 100 && misses > 100, "{hits} hits, {misses} misses");
+    }
+
+    /// With the shown cells: a volume of soft tissue with a few bone
+    /// voxels, every camera of the test above; every chord through a cell
+    /// the table may show (`[i, i + 1]³`, voxel space) lies within its
+    /// pixel's bounds, and the bounds are narrower than the macro cells'.
+    #[test]
+    fn narrowed_bounds_hold_every_chord_through_the_shown_cells() {
+        let dims = [26, 20, 18];
+        let mut vol = voxflex_phantom::phantom("head", dims).unwrap();
+        let g = vol.grid;
+        let voxflex_core::volume::VoxelData::I16(d) = &mut vol.data else {
+            panic!("an i16 phantom")
+        };
+        d.fill(40);
+        for (n, at) in [[3, 4, 5], [12, 9, 9], [13, 9, 9], [22, 17, 2]]
+            .iter()
+            .enumerate()
+        {
+            d[g.linear(at[0], at[1], at[2])] = 700 + 100 * n as i16;
+        }
+        let mut r = RaycastRenderer::create("", None).unwrap();
+        r.init(ExecutionBackend::Cpu).unwrap();
+        r.set_volume(RenderVolume::Cpu(vol.view()), DirtyRegion::All)
+            .unwrap();
+        let mut cameras = Vec::new();
+        for (az, el) in [(0.0, 0.0), (90.0, 40.0), (200.0, -70.0), (300.0, 15.0)] {
+            cameras.push(fit_camera(&g, 24, 20, az, el, None));
+            cameras.push(fit_camera(&g, 24, 20, az, el, Some(50.0)));
+        }
+        let mut close = fit_camera(&g, 24, 20, 0.0, 0.0, Some(100.0));
+        close.target = g.index_to_world(DVec3::new(12.5, 7.0, 9.5));
+        close.distance_mm = 3.0;
+        cameras.push(close);
+        r.render_linear(&cameras[0]).unwrap();
+        let frames: Vec<RayUniforms> = cameras.iter().map(|c| r.frame(c).unwrap()).collect();
+        let leap = r.leap.as_ref().unwrap().2.clone();
+        let cells = &r.visible.as_ref().unwrap().1;
+        let lut = r.lut.as_ref().unwrap().lut.clone();
+        let shown: Vec<[usize; 3]> = (0..dims[2] - 1)
+            .flat_map(|k| {
+                (0..dims[1] - 1).flat_map(move |j| (0..dims[0] - 1).map(move |i| [i, j, k]))
+            })
+            .filter(|&i| cells.may_show(&r.values, &lut, i))
+            .collect();
+        assert!(
+            !shown.is_empty() && shown.len() < 200,
+            "{} shown cells",
+            shown.len()
+        );
+        let (mut narrower, mut chords) = (0, 0);
+        for (u, cam) in frames.iter().zip(&cameras) {
+            let whole = RayBounds::build(u, &leap, None);
+            let narrow = RayBounds::build(
+                u,
+                &leap,
+                Some(ShownCells {
+                    cells,
+                    values: &r.values,
+                    lut: &lut,
+                }),
+            );
+            let v = |a: [f32; 4]| DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+            let (origin, inv) = (v(u.origin), v(u.inv_spacing));
+            for py in 0..u.image[1] {
+                for px in 0..u.image[0] {
+                    let [n_lo, n_hi] = narrow.at(px, py).map(|b| b as f64);
+                    let [w_lo, w_hi] = whole.at(px, py).map(|b| b as f64);
+                    narrower += (n_lo > w_lo || n_hi < w_hi) as usize;
+                    let (o, d) = primary_ray(u, px, py);
+                    let o = (o.as_dvec3() - origin) * inv;
+                    let d = d.as_dvec3() * inv;
+                    for i in &shown {
+                        let lo = DVec3::from_array(i.map(|i| i as f64));
+                        let Some((t0, t1)) = chord(o, d, lo, lo + 1.0) else {
+                            continue;
+                        };
+                        chords += 1;
+                        assert!(
+                            n_lo <= t0 && t1 <= n_hi,
+                            "cell {i:?} {cam:?} pixel {px},{py}: chord {t0}..{t1} outside {n_lo}..={n_hi}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            chords > 100 && narrower > 100,
+            "{chords} chords, {narrower} narrower pixels"
+        );
     }
 }

@@ -318,7 +318,7 @@ fn fine_skipping_changes_no_bit() {
         );
         // The bounds leave some rays out entirely, and not all.
         let u = fine.frame(&views[0]).unwrap();
-        let bounds = RayBounds::build(&u, &fine.leap.as_ref().unwrap().2);
+        let bounds = RayBounds::build(&u, &fine.leap.as_ref().unwrap().2, None);
         let empty = (0..u.image[1])
             .flat_map(|y| (0..u.image[0]).map(move |x| (x, y)))
             .filter(|&(x, y)| bounds.at(x, y)[0] > bounds.at(x, y)[1])

@@ -21,7 +21,7 @@
 //! starts over when the table changes. Not used with tricubic sampling
 //! (its footprint is 4³ voxels) nor when empty-space skipping is off.
 
-use crate::lazy_bricks::{BRICK, LazyBricks, Reach};
+use crate::lazy_bricks::{BRICK, CellPlace, LazyBricks, Reach};
 use crate::macrocell::IndexBox;
 use crate::transfer::Lut;
 
@@ -37,10 +37,17 @@ const REACH: Reach = Reach {
 /// One bit per cell of a brick: word `lz`, bit `lx + 8 ly`.
 type Bits = [u64; BRICK];
 
+/// One brick: its bits, and the box (local cell indices, inclusive) of the
+/// cells whose bit is set (`None`: none is).
+struct Brick {
+    bits: Bits,
+    shown: Option<[[u8; 3]; 2]>,
+}
+
 /// Which cells of a volume the current transfer function may show, per
 /// brick, built on first use.
 pub struct VisibleCells {
-    bricks: LazyBricks<Bits>,
+    bricks: LazyBricks<Brick>,
 }
 
 impl VisibleCells {
@@ -67,12 +74,51 @@ impl VisibleCells {
     #[inline(always)]
     pub fn may_show(&self, values: &[f32], lut: &Lut, i: [usize; 3]) -> bool {
         let place = self.bricks.place(i);
-        let bits = self
-            .bricks
-            .get_or_build(&place, |b| brick_bits(values, self.bricks.dims(), lut, b));
+        let brick = self.brick(values, lut, &place);
         let [lx, ly, lz] = place.local;
-        bits[lz] >> (lx + BRICK * ly) & 1 != 0
+        brick.bits[lz] >> (lx + BRICK * ly) & 1 != 0
     }
+
+    /// The box of the cells (lower-corner voxel indices, inclusive) of brick
+    /// `b` that the table may show; `None` when it shows none. Builds the
+    /// brick if needed (arguments as [`VisibleCells::may_show`]).
+    pub fn shown_cells(&self, values: &[f32], lut: &Lut, b: [usize; 3]) -> Option<IndexBox> {
+        let place = self.bricks.place(b.map(|b| b * BRICK));
+        let [lo, hi] = self.brick(values, lut, &place).shown?;
+        // A partial brick's cells past the grid repeat its last voxels:
+        // clipped to the last cell, `max(n, 2) − 2`.
+        let last = self.dims().map(|n| n.max(2) - 2);
+        let cells = IndexBox {
+            lo: std::array::from_fn(|a| (b[a] * BRICK + lo[a] as usize).min(last[a])),
+            hi: std::array::from_fn(|a| (b[a] * BRICK + hi[a] as usize).min(last[a])),
+        };
+        Some(cells)
+    }
+
+    #[inline(always)]
+    fn brick(&self, values: &[f32], lut: &Lut, place: &CellPlace) -> &Brick {
+        self.bricks.get_or_build(place, |b| {
+            let bits = brick_bits(values, self.bricks.dims(), lut, b);
+            Brick {
+                shown: shown_box(&bits),
+                bits,
+            }
+        })
+    }
+}
+
+/// The box of the set bits: z from the non-zero words, y from their
+/// non-zero bytes, x from the bits of all bytes together.
+fn shown_box(bits: &Bits) -> Option<[[u8; 3]; 2]> {
+    let z: Vec<usize> = (0..BRICK).filter(|&z| bits[z] != 0).collect();
+    let (&z0, &z1) = (z.first()?, z.last()?);
+    let rows = bits.iter().fold(0u64, |a, w| a | w);
+    let y_set = (0..BRICK).filter(|y| rows >> (BRICK * y) & 0xff != 0);
+    let (y0, y1) = y_set.fold((BRICK, 0), |(lo, hi), y| (lo.min(y), hi.max(y)));
+    let x_bits = (0..BRICK).fold(0u64, |a, y| a | (rows >> (BRICK * y) & 0xff));
+    let x0 = x_bits.trailing_zeros() as usize;
+    let x1 = 63 - x_bits.leading_zeros() as usize;
+    Some([[x0, y0, z0].map(|v| v as u8), [x1, y1, z1].map(|v| v as u8)])
 }
 
 /// The bits of brick `b`: min/max of the table entries of each cell's
@@ -188,6 +234,56 @@ mod tests {
         assert!(
             shown > 100 && hidden > 100,
             "{shown} shown, {hidden} hidden"
+        );
+    }
+
+    /// The shown box of every brick is the box of its set bits (brute
+    /// force), `None` for a brick with none.
+    #[test]
+    fn shown_cells_are_the_box_of_the_set_bits() {
+        let lut = TransferFunction::preset("ct-bone")
+            .unwrap()
+            .lut((-1024.0, 3071.0), 1.0);
+        let (mut some, mut none) = (0, 0);
+        for seed in 0..6 {
+            let dims = [19, 10, 17];
+            let mut v = vec![0.0; dims.iter().product()];
+            // A few bone voxels per seed, so bricks show little or nothing.
+            for n in 0..(seed * 3) {
+                let l = ((n as u32).wrapping_mul(2_654_435_761) ^ (seed as u32 * 40_503)) as usize
+                    % v.len();
+                v[l] = 900.0;
+            }
+            let cells = VisibleCells::new(dims);
+            let max0 = dims.map(|n| n - 2);
+            let counts = max0.map(|m| m / 8 + 1);
+            for bz in 0..counts[2] {
+                for by in 0..counts[1] {
+                    for bx in 0..counts[0] {
+                        let mut want: Option<IndexBox> = None;
+                        for k in 8 * bz..(8 * bz + 8).min(max0[2] + 1) {
+                            for j in 8 * by..(8 * by + 8).min(max0[1] + 1) {
+                                for i in 8 * bx..(8 * bx + 8).min(max0[0] + 1) {
+                                    if cells.may_show(&v, &lut, [i, j, k]) {
+                                        let c = IndexBox {
+                                            lo: [i, j, k],
+                                            hi: [i, j, k],
+                                        };
+                                        want = Some(want.map_or(c, |w| w.union(&c)));
+                                    }
+                                }
+                            }
+                        }
+                        let got = cells.shown_cells(&v, &lut, [bx, by, bz]);
+                        assert_eq!(got, want, "seed {seed} brick {:?}", [bx, by, bz]);
+                        if got.is_some() { some += 1 } else { none += 1 }
+                    }
+                }
+            }
+        }
+        assert!(
+            some > 5 && none > 5,
+            "{some} with shown cells, {none} without"
         );
     }
 
