@@ -14,7 +14,7 @@
 //! - the output, RGBA8 packed per u32; `stats`: three u32 counters.
 //!
 //! A volume above `max_storage_buffer_binding_size` (128 MiB on lavapipe,
-//! i.e. 32 Mi voxels of f32) is bound as z-slabs ([`crate::slabs`]): the
+//! i.e. 32 Mi voxels of f32) is bound as z-slabs (`slabs.rs`): the
 //! macro-cell kernel runs per slab over the cells in it, and the ray caster
 //! runs one pass per slab for the rays going up in z (slabs ascending),
 //! then one per slab for the rays going down (descending), each ray

@@ -44,7 +44,13 @@
 //!   once; MIP rays jump cell by cell over cells whose max cannot beat their
 //!   running maximum.
 //!   Skipping is exact: it never changes a pixel (up to float rounding at
-//!   cell faces).
+//!   cell faces). The CPU path skips finer still, without changing a bit
+//!   of the image: [`visible_cells`] keeps one bit per trilinear cell
+//!   (may the table show a value between its corners?) and skips a
+//!   sample in a hidden cell before reading the volume, and
+//!   [`ray_bounds`] projects every non-empty macro cell (narrowed to its
+//!   shown cells) per frame, so each ray starts at its first and stops
+//!   after its last possibly visible sample.
 //! - **Early ray termination** at `termination_threshold` (default
 //!   `0.998 = 1 − 0.5/255`, so what is left cannot change an 8-bit pixel).
 //! - **Shading.** Blinn–Phong with a headlight (light and eye along the
