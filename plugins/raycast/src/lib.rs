@@ -441,8 +441,10 @@ impl RaycastRenderer {
                 values: &self.values,
                 lut,
             });
-        let bounds = self
-            .fine_skipping
+        // The bounds serve composite rays with skipping on (MIP rays skip
+        // by their running maximum, not by the table).
+        let composite = self.params.mode == params::RenderMode::Composite;
+        let bounds = (self.fine_skipping && composite && self.params.empty_space_skipping)
             .then(|| RayBounds::build(&u, leap, shown));
         let scene = cpu::Scene {
             u: &u,
