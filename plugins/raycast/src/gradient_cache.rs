@@ -130,39 +130,30 @@ impl GradientCache {
 
 /// The corner gradients of brick `b`: separable passes over the brick's
 /// 11³ voxels (indices clamped to the grid axis by axis, as `gather` does).
+///
+/// Each pass runs over whole rows of fixed-size arrays on the stack, so the
+/// compiler keeps it in SIMD registers; per element it is the same [`tap3`]
+/// as the per-sample filter, so the result is bit-identical.
 fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
     let index = |a: usize, h: usize| (b[a] * BRICK + h).saturating_sub(1).min(dims[a] - 1);
-    let mut halo = vec![0f32; HALO * HALO * HALO];
+    let xs: [usize; HALO] = std::array::from_fn(|h| index(0, h));
+    // Along x, per halo row (hy, hz): [D, S][hz][hy][cx].
+    let mut x_pass = [[[[0f32; SIDE]; HALO]; HALO]; 2];
     for hz in 0..HALO {
         for hy in 0..HALO {
-            let row = dims[0] * (index(1, hy) + dims[1] * index(2, hz));
-            for hx in 0..HALO {
-                halo[hx + HALO * (hy + HALO * hz)] = values[row + index(0, hx)];
+            let row = &values[dims[0] * (index(1, hy) + dims[1] * index(2, hz))..];
+            let h: [f32; HALO] = std::array::from_fn(|x| row[xs[x]]);
+            for (k, pass) in x_pass.iter_mut().enumerate() {
+                pass[hz][hy] = taps(&h, k == 0);
             }
         }
     }
-    // Along x: [D, S][cx + 9 (hy + 11 hz)].
-    let mut x_pass = [
-        vec![0f32; SIDE * HALO * HALO],
-        vec![0f32; SIDE * HALO * HALO],
-    ];
-    for line in 0..HALO * HALO {
-        let h = &halo[HALO * line..HALO * (line + 1)];
-        for c in 0..SIDE {
-            for (k, out) in x_pass.iter_mut().enumerate() {
-                out[c + SIDE * line] = tap3(h[c], h[c + 1], h[c + 2], k == 0);
-            }
-        }
-    }
-    // Along y: DxSy, SxDy, SxSy [cx + 9 (cy + 9 hz)].
-    let y_of = |src: &[f32], diff: bool| {
-        let mut out = vec![0f32; SIDE * SIDE * HALO];
-        for hz in 0..HALO {
-            for cy in 0..SIDE {
-                for cx in 0..SIDE {
-                    let at = |hy: usize| src[cx + SIDE * (hy + HALO * hz)];
-                    out[cx + SIDE * (cy + SIDE * hz)] = tap3(at(cy), at(cy + 1), at(cy + 2), diff);
-                }
+    // Along y: DxSy, SxDy, SxSy [hz][cy][cx].
+    let y_of = |src: &[[[f32; SIDE]; HALO]; HALO], diff: bool| {
+        let mut out = [[[0f32; SIDE]; SIDE]; HALO];
+        for (plane, rows) in out.iter_mut().zip(src) {
+            for (cy, row) in plane.iter_mut().enumerate() {
+                *row = tap_rows(&rows[cy], &rows[cy + 1], &rows[cy + 2], diff);
             }
         }
         out
@@ -172,20 +163,31 @@ fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
         y_of(&x_pass[1], true),
         y_of(&x_pass[1], false),
     ];
-    // Along z: gx = S(DxSy), gy = S(SxDy), gz = D(SxSy).
+    // Along z: gx = S(DxSy), gy = S(SxDy), gz = D(SxSy), then interleaved.
     let mut out = vec![Vec4::ZERO; SIDE * SIDE * SIDE];
     for (axis, src) in y_pass.iter().enumerate() {
         for cz in 0..SIDE {
             for cy in 0..SIDE {
-                for cx in 0..SIDE {
-                    let at = |hz: usize| src[cx + SIDE * (cy + SIDE * hz)];
-                    out[cx + SIDE * (cy + SIDE * cz)][axis] =
-                        tap3(at(cz), at(cz + 1), at(cz + 2), axis == 2);
+                let g = tap_rows(&src[cz][cy], &src[cz + 1][cy], &src[cz + 2][cy], axis == 2);
+                for (cx, v) in g.into_iter().enumerate() {
+                    out[cx + SIDE * (cy + SIDE * cz)][axis] = v;
                 }
             }
         }
     }
     out.into_boxed_slice()
+}
+
+/// [`tap3`] along a halo row: output `c` from inputs `c, c + 1, c + 2`.
+#[inline(always)]
+fn taps(h: &[f32; HALO], d: bool) -> [f32; SIDE] {
+    std::array::from_fn(|c| tap3(h[c], h[c + 1], h[c + 2], d))
+}
+
+/// [`tap3`] across three rows, element by element.
+#[inline(always)]
+fn tap_rows(a: &[f32; SIDE], b: &[f32; SIDE], c: &[f32; SIDE], d: bool) -> [f32; SIDE] {
+    std::array::from_fn(|x| tap3(a[x], b[x], c[x], d))
 }
 
 #[cfg(test)]

@@ -414,21 +414,9 @@ impl RaycastRenderer {
             ));
         }
         let u = self.frame(camera)?;
-        let generation = self.lut.as_ref().expect("made by frame").generation;
-        let stale =
-            !matches!(&self.leap, Some((c, g, _)) if *c == self.cells_version && *g == generation);
+        let clock = std::time::Instant::now();
+        self.ensure_cpu_acceleration();
         let lut = &self.lut.as_ref().expect("made by frame").lut;
-        if stale {
-            self.leap = Some((
-                self.cells_version,
-                generation,
-                self.cells.leap_distances(lut),
-            ));
-        }
-        let dims = self.grid.as_ref().expect("checked by frame").dims;
-        if !matches!(&self.visible, Some((g, v)) if *g == generation && v.dims() == dims) {
-            self.visible = Some((generation, VisibleCells::new(dims)));
-        }
         let leap = &self.leap.as_ref().expect("made above").2;
         // Visible cells hold for trilinear footprints only; they narrow the
         // ray bounds where a macro cell is one brick (the default edge).
@@ -441,11 +429,13 @@ impl RaycastRenderer {
                 values: &self.values,
                 lut,
             });
+        let tables_ms = clock.elapsed().as_secs_f64() * 1e3;
         // The bounds serve composite rays with skipping on (MIP rays skip
         // by their running maximum, not by the table).
         let composite = self.params.mode == params::RenderMode::Composite;
         let bounds = (self.fine_skipping && composite && self.params.empty_space_skipping)
             .then(|| RayBounds::build(&u, leap, shown));
+        let bounds_ms = clock.elapsed().as_secs_f64() * 1e3 - tables_ms;
         let scene = cpu::Scene {
             u: &u,
             values: &self.values,
@@ -457,7 +447,29 @@ impl RaycastRenderer {
             visible,
             bounds: bounds.as_ref(),
         };
-        Ok(cpu::render(&scene))
+        let out = cpu::render(&scene);
+        let rays_ms = clock.elapsed().as_secs_f64() * 1e3 - tables_ms - bounds_ms;
+        tracing::debug!(tables_ms, bounds_ms, rays_ms, "raycast cpu frame");
+        Ok(out)
+    }
+
+    /// Makes the CPU path's per-table state current: the leap distances
+    /// (per cells version and table) and the visible cells (per table and
+    /// grid; their bricks are built on use).
+    fn ensure_cpu_acceleration(&mut self) {
+        let generation = self.lut.as_ref().expect("made by frame").generation;
+        let lut = &self.lut.as_ref().expect("made by frame").lut;
+        if !matches!(&self.leap, Some((c, g, _)) if *c == self.cells_version && *g == generation) {
+            self.leap = Some((
+                self.cells_version,
+                generation,
+                self.cells.leap_distances(lut),
+            ));
+        }
+        let dims = self.grid.as_ref().expect("checked by frame").dims;
+        if !matches!(&self.visible, Some((g, v)) if *g == generation && v.dims() == dims) {
+            self.visible = Some((generation, VisibleCells::new(dims)));
+        }
     }
 
     fn set_volume_cpu(
