@@ -4,8 +4,8 @@
 //!
 //! Empty-space skipping walks the macro cells from where a ray enters the
 //! volume: on the 512 × 512 × 133 CT with `ct-bone`, ten leaps or cell
-//! visits per ray before its first sample, and one ray in three that enters
-//! the volume never meets a shown value. Here every non-empty macro cell
+//! visits per ray before its first sample, and six rays in ten that enter
+//! the volume never meet a shown value. Here every non-empty macro cell
 //! (leap distance 0 under the current table) is projected once per frame:
 //! its box in voxel space, widened by [`MARGIN`] voxels, gives a pixel
 //! rectangle (every pixel whose ray can pass through the box) and a range
@@ -16,6 +16,13 @@
 //! its samples read), so the ray starts at the first sample inside and
 //! stops after the last one: **the image does not change, bit for bit**,
 //! and a ray whose pixel no rectangle covers costs its clipping alone.
+//!
+//! With [`ShownCells`] (trilinear sampling, macro cells of one brick) a
+//! non-empty macro cell is narrowed to the box of its cells the table may
+//! show ([`VisibleCells::shown_cells`]; a cell `i` holds the positions
+//! `[i, i + 1]`), and one with none is left out: a κ > 0 sample lies in a
+//! shown cell, so the argument above holds for these smaller boxes, and a
+//! ray starts about where the tissue starts, not up to a macro cell before.
 //!
 //! Orthographic rays share the direction `forward`, and `t` of a point `q`
 //! is `(q − eye)·forward`. Perspective rays start at the eye, and `t` is the
