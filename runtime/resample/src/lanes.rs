@@ -25,6 +25,15 @@
 //! tetrahedral mode). The lanes find a row's cells' corners with contiguous
 //! loads ([`strip_corners`]): the even and the odd cells of a strip of 16
 //! are the two lane groups.
+//!
+//! Before a lane tests a candidate it reads the tile's key there
+//! ([`TileSink::decided`]): a strong claim of an id below the lane's cell's
+//! first id wins whatever the cell finds, so the lane skips to its next
+//! candidate first, and the planes are evaluated for undecided voxels only.
+//! Owners and payloads are unchanged (property-tested in both orders of the
+//! rows). Where voxel centres sit on shared cell faces — a twist about z
+//! keeps every centre on a z-face of two cells — about half of the
+//! candidates are decided this way.
 
 // Lane and corner loops index several arrays by the same number.
 #![allow(clippy::needless_range_loop)]
@@ -279,6 +288,25 @@ impl TileSink<'_> {
         let y = (q[1] - self.lo[1]) as usize;
         let z = (q[2] - self.lo[2]) as usize;
         x + self.dims[0] * (y + self.dims[1] * z)
+    }
+
+    /// Lanes of `lanes` (bit per lane) whose voxel `q[l]` already holds a
+    /// strong claim (`WEAK_OWNER` clear) of an id below `first_id[l]`: no
+    /// claim of ids from `first_id[l]` on can beat it there.
+    #[inline(always)]
+    pub fn decided(&self, q: &[I; 3], mut lanes: u32, first_id: I) -> u32 {
+        let [dx, dy] = self.dims.map(|d| I::splat(d as i32));
+        let lo = self.lo.map(I::splat);
+        let at = ((q[2] - lo[2]) * dy + (q[1] - lo[1])) * dx + (q[0] - lo[0]);
+        let (at, first) = (at.to_array(), first_id.to_array());
+        let mut out = 0;
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            let key = self.keys[at[l] as usize];
+            out |= ((key < first[l] as u32) as u32) << l;
+        }
+        out
     }
 
     /// Claims voxel `q[l]` for lane `l` of every bit set in `found` with
@@ -568,6 +596,22 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
         }
     };
     while active != 0 {
+        // Lanes whose voxel already holds a strong claim of a smaller id
+        // than any of the lane's cell can make lose whatever they find
+        // there: skip them (exact — the owner and payload are unchanged —
+        // and in a deformation that keeps voxel centres on shared cell
+        // faces, half of all candidates).
+        // Each lane skips its decided voxels first, so that the planes are
+        // evaluated for as many undecided voxels as possible at once.
+        let mut decided = sink.decided(&q, active, base_id);
+        while decided != 0 {
+            advance(&mut q, &lo, &hi, &mut active, mask_of(decided));
+            decided = sink.decided(&q, decided & active, base_id);
+        }
+        if active == 0 {
+            break;
+        }
+        let todo = active;
         let qf = [
             F::from_i32x8(q[0]),
             F::from_i32x8(q[1]),
@@ -586,7 +630,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
         let mut tb = [[F::ZERO; 3]; 4];
         for k in 0..4 {
             let c = &cs[k];
-            let mut m = pass(&c.t_corner, ti[k]) & live[k] & active;
+            let mut m = pass(&c.t_corner, ti[k]) & live[k] & todo;
             if m != 0 {
                 for mm in 0..3 {
                     tb[k][mm] = eval(&c.boundary[mm], &qf);
@@ -600,7 +644,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
             & pass(&cs[1].t_central, ti[1])
             & pass(&cs[2].t_central, ti[2])
             & pass(&cs[3].t_central, ti[3])
-            & active;
+            & todo;
         let found = passing.iter().fold(0, |a, &m| a | m);
         if found != 0 {
             // Lanes whose centre is the rest position of a still corner c:
@@ -705,15 +749,22 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
                 });
             }
         }
-        // Advance every lane's cursor: x, then y on wrap, then z.
-        let wx = q[0].simd_eq(hi[0]);
-        q[0] = wx.select(lo[0], q[0] + I::ONE);
-        let wy = wx & q[1].simd_eq(hi[1]);
-        q[1] = wy.select(lo[1], q[1] - wx);
-        let wz = wy & q[2].simd_eq(hi[2]);
-        q[2] = wz.select(lo[2], q[2] - wy);
-        active &= !(wz.to_bitmask());
+        advance(&mut q, &lo, &hi, &mut active, I::splat(-1));
     }
+}
+
+/// Advances the cursor `q` of the lanes set in `lanes` (all bits of a lane
+/// set) through its box `lo ..= hi`: x, then y on wrap, then z; lanes that
+/// wrap in z leave `active`.
+#[inline(always)]
+fn advance(q: &mut [I; 3], lo: &[I; 3], hi: &[I; 3], active: &mut u32, lanes: I) {
+    let wx = lanes & q[0].simd_eq(hi[0]);
+    q[0] = wx.select(lo[0], q[0] - lanes);
+    let wy = wx & q[1].simd_eq(hi[1]);
+    q[1] = wy.select(lo[1], q[1] - wx);
+    let wz = wy & q[2].simd_eq(hi[2]);
+    q[2] = wz.select(lo[2], q[2] - wy);
+    *active &= !(wz.to_bitmask());
 }
 
 #[cfg(test)]
@@ -728,12 +779,16 @@ mod tests {
     use proptest::prelude::*;
 
     /// Runs every cell of the mesh through `strip_corners` + `raster_cells`
-    /// (strips of 16 along each row, as the CPU kernel does) into one tile.
+    /// (strips of 16 along each row, as the CPU kernel does) into one tile,
+    /// rows in ascending order or, with `descending`, the last row first (a
+    /// tile meets its blocks' cells in neither order exactly, and a voxel
+    /// already decided by a smaller id is skipped only then).
     fn lanes_claims<const TRI: bool>(
         ctx: &LaneCtx<'_>,
         mesh: &SamplingMesh,
         removed: &[u8],
         src: &[f32],
+        descending: bool,
     ) -> (Vec<u32>, Vec<[f32; 4]>) {
         let clip = ctx.clip;
         let d = clip.dims();
@@ -746,8 +801,14 @@ mod tests {
             dims: [d[0], d[1]],
         };
         let c = mesh.cell_dims();
-        for k in 0..c[2] {
-            for j in 0..c[1] {
+        let rows = (0..c[2]).flat_map(|k| (0..c[1]).map(move |j| (j, k)));
+        let rows: Vec<_> = if descending {
+            rows.rev().collect()
+        } else {
+            rows.collect()
+        };
+        for (j, k) in rows {
+            {
                 for x0 in (0..c[0]).step_by(2 * LANES) {
                     let count = (c[0] - x0).min(2 * LANES);
                     let corners = strip_corners(ctx, x0, j, k);
@@ -848,9 +909,16 @@ mod tests {
                     claim(&mut |q| r.owner(q), lo, hi);
                 }
             }
-            let (keys_t, pay_t) = lanes_claims::<true>(&ctx, &mesh, &removed, &values);
-            let (keys_v, pay_v) = lanes_claims::<false>(&ctx, &mesh, &removed, &values);
+            let (keys_t, pay_t) = lanes_claims::<true>(&ctx, &mesh, &removed, &values, false);
+            let (keys_v, pay_v) = lanes_claims::<false>(&ctx, &mesh, &removed, &values, false);
             prop_assert_eq!(&keys_t, &keys_v);
+            // The other order skips other claims, and ends the same.
+            let (keys_r, pay_r) = lanes_claims::<true>(&ctx, &mesh, &removed, &values, true);
+            prop_assert_eq!(&keys_r, &keys_t);
+            let bits = |p: &[[f32; 4]], k: &[u32]| -> Vec<[u32; 4]> {
+                p.iter().zip(k).filter(|(_, k)| **k != u32::MAX).map(|(v, _)| v.map(f32::to_bits)).collect()
+            };
+            prop_assert_eq!(bits(&pay_r, &keys_r), bits(&pay_t, &keys_t));
             let dims = grid.dims.map(|v| v as i32);
             for (i, &(key, cell, t)) in want.iter().enumerate() {
                 prop_assert_eq!(keys_t[i], key, "voxel {}", i);
