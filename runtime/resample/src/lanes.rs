@@ -596,13 +596,11 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
         }
     };
     while active != 0 {
-        // Lanes whose voxel already holds a strong claim of a smaller id
-        // than any of the lane's cell can make lose whatever they find
-        // there: skip them (exact — the owner and payload are unchanged —
-        // and in a deformation that keeps voxel centres on shared cell
-        // faces, half of all candidates).
-        // Each lane skips its decided voxels first, so that the planes are
-        // evaluated for as many undecided voxels as possible at once.
+        // A lane whose voxel already holds a strong claim of a smaller id
+        // than its cell's would lose whatever it finds there (exact: the
+        // owner and payload are unchanged). Each lane skips such voxels
+        // first, so that the planes are evaluated for as many undecided
+        // voxels as possible at once.
         let mut decided = sink.decided(&q, active, base_id);
         while decided != 0 {
             advance(&mut q, &lo, &hi, &mut active, mask_of(decided));
@@ -611,7 +609,6 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
         if active == 0 {
             break;
         }
-        let todo = active;
         let qf = [
             F::from_i32x8(q[0]),
             F::from_i32x8(q[1]),
@@ -630,7 +627,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
         let mut tb = [[F::ZERO; 3]; 4];
         for k in 0..4 {
             let c = &cs[k];
-            let mut m = pass(&c.t_corner, ti[k]) & live[k] & todo;
+            let mut m = pass(&c.t_corner, ti[k]) & live[k] & active;
             if m != 0 {
                 for mm in 0..3 {
                     tb[k][mm] = eval(&c.boundary[mm], &qf);
@@ -644,7 +641,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
             & pass(&cs[1].t_central, ti[1])
             & pass(&cs[2].t_central, ti[2])
             & pass(&cs[3].t_central, ti[3])
-            & todo;
+            & active;
         let found = passing.iter().fold(0, |a, &m| a | m);
         if found != 0 {
             // Lanes whose centre is the rest position of a still corner c:
