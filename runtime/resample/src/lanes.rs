@@ -292,7 +292,8 @@ impl TileSink<'_> {
 
     /// Lanes of `lanes` (bit per lane) whose voxel `q[l]` already holds a
     /// strong claim (`WEAK_OWNER` clear) of an id below `first_id[l]`: no
-    /// claim of ids from `first_id[l]` on can beat it there.
+    /// claim of ids from `first_id[l]` on can beat it there. The tile
+    /// indices are [`Self::local`]'s, computed for all lanes at once.
     #[inline(always)]
     pub fn decided(&self, q: &[I; 3], mut lanes: u32, first_id: I) -> u32 {
         let [dx, dy] = self.dims.map(|d| I::splat(d as i32));
@@ -805,23 +806,21 @@ mod tests {
             rows.collect()
         };
         for (j, k) in rows {
-            {
-                for x0 in (0..c[0]).step_by(2 * LANES) {
-                    let count = (c[0] - x0).min(2 * LANES);
-                    let corners = strip_corners(ctx, x0, j, k);
-                    for (g, cs) in corners.iter().enumerate() {
-                        let n = (count + 1 - g) / 2;
-                        if n == 0 {
-                            continue;
-                        }
-                        let cells: [[usize; 3]; LANES] =
-                            std::array::from_fn(|l| [x0 + g + 2 * l.min(n - 1), j, k]);
-                        let rm = cells.map(|cell| removed[mesh.cell_linear(cell)]);
-                        if cell_parity(cells[0]) == 0 {
-                            raster_cells::<0, f32, TRI>(ctx, &cells, cs, &rm, n, &mut sink, src);
-                        } else {
-                            raster_cells::<1, f32, TRI>(ctx, &cells, cs, &rm, n, &mut sink, src);
-                        }
+            for x0 in (0..c[0]).step_by(2 * LANES) {
+                let count = (c[0] - x0).min(2 * LANES);
+                let corners = strip_corners(ctx, x0, j, k);
+                for (g, cs) in corners.iter().enumerate() {
+                    let n = (count + 1 - g) / 2;
+                    if n == 0 {
+                        continue;
+                    }
+                    let cells: [[usize; 3]; LANES] =
+                        std::array::from_fn(|l| [x0 + g + 2 * l.min(n - 1), j, k]);
+                    let rm = cells.map(|cell| removed[mesh.cell_linear(cell)]);
+                    if cell_parity(cells[0]) == 0 {
+                        raster_cells::<0, f32, TRI>(ctx, &cells, cs, &rm, n, &mut sink, src);
+                    } else {
+                        raster_cells::<1, f32, TRI>(ctx, &cells, cs, &rm, n, &mut sink, src);
                     }
                 }
             }
@@ -916,6 +915,9 @@ mod tests {
                 p.iter().zip(k).filter(|(_, k)| **k != u32::MAX).map(|(v, _)| v.map(f32::to_bits)).collect()
             };
             prop_assert_eq!(bits(&pay_r, &keys_r), bits(&pay_t, &keys_t));
+            let (keys_rv, pay_rv) = lanes_claims::<false>(&ctx, &mesh, &removed, &values, true);
+            prop_assert_eq!(&keys_rv, &keys_v);
+            prop_assert_eq!(bits(&pay_rv, &keys_rv), bits(&pay_v, &keys_v));
             let dims = grid.dims.map(|v| v as i32);
             for (i, &(key, cell, t)) in want.iter().enumerate() {
                 prop_assert_eq!(keys_t[i], key, "voxel {}", i);
