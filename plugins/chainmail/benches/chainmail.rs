@@ -11,7 +11,13 @@
 //! - memory per element.
 //!
 //! Pass a size to run smaller (`cargo bench -p voxflex-chainmail -- 64`);
-//! `-- parallel` runs only the parallel model to rest, `-- kernels` times
+//! `-- parallel` runs only the parallel model to rest (and prints its
+//! relaxation energy and a hash of its state), `-- energy` runs the papers'
+//! test to the energy of the papers' 619 plain sweeps with the model's
+//! default, the automatic over-relaxation (`-- energy mirror`: the opposite
+//! corner pulled the opposite way), `-- propagation` only the propagation
+//! (ten times, with a hash of the state: equal hashes, equal results),
+//! `-- kernels` times
 //! only the relaxation kernels (beside a bare sweep of the same positions
 //! without bookkeeping, and a copy of them, for scale), `-- local` only the
 //! local grabs (three times), `-- gpu` runs the papers' test on the WGSL
@@ -26,6 +32,12 @@ use voxflex_phantom::phantom;
 /// The papers' test parameters; plain relaxation (`over_relaxation = 1`),
 /// as the papers relax, so the figures compare like for like.
 fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
+    params_with(algorithm, block, "over_relaxation = 1.0")
+}
+
+/// The papers' test parameters with `relaxation` (a TOML line: the
+/// over-relaxation, or nothing for the model's automatic choice).
+fn params_with(algorithm: &str, block: [usize; 3], relaxation: &str) -> ChainMailParams {
     // "frontier" selects the parallel algorithm with the element work-list.
     let (algorithm, schedule) = match algorithm {
         "frontier" => ("parallel", "frontier"),
@@ -33,7 +45,7 @@ fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
     };
     ChainMailParams::from_toml(&format!(
         "algorithm = \"{algorithm}\"\nschedule = \"{schedule}\"\nblock = {block:?}\n\
-         over_relaxation = 1.0\n\
+         {relaxation}\n\
          materials = [{{ range = [-1e9, 1e9], constraint = 0.1, elastic = 1.0 }}]"
     ))
     .expect("bench parameters")
@@ -42,14 +54,24 @@ fn params(algorithm: &str, block: [usize; 3]) -> ChainMailParams {
 /// A cube model of `n³` elements with one corner grabbed and pulled far
 /// enough to move every element.
 fn setup(n: usize, algorithm: &str, block: [usize; 3]) -> ChainMail {
+    setup_with(n, params(algorithm, block), false)
+}
+
+/// [`setup`] with `params`; `mirrored` grabs the opposite corner and pulls
+/// it the opposite way.
+fn setup_with(n: usize, params: ChainMailParams, mirrored: bool) -> ChainMail {
     let v = phantom("cube", [n, n, n]).expect("cube phantom");
-    let mut m = ChainMail::new(v.view(), params(algorithm, block)).expect("model");
+    let mut m = ChainMail::new(v.view(), params).expect("model");
     let lat = m.lattice();
-    let corner = lat.world([0, 0, 0]);
-    let pull = lat.spacing[0] * 0.1 * (3 * n) as f64 * 1.5;
+    let (corner, sign) = if mirrored {
+        (lat.world([n - 1; 3]), 1.0)
+    } else {
+        (lat.world([0; 3]), -1.0)
+    };
+    let pull = sign * lat.spacing[0] * 0.1 * (3 * n) as f64 * 1.5;
     m.interact(&InteractionSpec::Grab {
         point: corner.to_array(),
-        by: Some([-pull, -pull, -pull]),
+        by: Some([pull, pull, pull]),
         to: None,
         path: None,
         frames: 1,
@@ -146,14 +168,29 @@ fn main() {
     if std::env::args().any(|a| a == "propagation") {
         // Only the parallel propagation, ten times (for profiling).
         for _ in 0..10 {
-            let (pp, ppi, ..) = run("parallel", [8, 4, 4], 0);
-            println!("propagation {:.1} ms ({ppi} iterations)", ms(pp));
+            let (pp, ppi, _, _, c, m) = run("parallel", block, 0);
+            println!(
+                "propagation {:.1} ms ({ppi} iterations, {} visits, {} updates, state {:016x})",
+                ms(pp),
+                c.visits,
+                c.updates,
+                state_hash(&m)
+            );
         }
+        return;
+    }
+    if std::env::args().any(|a| a == "energy") {
+        equal_energy(n, block, std::env::args().any(|a| a == "mirror"), ms);
         return;
     }
     if std::env::args().any(|a| a == "parallel") {
         // Only the parallel run to rest (for profiling).
-        let (pp, ppi, pr, pri, ..) = run("parallel", block, RELAX_SWEEPS);
+        let (pp, ppi, pr, pri, _, m) = run("parallel", block, RELAX_SWEEPS);
+        println!(
+            "energy {:.6e}, state {:016x}",
+            voxflex_chainmail::relax::energy(m.lattice(), m.state()),
+            state_hash(&m)
+        );
         println!(
             "parallel {block:?}: propagation {:.1} ms ({ppi} iterations), relaxation {:.1} ms ({pri} sweeps), total {:.1} ms",
             ms(pp),
@@ -255,6 +292,75 @@ fn local_grabs(n: usize, ms: impl Fn(std::time::Duration) -> f64) {
 /// Times the relaxation kernels on a deformed model: 40 sweeps over every
 /// block of size `block`; and, for scale, a copy of as many bytes as the
 /// state's positions hold, split over the threads.
+/// The papers' test to the papers' relaxation: the plain run (619 sweeps)
+/// sets the energy `Σ w |u_n − u_e|²` its relaxation reaches; the model's
+/// default, the automatic over-relaxation, then relaxes after the same
+/// propagation until its energy is at most that. Only the model's stages
+/// are timed (the energy is measured between sweeps, off the clock).
+fn equal_energy(
+    n: usize,
+    block: [usize; 3],
+    mirrored: bool,
+    ms: impl Fn(std::time::Duration) -> f64,
+) {
+    use voxflex_chainmail::relax::energy;
+    let stages = |m: &mut ChainMail| {
+        let t = Instant::now();
+        m.start_deformation();
+        let iterations = m.propagate(u64::MAX);
+        (t.elapsed(), iterations)
+    };
+    let mut plain = setup_with(n, params("parallel", block), mirrored);
+    let (plain_prop, _) = stages(&mut plain);
+    let t = Instant::now();
+    let plain_sweeps = plain.relax(RELAX_SWEEPS);
+    let plain_relax = t.elapsed();
+    let target = energy(plain.lattice(), plain.state());
+    drop(plain);
+    let auto = params_with("parallel", block, "");
+    let omega = auto.omega(n);
+    let mut m = setup_with(n, auto, mirrored);
+    let (prop, iterations) = stages(&mut m);
+    let (mut relax, mut sweeps) = (std::time::Duration::ZERO, 0);
+    let mut e = energy(m.lattice(), m.state());
+    while e > target && sweeps < RELAX_SWEEPS {
+        let t = Instant::now();
+        let done = m.relax(1);
+        relax += t.elapsed();
+        if done == 0 {
+            break; // at rest
+        }
+        sweeps += done;
+        e = energy(m.lattice(), m.state());
+    }
+    println!(
+        "plain relaxation ({}): propagation {:.1} ms, relaxation {:.1} ms ({plain_sweeps} sweeps), energy {target:.4e}",
+        if mirrored { "mirrored pull" } else { "pull" },
+        ms(plain_prop),
+        ms(plain_relax)
+    );
+    println!(
+        "equal energy, automatic over-relaxation ω = {omega:.4}: propagation {:.1} ms ({iterations} iterations), relaxation {:.1} ms ({sweeps} sweeps), total {:.1} ms, energy {e:.4e}{}",
+        ms(prop),
+        ms(relax),
+        ms(prop + relax),
+        if e > target { " — NOT reached" } else { "" }
+    );
+}
+
+/// FNV-1a of every element's displacement bits and key, in storage order:
+/// equal hashes show that a faster build computed the same state.
+fn state_hash(m: &ChainMail) -> u64 {
+    use std::sync::atomic::Ordering::Relaxed;
+    let st = m.state();
+    let words = (0..3)
+        .flat_map(|a| st.u[st.cur][a].iter())
+        .chain(st.key[st.cur].iter());
+    words.fold(0xcbf2_9ce4_8422_2325u64, |h, w| {
+        (h ^ w.load(Relaxed) as u64).wrapping_mul(0x100_0000_01b3)
+    })
+}
+
 fn relaxation_kernels(pm: &ChainMail, block: [usize; 3], ms: impl Fn(std::time::Duration) -> f64) {
     use rayon::prelude::*;
     use voxflex_chainmail::blocks::Blocks;

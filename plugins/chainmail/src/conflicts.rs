@@ -26,7 +26,7 @@
 //! which own the links into them).
 
 use crate::blocks::Blocks;
-use crate::lattice::{ElementLattice, FIXED, HELD};
+use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD, X_FACE};
 use crate::state::State;
 use rayon::prelude::*;
 
@@ -180,34 +180,53 @@ impl Conflicts {
     }
 }
 
-/// The links block `b` owns (its elements' +x, +y, +z links between
-/// present elements) on the current copy, with their violation:
-/// `(n, e, largest |u_n − u_e|_a − D_a over the axes, mm)`.
-fn owned_links<'a>(
-    lat: &'a ElementLattice,
-    state: &'a State,
+/// Calls `f(n, e, worst)` for every link block `b` owns (its elements'
+/// +x, +y, +z links between present elements), elements in `(k, j, i)`
+/// order and their links in that order, on the current copy: `worst` is the largest `|u_n − u_e|_a − D_a` over the
+/// axes, mm.
+fn for_each_owned_link(
+    lat: &ElementLattice,
+    state: &State,
     blocks: &Blocks,
     b: usize,
-) -> impl Iterator<Item = (usize, usize, f32)> + 'a {
+    mut f: impl FnMut(usize, usize, f32),
+) {
     let cur = state.cur;
+    let worst = |un: [f32; 3], ue: [f32; 3], d: [f32; 3]| {
+        (0..3)
+            .map(|a| (un[a] - ue[a]).abs() - d[a])
+            .fold(f32::NEG_INFINITY, f32::max)
+    };
+    let interior = lat.interior();
     let (lo, hi) = blocks.range(b);
-    (lo[2]..hi[2])
-        .flat_map(move |k| (lo[1]..hi[1]).flat_map(move |j| (lo[0]..hi[0]).map(move |i| [i, j, k])))
-        .filter_map(move |c| {
-            let n = lat.linear(c);
-            lat.present(n).then_some((n, c))
-        })
-        .flat_map(move |(n, c)| {
-            let un = state.get(cur, n);
-            [0, 2, 4].into_iter().filter_map(move |l| {
-                let e = lat.neighbour(n, c, l).filter(|&e| lat.present(e))?;
-                let (link, ue) = (lat.link(n, e), state.get(cur, e));
-                let worst = (0..3)
-                    .map(|a| (un[a] - ue[a]).abs() - link.d[a])
-                    .fold(f32::NEG_INFINITY, f32::max);
-                Some((n, e, worst))
-            })
-        })
+    for k in lo[2]..hi[2] {
+        for j in lo[1]..hi[1] {
+            for i in lo[0]..hi[0] {
+                let c = [i, j, k];
+                let n = lat.linear(c);
+                let un = state.get(cur, n);
+                let m = interior[n];
+                if m != ABSENT && m & X_FACE == 0 {
+                    // Every link there, uncut, to the same material.
+                    let d = lat.material_link(m, m).d;
+                    let off = lat.offsets(c);
+                    for l in [0, 2, 4] {
+                        let e = off[l].wrapping_add(n);
+                        f(n, e, worst(un, state.get(cur, e), d));
+                    }
+                    continue;
+                }
+                if !lat.present(n) {
+                    continue;
+                }
+                for l in [0, 2, 4] {
+                    if let Some(e) = lat.neighbour(n, c, l).filter(|&e| lat.present(e)) {
+                        f(n, e, worst(un, state.get(cur, e), lat.link(n, e).d));
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// [`Conflicts::repair_seeds`] of block `b`.
@@ -220,11 +239,18 @@ fn block_repair_seeds(
 ) -> Vec<u32> {
     let free = |n: usize| lat.cells[n] & (FIXED | HELD) == 0;
     let cur = state.cur;
-    owned_links(lat, state, blocks, b)
-        .filter(|&(n, e, worst)| worst > tol_mm && free(n) && free(e))
-        // Keys order by wave, then time: the smaller was reached first.
-        .map(|(n, e, _)| if state.key(cur, e) < state.key(cur, n) { e } else { n } as u32)
-        .collect()
+    let mut seeds = Vec::new();
+    for_each_owned_link(lat, state, blocks, b, |n, e, worst| {
+        if worst > tol_mm && free(n) && free(e) {
+            // Keys order by wave, then time: the smaller was reached first.
+            seeds.push(if state.key(cur, e) < state.key(cur, n) {
+                e
+            } else {
+                n
+            } as u32);
+        }
+    });
+    seeds
 }
 
 /// The violation of the links block `b` owns (its elements' +x, +y, +z
@@ -237,7 +263,7 @@ fn block_violation(
     tol_mm: f32,
 ) -> Violation {
     let mut v = Violation::default();
-    for (n, e, worst) in owned_links(lat, state, blocks, b) {
+    for_each_owned_link(lat, state, blocks, b, |n, e, worst| {
         if worst > v.mm {
             v.mm = worst;
             v.link = (n as u32, e as u32);
@@ -246,7 +272,7 @@ fn block_violation(
             v.count += 1;
             v.kinds |= kinds_of(lat, n) | kinds_of(lat, e);
         }
-    }
+    });
     v
 }
 
@@ -264,4 +290,76 @@ fn kinds_of(lat: &ElementLattice, n: usize) -> Kinds {
         k |= RIGID_END;
     }
     k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lattice::LINKS;
+    use crate::tests::{params, volume};
+
+    /// The owned links and their violations, by the fast interior path and
+    /// the general one, against every +x, +y, +z link found one element at
+    /// a time: two materials, holes, cut links, the lattice's faces, odd
+    /// `nx`, a pseudo-random state.
+    #[test]
+    fn owned_links_are_every_forward_link_once_with_its_violation() {
+        let v = volume([13, 9, 7], |i, j, k| match (i * 5 + j * 3 + k) % 23 {
+            0 => 0,
+            r if r < 6 => 200,
+            _ => 100,
+        });
+        let mats = "{ range = [50, 150], constraint = 0.2 }, \
+                    { range = [150, 256], constraint = [0.05, 0.1, 0.02] }";
+        let mut lat = ElementLattice::new(v.view(), &params("", mats)).unwrap();
+        for (c, l) in [
+            ([4, 4, 3], 0),
+            ([6, 2, 2], 2),
+            ([6, 2, 2], 5),
+            ([12, 8, 6], 1),
+        ] {
+            let n = lat.linear(c);
+            lat.cut_link(n, l);
+        }
+        let state = State::new(lat.len());
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for n in 0..lat.len() {
+            let mut u = [0f32; 3];
+            for a in &mut u {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                *a = (x >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
+            }
+            state.set(state.cur, n, u);
+        }
+        let blocks = Blocks::new(lat.dims, [4, 4, 4]);
+        let mut got = Vec::new();
+        for b in 0..blocks.len() {
+            for_each_owned_link(&lat, &state, &blocks, b, |n, e, w| got.push((n, e, w)));
+        }
+        let mut want = Vec::new();
+        for n in (0..lat.len()).filter(|&n| lat.present(n)) {
+            let c = lat.coords(n);
+            for l in (0..LINKS.len()).filter(|l| LINKS[*l].1 > 0) {
+                if let Some(e) = lat.neighbour(n, c, l).filter(|&e| lat.present(e)) {
+                    let (un, ue, d) = (state.get(0, n), state.get(0, e), lat.link(n, e).d);
+                    let w = (0..3)
+                        .map(|a| (un[a] - ue[a]).abs() - d[a])
+                        .fold(f32::MIN, f32::max);
+                    want.push((n, e, w));
+                }
+            }
+        }
+        let interior = (0..lat.len())
+            .filter(|&n| lat.interior()[n] & X_FACE == 0 && lat.interior()[n] != ABSENT);
+        assert!(interior.count() > 50, "the fast path is exercised");
+        got.sort_by_key(|t| (t.0, t.1));
+        want.sort_by_key(|t| (t.0, t.1));
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!((g.0, g.1), (w.0, w.1));
+            assert_eq!(g.2.to_bits(), w.2.to_bits(), "link {:?}", (g.0, g.1));
+        }
+    }
 }

@@ -61,8 +61,9 @@ fn pair(gpu: Arc<dyn GpuService>, extra: &str) -> (ChainMail, ChainMail) {
 /// and whether all keys are equal.
 fn compare(cpu: &ChainMail, gpu: &mut ChainMail) -> (f32, bool) {
     gpu.pull().unwrap();
+    // Each side's current copy: the CPU's block propagation works in one
+    // copy, the GPU's swaps two.
     let (a, b) = (cpu.state(), gpu.state());
-    assert_eq!(a.cur, b.cur);
     let lat = cpu.lattice();
     let mut worst = 0f32;
     let mut keys = true;

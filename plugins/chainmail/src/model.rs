@@ -886,15 +886,18 @@ impl ChainMail {
 
     /// One propagation iteration on the CPU.
     fn propagate_once(&mut self) -> bool {
-        self.sync_copies();
         if self.params.schedule == Schedule::Frontier {
+            self.sync_copies();
             return self.propagate_frontier_once();
         }
-        let rep = jacobi_iteration(&self.lat, &mut self.state, &self.blocks, &self.active);
+        // The current copy only: the other falls behind where elements
+        // move, as after relaxation.
+        let rep = jacobi_iteration(&self.lat, &self.state, &self.blocks, &self.active);
         self.counts.propagation_iterations += 1;
         self.counts.visits += rep.visits;
         self.counts.updates += rep.updates;
         self.propagated_since_check = true;
+        self.mark_unsynced(rep.blocks.iter().filter(|b| b.1 != 0).map(|b| b.0));
         self.note_changes(&rep.blocks);
         self.active = self.blocks.next_active(&rep.blocks, &mut self.seen);
         merge_sorted(&mut self.relax, &self.active, &mut self.merge_scratch);
@@ -988,9 +991,11 @@ impl ChainMail {
         rep.max_move > 0.0
     }
 
-    /// Copies the relaxed blocks' displacements into the other Jacobi
-    /// copy, so that both copies agree outside the blocks propagation
-    /// visits (its invariant).
+    /// Copies the displacements and keys of the blocks changed in the
+    /// current copy only (by relaxation, and by the CPU's block
+    /// propagation) into the other copy, so that both agree outside the
+    /// blocks a two-copy propagation visits (its invariant: the GPU's, and
+    /// the frontier schedule's).
     fn sync_copies(&mut self) {
         if self.unsynced.is_empty() {
             return;
@@ -1009,7 +1014,7 @@ impl ChainMail {
             for k in lo[2]..hi[2] {
                 for j in lo[1]..hi[1] {
                     for i in lo[0]..hi[0] {
-                        state.copy_u(state.cur, lat.linear([i, j, k]));
+                        state.carry(state.cur, lat.linear([i, j, k]));
                     }
                 }
             }
@@ -1019,7 +1024,7 @@ impl ChainMail {
         }
     }
 
-    /// Blocks relaxed (in the current Jacobi copy only): to be synced.
+    /// Blocks changed in the current Jacobi copy only: to be synced.
     fn mark_unsynced(&mut self, blocks: impl Iterator<Item = u32>) {
         for b in blocks {
             if !std::mem::replace(&mut self.unsynced_flag[b as usize], true) {

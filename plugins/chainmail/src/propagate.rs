@@ -2,8 +2,10 @@
 //!
 //! - [`jacobi_iteration`]: one iteration of the parallel timestamp
 //!   propagation (Algorithm 1 with Algorithm 2's wavefront counters) over
-//!   the active blocks, in one rayon launch. Every element reads the read
-//!   copy and writes the write copy (Jacobi). An element takes the move of
+//!   the active blocks, in one rayon launch. Every element reads the
+//!   current copy; the moves found are written to it once every element
+//!   has read it (Jacobi, with the moves as the second copy: an element
+//!   that does not move is not written at all). An element takes the move of
 //!   the neighbour whose arrival (`key + τ_link`) is the earliest among
 //!   those that beat its own key *and* whose constraint box it violates; it
 //!   moves to the nearest point of that box and takes the arrival as its
@@ -41,28 +43,28 @@ fn pinned(cell: u8) -> bool {
     cell & (FIXED | HELD) != 0
 }
 
-/// One Jacobi iteration over `active` blocks (ascending); swaps the state's
-/// copies.
+/// One Jacobi iteration over `active` blocks (ascending), in the current
+/// copy only: the other copy is neither read nor written.
 ///
 /// The blocks are grouped into runs along x per block row (one rayon task
-/// per block row, so a row of elements has one writer), and each colour
-/// row of a run is scanned 8 slots at a time: a window whose elements and
-/// neighbours share one material with no cut link first tests, in vector
-/// arithmetic, whether any neighbour's arrival beats an element's key. Far
-/// from a wavefront none does, and the window is carried to the write copy
-/// as whole vectors; otherwise, and in mixed windows, each element runs
-/// `sponsor`.
+/// per block row), and each colour row of a run is scanned 8 slots at a
+/// time: a window whose elements and neighbours share one material with no
+/// cut link first tests, in vector arithmetic, whether any neighbour's
+/// arrival beats an element's key. Far from a wavefront none does, and the
+/// window is done without reading a position; otherwise, and in mixed
+/// windows, each element runs `sponsor`. Each task lists its moves, and
+/// they are written once every task has read the state, so every element
+/// sees its neighbours as they were before the iteration.
 pub fn jacobi_iteration(
     lat: &ElementLattice,
-    state: &mut State,
+    state: &State,
     blocks: &Blocks,
     active: &[u32],
 ) -> IterationReport {
-    let rd = state.cur;
-    let st = &*state;
+    let cur = state.cur;
     let rows = RunRows::new(blocks, active);
     let mut out: Vec<(u32, FaceMask)> = active.iter().map(|&b| (b, 0)).collect();
-    let (visits, updates) = rows
+    let found: Vec<((u64, u64), Vec<Move>)> = rows
         .split(&mut out)
         .into_par_iter()
         .enumerate()
@@ -71,19 +73,33 @@ pub fn jacobi_iteration(
             |(moves, acc), (r, part)| {
                 let runs = rows.runs(r);
                 let mut counts = (0u64, 0u64);
+                let mut found = Vec::new();
                 acc.clear();
                 for colour in 0..2 {
                     walk_block_row(lat, blocks, runs, colour, moves, acc, |[j, k], q, moves| {
                         let rows = RowBases::new(lat, colour, j, k);
-                        propagate_row(lat, st, rd, &rows, q, moves, &mut counts)
+                        let mut row = RowFinds {
+                            moves,
+                            counts: &mut counts,
+                            found: &mut found,
+                        };
+                        propagate_row(lat, state, cur, &rows, q, &mut row)
                     });
                 }
                 fold_runs(blocks, runs, acc, part);
-                counts
+                (counts, found)
             },
         )
-        .reduce(|| (0, 0), |x, y| (x.0 + y.0, x.1 + y.1));
-    state.cur = 1 - rd;
+        .collect();
+    found.par_iter().for_each(|(_, moves)| {
+        for m in moves {
+            state.set(cur, m.n as usize, m.u);
+            state.set_key(cur, m.n as usize, m.key);
+        }
+    });
+    let (visits, updates) = found
+        .iter()
+        .fold((0, 0), |(v, u), ((cv, cu), _)| (v + cv, u + cu));
     IterationReport {
         visits,
         updates,
@@ -91,20 +107,50 @@ pub fn jacobi_iteration(
     }
 }
 
-/// Propagates into slots `qa..qb` of one colour row: flags the updated
-/// slots in `moves` and adds `(visits, updates)` to `counts`.
+/// An element's move found in a Jacobi iteration: storage index, new
+/// displacement (mm) and arrival key.
+#[derive(Clone, Copy, Debug)]
+struct Move {
+    n: u32,
+    key: u32,
+    u: [f32; 3],
+}
+
+/// What the scan of one row records: the moved slots, `(visits, updates)`
+/// and the moves themselves.
+struct RowFinds<'a> {
+    moves: &'a mut RowMoves,
+    counts: &'a mut (u64, u64),
+    found: &'a mut Vec<Move>,
+}
+
+impl RowFinds<'_> {
+    /// Element `n` in slot `q` of the row moves to `u` with arrival `key`.
+    #[inline]
+    fn push(&mut self, q: usize, n: usize, u: [f32; 3], key: u32) {
+        self.moves.mark(q);
+        self.counts.1 += 1;
+        self.found.push(Move {
+            n: n as u32,
+            key,
+            u,
+        });
+    }
+}
+
+/// Propagates into slots `qa..qb` of one colour row, recording the moves
+/// in `row`.
 fn propagate_row(
     lat: &ElementLattice,
     st: &State,
     rd: usize,
     rows: &RowBases,
     (qa, qb): (usize, usize),
-    moves: &mut RowMoves,
-    counts: &mut (u64, u64),
+    row: &mut RowFinds,
 ) {
     if lat.hx < 8 {
         for q in qa..qb {
-            propagate_slot(lat, st, rd, rows, q, moves, counts);
+            propagate_slot(lat, st, rd, rows, q, row);
         }
         return;
     }
@@ -115,9 +161,9 @@ fn propagate_row(
         let w = q.min(lat.hx - 8);
         let (from, to) = (q - w, (qb - w).min(8));
         let range = lane_range(from, to);
-        if !uniform_window(lat, st, rd, rows, w, range, moves, counts) {
+        if !uniform_window(lat, st, rd, rows, w, range, row) {
             for lane in from..to {
-                propagate_slot(lat, st, rd, rows, w + lane, moves, counts);
+                propagate_slot(lat, st, rd, rows, w + lane, row);
             }
         }
         q = w + 8;
@@ -127,10 +173,9 @@ fn propagate_row(
 /// One Jacobi step of the 8 lanes of the window at slot `w`, in vector
 /// arithmetic, when the window is uniform: one material, every element
 /// and every link there and uncut, but for the links that leave the
-/// lattice's x faces. Writes the lanes in `range` to the
-/// write copy (their move, or their carried value), flags the moved ones in
-/// `moves`, adds the counts, and returns true; returns false, writing
-/// nothing, for any other window.
+/// lattice's x faces. Records the moves of the lanes in `range` in `row`
+/// and returns true; returns false, recording nothing, for any other
+/// window.
 ///
 /// The choice is [`sponsor`]'s, lane-wise: with `rank(k) = k ^ MAX_TIME`
 /// (wave in the high bits, reversed time in the low), arrival `a` is
@@ -145,8 +190,7 @@ fn uniform_window(
     rows: &RowBases,
     w: usize,
     range: u8,
-    moves: &mut RowMoves,
-    counts: &mut (u64, u64),
+    row: &mut RowFinds,
 ) -> bool {
     let own = rows.own + w;
     let own_cells = bytes8(&lat.cells, own);
@@ -167,6 +211,28 @@ fn uniform_window(
     let (keys, u) = (&st.key[rd], &st.u[rd]);
     let kn = load_u32(keys, own);
     let rank_n = kn ^ time;
+    let pinned = nonzero_lanes(own_cells & splat_byte(FIXED | HELD));
+    // Per link: the lanes whose neighbour's arrival beats their key, from
+    // the keys alone. Far from a wavefront no lane has one, and the window
+    // is done without reading a position.
+    let mut beats = [u32x8::ZERO; 6];
+    let mut ranks = [u32x8::ZERO; 6];
+    let mut any = u32x8::ZERO;
+    for (l, &e) in nb.iter().enumerate() {
+        let ke = load_u32(keys, e);
+        // `arrival`: reached, and the time does not overflow.
+        let mut reached = !ke.simd_eq(u32x8::ZERO) & ((ke & time) + tau).simd_le(time);
+        if l < 2 {
+            reached &= !off_lattice[l];
+        }
+        ranks[l] = (ke + tau) ^ time;
+        beats[l] = reached & ranks[l].simd_gt(rank_n);
+        any |= beats[l];
+    }
+    row.counts.0 += range.count_ones() as u64;
+    if any.to_bitmask() as u8 & range & !pinned == 0 {
+        return true;
+    }
     // Written out: array `map` closures are not reliably inlined here.
     let un = [
         load_f32(&u[0], own),
@@ -182,20 +248,14 @@ fn uniform_window(
     let mut best_u = un;
     let mut found = u32x8::ZERO;
     for (l, &e) in nb.iter().enumerate() {
-        let ke = load_u32(keys, e);
-        // `arrival`: reached, and the time does not overflow.
-        let mut reached = !ke.simd_eq(u32x8::ZERO) & ((ke & time) + tau).simd_le(time);
-        if l < 2 {
-            reached &= !off_lattice[l];
-        }
-        let rank = (ke + tau) ^ time;
+        let rank = ranks[l];
         let ue = [load_f32(&u[0], e), load_f32(&u[1], e), load_f32(&u[2], e)];
         let mut violated = f32x8::ZERO;
         for a in 0..3 {
             violated |= un[a].simd_lt(ue[a] - d[a]) | un[a].simd_gt(ue[a] + d[a]);
         }
         let violated: u32x8 = bytemuck::cast(violated);
-        let better = reached & rank.simd_gt(rank_n) & rank.simd_gt(best_rank) & violated;
+        let better = beats[l] & rank.simd_gt(best_rank) & violated;
         best_rank = better.select(rank, best_rank);
         let better_f: f32x8 = bytemuck::cast(better);
         for a in 0..3 {
@@ -203,27 +263,19 @@ fn uniform_window(
         }
         found |= better;
     }
-    let pinned = nonzero_lanes(own_cells & splat_byte(FIXED | HELD));
     let moved = found.to_bitmask() as u8 & range & !pinned;
-    let moved_w = u32x8::from(LANE_WORDS[moved as usize]);
-    let moved_f: f32x8 = bytemuck::cast(moved_w);
-    let keep = u32x8::from(LANE_WORDS[range as usize]);
-    let keep_f: f32x8 = bytemuck::cast(keep);
-    let wr = 1 - rd;
-    for a in 0..3 {
-        // `Link::clamp` towards the sponsor; carried lanes keep `un`.
-        let v = un[a].fast_max(best_u[a] - d[a]).fast_min(best_u[a] + d[a]);
-        let v = moved_f.select(v, un[a]);
-        let out = &st.u[wr][a];
-        store_f32(out, own, keep_f.select(v, load_f32(out, own)));
-    }
-    let k = moved_w.select(best_rank ^ time, kn);
-    store_u32(&st.key[wr], own, keep.select(k, load_u32(&st.key[wr], own)));
-    counts.0 += range.count_ones() as u64;
-    counts.1 += moved.count_ones() as u64;
+    // `Link::clamp` towards the sponsor.
+    let v = [0, 1, 2].map(|a| {
+        un[a]
+            .fast_max(best_u[a] - d[a])
+            .fast_min(best_u[a] + d[a])
+            .to_array()
+    });
+    let keys = (best_rank ^ time).to_array();
     for lane in 0..8 {
         if moved >> lane & 1 == 1 {
-            moves.mark(w + lane);
+            let u = [v[0][lane], v[1][lane], v[2][lane]];
+            row.push(w + lane, own + lane, u, keys[lane]);
         }
     }
     true
@@ -251,9 +303,9 @@ static LANE_WORDS: [[u32; 8]; 256] = {
 fn load_u32(s: &[AtomicU32], at: usize) -> u32x8 {
     let w = &s[at..at + 8];
     // SAFETY: `AtomicU32` has the size, alignment and bit validity of
-    // `u32`. During a Jacobi iteration the read copy is only read, and a
-    // row of the write copy has one writer (this task), so the plain
-    // accesses do not race.
+    // `u32`. While a Jacobi iteration scans, no thread writes the state
+    // (the moves are written after the scan), so the plain read does not
+    // race.
     u32x8::from(unsafe { std::ptr::read_unaligned(w.as_ptr() as *const [u32; 8]) })
 }
 
@@ -261,21 +313,6 @@ fn load_u32(s: &[AtomicU32], at: usize) -> u32x8 {
 #[inline(always)]
 fn load_f32(s: &[AtomicU32], at: usize) -> f32x8 {
     bytemuck::cast(load_u32(s, at))
-}
-
-/// Stores 8 consecutive values of a state array as f32.
-#[inline(always)]
-fn store_f32(s: &[AtomicU32], at: usize, v: f32x8) {
-    store_u32(s, at, bytemuck::cast(v))
-}
-
-/// Stores 8 consecutive words of a state array.
-#[inline(always)]
-fn store_u32(s: &[AtomicU32], at: usize, v: u32x8) {
-    let w = &s[at..at + 8];
-    // SAFETY: as in `load_u32`; `AtomicU32` is an `UnsafeCell`, so writing
-    // through a pointer from a shared slice is allowed.
-    unsafe { std::ptr::write_unaligned(w.as_ptr() as *mut [u32; 8], v.to_array()) }
 }
 
 /// Propagates into the element in slot `q` of a row, if there is one.
@@ -286,27 +323,20 @@ fn propagate_slot(
     rd: usize,
     rows: &RowBases,
     q: usize,
-    moves: &mut RowMoves,
-    counts: &mut (u64, u64),
+    row: &mut RowFinds,
 ) {
     let n = rows.own + q;
     let c = [2 * q + rows.p, rows.jk[0], rows.jk[1]];
     if c[0] >= lat.dims[0] || !lat.present(n) {
         return;
     }
-    counts.0 += 1;
+    row.counts.0 += 1;
     if !pinned(lat.cells[n])
         && let Some((e, a)) = sponsor(lat, st, rd, n, c)
     {
-        let wr = 1 - rd;
         let link = lat.link(n, e);
-        st.set(wr, n, link.clamp(st.get(rd, n), st.get(rd, e)));
-        st.set_key(wr, n, a);
-        counts.1 += 1;
-        moves.mark(q);
-        return;
+        row.push(q, n, link.clamp(st.get(rd, n), st.get(rd, e)), a);
     }
-    st.carry(rd, n);
 }
 
 /// The neighbour whose move element `n` takes, with the arrival key.

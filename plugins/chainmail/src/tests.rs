@@ -668,3 +668,66 @@ fn memory_per_element_is_within_the_budget() {
     let b = m.bytes_per_element();
     assert!((35.0..=40.0).contains(&b), "{b} bytes per element");
 }
+
+/// The block schedule's propagation (one copy, moves written after each
+/// scan, vector windows that skip elements no arrival beats) against the
+/// frontier schedule's (two copies, element by element): the same keys and
+/// displacements, bit for bit, after every iteration — through two
+/// materials, holes, a cut and a fixed box, pulled both ways along x.
+#[test]
+fn block_propagation_matches_the_element_frontier_iteration_by_iteration() {
+    let v = volume([37, 21, 17], |i, j, k| {
+        let r2 = (i as i64 - 18).pow(2) + (j as i64 - 10).pow(2) + (k as i64 - 8).pow(2);
+        match (r2, (i * 7 + j * 3 + k) % 89) {
+            (_, 0) => 0,
+            (r2, _) if r2 < 30 => 200,
+            _ => 100,
+        }
+    });
+    let mats = "{ range = [50, 150], constraint = 0.2, elastic = 0.7 }, \
+                { range = [150, 256], constraint = [0.05, 0.1, 0.02], elastic = 1.0 }";
+    for (at, by) in [
+        ([3, 15, 9], [-6.0, 5.0, 4.0]),
+        ([33, 15, 9], [6.0, 5.0, 4.0]),
+    ] {
+        let make = |schedule: &str| {
+            let extra = format!("schedule = \"{schedule}\"\nblock = [8, 4, 4]");
+            let mut m = ChainMail::new(v.view(), params(&extra, mats)).unwrap();
+            for spec in [
+                "kind = \"fix\"\nmin = [16, 0, 0]\nmax = [20, 4, 16]",
+                "kind = \"cut\"\npolygon = [[12.5, 8, -1], [12.5, 21, -1], [12.5, 21, 17], [12.5, 8, 17]]",
+            ] {
+                m.interact(&InteractionSpec::from_toml(spec).unwrap())
+                    .unwrap();
+            }
+            grab(&mut m, at, by);
+            m.start_deformation();
+            m
+        };
+        let (mut blocks, mut frontier) = (make("blocks"), make("frontier"));
+        let mut iterations = 0;
+        loop {
+            let (a, b) = (blocks.propagate(1), frontier.propagate(1));
+            assert_eq!(
+                a, b,
+                "pull at {at:?}, iteration {iterations}: one stopped first"
+            );
+            if a == 0 {
+                break;
+            }
+            iterations += 1;
+            let (sa, sb) = (blocks.state(), frontier.state());
+            for n in 0..blocks.lattice().len() {
+                let (ua, ub) = (sa.get(sa.cur, n), sb.get(sb.cur, n));
+                assert!(
+                    ua.map(f32::to_bits) == ub.map(f32::to_bits)
+                        && sa.key(sa.cur, n) == sb.key(sb.cur, n),
+                    "pull at {at:?}, iteration {iterations}, element {:?}: {ua:?} vs {ub:?}",
+                    blocks.lattice().coords(n)
+                );
+            }
+        }
+        assert!(iterations > 10, "pull at {at:?}: {iterations} iterations");
+        assert!(blocks.counts().updates > 1000);
+    }
+}
