@@ -167,6 +167,34 @@ fn gpu_runs_to_rest_match_rayon_in_both_directions() {
     }
 }
 
+/// A model that propagated on the CPU (in one copy) and then moves to the
+/// device — as the viewer's backend switch does — carries on as the CPU
+/// model does: the blocks the CPU changed are synced into the device's
+/// second copy first.
+#[test]
+fn a_model_moved_to_the_gpu_after_cpu_propagation_carries_on_alike() {
+    let Some(gpu) = test_gpu() else { return };
+    let v = phantom();
+    let make = || ChainMail::new(v.view(), params("block = [8, 4, 4]", MATERIALS)).unwrap();
+    let (mut cpu, mut moved) = (make(), make());
+    for m in [&mut cpu, &mut moved] {
+        grab(m, [18, 10, 8], [-4.0, 3.0, 2.0]);
+        m.start_deformation();
+        // Propagation only: relaxed blocks would be synced anyway.
+        assert!(m.propagate(u64::MAX) > 10);
+    }
+    moved.use_gpu(gpu).unwrap();
+    for m in [&mut cpu, &mut moved] {
+        grab(m, [6, 4, 12], [3.0, -2.0, 4.0]);
+        m.start_deformation();
+    }
+    let (a, b) = (cpu.propagate(u64::MAX), moved.propagate(u64::MAX));
+    assert_eq!(a, b, "propagation iterations after the move");
+    let (worst, keys) = compare(&cpu, &mut moved);
+    assert!(keys && worst <= 1e-5, "keys {keys}, {worst} mm");
+    assert!(moved.take_gpu_error().is_none());
+}
+
 /// The device's lists come in another order than the host's ascending
 /// ones; a launch's result must not depend on it. A run of many
 /// iterations (lists built on the device) against the same model stepped
