@@ -337,6 +337,7 @@ fn equal_energy(
         }
         sweeps += done;
     }
+    drop(m);
     let mut m = setup_with(n, auto(), mirrored);
     let (prop, iterations) = stages(&mut m);
     let t = Instant::now();
