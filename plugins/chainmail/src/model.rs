@@ -99,8 +99,9 @@ pub struct ChainMail {
     merge_scratch: Vec<u32>,
     /// Blocks changed since the last `take_dirty`.
     dirty: Vec<bool>,
-    /// Blocks relaxed since the Jacobi copies were last made equal
-    /// (relaxation writes only the current copy), with their flags.
+    /// Blocks changed in the current copy only (by relaxation and the
+    /// CPU's block propagation) since the two copies were last made equal,
+    /// with their flags.
     unsynced: Vec<u32>,
     unsynced_flag: Vec<bool>,
     wave: u32,

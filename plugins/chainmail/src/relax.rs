@@ -21,8 +21,9 @@
 //! (on a bipartite lattice its checkerboard mode does not decay at α = 1),
 //! converges about half as fast, and would need its own copy.
 //!
-//! Only the current Jacobi copy is written; the model copies the relaxed
-//! blocks into the other copy once, before propagation next runs
+//! Only the current copy is written; the model copies the relaxed blocks
+//! into the other copy before a two-copy propagation (the GPU's, the
+//! frontier schedule's) next runs
 //! ([`crate::model::ChainMail`]), instead of writing both on every sweep.
 //!
 //! Two kinds of sweep share `relax_one`:

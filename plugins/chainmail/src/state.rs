@@ -1,7 +1,9 @@
 //! The per-element state, structure of arrays, with both Jacobi copies.
 //!
 //! Per element: displacement `u` (mm, x/y/z f32) and an arrival key (u32),
-//! each twice (read and write copies of a Jacobi iteration), plus the
+//! each twice (read and write copies of a Jacobi iteration on the GPU and
+//! in the frontier schedule; the CPU's block propagation and relaxation
+//! work in the current copy alone), plus the
 //! lattice's material byte and cut-link byte: 2 × (12 + 4) + 2 = **34
 //! bytes**.
 //!
