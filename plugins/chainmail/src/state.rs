@@ -75,14 +75,19 @@ pub struct State {
 ///
 /// The kernels stream 8 to 10 arrays of several MiB at once; with 4 KiB
 /// pages their neighbour rows miss the TLB on almost every window. The
-/// advice is given before the first write, so the zeroing faults the pages
-/// in huge where the system allows it (`madvise` mode of transparent huge
-/// pages); elsewhere it is ignored.
+/// zeros come from the allocator's zeroed memory (fresh pages for arrays
+/// this large), so no page is backed before its first write: the advice,
+/// given before that, makes the first writes fault the pages in huge where
+/// the system allows it (`madvise` mode of transparent huge pages;
+/// elsewhere it is ignored), and a copy that is never written — the second
+/// copy, on the CPU's block path — costs no memory.
 fn zeros(n: usize) -> Vec<AtomicU32> {
-    let mut v: Vec<AtomicU32> = Vec::with_capacity(n);
+    let mut v = std::mem::ManuallyDrop::new(vec![0u32; n]);
     advise_huge_pages(v.as_ptr() as usize, n * 4);
-    v.extend((0..n).map(|_| AtomicU32::new(0)));
-    v
+    // SAFETY: the allocation is `v`'s own, taken over whole (pointer,
+    // length, capacity); `AtomicU32` has the size, alignment and bit
+    // validity of `u32`, so the layout the allocator sees is unchanged.
+    unsafe { Vec::from_raw_parts(v.as_mut_ptr().cast::<AtomicU32>(), v.len(), v.capacity()) }
 }
 
 /// Asks for huge pages over the whole 2 MiB pages inside `[addr, addr +
