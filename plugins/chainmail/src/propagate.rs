@@ -248,6 +248,11 @@ fn uniform_window(
     let mut best_u = un;
     let mut found = u32x8::ZERO;
     for (l, &e) in nb.iter().enumerate() {
+        // A direction no lane's key loses to cannot sponsor: skipped
+        // (the links ahead of the wavefront).
+        if beats[l].to_bitmask() == 0 {
+            continue;
+        }
         let rank = ranks[l];
         let ue = [load_f32(&u[0], e), load_f32(&u[1], e), load_f32(&u[2], e)];
         let mut violated = f32x8::ZERO;
