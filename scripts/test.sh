@@ -12,6 +12,9 @@
 #   4. test --no-run      the test harnesses only; dependencies are reused
 #                         from step 3 (same target dir, same dev profile).
 #   5. test               runs them (unit, integration, doc tests).
+#   6. counters           the resampler's profiling counters (cargo feature
+#                         `counters`, off in every other build): clippy and
+#                         their test; only voxflex-resample is compiled again.
 # Check-mode and build-mode artifacts are distinct in cargo, so dependencies
 # are compiled twice (once `check`, once `build`) whatever the order; the
 # order only decides how early a failure shows.
@@ -42,5 +45,9 @@ step clippy cargo clippy "${locked[@]}" --workspace --all-targets -- -D warnings
 step build cargo build "${locked[@]}" --workspace
 step test-build cargo test "${locked[@]}" --workspace --no-run
 step test cargo test "${locked[@]}" --workspace
+step counters-clippy cargo clippy "${locked[@]}" -p voxflex-resample --features counters \
+    --all-targets -- -D warnings
+step counters-test cargo test "${locked[@]}" -p voxflex-resample --features counters \
+    --test raster_counters
 
 echo "==> all checks passed in $((SECONDS - total_start)) s" >&2

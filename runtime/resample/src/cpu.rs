@@ -32,6 +32,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::blocks::BlockBounds;
+use super::counters;
 use super::fill_lanes::{FILL_LANES, trilinear_group};
 use super::lanes::{LANES, LaneCtx, TileSink, raster_cells, strip_corners};
 use super::sampling_mesh::{
@@ -150,6 +151,7 @@ impl Kernels for CpuKernels<'_> {
             Interpolation::Trilinear => run!(true),
         }
         let t2 = std::time::Instant::now();
+        counters::report(job.consts.mesh.cell_count(), job.region.count() as usize);
         tracing::trace!(
             voxels = job.region.count(),
             blocks = job.blocks.len(),

@@ -38,6 +38,7 @@
 // Lane and corner loops index several arrays by the same number.
 #![allow(clippy::needless_range_loop)]
 
+use super::counters::{Counter, add};
 use super::raster::interpolate;
 use super::sampling_mesh::{
     CELL_TETS, CORNER_TABLES, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset,
@@ -327,6 +328,7 @@ impl TileSink<'_> {
             let i = self.local([q[0][l], q[1][l], q[2][l]]);
             let key = keys[l] as u32;
             if key < self.keys[i] {
+                add(Counter::Claims, 1);
                 self.keys[i] = key;
                 self.payload[i] = payload(l);
             }
@@ -547,9 +549,12 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
             active &= !(1 << l);
         }
     }
+    add(Counter::Cells, n as u32);
     if active == 0 {
         return;
     }
+    add(Counter::BusyGroups, 1);
+    add(Counter::BusyCells, active.count_ones());
     // Planes and orientation tests, built in place (no zeroed scratch).
     let eps = ctx.eps;
     let cs = [
@@ -604,6 +609,7 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
         // voxels as possible at once.
         let mut decided = sink.decided(&q, active, base_id);
         while decided != 0 {
+            add(Counter::Decided, decided.count_ones());
             advance(&mut q, &lo, &hi, &mut active, mask_of(decided));
             decided = sink.decided(&q, decided & active, base_id);
         }
@@ -644,6 +650,9 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
             & pass(&cs[3].t_central, ti[3])
             & active;
         let found = passing.iter().fold(0, |a, &m| a | m);
+        add(Counter::Iterations, 1);
+        add(Counter::Tested, active.count_ones());
+        add(Counter::Found, found.count_ones());
         if found != 0 {
             // Lanes whose centre is the rest position of a still corner c:
             // a tetrahedron touching it only there claims it weakly.

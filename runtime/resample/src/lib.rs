@@ -90,6 +90,7 @@
 
 pub mod accuracy;
 pub mod blocks;
+mod counters;
 pub mod cpu;
 pub mod fields;
 mod fill_lanes;
@@ -109,6 +110,7 @@ pub mod tet_mask;
 #[cfg(test)]
 mod tests;
 
+pub use counters::{RasterCounts, last_raster_counts};
 pub use interpolation::Interpolation;
 pub use output_grid::{OutputGrid, VoxelBox};
 pub use sampling_mesh::SamplingMesh;
