@@ -38,6 +38,18 @@ var<private> TETS: array<u32, 40> = array<u32, 40>(
 // The corners of the face opposite corner slot a: the other three slots, ascending.
 var<private> OTHERS: array<u32, 12> = array<u32, 12>(1u, 2u, 3u, 0u, 2u, 3u, 0u, 1u, 3u, 0u, 1u, 2u);
 
+// ORIENTATION (sampling_mesh.rs): [parity][tet] = slot | (rest D > 0) << 2:
+// the face whose D (at that slot's corner) is the tetrahedron's one D.
+var<private> ORIENT: array<u32, 10> = array<u32, 10>(
+    0u, 6u, 2u, 6u, 7u, 5u, 1u, 5u, 3u, 3u,
+);
+
+// D_SIGN (sampling_mesh.rs): the D of the face opposite slot a from the
+// tetrahedron's one D at slot o, (−1)^(a−o) D.
+fn d_of_slot(d: f32, a: u32, o: u32) -> f32 {
+    return select(-d, d, ((a + o) & 1u) == 0u);
+}
+
 // Flat invocation index of a folded 3-D dispatch (gpu.rs: workgroups_1d).
 fn flat_index(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * (nwg.x * WG) + gid.z * (nwg.x * WG * nwg.y);

@@ -76,10 +76,14 @@ fn fill(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         off[a] = vec3<f32>(oc);
     }
     let q = vec3<f32>(f32(x), f32(y), f32(z));
+    // raster.rs: barycentric — λ_a = t_a(q) / D_a, D_a = ±D (d_of_slot).
+    let so = ORIENT[parity * 5u + t] & 3u;
+    let fo = make_plane(p[OTHERS[so * 3u]], p[OTHERS[so * 3u + 1u]], p[OTHERS[so * 3u + 2u]]);
+    let dt = plane_eval(fo, p[so]);
     var w: vec4<f32>;
     for (var a = 0u; a < 4u; a++) {
         let f = make_plane(p[OTHERS[a * 3u]], p[OTHERS[a * 3u + 1u]], p[OTHERS[a * 3u + 2u]]);
-        let dd = plane_eval(f, p[a]);
+        let dd = d_of_slot(dt, a, so);
         w[a] = select(0.0, plane_eval(f, q) / dd, dd != 0.0);
     }
     if P.chi.w == 1 {

@@ -25,12 +25,6 @@ var<private> TET_FACES: array<u32, 40> = array<u32, 40>(
     0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u, 15u, 9u, 5u, 1u,
 );
 
-// ORIENTATION (sampling_mesh.rs): [parity][tet] = slot | (rest D > 0) << 2:
-// the face test whose D decides the tetrahedron's orientation.
-var<private> ORIENT: array<u32, 10> = array<u32, 10>(
-    0u, 6u, 2u, 6u, 7u, 5u, 1u, 5u, 3u, 3u,
-);
-
 const WEAK_OWNER: u32 = 0x80000000u;
 
 var<private> PX: array<f32, 8>;
@@ -92,15 +86,22 @@ fn raster(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         PN[f] = pl.n;
         PB[f] = pl.b;
     }
+    // One D per tetrahedron, at its ORIENT slot o; face a's is ±D
+    // (sampling_mesh.rs: D_SIGN, (−1)^(a−o)).
     let eps = P.inv.w;
-    for (var s = 0u; s < 20u; s++) {
-        let f = TET_FACES[parity * 20u + s];
-        let d = plane_eval(Plane(PN[f], PB[f]), corner(TETS[parity * 20u + s]));
+    for (var t = 0u; t < 5u; t++) {
+        let o = ORIENT[parity * 5u + t] & 3u;
+        let so = t * 4u + o;
+        let f = TET_FACES[parity * 20u + so];
+        let d = plane_eval(Plane(PN[f], PB[f]), corner(TETS[parity * 20u + so]));
         if d == 0.0 || !(abs(d) <= 3.4028235e38) {
-            live &= ~(1u << (s / 4u));
+            live &= ~(1u << t);
         }
-        SG[s] = select(-1.0, 1.0, d > 0.0);
-        TH[s] = -eps * abs(d);
+        for (var a = 0u; a < 4u; a++) {
+            let da = d_of_slot(d, a, o);
+            SG[t * 4u + a] = select(-1.0, 1.0, da > 0.0);
+            TH[t * 4u + a] = -eps * abs(da);
+        }
     }
     if live == 0u {
         return;

@@ -770,7 +770,7 @@ mod tests {
             .flatten()
             .map(|&(slot, positive)| slot as u32 | (positive as u32) << 2)
             .collect();
-        assert_eq!(wgsl_table(RASTER, "ORIENT"), orient);
+        assert_eq!(wgsl_table(COMMON, "ORIENT"), orient);
         assert!(RASTER.contains(&format!(
             "const WEAK_OWNER: u32 = 0x{:08x}u;",
             super::super::sampling_mesh::WEAK_OWNER

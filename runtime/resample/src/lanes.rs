@@ -41,7 +41,7 @@
 use super::counters::{Counter, add};
 use super::raster::interpolate;
 use super::sampling_mesh::{
-    CELL_TETS, CORNER_TABLES, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset,
+    CELL_TETS, CORNER_TABLES, D_SIGN, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset,
 };
 use super::{DisplacementsRef, VoxelBox};
 use crate::volume::Sample;
@@ -146,8 +146,13 @@ struct CornerTet {
     d_boundary: [F; 3],
 }
 
+///
+/// Each tetrahedron has one `D` (at its `ORIENTATION` slot), the others are
+/// `±D` (`D_SIGN`): corner tetrahedron `k`'s is `d_corner`; the central
+/// one's is `d_central` of corner tetrahedron 0, which `central` passes to
+/// the others (`None` for `k = 0`).
 #[inline(always)]
-fn corner<const P: usize>(p: &[[F; 3]; 8], k: usize, eps: f32) -> CornerTet {
+fn corner<const P: usize>(p: &[[F; 3]; 8], k: usize, eps: f32, central: Option<F>) -> CornerTet {
     let faces = &FACE_TABLES.faces[P];
     let it = &CORNER_TABLES.interior[P][k];
     let bt = &CORNER_TABLES.boundary[P][k];
@@ -158,11 +163,15 @@ fn corner<const P: usize>(p: &[[F; 3]; 8], k: usize, eps: f32) -> CornerTet {
     let interior = face(it[0]);
     let boundary = [face(bt[0][0]), face(bt[1][0]), face(bt[2][0])];
     let d_corner = eval(&interior, &p[it[1] as usize]);
-    let d_central = eval(&interior, &p[it[2] as usize]);
+    let sign = |t: usize, v: u8| F::splat(D_SIGN[P][t][slot_of(&CELL_TETS[P][t], v)]);
+    let d_central = match central {
+        None => eval(&interior, &p[it[2] as usize]),
+        Some(d) => d * sign(4, it[2]),
+    };
     let d_boundary = [
-        eval(&boundary[0], &p[bt[0][1] as usize]),
-        eval(&boundary[1], &p[bt[1][1] as usize]),
-        eval(&boundary[2], &p[bt[2][1] as usize]),
+        d_corner * sign(k, bt[0][1]),
+        d_corner * sign(k, bt[1][1]),
+        d_corner * sign(k, bt[2][1]),
     ];
     CornerTet {
         t_corner: test(d_corner, eps),
@@ -557,11 +566,13 @@ pub(crate) fn raster_cells<const P: usize, T: Sample, const TRI: bool>(
     add(Counter::BusyCells, active.count_ones());
     // Planes and orientation tests, built in place (no zeroed scratch).
     let eps = ctx.eps;
+    let c0 = corner::<P>(p, 0, eps, None);
+    let central = Some(c0.d_central);
     let cs = [
-        corner::<P>(p, 0, eps),
-        corner::<P>(p, 1, eps),
-        corner::<P>(p, 2, eps),
-        corner::<P>(p, 3, eps),
+        c0,
+        corner::<P>(p, 1, eps, central),
+        corner::<P>(p, 2, eps, central),
+        corner::<P>(p, 3, eps, central),
     ];
     // Live tetrahedra per lane (bit per lane).
     let mut live = [(1u32 << LANES) - 1; 5];
@@ -939,8 +950,10 @@ mod tests {
                     clip.lo[2] + (i / (d[0] * d[1])) as i32,
                 ];
                 let c = &corners_of[mesh.cell_linear(cell)];
-                let tet = CELL_TETS[cell_parity(cell)][t];
-                let w = barycentric(&tet.map(|k| c.point(k as usize)), q.map(|v| v as f32));
+                let parity = cell_parity(cell);
+                let tet = CELL_TETS[parity][t];
+                let p = tet.map(|k| c.point(k as usize));
+                let w = barycentric(parity, t, &p, q.map(|v| v as f32));
                 let o = tet.map(|k| corner_offset(k).map(|v| v as f32));
                 let r = rest_offset(w, o);
                 let ax = [0, 1, 2].map(|a| trilinear_axis(cell[a] as i32, r[a], dims[a]));

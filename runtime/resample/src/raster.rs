@@ -18,11 +18,15 @@
 //!   tetrahedra sharing a face compute the same bits, with opposite signs
 //!   relative to their opposite vertices, so a voxel centre on a shared face
 //!   passes at least one of them: no holes, whatever the epsilon.
-//! - `D_a = t_a(P_a)` (the plane of the face opposite `a` at `P_a`),
-//!   barycentric `λ_a = t_a(q) / D_a`. A voxel centre on vertex `a` gets
-//!   `λ_a = D_a / D_a = 1` exactly; with integer positions (the identity
-//!   field) every product is exact, so the other weights are exactly 0 and
-//!   the interpolated value is the vertex's value, bit for bit.
+//! - Each tetrahedron has **one** orientation `D = t_o(P_o)`, the plane of
+//!   the face opposite its `ORIENTATION` slot `o` at that corner; face `a`'s
+//!   is `D_a = (−1)^(a−o) D` (`sampling_mesh::D_SIGN`: the determinant with
+//!   slot `a` moved last), so a cell evaluates 5 orientations, not 20, and
+//!   all faces of a tetrahedron agree on its orientation. Barycentric
+//!   `λ_a = t_a(q) / D_a`. With integer positions (the identity field)
+//!   every product is exact, so a voxel centre on vertex `a` gets
+//!   `λ_a = 1` and the other weights exactly 0: the interpolated value is
+//!   the vertex's value, bit for bit.
 //! - Inclusion: voxel centre `q` lies in the integer box of its cell (the
 //!   cell's deformed bounding box, clipped) and `sign(D_a) · t_a(q) ≥ −ε |D_a|`
 //!   (with `D_a` finite and non-zero) for the four faces of the tetrahedron.
@@ -45,7 +49,9 @@
 #[cfg(test)]
 use super::output_grid::VoxelBox;
 #[cfg(test)]
-use super::sampling_mesh::{CELL_TETS, CORNER_TABLES, FACE_TABLES, ORIENTATION, TETS_PER_CELL};
+use super::sampling_mesh::{
+    CELL_TETS, CORNER_TABLES, D_SIGN, FACE_TABLES, ORIENTATION, TETS_PER_CELL,
+};
 
 #[cfg(test)]
 /// Deformed positions of the eight corners of a cell (source index units),
@@ -261,8 +267,14 @@ impl<'c, const P: usize> CellRaster<'c, P> {
         for k in 0..4 {
             let p = plane_of::<P>(c, tab[k][0]);
             interior.set(k, &p);
+            // Each tetrahedron's one `D` (its `ORIENTATION` slot): corner
+            // tetrahedron k's at its corner vertex, the central one's from
+            // interior face 0; the other faces' `D`s follow by `D_SIGN`.
             d_corner[k] = p.eval(c.point(tab[k][1] as usize));
-            d_central[k] = p.eval(c.point(tab[k][2] as usize));
+            if k == 0 {
+                d_central[0] = p.eval(c.point(tab[0][2] as usize));
+            }
+            d_central[k] = d_central[0] * D_SIGN[P][4][slot_in(&CELL_TETS[P][4], tab[k][2])];
         }
         Some(CellRaster {
             c,
@@ -286,7 +298,8 @@ impl<'c, const P: usize> CellRaster<'c, P> {
             for m in 0..3 {
                 let p = plane_of::<P>(self.c, tab[m][0]);
                 self.boundary[k].set(m, &p);
-                self.d_boundary[k][m] = p.eval(self.c.point(tab[m][1] as usize));
+                let sign = D_SIGN[P][k][slot_in(&CELL_TETS[P][k], tab[m][1])];
+                self.d_boundary[k][m] = self.d_corner[k] * sign;
             }
             self.have_boundary |= 1 << k;
         }
@@ -349,6 +362,14 @@ impl<'c, const P: usize> CellRaster<'c, P> {
 }
 
 #[cfg(test)]
+/// The slot of corner `c` in `tet` (its corners ascending).
+fn slot_in(tet: &[u8; 4], c: u8) -> usize {
+    tet.iter()
+        .position(|&v| v == c)
+        .expect("corner of the tetrahedron")
+}
+
+#[cfg(test)]
 /// Face plane `f` of a cell of parity `P`.
 #[inline(always)]
 fn plane_of<const P: usize>(c: &CellCorners, f: u8) -> FacePlane {
@@ -361,17 +382,23 @@ fn plane_of<const P: usize>(c: &CellCorners, f: u8) -> FacePlane {
 }
 
 #[cfg(test)]
-/// Barycentric weights of `q` in the tetrahedron with corner positions `p`
-/// (ascending corner order), `λ_a = t_a(q) / D_a` (0 for a degenerate face).
+/// Barycentric weights of `q` in tetrahedron `t` of a cell of parity
+/// `parity`, its corner positions `p` in ascending corner order:
+/// `λ_a = t_a(q) / D_a` with `D_a = D_SIGN · D` from the one `D` at the
+/// tetrahedron's `ORIENTATION` slot (all 0 for a degenerate tetrahedron).
 #[inline(always)]
-pub(crate) fn barycentric(p: &[[f32; 3]; 4], q: [f32; 3]) -> [f32; 4] {
+pub(crate) fn barycentric(parity: usize, t: usize, p: &[[f32; 3]; 4], q: [f32; 3]) -> [f32; 4] {
     const OTHERS: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
+    let face = |a: usize| {
+        let [u, v, x] = OTHERS[a];
+        FacePlane::new(p[u], p[v], p[x])
+    };
+    let o = ORIENTATION[parity][t].0 as usize;
+    let d = face(o).eval(p[o]);
     let mut w = [0.0; 4];
     for a in 0..4 {
-        let [u, v, x] = OTHERS[a];
-        let f = FacePlane::new(p[u], p[v], p[x]);
-        let d = f.eval(p[a]);
-        w[a] = if d != 0.0 { f.eval(q) / d } else { 0.0 };
+        let da = d * D_SIGN[parity][t][a];
+        w[a] = if da != 0.0 { face(a).eval(q) / da } else { 0.0 };
     }
     w
 }
@@ -476,10 +503,10 @@ mod tests {
             ]
         });
         for parity in 0..2 {
-            for tet in CELL_TETS[parity] {
+            for (t, tet) in CELL_TETS[parity].iter().enumerate() {
                 let p = tet.map(|k| c.point(k as usize));
                 for (a, q) in p.iter().enumerate() {
-                    let w = barycentric(&p, *q);
+                    let w = barycentric(parity, t, &p, *q);
                     let mut e = [0.0; 4];
                     e[a] = 1.0;
                     assert_eq!(w, e);
@@ -504,11 +531,15 @@ mod tests {
         q: [f32; 3],
     ) -> Option<(usize, bool)> {
         const OTHERS: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
+        // Face `a`'s plane, and its `D` from the tetrahedron's one `D`.
         let plane_d = |t: usize, a: usize| {
             let p = CELL_TETS[parity][t].map(|k| c.point(k as usize));
-            let [u, v, w] = OTHERS[a];
-            let f = FacePlane::new(p[u], p[v], p[w]);
-            (f, f.eval(p[a]))
+            let face = |a: usize| {
+                let [u, v, w] = OTHERS[a];
+                FacePlane::new(p[u], p[v], p[w])
+            };
+            let o = ORIENTATION[parity][t].0 as usize;
+            (face(a), face(o).eval(p[o]) * D_SIGN[parity][t][a])
         };
         (0..TETS_PER_CELL)
             .filter(|&t| {
