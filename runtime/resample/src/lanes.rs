@@ -146,6 +146,7 @@ struct CornerTet {
     d_boundary: [F; 3],
 }
 
+/// Corner tetrahedron `k`'s planes, orientations and face tests, per lane.
 ///
 /// Each tetrahedron has one `D` (at its `ORIENTATION` slot), the others are
 /// `±D` (`D_SIGN`): corner tetrahedron `k`'s is `d_corner`; the central
