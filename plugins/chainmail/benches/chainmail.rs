@@ -290,9 +290,6 @@ fn local_grabs(n: usize, ms: impl Fn(std::time::Duration) -> f64) {
     }
 }
 
-/// Times the relaxation kernels on a deformed model: 40 sweeps over every
-/// block of size `block`; and, for scale, a copy of as many bytes as the
-/// state's positions hold, split over the threads.
 /// The papers' test to the papers' relaxation: the plain run (619 sweeps)
 /// sets the energy `Σ w |u_n − u_e|²` its relaxation reaches; the model's
 /// default, the automatic over-relaxation, then relaxes after the same
@@ -399,6 +396,9 @@ fn state_hash(m: &ChainMail) -> u64 {
     })
 }
 
+/// Times the relaxation kernels on a deformed model: 40 sweeps over every
+/// block of size `block`; and, for scale, a copy of as many bytes as the
+/// state's positions hold, split over the threads.
 fn relaxation_kernels(pm: &ChainMail, block: [usize; 3], ms: impl Fn(std::time::Duration) -> f64) {
     use rayon::prelude::*;
     use voxflex_chainmail::blocks::Blocks;
