@@ -105,29 +105,21 @@ pub(crate) fn add(c: Counter, n: u32) {
 pub(crate) fn report(mesh_cells: usize, output_voxels: usize) {
     #[cfg(feature = "counters")]
     {
-        let [
-            cells,
-            busy_groups,
-            busy_cells,
-            decided,
-            iterations,
-            tested,
-            found,
-            claims,
-        ] = on::take();
+        let taken = on::take();
+        let n = |c: Counter| taken[c as usize];
         let counts = super::RasterCounts {
             mesh_cells: mesh_cells as u64,
             output_voxels: output_voxels as u64,
-            cells,
-            busy_groups,
-            busy_cells,
-            decided,
-            iterations,
-            tested,
-            found,
-            claims,
+            cells: n(Counter::Cells),
+            busy_groups: n(Counter::BusyGroups),
+            busy_cells: n(Counter::BusyCells),
+            decided: n(Counter::Decided),
+            iterations: n(Counter::Iterations),
+            tested: n(Counter::Tested),
+            found: n(Counter::Found),
+            claims: n(Counter::Claims),
         };
-        let lane_use = tested as f64 / (8 * iterations).max(1) as f64;
+        let lane_use = counts.tested as f64 / (8 * counts.iterations).max(1) as f64;
         tracing::debug!(?counts, lane_use, "resample: raster counters (cpu)");
         *on::LAST.lock().unwrap_or_else(|e| e.into_inner()) = Some(counts);
     }
