@@ -39,43 +39,44 @@ def bench_output(ctx: Context, exe, *args: str) -> str:
     return p.stdout
 
 
+# The timings both bench lines print, as named groups.
+RUN_TIMES = (
+    r"propagation (?P<propagation_ms>[\d.]+) ms \((?P<iterations>\d+) iterations\), "
+    r"relaxation (?P<relaxation_ms>[\d.]+) ms \((?P<sweeps>\d+) sweeps\), total (?P<total_ms>[\d.]+) ms"
+)
+
+
+def run_times(m: re.Match) -> dict:
+    """The fields of ``RUN_TIMES`` in a match, as numbers."""
+    return {
+        "propagation_ms": float(m["propagation_ms"]),
+        "iterations": int(m["iterations"]),
+        "relaxation_ms": float(m["relaxation_ms"]),
+        "sweeps": int(m["sweeps"]),
+        "total_ms": float(m["total_ms"]),
+    }
+
+
 def parallel_run(ctx: Context, exe, n: int) -> dict:
     out = bench_output(ctx, exe, "parallel", str(n))
-    m = re.search(
-        r"propagation ([\d.]+) ms \((\d+) iterations\), relaxation ([\d.]+) ms \((\d+) sweeps\), total ([\d.]+) ms",
-        out,
-    )
+    m = re.search(RUN_TIMES, out)
     if not m:
         raise HarnessError(f"no parallel run line in:\n{out}")
-    return {
-        "propagation_ms": float(m.group(1)),
-        "iterations": int(m.group(2)),
-        "relaxation_ms": float(m.group(3)),
-        "sweeps": int(m.group(4)),
-        "total_ms": float(m.group(5)),
-    }
+    return run_times(m)
 
 
 def energy_run(ctx: Context, exe, n: int) -> dict:
     out = bench_output(ctx, exe, "energy", str(n))
     plain = re.search(r"plain relaxation .*energy ([\d.e+-]+)", out)
-    m = re.search(
-        r"ω = ([\d.]+): propagation ([\d.]+) ms \((\d+) iterations\), relaxation ([\d.]+) ms \((\d+) sweeps\), "
-        r"total ([\d.]+) ms, energy ([\d.e+-]+)(.*)",
-        out,
-    )
+    m = re.search(r"ω = (?P<omega>[\d.]+): " + RUN_TIMES + r", energy (?P<energy>[\d.e+-]+)(?P<rest>.*)", out)
     if not (plain and m):
         raise HarnessError(f"no equal-energy lines in:\n{out}")
     return {
-        "omega": float(m.group(1)),
-        "propagation_ms": float(m.group(2)),
-        "iterations": int(m.group(3)),
-        "relaxation_ms": float(m.group(4)),
-        "sweeps": int(m.group(5)),
-        "total_ms": float(m.group(6)),
-        "energy": float(m.group(7)),
+        "omega": float(m["omega"]),
+        **run_times(m),
+        "energy": float(m["energy"]),
         "target_energy": float(plain.group(1)),
-        "reached": "NOT reached" not in m.group(8),
+        "reached": "NOT reached" not in m["rest"],
     }
 
 
