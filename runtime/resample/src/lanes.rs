@@ -41,7 +41,7 @@
 use super::counters::{Counter, add};
 use super::raster::interpolate;
 use super::sampling_mesh::{
-    CELL_TETS, CORNER_TABLES, D_SIGN, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset,
+    CELL_TETS, CORNER_TABLES, D_SIGN, FACE_TABLES, ORIENTATION, WEAK_OWNER, corner_offset, slot_of,
 };
 use super::{DisplacementsRef, VoxelBox};
 use crate::volume::Sample;
@@ -217,17 +217,6 @@ const SLOT_SRC_PAIRS: [[[[u8; 2]; 4]; 5]; 2] = {
     }
     out
 };
-
-const fn slot_of(tet: &[u8; 4], corner: u8) -> usize {
-    let mut a = 0;
-    while a < 4 {
-        if tet[a] == corner {
-            return a;
-        }
-        a += 1;
-    }
-    panic!("corner not in tetrahedron")
-}
 
 const fn slot_src(p: usize) -> [[(u8, u8); 4]; 5] {
     let mut out = [[(255u8, 255u8); 4]; 5];

@@ -50,7 +50,7 @@
 use super::output_grid::VoxelBox;
 #[cfg(test)]
 use super::sampling_mesh::{
-    CELL_TETS, CORNER_TABLES, D_SIGN, FACE_TABLES, ORIENTATION, TETS_PER_CELL,
+    CELL_TETS, CORNER_TABLES, D_SIGN, FACE_TABLES, ORIENTATION, TETS_PER_CELL, slot_of,
 };
 
 #[cfg(test)]
@@ -274,7 +274,7 @@ impl<'c, const P: usize> CellRaster<'c, P> {
             if k == 0 {
                 d_central[0] = p.eval(c.point(tab[0][2] as usize));
             }
-            d_central[k] = d_central[0] * D_SIGN[P][4][slot_in(&CELL_TETS[P][4], tab[k][2])];
+            d_central[k] = d_central[0] * D_SIGN[P][4][slot_of(&CELL_TETS[P][4], tab[k][2])];
         }
         Some(CellRaster {
             c,
@@ -298,7 +298,7 @@ impl<'c, const P: usize> CellRaster<'c, P> {
             for m in 0..3 {
                 let p = plane_of::<P>(self.c, tab[m][0]);
                 self.boundary[k].set(m, &p);
-                let sign = D_SIGN[P][k][slot_in(&CELL_TETS[P][k], tab[m][1])];
+                let sign = D_SIGN[P][k][slot_of(&CELL_TETS[P][k], tab[m][1])];
                 self.d_boundary[k][m] = self.d_corner[k] * sign;
             }
             self.have_boundary |= 1 << k;
@@ -359,14 +359,6 @@ impl<'c, const P: usize> CellRaster<'c, P> {
         }
         best.map(|(w, t)| (t, w))
     }
-}
-
-#[cfg(test)]
-/// The slot of corner `c` in `tet` (its corners ascending).
-fn slot_in(tet: &[u8; 4], c: u8) -> usize {
-    tet.iter()
-        .position(|&v| v == c)
-        .expect("corner of the tetrahedron")
 }
 
 #[cfg(test)]

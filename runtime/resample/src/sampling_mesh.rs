@@ -244,11 +244,13 @@ const fn build_d_sign(p: usize) -> [[f32; 4]; TETS_PER_CELL] {
     out
 }
 
-const fn slot_of(tet: &[u8; 4], corner: u8) -> u8 {
+/// The slot (0..4) of cell corner `corner` in `tet` (its corners
+/// ascending); panics (at compile time in const use) if `tet` lacks it.
+pub(crate) const fn slot_of(tet: &[u8; 4], corner: u8) -> usize {
     let mut a = 0;
     while a < 4 {
         if tet[a] == corner {
-            return a as u8;
+            return a;
         }
         a += 1;
     }
@@ -295,16 +297,16 @@ const fn build_orientation(p: usize) -> [(u8, bool); TETS_PER_CELL] {
     while k < 4 {
         let tet = &CELL_TETS[p][k];
         let a = slot_of(tet, CORNER_TABLES.interior[p][k][1]);
-        let d = rest_d(p, tet, a as usize);
+        let d = rest_d(p, tet, a);
         assert!(d != 0, "a rest tetrahedron is not degenerate");
-        out[k] = (a, d > 0);
+        out[k] = (a as u8, d > 0);
         k += 1;
     }
     let central = &CELL_TETS[p][4];
     let a = slot_of(central, CORNER_TABLES.interior[p][0][2]);
-    let d = rest_d(p, central, a as usize);
+    let d = rest_d(p, central, a);
     assert!(d != 0, "a rest tetrahedron is not degenerate");
-    out[4] = (a, d > 0);
+    out[4] = (a as u8, d > 0);
     out
 }
 
