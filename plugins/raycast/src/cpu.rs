@@ -27,6 +27,8 @@ use rayon::prelude::*;
 use voxflex_core::glam::Vec3;
 use voxflex_core::opacity_map::{OPACITY_ONE, OpacityMap};
 use voxflex_core::render::RenderStats;
+use voxflex_core::volume::{Sample, VoxelSlice};
+use voxflex_core::with_voxels;
 
 /// Tile edge, pixels.
 pub const TILE: u32 = 16;
@@ -38,8 +40,9 @@ const T_FAR: f32 = 3.0e38;
 pub struct Scene<'a> {
     /// The frame's constants.
     pub u: &'a RayUniforms,
-    /// The volume as f32, x fastest.
-    pub values: &'a [f32],
+    /// The volume, x fastest, in its own scalar type (read as f32, exactly:
+    /// [`crate::voxel_store::VoxelStore`]).
+    pub values: VoxelSlice<'a>,
     /// The transfer function table.
     pub lut: &'a Lut,
     /// The macro-cells (min/max).
@@ -95,9 +98,11 @@ struct Schedule {
     n_total: u32,
 }
 
-/// Precomputed integer constants of a [`Scene`].
-struct Kernel<'a> {
+/// Precomputed integer constants of a [`Scene`] whose voxels are `T`s.
+struct Kernel<'a, T> {
     s: &'a Scene<'a>,
+    /// The scene's voxels, typed.
+    values: &'a [T],
     dims: [usize; 3],
     /// Largest lower-corner index per axis (`max(n, 2) − 2`).
     max0: [usize; 3],
@@ -125,13 +130,14 @@ fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a + t * (b - a)
 }
 
-impl<'a> Kernel<'a> {
-    fn new(s: &'a Scene<'a>) -> Self {
+impl<'a, T: Sample> Kernel<'a, T> {
+    fn new(s: &'a Scene<'a>, values: &'a [T]) -> Self {
         let u = s.u;
         let dims = [u.dims[0] as usize, u.dims[1] as usize, u.dims[2] as usize];
         let strides = [1, dims[0], dims[0] * dims[1]];
         Self {
             s,
+            values,
             dims,
             max0: dims.map(|n| n.max(2) - 2),
             off: std::array::from_fn(|a| if dims[a] > 1 { strides[a] } else { 0 }),
@@ -247,7 +253,7 @@ impl<'a> Kernel<'a> {
     #[inline(always)]
     fn may_show(&self, fp: &Footprint) -> bool {
         match self.visible {
-            Some(cells) => cells.may_show(self.s.values, self.s.lut, fp.i),
+            Some(cells) => cells.may_show(self.values, self.s.lut, fp.i),
             None => true,
         }
     }
@@ -257,11 +263,12 @@ impl<'a> Kernel<'a> {
     fn value(&self, fp: &Footprint) -> f32 {
         let [ox, oy, oz] = self.off;
         let b = fp.base;
-        let v = &self.s.values[b..=b + ox + oy + oz];
-        let x00 = lerp(v[0], v[ox], fp.f.x);
-        let x10 = lerp(v[oy], v[ox + oy], fp.f.x);
-        let x01 = lerp(v[oz], v[ox + oz], fp.f.x);
-        let x11 = lerp(v[oy + oz], v[ox + oy + oz], fp.f.x);
+        let v = &self.values[b..=b + ox + oy + oz];
+        let at = |o: usize| v[o].to_f32();
+        let x00 = lerp(at(0), at(ox), fp.f.x);
+        let x10 = lerp(at(oy), at(ox + oy), fp.f.x);
+        let x01 = lerp(at(oz), at(ox + oz), fp.f.x);
+        let x11 = lerp(at(oy + oz), at(ox + oy + oz), fp.f.x);
         lerp(lerp(x00, x10, fp.f.y), lerp(x01, x11, fp.f.y), fp.f.z)
     }
 
@@ -284,11 +291,11 @@ impl<'a> Kernel<'a> {
         let mut acc = [0f32; 4];
         let ob = [0, self.off[b]];
         let oc = [0, self.off[c]];
-        let v = self.s.values;
+        let v = |l: usize| self.values[l].to_f32();
         for (slot, (db, dc)) in acc.iter_mut().zip([(0, 0), (1, 0), (0, 1), (1, 1)]) {
             let r = row0 + ob[db] + oc[dc];
-            *slot = (1.0 - fa) * (v[r + i1 * sa] - v[r + im * sa])
-                + fa * (v[r + i2 * sa] - v[r + i0 * sa]);
+            *slot = (1.0 - fa) * (v(r + i1 * sa) - v(r + im * sa))
+                + fa * (v(r + i2 * sa) - v(r + i0 * sa));
         }
         lerp(lerp(acc[0], acc[1], fb), lerp(acc[2], acc[3], fb), fc)
     }
@@ -301,9 +308,9 @@ impl<'a> Kernel<'a> {
             let cached = self
                 .s
                 .gradients
-                .and_then(|c| c.sobel(self.s.values, fp.i, fp.f));
+                .and_then(|c| c.sobel(self.values, fp.i, fp.f));
             let d = cached.unwrap_or_else(|| {
-                filters::sobel(&filters::gather(self.s.values, self.dims, fp.i), fp.f)
+                filters::sobel(&filters::gather(self.values, self.dims, fp.i), fp.f)
             });
             return Vec3::new(d.x * g[0], d.y * g[1], d.z * g[2]);
         }
@@ -653,7 +660,13 @@ pub fn primary_ray(u: &RayUniforms, px: u32, py: u32) -> (Vec3, Vec3) {
 /// Renders the whole image: linear premultiplied RGBA per pixel (row-major
 /// from the top-left), background composited, and the statistics.
 pub fn render(scene: &Scene<'_>) -> (Vec<[f32; 4]>, RenderStats) {
-    let k = Kernel::new(scene);
+    with_voxels!(scene.values, |values| render_typed(scene, values))
+}
+
+/// [`render`] with the scene's voxels as `T`s (one copy of the kernel per
+/// scalar type, so a sample reads its type and converts in registers).
+fn render_typed<T: Sample>(scene: &Scene<'_>, values: &[T]) -> (Vec<[f32; 4]>, RenderStats) {
+    let k = Kernel::new(scene, values);
     let (w, h) = (scene.u.image[0], scene.u.image[1]);
     let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
     let tiles: Vec<(Vec<[f32; 4]>, RenderStats)> = (0..tx * ty)

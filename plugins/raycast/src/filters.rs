@@ -21,6 +21,7 @@
 //! Voxel-index space throughout (voxel centres at integers).
 
 use voxflex_core::glam::Vec3;
+use voxflex_core::volume::Sample;
 
 /// A 32-bit integer hash (Chris Wellons' "lowbias32"): full avalanche, a
 /// handful of integer operations, identical in WGSL.
@@ -175,9 +176,10 @@ pub fn sobel(block: &Block, f: Vec3) -> Vec3 {
 }
 
 /// Gathers the [`Block`] of the footprint with lower corner `i` from
-/// `values` (`dims`, x fastest), clamping indices to the grid.
+/// `values` (`dims`, x fastest, in the renderer's [`Sample`] type), clamping
+/// indices to the grid.
 #[inline]
-pub fn gather(values: &[f32], dims: [usize; 3], i: [usize; 3]) -> Block {
+pub fn gather<T: Sample>(values: &[T], dims: [usize; 3], i: [usize; 3]) -> Block {
     let idx = |a: usize| {
         let n = dims[a] - 1;
         [
@@ -193,7 +195,7 @@ pub fn gather(values: &[f32], dims: [usize; 3], i: [usize; 3]) -> Block {
         for y in 0..4 {
             let row = dims[0] * (iy[y] + dims[1] * iz[z]);
             for x in 0..4 {
-                b[x + 4 * (y + 4 * z)] = values[row + ix[x]];
+                b[x + 4 * (y + 4 * z)] = values[row + ix[x]].to_f32();
             }
         }
     }

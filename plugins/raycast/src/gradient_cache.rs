@@ -29,6 +29,7 @@ use crate::lazy_bricks::{LazyBricks, Reach};
 use crate::macrocell::IndexBox;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use voxflex_core::glam::{Vec3, Vec4};
+use voxflex_core::volume::Sample;
 
 pub use crate::lazy_bricks::BRICK;
 /// Corner voxels per brick edge.
@@ -97,7 +98,7 @@ impl GradientCache {
     /// `values` (the volume, x fastest); `None` when the brick is over the
     /// budget.
     #[inline]
-    pub fn sobel(&self, values: &[f32], i: [usize; 3], f: Vec3) -> Option<Vec3> {
+    pub fn sobel<T: Sample>(&self, values: &[T], i: [usize; 3], f: Vec3) -> Option<Vec3> {
         let place = self.bricks.place(i);
         let brick = self
             .bricks
@@ -120,7 +121,7 @@ impl GradientCache {
 
     /// Builds brick `b` (or marks it uncached when the budget is spent).
     #[cold]
-    fn build(&self, values: &[f32], b: [usize; 3]) -> Option<Brick> {
+    fn build<T: Sample>(&self, values: &[T], b: [usize; 3]) -> Option<Brick> {
         if self.built.fetch_add(1, Ordering::Relaxed) >= self.budget {
             return None;
         }
@@ -134,7 +135,7 @@ impl GradientCache {
 /// Each pass runs over whole rows of fixed-size arrays on the stack, so the
 /// compiler keeps it in SIMD registers; per element it is the same [`tap3`]
 /// as the per-sample filter, so the result is bit-identical.
-fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
+fn brick_gradients<T: Sample>(values: &[T], dims: [usize; 3], b: [usize; 3]) -> Brick {
     let index = |a: usize, h: usize| (b[a] * BRICK + h).saturating_sub(1).min(dims[a] - 1);
     let xs: [usize; HALO] = std::array::from_fn(|h| index(0, h));
     // Along x, per halo row (hy, hz): [D, S][hz][hy][cx].
@@ -142,7 +143,7 @@ fn brick_gradients(values: &[f32], dims: [usize; 3], b: [usize; 3]) -> Brick {
     for hz in 0..HALO {
         for hy in 0..HALO {
             let row = &values[dims[0] * (index(1, hy) + dims[1] * index(2, hz))..];
-            let h: [f32; HALO] = std::array::from_fn(|x| row[xs[x]]);
+            let h: [f32; HALO] = std::array::from_fn(|x| row[xs[x]].to_f32());
             for (k, pass) in x_pass.iter_mut().enumerate() {
                 pass[hz][hy] = taps(&h, k == 0);
             }

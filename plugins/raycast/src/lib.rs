@@ -128,19 +128,21 @@ pub mod transfer;
 pub mod uniforms;
 pub mod views;
 pub mod visible_cells;
+pub mod voxel_store;
 
 pub use params::RaycastParams;
 pub use views::{fit_camera, turntable};
 
 use gpu::GpuRenderer;
 use gradient_cache::GradientCache;
-use macrocell::{IndexBox, MacroCells, convert_region, dirty_voxels};
+use macrocell::{IndexBox, MacroCells, dirty_voxels};
 use ray_bounds::{RayBounds, ShownCells};
 use rayon::prelude::*;
 use std::sync::Arc;
 use transfer::{Lut, TransferFunction, ValueUnits};
 use uniforms::RayUniforms;
 use visible_cells::VisibleCells;
+use voxel_store::VoxelStore;
 use voxflex_core::camera::{Camera, Projection};
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
 use voxflex_core::error::ModelError;
@@ -148,6 +150,8 @@ use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::grid::Grid;
 use voxflex_core::opacity_map::OpacityMap;
 use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
+use voxflex_core::volume::ScalarType;
+use voxflex_core::with_voxels;
 
 /// Largest image, pixels (keeps every index in u32 on both paths).
 pub const MAX_PIXELS: u64 = 1 << 28;
@@ -168,8 +172,8 @@ pub struct RaycastRenderer {
     service: Option<Arc<dyn GpuService>>,
     backend: ExecutionBackend,
     grid: Option<Grid>,
-    /// CPU backend: the volume as f32.
-    values: Vec<f32>,
+    /// CPU backend: the volume in its own scalar type.
+    values: VoxelStore,
     /// CPU backend: the macro-cells.
     cells: MacroCells,
     /// CPU backend: Sobel gradients per brick, built on first use.
@@ -226,7 +230,7 @@ impl RaycastRenderer {
             service: gpu,
             backend: ExecutionBackend::Cpu,
             grid: None,
-            values: Vec::new(),
+            values: VoxelStore::default(),
             gradients: None,
             visible: None,
             fine_skipping: true,
@@ -293,7 +297,7 @@ impl RaycastRenderer {
                     Some(v) if !fresh => self.cells.cells_touching(v),
                     _ => IndexBox::all(self.cells.counts),
                 };
-                self.cells.rebuild(&self.values, cells);
+                with_voxels!(self.values.as_slice(), |v| self.cells.rebuild(v, cells));
             }
             ExecutionBackend::Gpu => {
                 let counts = MacroCells::counts_for(grid.dims, cell);
@@ -426,7 +430,7 @@ impl RaycastRenderer {
             .filter(|_| self.cell() == lazy_bricks::BRICK)
             .map(|cells| ShownCells {
                 cells,
-                values: &self.values,
+                values: self.values.as_slice(),
                 lut,
             });
         let tables_ms = clock.elapsed().as_secs_f64() * 1e3;
@@ -438,7 +442,7 @@ impl RaycastRenderer {
         let bounds_ms = clock.elapsed().as_secs_f64() * 1e3 - tables_ms;
         let scene = cpu::Scene {
             u: &u,
-            values: &self.values,
+            values: self.values.as_slice(),
             lut,
             cells: &self.cells,
             leap,
@@ -480,8 +484,8 @@ impl RaycastRenderer {
         region: IndexBox,
     ) -> Result<(), ModelError> {
         if fresh {
-            self.values = vec![0.0; grid.len()];
-            // At most as many bytes of gradients as the volume itself.
+            self.values = VoxelStore::zeroed(stored_type(&volume), grid.len());
+            // At most as many bytes of gradients as the volume as f32.
             self.gradients = Some(GradientCache::new(grid.dims, 4 * grid.len()));
             self.visible = None;
         } else {
@@ -493,7 +497,7 @@ impl RaycastRenderer {
             }
         }
         match volume {
-            RenderVolume::Cpu(view) => convert_region(&view, region, &mut self.values),
+            RenderVolume::Cpu(view) => self.values.copy_region(&view, region),
             RenderVolume::Gpu { values, .. } => {
                 let service = self.service()?;
                 let plane = grid.dims[0] * grid.dims[1];
@@ -506,12 +510,16 @@ impl RaycastRenderer {
                         grid.len() * 4
                     )));
                 }
+                let store = self
+                    .values
+                    .f32_mut()
+                    .expect("a device volume is stored as f32");
                 service.read_buffer(
                     values,
                     a as u64 * 4,
-                    bytemuck::cast_slice_mut(&mut self.values[a..b]),
+                    bytemuck::cast_slice_mut(&mut store[a..b]),
                 )?;
-                for v in &mut self.values[a..b] {
+                for v in &mut store[a..b] {
                     if v.is_nan() {
                         *v = 0.0;
                     }
@@ -575,6 +583,15 @@ impl RaycastRenderer {
     }
 }
 
+/// The scalar type the CPU path keeps `volume` in: its own for a CPU
+/// view, f32 for a device buffer (read back as f32).
+fn stored_type(volume: &RenderVolume<'_>) -> ScalarType {
+    match volume {
+        RenderVolume::Cpu(view) => view.data.scalar_type(),
+        RenderVolume::Gpu { .. } => ScalarType::F32,
+    }
+}
+
 fn check_len(have: usize, pixels: usize) -> Result<(), ModelError> {
     if have != pixels * 4 {
         return Err(ModelError(format!(
@@ -620,7 +637,7 @@ impl Renderer for RaycastRenderer {
         self.backend = backend;
         // Volume state belongs to the previous backend: start over.
         self.grid = None;
-        self.values = Vec::new();
+        self.values = VoxelStore::default();
         self.cells = MacroCells::new([1, 1, 1], self.cell());
         self.external = None;
         self.range = None;
@@ -673,7 +690,10 @@ impl Renderer for RaycastRenderer {
             RenderVolume::Gpu { values, .. } => Some(values),
             RenderVolume::Cpu(_) => None,
         };
-        let fresh = self.grid != Some(grid) || self.external != external;
+        // A volume of another scalar type starts the CPU store over.
+        let retyped = self.backend == ExecutionBackend::Cpu
+            && !self.values.holds(stored_type(&volume), grid.len());
+        let fresh = self.grid != Some(grid) || self.external != external || retyped;
         let region = if fresh {
             Some(IndexBox::all(grid.dims))
         } else {
@@ -754,6 +774,8 @@ impl Renderer for RaycastRenderer {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod voxel_store_tests;
 
 impl voxflex_abi::DeclaresParams for RaycastRenderer {
     fn params_schema() -> Result<String, String> {

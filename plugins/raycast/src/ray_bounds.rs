@@ -39,6 +39,8 @@ use crate::uniforms::RayUniforms;
 use crate::visible_cells::VisibleCells;
 use rayon::prelude::*;
 use voxflex_core::glam::DVec3;
+use voxflex_core::volume::VoxelSlice;
+use voxflex_core::with_voxels;
 
 /// Voxels each non-empty cell's box is widened by on every side: far above
 /// the f32 rounding of a sample's position (~1e-4 voxel) and of `t`.
@@ -68,8 +70,8 @@ struct Footprint {
 pub struct ShownCells<'a> {
     /// The visible cells of `values` under `lut`.
     pub cells: &'a VisibleCells,
-    /// The volume (x fastest).
-    pub values: &'a [f32],
+    /// The volume (x fastest, in the renderer's scalar type).
+    pub values: VoxelSlice<'a>,
     /// The frame's table.
     pub lut: &'a Lut,
 }
@@ -142,7 +144,7 @@ fn cell_box(u: &RayUniforms, l: usize, shown: Option<ShownCells<'_>>) -> Option<
     let (lo, hi) = match shown {
         // A trilinear cell i holds the positions [i, i + 1] per axis.
         Some(s) => {
-            let cells = s.cells.shown_cells(s.values, s.lut, c)?;
+            let cells = with_voxels!(s.values, |v| s.cells.shown_cells(v, s.lut, c))?;
             let lo = DVec3::from_array(cells.lo.map(|i| i as f64));
             let hi = DVec3::from_array(cells.hi.map(|i| i as f64 + 1.0));
             (lo, hi)
@@ -386,7 +388,7 @@ mod tests {
             .flat_map(|k| {
                 (0..dims[1] - 1).flat_map(move |j| (0..dims[0] - 1).map(move |i| [i, j, k]))
             })
-            .filter(|&i| cells.may_show(&r.values, &lut, i))
+            .filter(|&i| with_voxels!(r.values.as_slice(), |v| cells.may_show(v, &lut, i)))
             .collect();
         assert!(
             !shown.is_empty() && shown.len() < 200,
@@ -401,7 +403,7 @@ mod tests {
                 &leap,
                 Some(ShownCells {
                     cells,
-                    values: &r.values,
+                    values: r.values.as_slice(),
                     lut: &lut,
                 }),
             );

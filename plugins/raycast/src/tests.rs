@@ -7,17 +7,17 @@ use voxflex_core::gpu::GpuServiceExt;
 use voxflex_core::opacity_map::to_fixed;
 use voxflex_core::volume::{Volume, VoxelData};
 
-fn head(n: usize) -> Volume {
+pub(crate) fn head(n: usize) -> Volume {
     voxflex_phantom::phantom("head", [n, n, n]).unwrap()
 }
 
-fn cpu(toml: &str) -> RaycastRenderer {
+pub(crate) fn cpu(toml: &str) -> RaycastRenderer {
     let mut r = RaycastRenderer::create(toml, None).unwrap();
     r.init(ExecutionBackend::Cpu).unwrap();
     r
 }
 
-fn with_volume(mut r: RaycastRenderer, v: &Volume) -> RaycastRenderer {
+pub(crate) fn with_volume(mut r: RaycastRenderer, v: &Volume) -> RaycastRenderer {
     r.set_volume(RenderVolume::Cpu(v.view()), DirtyRegion::All)
         .unwrap();
     r
@@ -378,8 +378,10 @@ fn dirty_rebuild_equals_full_rebuild() {
         for k in 0..g.dims[2] - 1 {
             for j in 0..g.dims[1] - 1 {
                 for i in 0..g.dims[0] - 1 {
-                    let got = cache.sobel(&r.values, [i, j, k], f);
-                    let want = filters::sobel(&filters::gather(&r.values, g.dims, [i, j, k]), f);
+                    let (got, want) = with_voxels!(r.values.as_slice(), |v| (
+                        cache.sobel(v, [i, j, k], f),
+                        filters::sobel(&filters::gather(v, g.dims, [i, j, k]), f)
+                    ));
                     if check {
                         assert_eq!(got, Some(want), "cell {i} {j} {k}");
                     }
@@ -641,7 +643,7 @@ fn gpu_renderer(toml: &str, service: &Arc<dyn GpuService>) -> RaycastRenderer {
 }
 
 /// Two overlapping opacity maps (one textured) for the GPU checks.
-fn test_maps() -> [OpacityMap; 2] {
+pub(crate) fn test_maps() -> [OpacityMap; 2] {
     [
         OpacityMap {
             origin: [4, 6, 8],
@@ -661,7 +663,7 @@ fn test_maps() -> [OpacityMap; 2] {
 }
 
 /// Settings the GPU checks render with (and whether to add [`test_maps`]).
-const GPU_CASES: [(&str, bool); 15] = [
+pub(crate) const GPU_CASES: [(&str, bool); 15] = [
     ("", false),
     ("", true),
     ("mode = \"mip\"", false),

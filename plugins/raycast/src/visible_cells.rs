@@ -24,6 +24,7 @@
 use crate::lazy_bricks::{BRICK, CellPlace, LazyBricks, Reach};
 use crate::macrocell::IndexBox;
 use crate::transfer::Lut;
+use voxflex_core::volume::Sample;
 
 /// Corner voxels per brick edge.
 const SIDE: usize = BRICK + 1;
@@ -72,7 +73,7 @@ impl VisibleCells {
     /// is voxel `i` has κ = 0 under `lut` (`values`: the volume, x fastest;
     /// `lut`: the table this cache was made for).
     #[inline(always)]
-    pub fn may_show(&self, values: &[f32], lut: &Lut, i: [usize; 3]) -> bool {
+    pub fn may_show<T: Sample>(&self, values: &[T], lut: &Lut, i: [usize; 3]) -> bool {
         let place = self.bricks.place(i);
         let brick = self.brick(values, lut, &place);
         let [lx, ly, lz] = place.local;
@@ -82,7 +83,12 @@ impl VisibleCells {
     /// The box of the cells (lower-corner voxel indices, inclusive) of brick
     /// `b` that the table may show; `None` when it shows none. Builds the
     /// brick if needed (arguments as [`VisibleCells::may_show`]).
-    pub fn shown_cells(&self, values: &[f32], lut: &Lut, b: [usize; 3]) -> Option<IndexBox> {
+    pub fn shown_cells<T: Sample>(
+        &self,
+        values: &[T],
+        lut: &Lut,
+        b: [usize; 3],
+    ) -> Option<IndexBox> {
         let place = self.bricks.place(b.map(|b| b * BRICK));
         let [lo, hi] = self.brick(values, lut, &place).shown?;
         // A partial brick's cells past the grid repeat its last voxels:
@@ -96,7 +102,7 @@ impl VisibleCells {
     }
 
     #[inline(always)]
-    fn brick(&self, values: &[f32], lut: &Lut, place: &CellPlace) -> &Brick {
+    fn brick<T: Sample>(&self, values: &[T], lut: &Lut, place: &CellPlace) -> &Brick {
         self.bricks.get_or_build(place, |b| {
             let bits = brick_bits(values, self.bricks.dims(), lut, b);
             Brick {
@@ -125,7 +131,7 @@ fn shown_box(bits: &Bits) -> Option<[[u8; 3]; 2]> {
 /// corners, separably along x, y, z (voxel indices clamped to the grid, so
 /// a 1-voxel axis reads its one voxel twice).
 #[cold]
-fn brick_bits(values: &[f32], dims: [usize; 3], lut: &Lut, b: [usize; 3]) -> Bits {
+fn brick_bits<T: Sample>(values: &[T], dims: [usize; 3], lut: &Lut, b: [usize; 3]) -> Bits {
     let index = |a: usize, h: usize| (b[a] * BRICK + h).min(dims[a] - 1);
     // Entries of the 9³ corner voxels, then [min, max] over x pairs, y, z.
     let mut lo = [0u16; SIDE * SIDE * SIDE];
@@ -134,9 +140,9 @@ fn brick_bits(values: &[f32], dims: [usize; 3], lut: &Lut, b: [usize; 3]) -> Bit
         for hy in 0..SIDE {
             let row = dims[0] * (index(1, hy) + dims[1] * index(2, hz));
             let out = SIDE * (hy + SIDE * hz);
-            let mut prev = lut.entry(values[row + index(0, 0)]) as u16;
+            let mut prev = lut.entry(values[row + index(0, 0)].to_f32()) as u16;
             for hx in 0..BRICK {
-                let next = lut.entry(values[row + index(0, hx + 1)]) as u16;
+                let next = lut.entry(values[row + index(0, hx + 1)].to_f32()) as u16;
                 lo[out + hx] = prev.min(next);
                 hi[out + hx] = prev.max(next);
                 prev = next;
