@@ -224,6 +224,37 @@ impl TransferFunction {
     }
 }
 
+/// A key that orders the non-NaN f32 values as numbers (−∞ lowest, −0
+/// just below +0), as unsigned integers.
+fn order_key(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+}
+
+/// The value of an [`order_key`].
+fn from_order_key(k: u32) -> f32 {
+    f32::from_bits(if k >> 31 == 1 { k & 0x7fff_ffff } else { !k })
+}
+
+/// The smallest non-NaN value (−∞ to +∞) where `pass`, non-decreasing
+/// (false, then true), holds; `None` when it holds nowhere. 32 steps.
+fn first_passing(pass: impl Fn(f32) -> bool) -> Option<f32> {
+    let (mut lo, mut hi) = (order_key(f32::NEG_INFINITY), order_key(f32::INFINITY));
+    if !pass(from_order_key(hi)) {
+        return None;
+    }
+    // Invariant: `pass` holds at `hi`; it fails below `lo` (or `lo` is −∞).
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if pass(from_order_key(mid)) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    Some(from_order_key(hi))
+}
+
 /// The precomputed transfer function both paths sample identically:
 /// [`LUT_SIZE`] entries of **linear** RGB and extinction κ (per mm), linearly
 /// interpolated, clamped at the ends.
@@ -278,6 +309,30 @@ impl Lut {
     pub fn entries_may_show(&self, e_lo: usize, e_hi: usize) -> bool {
         let (first, last) = self.visible;
         e_hi + 2 >= first && e_lo <= last + 1
+    }
+
+    /// [`Lut::entries_may_show`] in data values: `(t_lo, t_hi)` with
+    /// `entry(v) + 2 ≥ first ⟺ v ≥ t_lo` and `entry(v) ≤ last + 1 ⟺
+    /// v ≤ t_hi` for every non-NaN `v` (−∞ / +∞ when every value passes,
+    /// NaN when none does, so the comparison is false). Values whose
+    /// entries span `[e_lo, e_hi]` may show exactly when the largest is
+    /// ≥ `t_lo` and the smallest ≤ `t_hi` — two comparisons per value
+    /// instead of a table position ([`crate::visible_cells`]).
+    ///
+    /// Found by bisection over the ordered f32 values with [`Lut::entry`]
+    /// itself as the oracle (it is non-decreasing), so the thresholds
+    /// agree with it on every value; 64 evaluations of it.
+    pub fn show_window(&self) -> (f32, f32) {
+        let (first, last) = self.visible;
+        let least = first.saturating_sub(2);
+        let t_lo = first_passing(|v| self.entry(v) >= least).unwrap_or(f32::NAN);
+        let t_hi = match first_passing(|v| self.entry(v) > last + 1) {
+            // The value just below the first one past the window.
+            Some(v) if v == f32::NEG_INFINITY => f32::NAN,
+            Some(v) => from_order_key(order_key(v) - 1),
+            None => f32::INFINITY,
+        };
+        (t_lo, t_hi)
     }
 
     /// The entry below `v` and the fraction past it.
@@ -354,6 +409,57 @@ mod tests {
             }
             assert!(skipped > 0, "{f:?}");
         }
+    }
+
+    /// The show window's two comparisons answer what the entries answer,
+    /// on every preset, a function with nothing visible and one visible
+    /// everywhere, over the data range (integers, fractions), at each
+    /// threshold and the floats either side of it, at ±0 and ±∞.
+    #[test]
+    fn show_window_agrees_with_the_entries_on_every_value() {
+        let mut fns: Vec<TransferFunction> = PRESETS
+            .iter()
+            .map(|p| TransferFunction::preset(p).unwrap())
+            .collect();
+        fns.push(tf(&[
+            [0.0, 1.0, 1.0, 1.0, 0.0],
+            [100.0, 1.0, 1.0, 1.0, 0.0],
+        ]));
+        fns.push(tf(&[
+            [0.0, 1.0, 1.0, 1.0, 0.5],
+            [100.0, 1.0, 1.0, 1.0, 0.5],
+        ]));
+        let (mut hidden, mut only_one) = (0, 0);
+        for f in &fns {
+            let lut = f.lut((-1024.0, 3071.0), 1.0);
+            let (first, last) = lut.visible;
+            let (t_lo, t_hi) = lut.show_window();
+            let near = |t: f32| {
+                let k = order_key(t);
+                (k.saturating_sub(3)..=k.saturating_add(3)).map(from_order_key)
+            };
+            let mut values: Vec<f32> = (-4200..=4200)
+                .flat_map(|i| [i as f32, i as f32 + 0.37])
+                .collect();
+            values.extend([
+                0.0,
+                -0.0,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::MAX,
+                f32::MIN,
+            ]);
+            values.extend(near(t_lo).chain(near(t_hi)).filter(|v| !v.is_nan()));
+            for v in values {
+                let e = lut.entry(v);
+                assert_eq!(v >= t_lo, e + 2 >= first, "{f:?}: {v} ≥ {t_lo}");
+                assert_eq!(v <= t_hi, e <= last + 1, "{f:?}: {v} ≤ {t_hi}");
+                hidden += !(v >= t_lo && v <= t_hi) as u32;
+                only_one += ((v >= t_lo) != (v <= t_hi)) as u32;
+            }
+        }
+        assert!(only_one > 0, "the thresholds cut somewhere");
+        assert!(hidden > 0, "some values are hidden");
     }
 
     fn tf(points: &[[f32; 5]]) -> TransferFunction {
