@@ -138,12 +138,20 @@ impl GradientCache {
 fn brick_gradients<T: Sample>(values: &[T], dims: [usize; 3], b: [usize; 3]) -> Brick {
     let index = |a: usize, h: usize| (b[a] * BRICK + h).saturating_sub(1).min(dims[a] - 1);
     let xs: [usize; HALO] = std::array::from_fn(|h| index(0, h));
+    // A brick clear of the grid's x faces reads its halo rows as one run.
+    let run = (xs[HALO - 1] == xs[0] + HALO - 1).then_some(xs[0]);
     // Along x, per halo row (hy, hz): [D, S][hz][hy][cx].
     let mut x_pass = [[[[0f32; SIDE]; HALO]; HALO]; 2];
     for hz in 0..HALO {
         for hy in 0..HALO {
             let row = &values[dims[0] * (index(1, hy) + dims[1] * index(2, hz))..];
-            let h: [f32; HALO] = std::array::from_fn(|x| row[xs[x]].to_f32());
+            let h: [f32; HALO] = match run {
+                Some(x0) => {
+                    let r: &[T; HALO] = row[x0..x0 + HALO].try_into().expect("HALO voxels");
+                    r.map(T::to_f32)
+                }
+                None => std::array::from_fn(|x| row[xs[x]].to_f32()),
+            };
             for (k, pass) in x_pass.iter_mut().enumerate() {
                 pass[hz][hy] = taps(&h, k == 0);
             }

@@ -151,15 +151,24 @@ fn brick_bits<T: Sample>(
     const BELOW: u8 = 2;
     let index = |a: usize, h: usize| (b[a] * BRICK + h).min(dims[a] - 1);
     let xs: [usize; SIDE] = std::array::from_fn(|h| index(0, h));
+    // A brick clear of the grid's last x reads its rows as one run.
+    let run = (xs[SIDE - 1] == xs[0] + BRICK).then_some(xs[0]);
+    let flag = |v: T| {
+        let v = v.to_f32();
+        ((v >= t_lo) as u8 * ABOVE) | ((v <= t_hi) as u8 * BELOW)
+    };
     // Per corner voxel: ABOVE | BELOW; then or-ed over x pairs, y, z.
     let mut flags = [0u8; SIDE * SIDE * SIDE];
     for hz in 0..SIDE {
         for hy in 0..SIDE {
             let row = &values[dims[0] * (index(1, hy) + dims[1] * index(2, hz))..];
-            let f: [u8; SIDE] = std::array::from_fn(|x| {
-                let v = row[xs[x]].to_f32();
-                ((v >= t_lo) as u8 * ABOVE) | ((v <= t_hi) as u8 * BELOW)
-            });
+            let f: [u8; SIDE] = match run {
+                Some(x0) => {
+                    let r: &[T; SIDE] = row[x0..x0 + SIDE].try_into().expect("SIDE voxels");
+                    r.map(flag)
+                }
+                None => std::array::from_fn(|x| flag(row[xs[x]])),
+            };
             let out = SIDE * (hy + SIDE * hz);
             for hx in 0..BRICK {
                 flags[out + hx] = f[hx] | f[hx + 1];
