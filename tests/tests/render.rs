@@ -190,3 +190,61 @@ fn render_command_writes_a_png_and_names_bad_presets() {
         "{err}"
     );
 }
+
+/// `voxflex render` of a CT as its file holds it (i16) and of the same
+/// values written as f32 gives the same PNG, byte for byte (the renderer
+/// keeps integer volumes in their own type and reads them exactly); the
+/// same for an 8-bit volume, and for views from the other side.
+#[test]
+fn render_command_draws_integer_files_as_their_f32_twins() {
+    use voxflex_core::volume::{Volume, VoxelData};
+    plugin_dir(&["raycast"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let head = voxflex_phantom::phantom("head", [40, 44, 36]).unwrap();
+    let VoxelData::I16(hu) = &head.data else {
+        panic!("the head phantom is i16")
+    };
+    let bytes: Vec<u8> = hu
+        .iter()
+        .map(|&v| ((v as i32 + 1024) / 16).clamp(0, 255) as u8)
+        .collect();
+    let byte_head = Volume::new(head.grid, VoxelData::U8(bytes)).unwrap();
+    // `mri-t1` is placed on the data range: it shows the bytes too.
+    for (name, vol, preset) in [("ct", &head, "ct-bone"), ("bytes", &byte_head, "mri-t1")] {
+        let twin = Volume::new(vol.grid, VoxelData::F32(vol.view().data.to_f32_vec())).unwrap();
+        let paths = [format!("{name}.nii"), format!("{name}_f32.nii")];
+        for (p, v) in paths.iter().zip([vol, &twin]) {
+            voxflex_io::write_volume(&tmp.path().join(p), v.view()).unwrap();
+        }
+        let mut views = Vec::new();
+        for azimuth in ["30", "210"] {
+            let pngs: Vec<Vec<u8>> = paths
+                .iter()
+                .map(|p| {
+                    let out = format!("{p}_{azimuth}.png");
+                    let args = [
+                        "render",
+                        p,
+                        "--out",
+                        &out,
+                        "--size",
+                        "64x48",
+                        "--backend",
+                        "cpu",
+                        "--preset",
+                        preset,
+                        "--azimuth",
+                        azimuth,
+                    ];
+                    let o = voxflex(&args, tmp.path());
+                    assert!(o.status.success(), "{}", text(&o));
+                    image_bytes(&tmp.path().join(&out))
+                })
+                .collect();
+            assert!(pngs[0] == pngs[1], "{name}, azimuth {azimuth}: PNGs differ");
+            views.push(pngs[0].clone());
+        }
+        // Not two blank images: the two sides of the head differ.
+        assert!(views[0] != views[1], "{name}: both views alike");
+    }
+}
