@@ -10,6 +10,7 @@
 //! change of the volume drops). Indices are voxel indices, x fastest.
 
 use crate::macrocell::IndexBox;
+use rayon::prelude::*;
 use std::sync::OnceLock;
 
 /// Cells per brick edge.
@@ -44,14 +45,17 @@ pub struct CellPlace {
     pub local: [usize; 3],
 }
 
-impl<T> LazyBricks<T> {
+impl<T: Send> LazyBricks<T> {
     /// No brick built yet, for a volume of `dims` voxels.
     pub fn new(dims: [usize; 3]) -> Self {
         let counts = dims.map(|n| (n.max(2) - 1).div_ceil(BRICK));
         Self {
             dims,
             counts,
+            // Written on both threads: a slot per brick is megabytes of
+            // fresh pages for a large volume.
             slots: (0..counts.iter().product())
+                .into_par_iter()
                 .map(|_| OnceLock::new())
                 .collect(),
         }
