@@ -510,10 +510,10 @@ impl RaycastRenderer {
                         grid.len() * 4
                     )));
                 }
-                let store = self
-                    .values
-                    .f32_mut()
-                    .expect("a device volume is stored as f32");
+                // `set_volume` made the store f32 for a device volume.
+                let store = self.values.f32_mut().ok_or_else(|| {
+                    ModelError::new("internal: the CPU store of a device volume is not f32")
+                })?;
                 service.read_buffer(
                     values,
                     a as u64 * 4,
