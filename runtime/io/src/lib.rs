@@ -672,24 +672,6 @@ fn decode_stream<T, const N: usize>(
     Ok(out)
 }
 
-/// [`decode_stream`] of values of type `$t` stored big- or little-endian
-/// (`$big`), each mapped by `$map`: one closure per byte order, so the
-/// decoder is inlined into the loop (a function pointer per voxel kept it
-/// scalar: ~75 ms for a 70 MB CT, most of its load).
-macro_rules! decode_endian {
-    ($t:ty, $big:expr, $map:expr, $reader:expr, $spec:expr, $needed:expr, $n:expr) => {
-        if $big {
-            decode_stream($reader, $spec, $needed, $n, |a| {
-                $map(<$t>::from_be_bytes(a))
-            })
-        } else {
-            decode_stream($reader, $spec, $needed, $n, |a| {
-                $map(<$t>::from_le_bytes(a))
-            })
-        }
-    };
-}
-
 /// Reads the voxel data described by `spec` from `reader`, positioned at the
 /// first data byte. Checks the length both ways (too short: error; anything
 /// left after the last voxel: error) and converts non-native types (see the
@@ -709,59 +691,32 @@ pub(crate) fn read_voxels(
     }
     let n = spec.dims[0] * spec.dims[1] * spec.dims[2];
     let big = spec.big_endian;
+    // `decode_stream` of values of type `$t` in the file's byte order, each
+    // mapped by `$map`: one closure per byte order, so the decoder is
+    // inlined into the loop (a function pointer per voxel kept it scalar:
+    // ~75 ms for a 70 MB CT, most of its load).
+    macro_rules! decode {
+        ($t:ty, $map:expr) => {
+            if big {
+                decode_stream(reader, spec, needed, n, |a| $map(<$t>::from_be_bytes(a)))
+            } else {
+                decode_stream(reader, spec, needed, n, |a| $map(<$t>::from_le_bytes(a)))
+            }
+        };
+    }
     let data = match spec.ty {
         RawType::U8 => VoxelData::U8(decode_stream::<u8, 1>(reader, spec, needed, n, |a| a[0])?),
         RawType::I8 => VoxelData::I16(decode_stream::<i16, 1>(reader, spec, needed, n, |a| {
             i16::from(a[0] as i8)
         })?),
-        RawType::U16 => VoxelData::U16(decode_endian!(u16, big, |v| v, reader, spec, needed, n)?),
-        RawType::I16 => VoxelData::I16(decode_endian!(i16, big, |v| v, reader, spec, needed, n)?),
-        RawType::F32 => VoxelData::F32(decode_endian!(f32, big, |v| v, reader, spec, needed, n)?),
-        RawType::U32 => VoxelData::F32(decode_endian!(
-            u32,
-            big,
-            |v| v as f32,
-            reader,
-            spec,
-            needed,
-            n
-        )?),
-        RawType::I32 => VoxelData::F32(decode_endian!(
-            i32,
-            big,
-            |v| v as f32,
-            reader,
-            spec,
-            needed,
-            n
-        )?),
-        RawType::U64 => VoxelData::F32(decode_endian!(
-            u64,
-            big,
-            |v| v as f32,
-            reader,
-            spec,
-            needed,
-            n
-        )?),
-        RawType::I64 => VoxelData::F32(decode_endian!(
-            i64,
-            big,
-            |v| v as f32,
-            reader,
-            spec,
-            needed,
-            n
-        )?),
-        RawType::F64 => VoxelData::F32(decode_endian!(
-            f64,
-            big,
-            |v| v as f32,
-            reader,
-            spec,
-            needed,
-            n
-        )?),
+        RawType::U16 => VoxelData::U16(decode!(u16, |v| v)?),
+        RawType::I16 => VoxelData::I16(decode!(i16, |v| v)?),
+        RawType::F32 => VoxelData::F32(decode!(f32, |v| v)?),
+        RawType::U32 => VoxelData::F32(decode!(u32, |v| v as f32)?),
+        RawType::I32 => VoxelData::F32(decode!(i32, |v| v as f32)?),
+        RawType::U64 => VoxelData::F32(decode!(u64, |v| v as f32)?),
+        RawType::I64 => VoxelData::F32(decode!(i64, |v| v as f32)?),
+        RawType::F64 => VoxelData::F32(decode!(f64, |v| v as f32)?),
     };
     // Anything after the last voxel means the header and the data disagree.
     let mut probe = [0u8; 1];
