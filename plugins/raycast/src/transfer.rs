@@ -382,8 +382,8 @@ mod tests {
     /// only where `lookup`'s κ is 0: every preset (`ct-lung` has two
     /// visible ranges), a function with nothing visible, values below,
     /// inside, between and above the table's entries, and NaN.
-    #[test]
-    fn lookup_visible_skips_only_invisible_values() {
+    /// Every preset and a function with nothing visible.
+    fn presets_and_an_invisible_function() -> Vec<TransferFunction> {
         let mut fns: Vec<TransferFunction> = PRESETS
             .iter()
             .map(|p| TransferFunction::preset(p).unwrap())
@@ -392,7 +392,12 @@ mod tests {
             [0.0, 1.0, 1.0, 1.0, 0.0],
             [100.0, 1.0, 1.0, 1.0, 0.0],
         ]));
-        for f in &fns {
+        fns
+    }
+
+    #[test]
+    fn lookup_visible_skips_only_invisible_values() {
+        for f in &presets_and_an_invisible_function() {
             let lut = f.lut((-1024.0, 3071.0), 1.0);
             let mut skipped = 0;
             for i in -4200..=4200 {
@@ -417,14 +422,7 @@ mod tests {
     /// threshold and the floats either side of it, at ±0 and ±∞.
     #[test]
     fn show_window_agrees_with_the_entries_on_every_value() {
-        let mut fns: Vec<TransferFunction> = PRESETS
-            .iter()
-            .map(|p| TransferFunction::preset(p).unwrap())
-            .collect();
-        fns.push(tf(&[
-            [0.0, 1.0, 1.0, 1.0, 0.0],
-            [100.0, 1.0, 1.0, 1.0, 0.0],
-        ]));
+        let mut fns = presets_and_an_invisible_function();
         fns.push(tf(&[
             [0.0, 1.0, 1.0, 1.0, 0.5],
             [100.0, 1.0, 1.0, 1.0, 0.5],
