@@ -380,19 +380,24 @@ fn plane_of<const P: usize>(c: &CellCorners, f: u8) -> FacePlane {
 /// tetrahedron's `ORIENTATION` slot (all 0 for a degenerate tetrahedron).
 #[inline(always)]
 pub(crate) fn barycentric(parity: usize, t: usize, p: &[[f32; 3]; 4], q: [f32; 3]) -> [f32; 4] {
+    std::array::from_fn(|a| {
+        let (face, da) = tet_face(parity, t, p, a);
+        if da != 0.0 { face.eval(q) / da } else { 0.0 }
+    })
+}
+
+#[cfg(test)]
+/// The plane of the face opposite slot `a` of tetrahedron `t` of a cell of
+/// parity `parity` (corner positions `p`, ascending corners) and its
+/// `D_a = D_SIGN · D`, `D` the one at the tetrahedron's `ORIENTATION` slot.
+pub(crate) fn tet_face(parity: usize, t: usize, p: &[[f32; 3]; 4], a: usize) -> (FacePlane, f32) {
     const OTHERS: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
     let face = |a: usize| {
         let [u, v, x] = OTHERS[a];
         FacePlane::new(p[u], p[v], p[x])
     };
     let o = ORIENTATION[parity][t].0 as usize;
-    let d = face(o).eval(p[o]);
-    let mut w = [0.0; 4];
-    for a in 0..4 {
-        let da = d * D_SIGN[parity][t][a];
-        w[a] = if da != 0.0 { face(a).eval(q) / da } else { 0.0 };
-    }
-    w
+    (face(a), face(o).eval(p[o]) * D_SIGN[parity][t][a])
 }
 
 /// `Σ λ_a v_a`, or exactly `v_a` when `λ_a == 1` (a voxel centre on a
@@ -522,16 +527,10 @@ mod tests {
         eps: f32,
         q: [f32; 3],
     ) -> Option<(usize, bool)> {
-        const OTHERS: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
         // Face `a`'s plane, and its `D` from the tetrahedron's one `D`.
         let plane_d = |t: usize, a: usize| {
             let p = CELL_TETS[parity][t].map(|k| c.point(k as usize));
-            let face = |a: usize| {
-                let [u, v, w] = OTHERS[a];
-                FacePlane::new(p[u], p[v], p[w])
-            };
-            let o = ORIENTATION[parity][t].0 as usize;
-            (face(a), face(o).eval(p[o]) * D_SIGN[parity][t][a])
+            super::tet_face(parity, t, &p, a)
         };
         (0..TETS_PER_CELL)
             .filter(|&t| {
