@@ -134,12 +134,13 @@ fn shown_box(bits: &Bits) -> Option<[[u8; 3]; 2]> {
 
 /// The bits of brick `b`. A cell may show when the table entries of its
 /// corners span a visible entry ([`Lut::entries_may_show`]): when one
-/// corner lies at or above the window's low threshold and one at or
-/// below its high one ([`Lut::show_window`], the same answer in data
-/// values; `window` is it). So each of the 9³ corner voxels gets those two flags, which
-/// are or-ed over x pairs, y and z (voxel indices clamped to the grid, so
-/// a 1-voxel axis reads its one voxel twice) — comparisons and ors the
-/// compiler vectorises, instead of a table position per voxel.
+/// corner lies at or above the low threshold of the table's
+/// [`Lut::show_window`] (the `(t_lo, t_hi)` argument: the same answer in data
+/// values) and one at or below its high one. So each of the 9³ corner
+/// voxels gets those two flags, or-ed over x pairs, y and z (voxel indices
+/// clamped to the grid, so a 1-voxel axis reads its one voxel twice) —
+/// comparisons and ors the compiler vectorises, instead of a table
+/// position per voxel.
 #[cold]
 fn brick_bits<T: Sample>(
     values: &[T],
