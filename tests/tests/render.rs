@@ -94,6 +94,51 @@ fn cpu_and_gpu_images_agree_through_the_plugin() {
     }
 }
 
+/// A volume the host lends crosses into the built plugin without a copy:
+/// the CPU image is the copied volume's, byte for byte, on a view from
+/// each side, and the plugin gives the host's values back (releases its
+/// loan) when it takes another volume and when it is dropped.
+#[test]
+fn a_shared_volume_renders_as_a_copied_one_through_the_plugin() {
+    use voxflex_core::shared_volume::SharedVolume;
+    let volume = Arc::new(voxflex_phantom::phantom("head", [48, 56, 52]).unwrap());
+    let shared = SharedVolume::new(volume.clone());
+    let holders = || Arc::strong_count(&volume);
+    let params = "transfer_function = { preset = \"ct-bone\" }";
+    let mut lent = raycast(None, params, ExecutionBackend::Cpu);
+    lent.set_volume(RenderVolume::Shared(&shared), DirtyRegion::All)
+        .unwrap();
+    let mut copied = raycast(None, params, ExecutionBackend::Cpu);
+    copied
+        .set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All)
+        .unwrap();
+    drop(shared);
+    assert_eq!(holders(), 2, "the plugin holds the host's volume");
+    for azimuth in [25.0, 205.0] {
+        let cam = Camera {
+            azimuth_deg: azimuth,
+            ..camera(&volume.grid)
+        };
+        let n = (cam.width * cam.height) as usize * 4;
+        let (mut a, mut b) = (vec![0u8; n], vec![0u8; n]);
+        lent.render(&cam, ImageTarget::Cpu(&mut a)).unwrap();
+        copied.render(&cam, ImageTarget::Cpu(&mut b)).unwrap();
+        assert!(a.iter().any(|&v| v > 0), "empty image");
+        assert!(a == b, "azimuth {azimuth}: the shared image differs");
+    }
+    lent.set_volume(RenderVolume::Cpu(volume.view()), DirtyRegion::All)
+        .unwrap();
+    assert_eq!(holders(), 1, "released on a copied volume");
+    lent.set_volume(
+        RenderVolume::Shared(&SharedVolume::new(volume.clone())),
+        DirtyRegion::All,
+    )
+    .unwrap();
+    assert_eq!(holders(), 2);
+    drop(lent);
+    assert_eq!(holders(), 1, "released when the plugin is dropped");
+}
+
 #[test]
 fn a_scene_renders_with_its_roi_maps() {
     plugin_dir(&["affine", "raycast"]);

@@ -697,7 +697,11 @@ fn render(
     if turntable > MAX_TURNTABLE_FRAMES {
         bail!("--turntable {turntable} frames is absurd; use 0 to {MAX_TURNTABLE_FRAMES}");
     }
-    let volume = load_volume(&source, dims)?;
+    // Shared with the renderer, not copied: it never changes here.
+    let volume = voxflex_core::shared_volume::SharedVolume::new(std::sync::Arc::new(load_volume(
+        &source, dims,
+    )?));
+    let grid = volume.view().grid;
     let resolved = voxflex_runtime::backend::resolve(backend)?;
     let plugin = plugin_loader::load_by_name("raycast", &plugin_loader::search_path(&[]))?;
     let services = voxflex_abi::host_side::HostServices::new(
@@ -732,7 +736,7 @@ fn render(
     let mut metrics = voxflex_runtime::metrics::RunMetrics::default();
     let written = stage.render(
         &settings,
-        &volume,
+        voxflex_core::render::RenderVolume::Shared(&volume),
         voxflex_core::deformation::DirtyRegion::All,
         &[],
         &dir,
@@ -746,7 +750,7 @@ fn render(
     if repeat > 0 {
         // The same view again, the scene already handed over: each frame's
         // time is the rays' alone.
-        let camera = voxflex_runtime::visualise::camera_for(&settings, &volume.grid, 0.0);
+        let camera = voxflex_runtime::visualise::camera_for(&settings, &grid, 0.0);
         let mut times = vec![];
         for _ in 0..repeat {
             let t = std::time::Instant::now();

@@ -150,7 +150,7 @@ use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::grid::Grid;
 use voxflex_core::opacity_map::OpacityMap;
 use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
-use voxflex_core::volume::ScalarType;
+use voxflex_core::volume::{ScalarType, VolumeView};
 use voxflex_core::with_voxels;
 
 /// Largest image, pixels (keeps every index in u32 on both paths).
@@ -453,7 +453,14 @@ impl RaycastRenderer {
         };
         let out = cpu::render(&scene);
         let rays_ms = clock.elapsed().as_secs_f64() * 1e3 - tables_ms - bounds_ms;
-        tracing::debug!(tables_ms, bounds_ms, rays_ms, "raycast cpu frame");
+        let gradient_bricks = self.gradients.as_ref().map_or(0, GradientCache::built);
+        tracing::debug!(
+            tables_ms,
+            bounds_ms,
+            rays_ms,
+            gradient_bricks,
+            "raycast cpu frame"
+        );
         Ok(out)
     }
 
@@ -484,7 +491,9 @@ impl RaycastRenderer {
         region: IndexBox,
     ) -> Result<(), ModelError> {
         if fresh {
-            self.values = VoxelStore::zeroed(stored_type(&volume), grid.len());
+            if !matches!(volume, RenderVolume::Shared(_)) {
+                self.values = VoxelStore::zeroed(stored_type(&volume), grid.len());
+            }
             // At most as many bytes of gradients as the volume as f32.
             self.gradients = Some(GradientCache::new(grid.dims, 4 * grid.len()));
             self.visible = None;
@@ -498,6 +507,7 @@ impl RaycastRenderer {
         }
         match volume {
             RenderVolume::Cpu(view) => self.values.copy_region(&view, region),
+            RenderVolume::Shared(shared) => self.values.share(shared, region),
             RenderVolume::Gpu { values, .. } => {
                 let service = self.service()?;
                 let plane = grid.dims[0] * grid.dims[1];
@@ -539,6 +549,7 @@ impl RaycastRenderer {
         match volume {
             RenderVolume::Gpu { values, .. } => gpu.set_external_volume(values, grid.len()),
             RenderVolume::Cpu(view) => gpu.upload_volume(&view, region),
+            RenderVolume::Shared(shared) => gpu.upload_volume(&shared.view(), region),
         }
     }
 
@@ -588,6 +599,7 @@ impl RaycastRenderer {
 fn stored_type(volume: &RenderVolume<'_>) -> ScalarType {
     match volume {
         RenderVolume::Cpu(view) => view.data.scalar_type(),
+        RenderVolume::Shared(shared) => shared.view().data.scalar_type(),
         RenderVolume::Gpu { .. } => ScalarType::F32,
     }
 }
@@ -600,6 +612,21 @@ fn check_len(have: usize, pixels: usize) -> Result<(), ModelError> {
         )));
     }
     Ok(())
+}
+
+/// The grid of a CPU volume whose grid [`check_grid`] accepts and whose
+/// values fill it.
+fn check_view(view: &VolumeView<'_>) -> Result<Grid, ModelError> {
+    check_grid(&view.grid)?;
+    if view.data.len() != view.grid.len() {
+        return Err(ModelError(format!(
+            "volume has {} values but dims {:?} need {}",
+            view.data.len(),
+            view.grid.dims,
+            view.grid.len()
+        )));
+    }
+    Ok(view.grid)
 }
 
 fn check_grid(grid: &Grid) -> Result<(), ModelError> {
@@ -669,18 +696,8 @@ impl Renderer for RaycastRenderer {
         dirty: DirtyRegion,
     ) -> Result<(), ModelError> {
         let grid = match volume {
-            RenderVolume::Cpu(view) => {
-                check_grid(&view.grid)?;
-                if view.data.len() != view.grid.len() {
-                    return Err(ModelError(format!(
-                        "volume has {} values but dims {:?} need {}",
-                        view.data.len(),
-                        view.grid.dims,
-                        view.grid.len()
-                    )));
-                }
-                view.grid
-            }
+            RenderVolume::Cpu(view) => check_view(&view)?,
+            RenderVolume::Shared(shared) => check_view(&shared.view())?,
             RenderVolume::Gpu { grid, .. } => {
                 check_grid(&grid)?;
                 grid
@@ -688,11 +705,12 @@ impl Renderer for RaycastRenderer {
         };
         let external = match volume {
             RenderVolume::Gpu { values, .. } => Some(values),
-            RenderVolume::Cpu(_) => None,
+            RenderVolume::Cpu(_) | RenderVolume::Shared(_) => None,
         };
-        // A volume of another scalar type starts the CPU store over.
-        let retyped = self.backend == ExecutionBackend::Cpu
-            && !self.values.holds(stored_type(&volume), grid.len());
+        // A volume of another scalar type (or a copied volume after a
+        // shared one) starts the CPU store over.
+        let retyped =
+            self.backend == ExecutionBackend::Cpu && !self.values.updatable_by(&volume, grid.len());
         let fresh = self.grid != Some(grid) || self.external != external || retyped;
         let region = if fresh {
             Some(IndexBox::all(grid.dims))
@@ -772,6 +790,8 @@ impl Renderer for RaycastRenderer {
     }
 }
 
+#[cfg(test)]
+mod shared_volume_tests;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]

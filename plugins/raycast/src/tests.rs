@@ -45,7 +45,7 @@ fn fill_box(vol: &mut Volume, lo: [usize; 3], hi: [usize; 3], value: i16) -> Dir
     }
 }
 
-fn rgba8(r: &mut RaycastRenderer, cam: &Camera) -> (Vec<u8>, RenderStats) {
+pub(crate) fn rgba8(r: &mut RaycastRenderer, cam: &Camera) -> (Vec<u8>, RenderStats) {
     let mut out = vec![0u8; cam.width as usize * cam.height as usize * 4];
     let stats = r.render(cam, ImageTarget::Cpu(&mut out)).unwrap();
     (out, stats)
@@ -632,11 +632,11 @@ fn normalized_transfer_functions_follow_the_data_range() {
 
 // ---------------------------------------------------------------- GPU --
 
-fn test_gpu() -> Option<Arc<dyn GpuService>> {
+pub(crate) fn test_gpu() -> Option<Arc<dyn GpuService>> {
     voxflex_runtime::gpu_context::testing::test_gpu().map(|g| g as Arc<dyn GpuService>)
 }
 
-fn gpu_renderer(toml: &str, service: &Arc<dyn GpuService>) -> RaycastRenderer {
+pub(crate) fn gpu_renderer(toml: &str, service: &Arc<dyn GpuService>) -> RaycastRenderer {
     let mut r = RaycastRenderer::create(toml, Some(service.clone())).unwrap();
     r.init(ExecutionBackend::Gpu).unwrap();
     r

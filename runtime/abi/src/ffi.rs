@@ -638,12 +638,14 @@ pub const PROJECTION_ORTHOGRAPHIC: u32 = 0;
 /// [`CameraDesc::projection`]: rays through the eye.
 pub const PROJECTION_PERSPECTIVE: u32 = 1;
 
-/// The volume a renderer draws: CPU values ([`RENDER_VOLUME_CPU`], `volume`)
-/// or an f32 GPU buffer on `volume.grid` ([`RENDER_VOLUME_GPU`], `buffer`).
+/// The volume a renderer draws: CPU values valid during the call
+/// ([`RENDER_VOLUME_CPU`], `volume`), CPU values lent until released
+/// ([`RENDER_VOLUME_SHARED`], `volume`, `owner`, `release`) or an f32 GPU
+/// buffer on `volume.grid` ([`RENDER_VOLUME_GPU`], `buffer`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct RenderVolumeDesc {
-    /// Which of the two.
+    /// Which of the three.
     pub tag: u32,
     /// Reserved, zero.
     pub reserved: u32,
@@ -651,12 +653,23 @@ pub struct RenderVolumeDesc {
     pub volume: VolumeDesc,
     /// GPU buffer id of `grid.len()` f32.
     pub buffer: u64,
+    /// [`RENDER_VOLUME_SHARED`]: the host's handle on `volume`'s values,
+    /// passed to `release`; null otherwise.
+    pub owner: *mut c_void,
+    /// [`RENDER_VOLUME_SHARED`]: the plugin calls it exactly once with
+    /// `owner` (from any thread, whatever `set_volume` returns) when it no
+    /// longer reads the values; until then they stay alive and unchanged.
+    /// `None` otherwise.
+    pub release: Option<unsafe extern "C" fn(owner: *mut c_void)>,
 }
 
-/// [`RenderVolumeDesc::tag`]: values on the CPU.
+/// [`RenderVolumeDesc::tag`]: values on the CPU, valid during the call.
 pub const RENDER_VOLUME_CPU: u32 = 0;
 /// [`RenderVolumeDesc::tag`]: values in a GPU buffer.
 pub const RENDER_VOLUME_GPU: u32 = 1;
+/// [`RenderVolumeDesc::tag`]: values on the CPU, lent until the plugin
+/// calls [`RenderVolumeDesc::release`] (`voxflex_core::shared_volume::SharedVolume`).
+pub const RENDER_VOLUME_SHARED: u32 = 2;
 
 /// A spatial opacity map (mirror of `voxflex_core::opacity_map::OpacityMap`).
 #[repr(C)]

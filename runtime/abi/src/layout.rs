@@ -222,7 +222,9 @@ pub const fn compute() -> u64 {
             tag,
             reserved,
             volume,
-            buffer
+            buffer,
+            owner,
+            release
         }
     );
     hash_type!(

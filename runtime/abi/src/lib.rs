@@ -31,7 +31,7 @@ pub mod renderer;
 
 /// Version of the boundary. Bump on any change to a function signature or
 /// to the meaning of a field; the layout hash catches layout changes.
-pub const ABI_VERSION: u32 = 3;
+pub const ABI_VERSION: u32 = 4;
 
 /// Fingerprint of every `#[repr(C)]` boundary type (see [`layout`]).
 pub const LAYOUT_HASH: u64 = layout::compute();

@@ -6,6 +6,7 @@ use crate::ffi::*;
 use crate::guard::guard;
 use crate::host_side::{HostServices, checked_call, create_proxy_instance};
 use crate::plugin::{HostContext, create_instance, destroy_instance, state};
+use std::ffi::c_void;
 use std::sync::Arc;
 use voxflex_core::camera::Camera;
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend};
@@ -13,6 +14,7 @@ use voxflex_core::error::ModelError;
 use voxflex_core::gpu::BufferId;
 use voxflex_core::opacity_map::OpacityMap;
 use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
+use voxflex_core::shared_volume::SharedVolume;
 
 /// A renderer that can be exported as a plugin.
 pub trait RendererPlugin:
@@ -83,26 +85,91 @@ unsafe extern "C" fn set_volume<P: RendererPlugin>(
     err: *mut ErrorBuf,
 ) -> i32 {
     guard(err, || {
+        if volume.is_null() {
+            return Err("null volume".into());
+        }
+        // SAFETY: checked non-null; the host keeps the descriptor alive
+        // during the call.
+        let desc = unsafe { *volume };
+        // Taken first, so lent values are released whatever happens below.
+        // SAFETY: host contract for a shared volume's `owner` and `release`.
+        let loan = unsafe { HostLoan::take(&desc) }?;
         // SAFETY: host contract.
         let s = unsafe { state::<P>(instance) }?;
-        if volume.is_null() || dirty.is_null() {
-            return Err("null volume or region".into());
+        if dirty.is_null() {
+            return Err("null region".into());
         }
-        // SAFETY: checked non-null; the host keeps the data alive during the call.
-        let (desc, region) = unsafe { (*volume, (*dirty).to_region()) };
-        let volume = match desc.tag {
-            // SAFETY: as above.
-            RENDER_VOLUME_CPU => RenderVolume::Cpu(unsafe { desc.volume.to_view() }?),
-            RENDER_VOLUME_GPU => RenderVolume::Gpu {
+        // SAFETY: checked non-null; alive during the call.
+        let region = unsafe { (*dirty).to_region() };
+        let shared;
+        let volume = match (desc.tag, loan) {
+            // SAFETY: the host keeps the data alive during the call.
+            (RENDER_VOLUME_CPU, _) => RenderVolume::Cpu(unsafe { desc.volume.to_view() }?),
+            (RENDER_VOLUME_GPU, _) => RenderVolume::Gpu {
                 grid: desc.volume.grid.to_grid()?,
                 values: BufferId(desc.buffer),
             },
-            t => return Err(format!("unknown render volume tag {t}")),
+            (RENDER_VOLUME_SHARED, Some(loan)) => {
+                // SAFETY: the host keeps the values alive and unchanged
+                // until `loan` (inside the shared volume) releases them.
+                shared = unsafe { SharedVolume::from_raw(desc.volume.to_view()?, Arc::new(loan)) };
+                RenderVolume::Shared(&shared)
+            }
+            (t, _) => return Err(format!("unknown render volume tag {t}")),
         };
         s.model
             .set_volume(volume, region)
             .map_err(|e| e.to_string())
     })
+}
+
+/// The host's hold on values it lent ([`RENDER_VOLUME_SHARED`]): calls
+/// the host's `release` with its `owner` once, when dropped.
+struct HostLoan {
+    owner: *mut c_void,
+    release: unsafe extern "C" fn(owner: *mut c_void),
+}
+
+// SAFETY: the ABI lets `release` run on any thread, and nothing else
+// touches `owner`.
+unsafe impl Send for HostLoan {}
+// SAFETY: as above; `&HostLoan` gives no access at all.
+unsafe impl Sync for HostLoan {}
+
+impl HostLoan {
+    /// The loan of a [`RENDER_VOLUME_SHARED`] descriptor (`None` for the
+    /// other tags).
+    ///
+    /// # Safety
+    /// For that tag, `owner` and `release` are the host's, to be called
+    /// once.
+    unsafe fn take(desc: &RenderVolumeDesc) -> Result<Option<Self>, String> {
+        if desc.tag != RENDER_VOLUME_SHARED {
+            return Ok(None);
+        }
+        match desc.release {
+            Some(release) => Ok(Some(Self {
+                owner: desc.owner,
+                release,
+            })),
+            None => Err("shared render volume without a release function".into()),
+        }
+    }
+}
+
+impl Drop for HostLoan {
+    fn drop(&mut self) {
+        // SAFETY: called once, with the host's own handle.
+        unsafe { (self.release)(self.owner) }
+    }
+}
+
+/// The host's `release` for a volume it lent: drops the boxed clone that
+/// [`RendererProxy::set_volume`] made.
+unsafe extern "C" fn release_shared(owner: *mut c_void) {
+    // SAFETY: `owner` is the `Box<SharedVolume>` made for this loan, and
+    // the plugin releases it once.
+    drop(unsafe { Box::from_raw(owner.cast::<SharedVolume>()) });
 }
 
 unsafe extern "C" fn set_opacity_maps<P: RendererPlugin>(
@@ -280,6 +347,17 @@ impl Renderer for RendererProxy {
                 reserved: 0,
                 volume: VolumeDesc::from_view(&view),
                 buffer: 0,
+                owner: std::ptr::null_mut(),
+                release: None,
+            },
+            RenderVolume::Shared(shared) => RenderVolumeDesc {
+                tag: RENDER_VOLUME_SHARED,
+                reserved: 0,
+                volume: VolumeDesc::from_view(&shared.view()),
+                buffer: 0,
+                // Released by the plugin (`release_shared`), once.
+                owner: Box::into_raw(Box::new(shared.clone())).cast(),
+                release: Some(release_shared),
             },
             RenderVolume::Gpu { grid, values } => RenderVolumeDesc {
                 tag: RENDER_VOLUME_GPU,
@@ -292,6 +370,8 @@ impl Renderer for RendererProxy {
                     len: grid.len() as u64,
                 },
                 buffer: values.0,
+                owner: std::ptr::null_mut(),
+                release: None,
             },
         };
         let region = RegionDesc::from(dirty);

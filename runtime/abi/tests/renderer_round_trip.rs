@@ -1,6 +1,8 @@
 //! Renderer plugins across the boundary, in one process: a renderer exported
 //! with `renderer_vtable`, driven through `RendererProxy`.
 
+use std::cell::Cell;
+use std::sync::Arc;
 use voxflex_abi::ffi::CAPABILITY_CPU;
 use voxflex_abi::host_side::HostServices;
 use voxflex_abi::renderer::{RendererProxy, renderer_vtable};
@@ -13,7 +15,14 @@ use voxflex_core::gpu::BufferId;
 use voxflex_core::grid::Grid;
 use voxflex_core::opacity_map::OpacityMap;
 use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
-use voxflex_core::volume::{VolumeView, VoxelSlice};
+use voxflex_core::shared_volume::SharedVolume;
+use voxflex_core::volume::{Volume, VolumeView, VoxelData, VoxelSlice};
+
+thread_local! {
+    /// The address of the last shared volume's first value `Flat` saw on
+    /// this thread (the calls run on the caller's thread).
+    static SEEN_AT: Cell<usize> = const { Cell::new(0) };
+}
 
 /// Paints every pixel with (mean voxel, #maps, azimuth, 255).
 #[derive(Default)]
@@ -21,6 +30,10 @@ struct Flat {
     mean: f32,
     maps: usize,
     log: Vec<String>,
+    /// The last shared volume, kept as a renderer keeps its volume.
+    kept: Option<SharedVolume>,
+    /// Refuses shared volumes (after looking at them).
+    refuse_shared: bool,
 }
 
 impl Renderer for Flat {
@@ -32,6 +45,7 @@ impl Renderer for Flat {
         if toml.contains("bad") {
             return Err(ModelError::new("[render] bad: unknown key"));
         }
+        self.refuse_shared = toml.contains("refuse_shared");
         Ok(())
     }
     fn set_volume(
@@ -45,7 +59,20 @@ impl Renderer for Flat {
                 self.mean = all.iter().sum::<f32>() / all.len() as f32;
             }
             RenderVolume::Gpu { values, .. } => self.mean = values.0 as f32,
+            RenderVolume::Shared(v) => {
+                let all = v.view().data.to_f32_vec();
+                self.mean = all.iter().sum::<f32>() / all.len() as f32;
+                let first = v.view().data.as_bytes().as_ptr();
+                SEEN_AT.set(first as usize);
+                if self.refuse_shared {
+                    return Err(ModelError::new("refused"));
+                }
+                self.kept = Some(v.clone());
+                self.log.push(format!("{dirty:?}"));
+                return Ok(());
+            }
         }
+        self.kept = None;
         self.log.push(format!("{dirty:?}"));
         Ok(())
     }
@@ -193,4 +220,75 @@ fn renderer_errors_and_panics_name_the_plugin() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("non-finite"), "{e}");
+}
+
+/// A shared volume crosses without a copy, stays alive while the plugin
+/// keeps it, and is released exactly once: when the plugin lets go of it,
+/// when `set_volume` fails, and when the plugin is dropped.
+#[test]
+fn shared_volumes_are_lent_not_copied_and_released_once() {
+    let grid = Grid::new([2, 1, 1], DVec3::ONE, DVec3::ZERO);
+    let volume = Arc::new(Volume::new(grid, VoxelData::U8(vec![10, 50])).unwrap());
+    let shared = SharedVolume::new(volume.clone());
+    let holders = || Arc::strong_count(&volume);
+    assert_eq!(holders(), 2);
+    let mut r = proxy("").unwrap();
+    r.init(ExecutionBackend::Cpu).unwrap();
+    r.set_volume(RenderVolume::Shared(&shared), DirtyRegion::All)
+        .unwrap();
+    // The plugin keeps the host's loan (one more holder), not a copy.
+    assert_eq!(holders(), 3);
+    drop(shared);
+    assert_eq!(holders(), 2);
+    let camera = Camera {
+        target: DVec3::ZERO,
+        azimuth_deg: 0.0,
+        elevation_deg: 0.0,
+        distance_mm: 10.0,
+        projection: Projection::Orthographic { height_mm: 1.0 },
+        width: 1,
+        height: 1,
+    };
+    let mut px = vec![0u8; 4];
+    r.render(&camera, ImageTarget::Cpu(&mut px)).unwrap();
+    assert_eq!(px[0], 30);
+    // A copied volume replaces it: the loan is released.
+    let data = [1u8, 3];
+    r.set_volume(
+        RenderVolume::Cpu(VolumeView {
+            grid,
+            data: VoxelSlice::U8(&data),
+        }),
+        DirtyRegion::All,
+    )
+    .unwrap();
+    assert_eq!(holders(), 1);
+    // A failed call releases it too, and so does dropping the plugin.
+    let shared = SharedVolume::new(volume.clone());
+    r.configure("refuse_shared = true").unwrap();
+    let e = r
+        .set_volume(RenderVolume::Shared(&shared), DirtyRegion::All)
+        .unwrap_err();
+    assert!(e.to_string().ends_with("refused"), "{e}");
+    assert_eq!(holders(), 2);
+    r.configure("").unwrap();
+    r.set_volume(RenderVolume::Shared(&shared), DirtyRegion::All)
+        .unwrap();
+    assert_eq!(holders(), 3);
+    drop(r);
+    assert_eq!(holders(), 2);
+}
+
+/// The plugin reads the host's own bytes: the address it saw (recorded
+/// in a thread-local, as plugin and host share this process and thread) is the host's.
+#[test]
+fn a_shared_volume_reaches_the_plugin_at_the_hosts_address() {
+    let grid = Grid::new([2, 1, 1], DVec3::ONE, DVec3::ZERO);
+    let volume = Arc::new(Volume::new(grid, VoxelData::U8(vec![10, 50])).unwrap());
+    let first = volume.view().data.as_bytes().as_ptr() as usize;
+    let shared = SharedVolume::new(volume);
+    let mut r = proxy("").unwrap();
+    r.set_volume(RenderVolume::Shared(&shared), DirtyRegion::All)
+        .unwrap();
+    assert_eq!(SEEN_AT.get(), first);
 }

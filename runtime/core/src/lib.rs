@@ -1,7 +1,8 @@
 //! # voxflex-core
 //!
 //! The ground every other voxflex crate stands on, and only that: voxel
-//! geometry ([`grid::Grid`]), volumes ([`volume::Volume`]), errors, the
+//! geometry ([`grid::Grid`]), volumes ([`volume::Volume`], and
+//! [`shared_volume::SharedVolume`] to lend one without copying), errors, the
 //! deformation-field trait ([`deformation::DeformationModel`]), the
 //! GPU-service trait ([`gpu::GpuService`]), the renderer trait
 //! ([`render::Renderer`]), the camera, the interaction vocabulary, cut
@@ -42,6 +43,7 @@ pub mod non_finite;
 pub mod on_worker;
 pub mod opacity_map;
 pub mod render;
+pub mod shared_volume;
 pub mod slice_axis;
 pub mod stats;
 #[cfg(any(test, feature = "test-support"))]

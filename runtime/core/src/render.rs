@@ -11,13 +11,20 @@ use crate::error::ModelError;
 use crate::gpu::BufferId;
 use crate::grid::Grid;
 use crate::opacity_map::OpacityMap;
+use crate::shared_volume::SharedVolume;
 use crate::volume::VolumeView;
 
 /// The volume a renderer draws.
 #[derive(Clone, Copy, Debug)]
 pub enum RenderVolume<'a> {
-    /// Values on the CPU.
+    /// Values on the CPU, valid during the call: a renderer that keeps the
+    /// volume copies the changed region.
     Cpu(VolumeView<'a>),
+    /// Values on the CPU that the renderer may keep (a clone: a reference
+    /// count, not a copy) instead of copying them. They never change; a
+    /// host with new values hands over a new volume, whose values may
+    /// differ from the previous volume's only inside the dirty region.
+    Shared(&'a SharedVolume),
     /// f32 values (x fastest) in a host GPU buffer, e.g. the resampler's output.
     Gpu {
         /// Geometry, mm.
@@ -25,6 +32,17 @@ pub enum RenderVolume<'a> {
         /// Buffer of `grid.len()` f32.
         values: BufferId,
     },
+}
+
+impl RenderVolume<'_> {
+    /// The volume's geometry (voxel index ↔ world millimetres).
+    pub fn grid(&self) -> Grid {
+        match self {
+            RenderVolume::Cpu(view) => view.grid,
+            RenderVolume::Shared(shared) => shared.view().grid,
+            RenderVolume::Gpu { grid, .. } => *grid,
+        }
+    }
 }
 
 /// Where [`Renderer::render`] writes the image: `width × height` pixels,

@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use voxflex_core::deformation::DirtyRegion;
 use voxflex_core::error::{GpuError, IoError, ModelError};
+use voxflex_core::render::RenderVolume;
 use voxflex_core::volume::Volume;
 use voxflex_io::png::{SliceAxis, Window, write_slice_png};
 use voxflex_io::{ReadOptions, read_volume_with, write_atomically, write_volume};
@@ -277,7 +278,7 @@ fn output_stage(
         }
         let files = stage.render(
             &settings,
-            volume,
+            RenderVolume::Cpu(volume.view()),
             *parts.render_dirty,
             &maps,
             out_dir,

@@ -323,23 +323,24 @@ impl RenderStage {
         Ok(self.renderer.render(camera, target)?)
     }
 
-    /// Renders `volume` with `maps` and writes the image(s); returns the files.
+    /// Renders `volume` (copied, or kept when shared) with `maps` and
+    /// writes the image(s); returns the files.
     pub fn render(
         &mut self,
         settings: &RenderSettings,
-        volume: &Volume,
+        volume: RenderVolume<'_>,
         dirty: DirtyRegion,
         maps: &[OpacityMap],
         dir: &Path,
         metrics: &mut RunMetrics,
     ) -> Result<Vec<String>, RunError> {
         let t = Instant::now();
-        self.set_scene(volume, dirty, maps)?;
+        self.set_scene_on(volume, dirty, maps)?;
         let frames = settings.turntable.max(1);
         let mut written = vec![];
         let (mut rays, mut samples) = (0u64, 0u64);
         for f in 0..frames {
-            let camera = camera_for(settings, &volume.grid, 360.0 * f as f64 / frames as f64);
+            let camera = camera_for(settings, &volume.grid(), 360.0 * f as f64 / frames as f64);
             let (image, stats) = self.render_image(&camera)?;
             rays += stats.rays;
             samples += stats.samples;

@@ -178,7 +178,9 @@ pub struct Session {
     offered_gpu: Option<Arc<WgpuService>>,
     gpu: Option<Arc<dyn GpuService>>,
     services: Arc<HostServices>,
-    source: Volume,
+    /// The loaded volume, never changed; shared with the renderer while
+    /// nothing deforms it (no copy, see `RenderVolume::Shared`).
+    source: Arc<Volume>,
     /// The next frame the model steps.
     frame: u64,
     frames: u64,
@@ -484,7 +486,7 @@ impl Session {
             resolved: o.resolved,
             offered_gpu: o.offered_gpu,
             gpu,
-            source: o.source,
+            source: Arc::new(o.source),
             frame: 0,
             frames: o.frames,
             dt_s: o.dt_s,
@@ -931,7 +933,7 @@ impl Session {
     fn roi_parts(&mut self) -> (&mut [SessionRoi], &Volume, RoiDevice<'_>) {
         let volume = match &self.resampled {
             Some((_, v)) => v,
-            None => &self.source,
+            None => self.source.as_ref(),
         };
         let device = match (&self.gpu, &self.roi_values) {
             (Some(gpu), Some((_, values))) => RoiDevice::Gpu {
@@ -985,7 +987,7 @@ impl Session {
     fn volume_ref(&self) -> &Volume {
         match &self.resampled {
             Some((_, v)) => v,
-            None => &self.source,
+            None => self.source.as_ref(),
         }
     }
 
@@ -1262,7 +1264,7 @@ impl Session {
         self.ensure_volume()?;
         let volume = match &self.resampled {
             Some((_, v)) => v,
-            None => &self.source,
+            None => self.source.as_ref(),
         };
         Ok(OutputParts {
             volume,

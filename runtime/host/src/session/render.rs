@@ -16,6 +16,7 @@ use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::grid::Grid;
 use voxflex_core::opacity_map::OpacityMap;
 use voxflex_core::render::{ImageTarget, RenderVolume};
+use voxflex_core::shared_volume::SharedVolume;
 
 impl Session {
     /// Renders the current volume with the session's ROI maps through
@@ -145,10 +146,13 @@ impl Session {
             .filter(|r| r.shown)
             .map(|r| r.map().clone())
             .collect();
+        // The source never changes, so the renderer may keep it instead of
+        // copying it; the resampled volume is rewritten in place each frame.
+        let source = SharedVolume::new(self.source.clone());
         let volume = match (on_gpu, &self.resampled) {
             (Some((grid, values)), _) => RenderVolume::Gpu { grid, values },
             (None, Some((_, v))) => RenderVolume::Cpu(v.view()),
-            (None, None) => RenderVolume::Cpu(self.source.view()),
+            (None, None) => RenderVolume::Shared(&source),
         };
         let slot = self.renderer.as_mut().expect("built above");
         slot.stage.set_scene_on(volume, self.render_dirty, &maps)?;
