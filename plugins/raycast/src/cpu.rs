@@ -248,14 +248,56 @@ impl<'a, T: Sample> Kernel<'a, T> {
         }
     }
 
-    /// False when the sample at footprint `fp` is known to have κ = 0
-    /// without reading the volume ([`VisibleCells`]).
+    /// 0 unless the sample at footprint `fp` is known to have κ = 0
+    /// without reading the volume; then the edge (cells) of the largest
+    /// aligned block around its cell that shows nothing
+    /// ([`VisibleCells::hidden_block`]).
     #[inline(always)]
-    fn may_show(&self, fp: &Footprint) -> bool {
+    fn hidden_block(&self, fp: &Footprint) -> usize {
         match self.visible {
-            Some(cells) => cells.may_show(self.values, self.s.lut, fp.i),
-            None => true,
+            Some(cells) => cells.hidden_block(self.values, self.s.lut, fp.i),
+            None => 0,
         }
+    }
+
+    /// The next sample to look at after sample `k − 1`, whose cell `i` lies
+    /// in a hidden block of `edge` cells: past the samples whose
+    /// footprints lie in that block too. The exit is estimated in ray
+    /// parameters and then checked on the sample itself with the loop's
+    /// own arithmetic — positions along the ray are monotone per axis, so
+    /// when the last skipped sample's footprint is in the (convex) block,
+    /// every sample before it is, and none that may show is passed.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn past_block(
+        &self,
+        k: u32,
+        sch: &Schedule,
+        i: [usize; 3],
+        edge: usize,
+        oi: Vec3,
+        di: Vec3,
+        inv_di: Vec3,
+    ) -> u32 {
+        let lo = i.map(|c| c & !(edge - 1));
+        let mut exit = T_FAR;
+        for a in 0..3 {
+            if di[a] > 0.0 {
+                exit = exit.min(((lo[a] + edge) as f32 - oi[a]) * inv_di[a]);
+            } else if di[a] < 0.0 {
+                exit = exit.min((lo[a] as f32 - oi[a]) * inv_di[a]);
+            }
+        }
+        let last = self
+            .first_sample_at(sch, exit)
+            .saturating_sub(1)
+            .min(sch.n_total - 1);
+        if last < k {
+            return k;
+        }
+        let fp = self.footprint(oi + di * self.at(sch, last).0);
+        let inside = (0..3).all(|a| fp.i[a] >= lo[a] && fp.i[a] < lo[a] + edge);
+        if inside { last + 1 } else { k }
     }
 
     /// Trilinear value at a footprint.
@@ -521,7 +563,12 @@ impl<'a, T: Sample> Kernel<'a, T> {
             }
             k += 1;
             let fp = self.footprint(p);
-            if !self.may_show(&fp) {
+            let hidden = self.hidden_block(&fp);
+            if hidden > 0 {
+                // A single cell holds a sample or two: step on.
+                if hidden > 1 {
+                    k = self.past_block(k, sch, fp.i, hidden, oi, di, inv_di);
+                }
                 continue;
             }
             let v = self.sample_at(p, &fp);

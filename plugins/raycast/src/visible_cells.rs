@@ -15,7 +15,10 @@
 //!
 //! One bit per cell, 512 per 8³-cell brick (one cache line), built per
 //! brick the first time a sample reaches it ([`LazyBricks`]): separable
-//! min/max passes over the brick's 9³ corner voxels' table entries. The
+//! min/max passes over the brick's 9³ corner voxels' table entries, and
+//! the same or-ed over its aligned 2³ and 4³ blocks of cells, so a ray in
+//! a hidden cell can jump past the largest hidden block around it
+//! ([`VisibleCells::hidden_block`]). The
 //! bits depend on the volume and on the table, so the renderer drops the
 //! bricks a volume update reaches ([`VisibleCells::invalidate`]) and
 //! starts over when the table changes. Not used with tricubic sampling
@@ -39,10 +42,14 @@ const REACH: Reach = Reach {
 /// One bit per cell of a brick: word `lz`, bit `lx + 8 ly`.
 type Bits = [u64; BRICK];
 
-/// One brick: its bits, and the box (local cell indices, inclusive) of the
-/// cells whose bit is set (`None`: none is).
+/// One brick: its bits, the same or-ed over aligned blocks of 2³ cells
+/// (bit `bx + 4 (by + 4 bz)`, `b = local / 2`) and of 4³ cells (bit
+/// `bx + 2 (by + 2 bz)`, `b = local / 4`), and the box (local cell
+/// indices, inclusive) of the cells whose bit is set (`None`: none is).
 struct Brick {
     bits: Bits,
+    blocks2: u64,
+    blocks4: u8,
     shown: Option<[[u8; 3]; 2]>,
 }
 
@@ -84,6 +91,29 @@ impl VisibleCells {
         brick.bits[lz] >> (lx + BRICK * ly) & 1 != 0
     }
 
+    /// 0 when the cell whose lower corner is voxel `i` may show (as
+    /// [`VisibleCells::may_show`]); else the edge, in cells, of the largest
+    /// block of its brick that holds it, is aligned to that edge (8, 4, 2
+    /// or 1: the brick, an octant, …) and shows nothing. A ray may pass
+    /// such a block without sampling it.
+    #[inline(always)]
+    pub fn hidden_block<T: Sample>(&self, values: &[T], lut: &Lut, i: [usize; 3]) -> usize {
+        let place = self.bricks.place(i);
+        let brick = self.brick(values, lut, &place);
+        let [lx, ly, lz] = place.local;
+        if brick.bits[lz] >> (lx + BRICK * ly) & 1 != 0 {
+            0
+        } else if brick.blocks2 >> (lx / 2 + 4 * (ly / 2 + 4 * (lz / 2))) & 1 != 0 {
+            1
+        } else if brick.blocks4 >> (lx / 4 + 2 * (ly / 4 + 2 * (lz / 4))) & 1 != 0 {
+            2
+        } else if brick.shown.is_some() {
+            4
+        } else {
+            BRICK
+        }
+    }
+
     /// The box of the cells (lower-corner voxel indices, inclusive) of brick
     /// `b` that the table may show; `None` when it shows none. Builds the
     /// brick if needed (arguments as [`VisibleCells::may_show`]).
@@ -110,12 +140,44 @@ impl VisibleCells {
         self.bricks.get_or_build(place, |b| {
             let window = *self.window.get_or_init(|| lut.show_window());
             let bits = brick_bits(values, self.bricks.dims(), window, b);
+            let (blocks2, blocks4) = blocks(&bits);
             Brick {
                 shown: shown_box(&bits),
                 bits,
+                blocks2,
+                blocks4,
             }
         })
     }
+}
+
+/// The bits or-ed over aligned blocks of 2³ cells (`bx + 4 (by + 4 bz)`)
+/// and of 4³ cells (`bx + 2 (by + 2 bz)`): a word's 8 × 8 layer or-ed
+/// with the next layer, with the next row (8 bits up) and the next
+/// column, leaves each 2³ block's answer at its even (x, y) bit.
+fn blocks(bits: &Bits) -> (u64, u8) {
+    let mut b2 = 0u64;
+    for m in 0..BRICK / 2 {
+        let w = bits[2 * m] | bits[2 * m + 1];
+        let w = w | w >> BRICK;
+        let w = w | w >> 1;
+        for q in 0..16 {
+            let (x, y) = (q % 4, q / 4);
+            b2 |= (w >> (2 * x + 2 * BRICK * y) & 1) << (q + 16 * m);
+        }
+    }
+    let mut b4 = 0u8;
+    for q in 0..8 {
+        let (x, y, z) = (q % 2, q / 2 % 2, q / 4);
+        // The 2³ blocks (2x + dx, 2y + dy, 2z + dz) of 4³ block (x, y, z).
+        let mut any = 0u64;
+        for d in 0..8 {
+            let (dx, dy, dz) = (d % 2, d / 2 % 2, d / 4);
+            any |= b2 >> (2 * x + dx + 4 * (2 * y + dy + 4 * (2 * z + dz))) & 1;
+        }
+        b4 |= (any as u8) << q;
+    }
+    (b2, b4)
 }
 
 /// The box of the set bits: z from the non-zero words, y from their
@@ -264,6 +326,55 @@ mod tests {
         assert!(
             shown > 100 && hidden > 100,
             "{shown} shown, {hidden} hidden"
+        );
+    }
+
+    /// The hidden block of every cell is the largest aligned block of its
+    /// brick (8, 4, 2 or 1 cells) whose cells all are hidden (brute force
+    /// over `may_show`), 0 for a cell that may show; grids with partial
+    /// bricks, volumes from nearly empty to nearly full.
+    #[test]
+    fn hidden_blocks_are_the_largest_empty_aligned_blocks() {
+        let lut = TransferFunction::preset("ct-bone")
+            .unwrap()
+            .lut((-1024.0, 3071.0), 1.0);
+        let mut seen = [0usize; 9];
+        for (dims, bone) in [([19, 10, 17], 5), ([33, 26, 20], 40), ([17, 17, 17], 400)] {
+            let mut v = vec![0.0; dims.iter().product()];
+            for n in 0..bone {
+                let l = (n as u32).wrapping_mul(2_654_435_761) as usize % v.len();
+                v[l] = 900.0;
+            }
+            let cells = VisibleCells::new(dims);
+            let max0 = dims.map(|n| n - 2);
+            let hidden_box = |lo: [usize; 3], edge: usize| {
+                (lo[2]..lo[2] + edge).all(|k| {
+                    (lo[1]..lo[1] + edge).all(|j| {
+                        (lo[0]..lo[0] + edge).all(|i| {
+                            // Cells past the grid repeat its last ones.
+                            let c = [i.min(max0[0]), j.min(max0[1]), k.min(max0[2])];
+                            !cells.may_show(&v, &lut, c)
+                        })
+                    })
+                })
+            };
+            for k in 0..=max0[2] {
+                for j in 0..=max0[1] {
+                    for i in 0..=max0[0] {
+                        let want = [8, 4, 2, 1, 0]
+                            .into_iter()
+                            .find(|&e| e == 0 || hidden_box([i, j, k].map(|c| c / e * e), e))
+                            .unwrap();
+                        let got = cells.hidden_block(&v, &lut, [i, j, k]);
+                        assert_eq!(got, want, "{dims:?} cell {:?}", [i, j, k]);
+                        seen[got] += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            [0, 1, 2, 4, 8].iter().all(|&e| seen[e] > 10),
+            "every answer occurs: {seen:?}"
         );
     }
 
