@@ -47,7 +47,8 @@
 //!   cell faces). The CPU path skips finer still, without changing a bit
 //!   of the image: [`visible_cells`] keeps one bit per trilinear cell
 //!   (may the table show a value between its corners?) and skips a
-//!   sample in a hidden cell before reading the volume, and
+//!   sample in a hidden cell before reading the volume — past the largest
+//!   hidden aligned block of 2, 4 or 8 cells around it at once —, and
 //!   [`ray_bounds`] projects every non-empty macro cell (narrowed to its
 //!   shown cells) per frame, so each ray starts at its first and stops
 //!   after its last possibly visible sample.
@@ -73,11 +74,13 @@
 //!
 //! ## Backends and buffers
 //!
-//! CPU path: the volume is converted to f32 once per version (only the dirty
-//! voxels afterwards); `RenderVolume::Gpu` on the CPU backend is read back
-//! (the dirty z-slab). GPU path ([`gpu`]): `RenderVolume::Gpu` buffers are
-//! bound as they are; `RenderVolume::Cpu` volumes are uploaded once per
-//! version (the dirty z-slab of planes). A volume above the GPU's largest
+//! CPU path ([`voxel_store`]): a `RenderVolume::Cpu` volume is copied in its
+//! own scalar type once per version (only the dirty voxels afterwards); a
+//! `RenderVolume::Shared` one is kept as the host lent it, not copied (an
+//! f32 volume holding NaN excepted); `RenderVolume::Gpu` on the CPU backend
+//! is read back (the dirty z-slab). GPU path ([`gpu`]): `RenderVolume::Gpu`
+//! buffers are bound as they are; CPU volumes, copied or lent, are uploaded
+//! once per version (the dirty z-slab of planes). A volume above the GPU's largest
 //! storage binding is bound in z-slabs, one pass per slab and ray
 //! direction, each ray resuming where it stopped (same image bit for bit;
 //! see [`gpu`]); an image, or its 32 bytes per pixel of ray state while the

@@ -278,7 +278,10 @@ fn output_stage(
         }
         let files = stage.render(
             &settings,
-            RenderVolume::Cpu(volume.view()),
+            match &parts.lent {
+                Some(source) => RenderVolume::Shared(source),
+                None => RenderVolume::Cpu(volume.view()),
+            },
             *parts.render_dirty,
             &maps,
             out_dir,

@@ -111,6 +111,7 @@ use voxflex_core::camera::Camera;
 use voxflex_core::deformation::{DirtyRegion, ExecutionBackend, FrameInfo, ModelNotes};
 use voxflex_core::gpu::{BufferId, GpuService};
 use voxflex_core::interaction::InteractionSpec;
+use voxflex_core::shared_volume::SharedVolume;
 use voxflex_core::volume::{Volume, VoxelData};
 use voxflex_io::png::render_slice;
 use voxflex_opacity::GpuOpacityVolume;
@@ -1262,12 +1263,16 @@ impl Session {
     /// re-render.
     pub(crate) fn output_parts(&mut self) -> Result<OutputParts<'_>, RunError> {
         self.ensure_volume()?;
-        let volume = match &self.resampled {
-            Some((_, v)) => v,
-            None => self.source.as_ref(),
+        let (volume, lent) = match &self.resampled {
+            Some((_, v)) => (v, None),
+            None => (
+                self.source.as_ref(),
+                Some(SharedVolume::new(self.source.clone())),
+            ),
         };
         Ok(OutputParts {
             volume,
+            lent,
             metrics: &mut self.metrics,
             gpu: self.gpu.as_ref(),
             renderer: self.renderer.as_mut().map(|r| &mut r.stage),
@@ -1280,6 +1285,8 @@ impl Session {
 /// See [`Session::output_parts`].
 pub(crate) struct OutputParts<'a> {
     pub(crate) volume: &'a Volume,
+    /// `volume` to lend the renderer when it is the (unchanging) source.
+    pub(crate) lent: Option<SharedVolume>,
     pub(crate) metrics: &'a mut RunMetrics,
     pub(crate) gpu: Option<&'a Arc<dyn GpuService>>,
     pub(crate) renderer: Option<&'a mut RenderStage>,
