@@ -5,22 +5,15 @@
 //! the image a fresh renderer draws of the new volume.
 
 use super::*;
-use crate::tests::{GPU_CASES, cpu, head, test_maps, with_volume};
+use crate::tests::{
+    GPU_CASES, assert_same_images, bits, cpu, f32_twin, head, test_maps, with_block, with_volume,
+};
 use std::sync::Arc;
-use voxflex_core::glam::DVec3;
 use voxflex_core::shared_volume::SharedVolume;
 use voxflex_core::volume::{Volume, VoxelData};
 
-fn bits(img: &[[f32; 4]]) -> Vec<u32> {
-    img.iter().flatten().map(|c| c.to_bits()).collect()
-}
-
 fn shared(vol: &Volume) -> SharedVolume {
     SharedVolume::new(Arc::new(vol.clone()))
-}
-
-fn f32_twin(vol: &Volume) -> Volume {
-    Volume::new(vol.grid, VoxelData::F32(vol.view().data.to_f32_vec())).unwrap()
 }
 
 fn with_shared(mut r: RaycastRenderer, v: &SharedVolume) -> RaycastRenderer {
@@ -62,13 +55,7 @@ fn a_shared_volume_renders_as_its_copy_without_being_copied() {
                 a.set_opacity_maps(&maps).unwrap();
                 b.set_opacity_maps(&maps).unwrap();
             }
-            for cam in views(&vol.grid) {
-                let (x, sx) = a.render_linear(&cam).unwrap();
-                let (y, sy) = b.render_linear(&cam).unwrap();
-                assert!(bits(&x) == bits(&y), "{toml:?}: image differs");
-                assert_eq!(sx, sy, "{toml:?}");
-                shown += x.iter().filter(|p| p[3] > 0.0).count();
-            }
+            shown += assert_same_images(&mut a, &mut b, &views(&vol.grid), toml);
         }
         assert!(shown > 5_000, "{shown} pixels shown");
     }
@@ -94,26 +81,6 @@ fn a_shared_volume_with_nan_is_copied_with_nan_as_zero() {
     for cam in views(&vol.grid) {
         assert!(bits(&a.render_linear(&cam).unwrap().0) == bits(&b.render_linear(&cam).unwrap().0));
     }
-}
-
-/// `vol` with a block of bone (1500) and the world box around it.
-fn with_block(vol: &Volume) -> (Volume, DirtyRegion) {
-    let mut changed = f32_twin(vol);
-    let VoxelData::F32(d) = &mut changed.data else {
-        unreachable!()
-    };
-    for k in 10..20 {
-        for j in 8..24 {
-            for i in 4..12 {
-                d[changed.grid.linear(i, j, k)] = 1500.0;
-            }
-        }
-    }
-    let dirty = DirtyRegion::Box {
-        min: vol.grid.index_to_world(DVec3::new(4.0, 8.0, 10.0)),
-        max: vol.grid.index_to_world(DVec3::new(11.0, 23.0, 19.0)),
-    };
-    (changed, dirty)
 }
 
 /// Shared → shared, shared → copied and copied → shared updates with the

@@ -45,6 +45,57 @@ fn fill_box(vol: &mut Volume, lo: [usize; 3], hi: [usize; 3], value: i16) -> Dir
     }
 }
 
+/// `vol`'s values as f32 on the same grid.
+pub(crate) fn f32_twin(vol: &Volume) -> Volume {
+    Volume::new(vol.grid, VoxelData::F32(vol.view().data.to_f32_vec())).unwrap()
+}
+
+/// The bits of a linear image's channels.
+pub(crate) fn bits(img: &[[f32; 4]]) -> Vec<u32> {
+    img.iter().flatten().map(|c| c.to_bits()).collect()
+}
+
+/// `vol` as f32 with a block of bone (1500) at voxels (4..12, 8..24,
+/// 10..20), and the world box (mm) around the block.
+pub(crate) fn with_block(vol: &Volume) -> (Volume, DirtyRegion) {
+    let mut changed = f32_twin(vol);
+    let VoxelData::F32(d) = &mut changed.data else {
+        unreachable!()
+    };
+    for k in 10..20 {
+        for j in 8..24 {
+            for i in 4..12 {
+                d[changed.grid.linear(i, j, k)] = 1500.0;
+            }
+        }
+    }
+    let dirty = DirtyRegion::Box {
+        min: vol.grid.index_to_world(DVec3::new(4.0, 8.0, 10.0)),
+        max: vol.grid.index_to_world(DVec3::new(11.0, 23.0, 19.0)),
+    };
+    (changed, dirty)
+}
+
+/// Renders every camera of `cams` with `a` and with `b`: the linear images
+/// must be equal bit for bit and the statistics equal (`what` names the
+/// case); returns how many of `a`'s pixels show anything.
+pub(crate) fn assert_same_images(
+    a: &mut RaycastRenderer,
+    b: &mut RaycastRenderer,
+    cams: &[Camera],
+    what: &str,
+) -> usize {
+    let mut shown = 0;
+    for cam in cams {
+        let (x, sx) = a.render_linear(cam).unwrap();
+        let (y, sy) = b.render_linear(cam).unwrap();
+        assert!(bits(&x) == bits(&y), "{what}: image differs");
+        assert_eq!(sx, sy, "{what}");
+        shown += x.iter().filter(|p| p[3] > 0.0).count();
+    }
+    shown
+}
+
 pub(crate) fn rgba8(r: &mut RaycastRenderer, cam: &Camera) -> (Vec<u8>, RenderStats) {
     let mut out = vec![0u8; cam.width as usize * cam.height as usize * 4];
     let stats = r.render(cam, ImageTarget::Cpu(&mut out)).unwrap();

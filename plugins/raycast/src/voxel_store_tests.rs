@@ -5,7 +5,9 @@
 //! says.
 
 use super::*;
-use crate::tests::{GPU_CASES, cpu, head, test_maps, with_volume};
+use crate::tests::{
+    GPU_CASES, assert_same_images, bits, cpu, f32_twin, head, test_maps, with_block, with_volume,
+};
 use voxflex_core::glam::DVec3;
 use voxflex_core::volume::{Volume, VoxelData};
 
@@ -30,15 +32,6 @@ fn typed_heads(n: usize) -> Vec<Volume> {
         Volume::new(vol.grid, VoxelData::U16(u16s)).unwrap(),
         Volume::new(vol.grid, VoxelData::U8(u8s)).unwrap(),
     ]
-}
-
-/// The same values as f32.
-fn f32_twin(vol: &Volume) -> Volume {
-    Volume::new(vol.grid, VoxelData::F32(vol.view().data.to_f32_vec())).unwrap()
-}
-
-fn bits(img: &[[f32; 4]]) -> Vec<u32> {
-    img.iter().flatten().map(|c| c.to_bits()).collect()
 }
 
 /// Every settings case the GPU checks use (MIP, tricubic, both gradient
@@ -66,13 +59,8 @@ fn every_scalar_type_renders_its_f32_twin_bit_for_bit() {
                 typed.set_opacity_maps(&maps).unwrap();
                 float.set_opacity_maps(&maps).unwrap();
             }
-            for cam in &views {
-                let (a, sa) = typed.render_linear(cam).unwrap();
-                let (b, sb) = float.render_linear(cam).unwrap();
-                assert!(bits(&a) == bits(&b), "{ty:?} {toml:?}: image differs");
-                assert_eq!(sa, sb, "{ty:?} {toml:?}");
-                shown += a.iter().filter(|p| p[3] > 0.0).count();
-            }
+            let what = format!("{ty:?} {toml:?}");
+            shown += assert_same_images(&mut typed, &mut float, &views, &what);
         }
         // Not an empty comparison: the cases show tissue in every type.
         assert!(shown > 10_000, "{ty:?}: {shown} pixels shown");
@@ -103,17 +91,7 @@ fn another_scalar_type_starts_the_store_over() {
     let heads = typed_heads(32);
     let (int, float) = (&heads[0], &f32_twin(&heads[0]));
     // The f32 volume: the same head with a bone block the i16 one lacks.
-    let mut changed = float.clone();
-    let VoxelData::F32(d) = &mut changed.data else {
-        unreachable!()
-    };
-    for k in 10..20 {
-        for j in 8..24 {
-            for i in 4..12 {
-                d[changed.grid.linear(i, j, k)] = 1500.0;
-            }
-        }
-    }
+    let (changed, _) = with_block(float);
     let cam = fit_camera(&int.grid, 40, 32, 30.0, 15.0, None);
     let small = DirtyRegion::Box {
         min: int.grid.index_to_world(DVec3::splat(15.0)),

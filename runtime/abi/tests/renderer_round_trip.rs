@@ -205,15 +205,7 @@ fn renderer_errors_and_panics_name_the_plugin() {
         r.configure("bad = 1").unwrap_err().to_string(),
         "plugin `flat`: [render] bad: unknown key"
     );
-    let camera = Camera {
-        target: DVec3::NAN,
-        azimuth_deg: 0.0,
-        elevation_deg: 0.0,
-        distance_mm: 1.0,
-        projection: Projection::Orthographic { height_mm: 1.0 },
-        width: 1,
-        height: 1,
-    };
+    let camera = one_pixel_camera(DVec3::NAN);
     let mut px = vec![0u8; 4];
     let e = r
         .render(&camera, ImageTarget::Cpu(&mut px))
@@ -222,13 +214,31 @@ fn renderer_errors_and_panics_name_the_plugin() {
     assert!(e.contains("non-finite"), "{e}");
 }
 
+/// A 2-voxel u8 volume (10, 50) the host keeps in an `Arc`.
+fn two_voxels() -> Arc<Volume> {
+    let grid = Grid::new([2, 1, 1], DVec3::ONE, DVec3::ZERO);
+    Arc::new(Volume::new(grid, VoxelData::U8(vec![10, 50])).unwrap())
+}
+
+/// A 1 × 1 orthographic camera looking at `target`.
+fn one_pixel_camera(target: DVec3) -> Camera {
+    Camera {
+        target,
+        azimuth_deg: 0.0,
+        elevation_deg: 0.0,
+        distance_mm: 10.0,
+        projection: Projection::Orthographic { height_mm: 1.0 },
+        width: 1,
+        height: 1,
+    }
+}
+
 /// A shared volume crosses without a copy, stays alive while the plugin
 /// keeps it, and is released exactly once: when the plugin lets go of it,
 /// when `set_volume` fails, and when the plugin is dropped.
 #[test]
 fn shared_volumes_are_lent_not_copied_and_released_once() {
-    let grid = Grid::new([2, 1, 1], DVec3::ONE, DVec3::ZERO);
-    let volume = Arc::new(Volume::new(grid, VoxelData::U8(vec![10, 50])).unwrap());
+    let volume = two_voxels();
     let shared = SharedVolume::new(volume.clone());
     let holders = || Arc::strong_count(&volume);
     assert_eq!(holders(), 2);
@@ -240,28 +250,14 @@ fn shared_volumes_are_lent_not_copied_and_released_once() {
     assert_eq!(holders(), 3);
     drop(shared);
     assert_eq!(holders(), 2);
-    let camera = Camera {
-        target: DVec3::ZERO,
-        azimuth_deg: 0.0,
-        elevation_deg: 0.0,
-        distance_mm: 10.0,
-        projection: Projection::Orthographic { height_mm: 1.0 },
-        width: 1,
-        height: 1,
-    };
     let mut px = vec![0u8; 4];
-    r.render(&camera, ImageTarget::Cpu(&mut px)).unwrap();
+    r.render(&one_pixel_camera(DVec3::ZERO), ImageTarget::Cpu(&mut px))
+        .unwrap();
     assert_eq!(px[0], 30);
     // A copied volume replaces it: the loan is released.
-    let data = [1u8, 3];
-    r.set_volume(
-        RenderVolume::Cpu(VolumeView {
-            grid,
-            data: VoxelSlice::U8(&data),
-        }),
-        DirtyRegion::All,
-    )
-    .unwrap();
+    let other = two_voxels();
+    r.set_volume(RenderVolume::Cpu(other.view()), DirtyRegion::All)
+        .unwrap();
     assert_eq!(holders(), 1);
     // A failed call releases it too, and so does dropping the plugin.
     let shared = SharedVolume::new(volume.clone());
@@ -283,8 +279,7 @@ fn shared_volumes_are_lent_not_copied_and_released_once() {
 /// in a thread-local, as plugin and host share this process and thread) is the host's.
 #[test]
 fn a_shared_volume_reaches_the_plugin_at_the_hosts_address() {
-    let grid = Grid::new([2, 1, 1], DVec3::ONE, DVec3::ZERO);
-    let volume = Arc::new(Volume::new(grid, VoxelData::U8(vec![10, 50])).unwrap());
+    let volume = two_voxels();
     let first = volume.view().data.as_bytes().as_ptr() as usize;
     let shared = SharedVolume::new(volume);
     let mut r = proxy("").unwrap();
