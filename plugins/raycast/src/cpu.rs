@@ -280,14 +280,7 @@ impl<'a, T: Sample> Kernel<'a, T> {
         inv_di: Vec3,
     ) -> u32 {
         let lo = i.map(|c| c & !(edge - 1));
-        let mut exit = T_FAR;
-        for a in 0..3 {
-            if di[a] > 0.0 {
-                exit = exit.min(((lo[a] + edge) as f32 - oi[a]) * inv_di[a]);
-            } else if di[a] < 0.0 {
-                exit = exit.min((lo[a] as f32 - oi[a]) * inv_di[a]);
-            }
-        }
+        let exit = block_exit(i.map(|c| c / edge), 1, edge as f32, oi, di, inv_di);
         let last = self
             .first_sample_at(sch, exit)
             .saturating_sub(1)
@@ -426,19 +419,11 @@ impl<'a, T: Sample> Kernel<'a, T> {
     }
 
     /// Ray parameter (mm) where the ray `oi + t·di` (voxel space, `inv_di`
-    /// = 1/di) leaves the block of cells within `d − 1` of cell `c` (`d = 1`:
-    /// the cell itself).
+    /// = 1/di) leaves the block of macro cells within `d − 1` of macro
+    /// cell `c` (`d = 1`: the cell itself).
     #[inline]
     fn cell_exit(&self, c: [usize; 3], d: u32, oi: Vec3, di: Vec3, inv_di: Vec3) -> f32 {
-        let mut t = T_FAR;
-        for a in 0..3 {
-            if di[a] > 0.0 {
-                t = t.min(((c[a] as u32 + d) as f32 * self.cell - oi[a]) * inv_di[a]);
-            } else if di[a] < 0.0 {
-                t = t.min(((c[a] as f32 + 1.0 - d as f32) * self.cell - oi[a]) * inv_di[a]);
-            }
-        }
-        t
+        block_exit(c, d, self.cell, oi, di, inv_di)
     }
 
     /// Casts the ray of pixel `(px, py)`.
@@ -666,6 +651,23 @@ impl<'a, T: Sample> Kernel<'a, T> {
             terminated: false,
         }
     }
+}
+
+/// Ray parameter (mm) where the ray `oi + t·di` (voxel space, `inv_di` =
+/// 1/di) leaves the blocks of `size` voxels within `d − 1` blocks of block
+/// `c` (the grid of blocks starting at voxel position 0; `d = 1`: block
+/// `c` itself).
+#[inline(always)]
+fn block_exit(c: [usize; 3], d: u32, size: f32, oi: Vec3, di: Vec3, inv_di: Vec3) -> f32 {
+    let mut t = T_FAR;
+    for a in 0..3 {
+        if di[a] > 0.0 {
+            t = t.min(((c[a] as u32 + d) as f32 * size - oi[a]) * inv_di[a]);
+        } else if di[a] < 0.0 {
+            t = t.min(((c[a] as f32 + 1.0 - d as f32) * size - oi[a]) * inv_di[a]);
+        }
+    }
+    t
 }
 
 /// `x^n` by squaring, inlined: the multiplications of the runtime's

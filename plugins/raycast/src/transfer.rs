@@ -378,10 +378,6 @@ impl Lut {
 mod tests {
     use super::*;
 
-    /// `lookup_visible` is `lookup` wherever it answers, and answers `None`
-    /// only where `lookup`'s κ is 0: every preset (`ct-lung` has two
-    /// visible ranges), a function with nothing visible, values below,
-    /// inside, between and above the table's entries, and NaN.
     /// Every preset and a function with nothing visible.
     fn presets_and_an_invisible_function() -> Vec<TransferFunction> {
         let mut fns: Vec<TransferFunction> = PRESETS
@@ -395,6 +391,10 @@ mod tests {
         fns
     }
 
+    /// `lookup_visible` is `lookup` wherever it answers, and answers `None`
+    /// only where `lookup`'s κ is 0: every preset (`ct-lung` has two
+    /// visible ranges), a function with nothing visible, values below,
+    /// inside, between and above the table's entries, and NaN.
     #[test]
     fn lookup_visible_skips_only_invisible_values() {
         for f in &presets_and_an_invisible_function() {

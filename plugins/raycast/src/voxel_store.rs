@@ -119,10 +119,7 @@ impl VoxelStore {
     /// first making it an owned store of `view`'s type and size (zeros) if
     /// it is not.
     pub fn copy_region(&mut self, view: &VolumeView<'_>, region: IndexBox) {
-        let fits = matches!(&self.values, Values::Own(d)
-            if d.as_slice().scalar_type() == view.data.scalar_type()
-                && d.as_slice().len() == view.data.len());
-        if !fits {
+        if !self.updatable_by(&RenderVolume::Cpu(*view), view.data.len()) {
             *self = Self::zeroed(view.data.scalar_type(), view.data.len());
         }
         let Values::Own(data) = &mut self.values else {
