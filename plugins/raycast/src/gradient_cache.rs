@@ -1,13 +1,14 @@
 //! [`GradientCache`]: the CPU path's Sobel gradients at the voxels, built
-//! per brick of 8³ cells on first use and dropped where the volume changes.
+//! per brick of [`EDGE`]³ cells on first use and dropped where the volume
+//! changes.
 //!
 //! [`crate::filters::sobel`] evaluates the 3×3×3 Sobel operator at the 8
 //! corners of a sample's footprint and interpolates them trilinearly: 84
 //! four-tap filters per shaded sample, about a quarter of a shaded frame.
 //! The corner values depend on the voxels alone, so they are cached: a
-//! brick holds the gradients of the 9³ voxels that are corners of its 8³
-//! cells (neighbouring bricks share a face), computed with the same f32
-//! operations in the same order as `filters::sobel` (difference or
+//! brick holds the gradients of the `(EDGE + 1)³` voxels that are corners
+//! of its cells (neighbouring bricks share a face), computed with the same
+//! f32 operations in the same order as `filters::sobel` (difference or
 //! `[1, 2, 1] / 4` smoothing along x, then y, then z, indices clamped to
 //! the grid one by one), so a cached gradient is **bit-identical** to the
 //! uncached one — the GPU twin, which keeps computing it per sample, stays
@@ -15,11 +16,22 @@
 //!
 //! Only bricks a shaded sample reaches are built (a bone transfer function
 //! on a head CT touches a small part of the volume), on the rendering
-//! threads, once each ([`crate::lazy_bricks`]). The cache holds at most as many bytes
-//! as the f32 volume itself ([`GradientCache::new`]'s budget); past that a
-//! brick is marked uncached and its samples compute the gradient as before.
+//! threads, once each, packed in one pool ([`crate::lazy_bricks`]). The
+//! cache holds at most as many bytes as the f32 volume itself
+//! ([`GradientCache::new`]'s budget); past that a brick is marked over
+//! budget and its samples compute the gradient as before.
 //! [`GradientCache::invalidate`] drops the bricks whose gradients read a
 //! changed voxel (the dirty region of `set_volume`).
+//!
+//! **Size.** A first frame writes every brick it builds into fresh pages,
+//! and on the 512 × 512 × 133 CT's `ct-bone` frame their page faults cost
+//! more than the filtering (4,770 bricks). So a corner keeps its three
+//! components only (12 bytes, read as four floats of which the fourth is
+//! the next corner's and is ignored): 42 MB of bricks instead of 56, the
+//! first frame ~6 ms faster and the later ones ~2 ms (the same cache
+//! holds more corners). Bricks of 4³ cells would cover the 417 k shaded
+//! cells with 2.71 M corners instead of 3.48 M, but made every frame 3–5 ms
+//! slower (docs/BENCHMARKS.md).
 //!
 //! Units: gradients in value units per voxel step × 2 (a difference over
 //! two voxels, as `filters::sobel`); indices are voxel indices, x fastest.
@@ -27,18 +39,18 @@
 use crate::filters::tap3;
 use crate::lazy_bricks::{LazyBricks, Reach};
 use crate::macrocell::IndexBox;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use voxflex_core::glam::{Vec3, Vec4};
 use voxflex_core::volume::Sample;
 
-pub use crate::lazy_bricks::BRICK;
+/// Cells per gradient brick edge.
+pub const EDGE: usize = 8;
 /// Corner voxels per brick edge.
-const SIDE: usize = BRICK + 1;
+const SIDE: usize = EDGE + 1;
 /// Voxels per brick edge with the one-voxel halo the filter reads.
-const HALO: usize = BRICK + 3;
-/// Gradient components stored per brick (3 per corner, padded to 4 so a
-/// corner is one SIMD load and the three components interpolate together).
-const BRICK_FLOATS: usize = 4 * SIDE * SIDE * SIDE;
+const HALO: usize = EDGE + 3;
+/// Floats per brick: three per corner, and one so that the last corner
+/// too is read as four.
+const BRICK_FLOATS: usize = 3 * SIDE * SIDE * SIDE + 1;
 /// Bytes of one built brick.
 pub const BRICK_BYTES: usize = 4 * BRICK_FLOATS;
 /// The Sobel filter reads one voxel beyond a brick's corners.
@@ -47,17 +59,14 @@ const REACH: Reach = Reach {
     after: 1,
 };
 
-/// One brick's corner gradients, `[cx + 9 (cy + 9 cz)] = [gx, gy, gz, 0]`.
-type Brick = Box<[Vec4]>;
+/// One brick's corner gradients: `[3 (cx + S (cy + S cz)) + axis]`,
+/// `S = EDGE + 1`, then one 0.
+type Brick = [f32; BRICK_FLOATS];
 
-/// Sobel gradients of a volume, per 8³-cell brick, built on first use.
+/// Sobel gradients of a volume, per [`EDGE`]³-cell brick, built on first
+/// use.
 pub struct GradientCache {
-    /// `None` inside: the brick was over budget (computed per sample).
-    bricks: LazyBricks<Option<Brick>>,
-    /// Bricks that may be built.
-    budget: usize,
-    /// Bricks built (or being built).
-    built: AtomicUsize,
+    bricks: LazyBricks<Brick, EDGE>,
 }
 
 impl GradientCache {
@@ -65,9 +74,7 @@ impl GradientCache {
     /// `budget_bytes` of gradients.
     pub fn new(dims: [usize; 3], budget_bytes: usize) -> Self {
         Self {
-            bricks: LazyBricks::new(dims),
-            budget: budget_bytes / BRICK_BYTES,
-            built: AtomicUsize::new(0),
+            bricks: LazyBricks::new(dims, budget_bytes / BRICK_BYTES),
         }
     }
 
@@ -78,19 +85,13 @@ impl GradientCache {
 
     /// Bricks built so far.
     pub fn built(&self) -> usize {
-        self.built.load(Ordering::Relaxed).min(self.budget)
+        self.bricks.built()
     }
 
     /// Drops every brick whose gradients read a voxel of `region` (a corner
     /// reads its neighbours one voxel away).
     pub fn invalidate(&mut self, region: IndexBox) {
-        let built = self.built.get_mut();
-        self.bricks.invalidate(region, REACH, |b| {
-            if b.is_some() {
-                *built -= 1;
-            }
-        });
-        *built = (*built).min(self.budget);
+        self.bricks.invalidate(region, REACH);
     }
 
     /// The Sobel gradient at fractions `f` of the footprint whose lower
@@ -102,11 +103,11 @@ impl GradientCache {
         let place = self.bricks.place(i);
         let brick = self
             .bricks
-            .get_or_build(&place, |b| self.build(values, b))
-            .as_deref()?;
+            .get_or_build(&place, |b| brick_gradients(values, self.bricks.dims(), b))?;
         let l = place.local;
         let at = |dx: usize, dy: usize, dz: usize| {
-            brick[l[0] + dx + SIDE * (l[1] + dy + SIDE * (l[2] + dz))]
+            let k = 3 * (l[0] + dx + SIDE * (l[1] + dy + SIDE * (l[2] + dz)));
+            Vec4::from_slice(&brick[k..k + 4])
         };
         // `trilinear8`'s operations, on the three components at once (lane
         // by lane the same f32 operations in the same order).
@@ -118,25 +119,17 @@ impl GradientCache {
         let g = lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z);
         Some(g.truncate())
     }
-
-    /// Builds brick `b` (or marks it uncached when the budget is spent).
-    #[cold]
-    fn build<T: Sample>(&self, values: &[T], b: [usize; 3]) -> Option<Brick> {
-        if self.built.fetch_add(1, Ordering::Relaxed) >= self.budget {
-            return None;
-        }
-        Some(brick_gradients(values, self.bricks.dims(), b))
-    }
 }
 
 /// The corner gradients of brick `b`: separable passes over the brick's
-/// 11³ voxels (indices clamped to the grid axis by axis, as `gather` does).
+/// `(EDGE + 3)³` voxels (indices clamped to the grid axis by axis, as
+/// `gather` does).
 ///
 /// Each pass runs over whole rows of fixed-size arrays on the stack, so the
 /// compiler keeps it in SIMD registers; per element it is the same [`tap3`]
 /// as the per-sample filter, so the result is bit-identical.
 fn brick_gradients<T: Sample>(values: &[T], dims: [usize; 3], b: [usize; 3]) -> Brick {
-    let index = |a: usize, h: usize| (b[a] * BRICK + h).saturating_sub(1).min(dims[a] - 1);
+    let index = |a: usize, h: usize| (b[a] * EDGE + h).saturating_sub(1).min(dims[a] - 1);
     let xs: [usize; HALO] = std::array::from_fn(|h| index(0, h));
     // A brick clear of the grid's x faces reads its halo rows as one run.
     let run = (xs[HALO - 1] == xs[0] + HALO - 1).then_some(xs[0]);
@@ -173,18 +166,18 @@ fn brick_gradients<T: Sample>(values: &[T], dims: [usize; 3], b: [usize; 3]) -> 
         y_of(&x_pass[1], false),
     ];
     // Along z: gx = S(DxSy), gy = S(SxDy), gz = D(SxSy), then interleaved.
-    let mut out = vec![Vec4::ZERO; SIDE * SIDE * SIDE];
+    let mut out = [0f32; BRICK_FLOATS];
     for (axis, src) in y_pass.iter().enumerate() {
         for cz in 0..SIDE {
             for cy in 0..SIDE {
                 let g = tap_rows(&src[cz][cy], &src[cz + 1][cy], &src[cz + 2][cy], axis == 2);
                 for (cx, v) in g.into_iter().enumerate() {
-                    out[cx + SIDE * (cy + SIDE * cz)][axis] = v;
+                    out[3 * (cx + SIDE * (cy + SIDE * cz)) + axis] = v;
                 }
             }
         }
     }
-    out.into_boxed_slice()
+    out
 }
 
 /// [`tap3`] along a halo row: output `c` from inputs `c, c + 1, c + 2`.
@@ -254,7 +247,7 @@ mod tests {
         for bz in 0..nz {
             for by in 0..ny {
                 for bx in 0..nx {
-                    cache.sobel(v, [8 * bx, 8 * by, 8 * bz], Vec3::ZERO);
+                    cache.sobel(v, [EDGE * bx, EDGE * by, EDGE * bz], Vec3::ZERO);
                 }
             }
         }
@@ -273,9 +266,12 @@ mod tests {
                 lo: [x, 12, 4],
                 hi: [x, 12, 4],
             });
-            // Brick b reads voxels 8b − 1 ..= 8b + 9 along each axis.
-            let along =
-                |v: usize, n: usize| (0..n).filter(|b| 8 * b <= v + 1 && v <= 8 * b + 9).count();
+            // Brick b reads voxels E·b − 1 ..= E·b + E + 1 along each axis.
+            let along = |v: usize, n: usize| {
+                (0..n)
+                    .filter(|b| EDGE * b <= v + 1 && v <= EDGE * b + EDGE + 1)
+                    .count()
+            };
             let dropped = along(x, cache.bricks.counts()[0])
                 * along(12, cache.bricks.counts()[1])
                 * along(4, cache.bricks.counts()[2]);

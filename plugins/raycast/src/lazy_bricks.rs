@@ -1,23 +1,46 @@
 //! [`LazyBricks`]: per-brick data of a volume, built on first use by the
 //! rendering threads and dropped where the volume changes.
 //!
-//! A brick is 8³ *cells* (a cell = a trilinear footprint, named by its lower
-//! corner voxel `i`, `0 ≤ i ≤ max(n, 2) − 2` per axis), so brick `b` holds
-//! the cells `8b ..= 8b + 7`. What a brick stores is up to its user — the
-//! Sobel gradients of its corners ([`crate::gradient_cache`]), which of its
-//! cells the transfer function may show ([`crate::visible_cells`]) — and so
-//! is how far beyond its cells it reads (its *reach*, which decides what a
-//! change of the volume drops). Indices are voxel indices, x fastest.
+//! A brick is `EDGE³` *cells* (a cell = a trilinear footprint, named by its
+//! lower corner voxel `i`, `0 ≤ i ≤ max(n, 2) − 2` per axis), so brick `b`
+//! holds the cells `EDGE·b ..= EDGE·b + EDGE − 1`. What a brick stores is
+//! up to its user — the Sobel gradients of its corners
+//! ([`crate::gradient_cache`], 4³ cells), which of its cells the transfer
+//! function may show ([`crate::visible_cells`], 8³ cells) — and so is how
+//! far beyond its cells it reads (its *reach*, which decides what a change
+//! of the volume drops). Indices are voxel indices, x fastest.
+//!
+//! **Memory.** Only a few bricks of a volume are ever built (a bone
+//! transfer function on a head CT builds one gradient brick in fifteen),
+//! and in a fresh process every byte written for the first time is a page
+//! fault. So a brick's slot is one `u32`, zero when unbuilt, allocated
+//! zeroed (the kernel maps untouched pages lazily, so slots nobody reaches
+//! cost nothing), and the built bricks sit packed in one pool, handed out
+//! in order (a page holds whole bricks, not one malloc'd brick and its
+//! neighbour's header). The pool's capacity is the user's budget; a brick
+//! past it is marked over budget and its cells are left to the caller.
+//! Places freed by [`LazyBricks::invalidate`] are handed out again first.
 
 use crate::macrocell::IndexBox;
-use rayon::prelude::*;
-use std::sync::OnceLock;
+use std::cell::UnsafeCell;
+use std::mem::MaybeUninit;
+use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
 
-/// Cells per brick edge.
+/// Cells per brick edge of the visible cells (and of the macro cells they
+/// narrow).
 pub const BRICK: usize = 8;
 
+/// A slot no brick was built for.
+const UNBUILT: u32 = 0;
+/// A slot whose brick a thread is building.
+const BUILDING: u32 = 1;
+/// A slot whose brick found the pool full.
+const OVER_BUDGET: u32 = u32::MAX;
+/// Slot values from here on are `FIRST_PLACE + place in the pool`.
+const FIRST_PLACE: u32 = 2;
+
 /// Voxels a brick reads beyond its cells' corners: `before` below voxel
-/// `8b` and `after` above voxel `8b + 8`, on every axis.
+/// `EDGE·b` and `after` above voxel `EDGE·b + EDGE`, on every axis.
 #[derive(Clone, Copy, Debug)]
 pub struct Reach {
     /// Voxels read below the brick's first corner.
@@ -26,15 +49,34 @@ pub struct Reach {
     pub after: usize,
 }
 
-/// One lazily built `T` per brick of a volume of `dims` voxels.
-pub struct LazyBricks<T> {
+/// One lazily built `T` per brick of `EDGE³` cells of a volume of `dims`
+/// voxels, at most `capacity` of them at a time.
+pub struct LazyBricks<T: Copy, const EDGE: usize> {
     dims: [usize; 3],
     counts: [usize; 3],
-    slots: Vec<OnceLock<T>>,
+    /// Per brick (x fastest): [`UNBUILT`], [`BUILDING`], [`OVER_BUDGET`]
+    /// or [`FIRST_PLACE`] + its place in `pool`.
+    slots: Box<[AtomicU32]>,
+    /// The built bricks. A place is written once, by the one thread that
+    /// took it, before its slot publishes it (release); read only through
+    /// a slot that names it (acquire).
+    pool: Box<[UnsafeCell<MaybeUninit<T>>]>,
+    /// Places freed by `invalidate`, handed out before fresh ones.
+    free: Vec<u32>,
+    /// Fresh places handed out before the current `taken` count.
+    used: usize,
+    /// Places taken since the last `invalidate` (free ones first).
+    taken: AtomicUsize,
 }
 
+// SAFETY: the pool's cells are written only by the thread that took their
+// place (`take_place` hands each out once) and read only after the slot
+// naming them was published with release ordering and read with acquire;
+// `T: Send + Sync` covers moving and sharing the values themselves.
+unsafe impl<T: Copy + Send + Sync, const EDGE: usize> Sync for LazyBricks<T, EDGE> {}
+
 /// Where a cell sits: its brick's slot, the brick, and the cell's index
-/// inside the brick (each `0..8`).
+/// inside the brick (each `0..EDGE`).
 #[derive(Clone, Copy, Debug)]
 pub struct CellPlace {
     /// Linear index of the brick (x fastest).
@@ -45,19 +87,24 @@ pub struct CellPlace {
     pub local: [usize; 3],
 }
 
-impl<T: Send> LazyBricks<T> {
-    /// No brick built yet, for a volume of `dims` voxels.
-    pub fn new(dims: [usize; 3]) -> Self {
-        let counts = dims.map(|n| (n.max(2) - 1).div_ceil(BRICK));
+impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
+    /// No brick built yet, for a volume of `dims` voxels; at most
+    /// `capacity` bricks built at a time (more than the volume has is
+    /// clamped).
+    pub fn new(dims: [usize; 3], capacity: usize) -> Self {
+        let counts = dims.map(|n| (n.max(2) - 1).div_ceil(EDGE));
+        let n = counts.iter().product::<usize>();
         Self {
             dims,
             counts,
-            // Written on both threads: a slot per brick is megabytes of
-            // fresh pages for a large volume.
-            slots: (0..counts.iter().product())
-                .into_par_iter()
-                .map(|_| OnceLock::new())
+            slots: zeroed_slots(n),
+            // Uninitialised: no byte of it is written (or faulted in) here.
+            pool: (0..capacity.min(n))
+                .map(|_| UnsafeCell::new(MaybeUninit::uninit()))
                 .collect(),
+            free: Vec::new(),
+            used: 0,
+            taken: AtomicUsize::new(0),
         }
     }
 
@@ -71,57 +118,182 @@ impl<T: Send> LazyBricks<T> {
         self.counts
     }
 
+    /// Bricks built (or being built) now, at most the capacity.
+    pub fn built(&self) -> usize {
+        let taken = self.taken.load(Ordering::Relaxed);
+        let open = self.free.len() + (self.pool.len() - self.used);
+        self.used - self.free.len() + taken.min(open)
+    }
+
     /// The brick of the cell whose lower corner is voxel `i`.
     #[inline(always)]
     pub fn place(&self, i: [usize; 3]) -> CellPlace {
-        let brick = [i[0] / BRICK, i[1] / BRICK, i[2] / BRICK];
+        let brick = [i[0] / EDGE, i[1] / EDGE, i[2] / EDGE];
         CellPlace {
-            slot: brick[0] + self.counts[0] * (brick[1] + self.counts[1] * brick[2]),
+            slot: self.slot_of(brick),
             brick,
             local: [
-                i[0] - brick[0] * BRICK,
-                i[1] - brick[1] * BRICK,
-                i[2] - brick[2] * BRICK,
+                i[0] - brick[0] * EDGE,
+                i[1] - brick[1] * EDGE,
+                i[2] - brick[2] * EDGE,
             ],
         }
     }
 
-    /// The brick at `place`, built by `build(brick)` if it is not yet.
+    /// The slot of brick `b` (x fastest).
     #[inline(always)]
-    pub fn get_or_build(&self, place: &CellPlace, build: impl FnOnce([usize; 3]) -> T) -> &T {
-        self.slots[place.slot].get_or_init(|| build(place.brick))
+    fn slot_of(&self, b: [usize; 3]) -> usize {
+        b[0] + self.counts[0] * (b[1] + self.counts[1] * b[2])
     }
 
-    /// Drops every brick that reads a voxel of `region`, handing each built
-    /// one to `dropped`.
-    pub fn invalidate(&mut self, region: IndexBox, reach: Reach, mut dropped: impl FnMut(T)) {
+    /// The brick at `place`, built by `build(brick)` if it is not yet;
+    /// `None` when the pool was full when it was first asked for.
+    #[inline(always)]
+    pub fn get_or_build(
+        &self,
+        place: &CellPlace,
+        build: impl FnOnce([usize; 3]) -> T,
+    ) -> Option<&T> {
+        let slot = &self.slots[place.slot];
+        match slot.load(Ordering::Acquire) {
+            s if s >= FIRST_PLACE && s != OVER_BUDGET => Some(self.read(s)),
+            s => self.build_slow(slot, s, place.brick, build),
+        }
+    }
+
+    #[cold]
+    fn build_slow(
+        &self,
+        slot: &AtomicU32,
+        mut s: u32,
+        brick: [usize; 3],
+        build: impl FnOnce([usize; 3]) -> T,
+    ) -> Option<&T> {
+        if s == UNBUILT {
+            match slot.compare_exchange(UNBUILT, BUILDING, Ordering::Acquire, Ordering::Acquire) {
+                Ok(_) => {
+                    let published = match self.take_place() {
+                        Some(place) => {
+                            // SAFETY: `take_place` handed `place` to this
+                            // thread alone and no slot names it yet.
+                            unsafe { (*self.pool[place].get()).write(build(brick)) };
+                            FIRST_PLACE + place as u32
+                        }
+                        None => OVER_BUDGET,
+                    };
+                    slot.store(published, Ordering::Release);
+                    s = published;
+                }
+                Err(now) => s = now,
+            }
+        }
+        let mut spins = 0u32;
+        while s == BUILDING {
+            // Another thread builds it: microseconds.
+            spins += 1;
+            if spins < 64 {
+                std::hint::spin_loop();
+            } else {
+                std::thread::yield_now();
+            }
+            s = slot.load(Ordering::Acquire);
+        }
+        (s != OVER_BUDGET).then(|| self.read(s))
+    }
+
+    /// The brick a slot value names.
+    #[inline(always)]
+    fn read(&self, s: u32) -> &T {
+        // SAFETY: a slot names a place only after its brick was written
+        // (release store, paired with the caller's acquire load), and the
+        // place is not written again before `invalidate` (`&mut self`).
+        unsafe { (*self.pool[(s - FIRST_PLACE) as usize].get()).assume_init_ref() }
+    }
+
+    /// A pool place for a new brick: a freed one first, then a fresh one;
+    /// `None` when the pool is full.
+    fn take_place(&self) -> Option<usize> {
+        let k = self.taken.fetch_add(1, Ordering::Relaxed);
+        match self.free.get(k) {
+            Some(&p) => Some(p as usize),
+            None => Some(self.used + (k - self.free.len())).filter(|&p| p < self.pool.len()),
+        }
+    }
+
+    /// Drops every brick that reads a voxel of `region` (its place is
+    /// handed out again), and forgets which bricks were over budget there.
+    pub fn invalidate(&mut self, region: IndexBox, reach: Reach) {
+        self.settle();
         let range = |a: usize| {
-            // Brick b reads voxels 8b − before ..= 8b + 8 + after.
+            // Brick b reads voxels EDGE·b − before ..= EDGE·b + EDGE + after.
             let lo = region.lo[a]
-                .saturating_sub(BRICK + reach.after)
-                .div_ceil(BRICK);
-            let hi = ((region.hi[a] + reach.before) / BRICK).min(self.counts[a] - 1);
+                .saturating_sub(EDGE + reach.after)
+                .div_ceil(EDGE);
+            let hi = ((region.hi[a] + reach.before) / EDGE).min(self.counts[a] - 1);
             lo..=hi
         };
         for bz in range(2) {
             for by in range(1) {
                 for bx in range(0) {
-                    let slot = &mut self.slots[bx + self.counts[0] * (by + self.counts[1] * bz)];
-                    if let Some(t) = slot.take() {
-                        dropped(t);
+                    let slot = self.slots[self.slot_of([bx, by, bz])].get_mut();
+                    if *slot >= FIRST_PLACE && *slot != OVER_BUDGET {
+                        self.free.push(*slot - FIRST_PLACE);
                     }
+                    *slot = UNBUILT;
                 }
             }
         }
     }
+
+    /// Folds the places taken since the last call into `free` and `used`.
+    fn settle(&mut self) {
+        let taken = std::mem::take(self.taken.get_mut());
+        let from_free = taken.min(self.free.len());
+        self.free.drain(..from_free);
+        self.used = (self.used + (taken - from_free)).min(self.pool.len());
+    }
+}
+
+/// `n` slots, all [`UNBUILT`], from zeroed memory: pages no slot of which
+/// is ever touched are never faulted in.
+fn zeroed_slots(n: usize) -> Box<[AtomicU32]> {
+    const { assert!(std::mem::align_of::<AtomicU32>() == std::mem::align_of::<u32>()) };
+    const { assert!(UNBUILT == 0) };
+    let zeros = std::mem::ManuallyDrop::new(vec![0u32; n].into_boxed_slice());
+    let ptr = zeros.as_ptr() as *mut AtomicU32;
+    // SAFETY: `AtomicU32` has the size and bit validity of `u32` and (checked
+    // above) its alignment, so the allocation of `n` zeroed `u32`s is one of
+    // `n` atomics holding 0, with the same layout for the deallocation; the
+    // `ManuallyDrop` hands its ownership over.
+    unsafe { Box::from_raw(std::ptr::slice_from_raw_parts_mut(ptr, n)) }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rayon::prelude::*;
+    use std::sync::atomic::AtomicUsize;
+
+    /// Builds every brick of `bricks` (each holds its own index), counting
+    /// the builds.
+    fn fill<const E: usize>(bricks: &LazyBricks<[usize; 3], E>, builds: &AtomicUsize) {
+        let [nx, ny, nz] = bricks.counts();
+        for bz in 0..nz {
+            for by in 0..ny {
+                for bx in 0..nx {
+                    let p = bricks.place([E * bx, E * by, E * bz]);
+                    bricks.get_or_build(&p, |b| {
+                        builds.fetch_add(1, Ordering::Relaxed);
+                        b
+                    });
+                }
+            }
+        }
+    }
 
     /// A region drops exactly the bricks whose read span (cells plus reach)
-    /// holds one of its voxels, with and without a reach.
+    /// holds one of its voxels, with and without a reach: those, and only
+    /// those, are built again, into the places they freed.
     #[test]
     fn invalidation_drops_exactly_the_bricks_that_read_the_region() {
         let dims = [33, 26, 20];
@@ -136,46 +308,131 @@ mod tests {
             },
         ] {
             for x in [0, 7, 8, 9, 10, 16, 17, 31, 32] {
-                let mut bricks = LazyBricks::<[usize; 3]>::new(dims);
-                let [nx, ny, nz] = bricks.counts();
-                for bz in 0..nz {
-                    for by in 0..ny {
-                        for bx in 0..nx {
-                            let p = bricks.place([8 * bx, 8 * by, 8 * bz]);
-                            bricks.get_or_build(&p, |b| b);
-                        }
-                    }
-                }
-                let mut dropped = Vec::new();
+                let mut bricks = LazyBricks::<[usize; 3], 8>::new(dims, usize::MAX);
+                let builds = AtomicUsize::new(0);
+                fill(&bricks, &builds);
+                let all = bricks.built();
+                assert_eq!(all, bricks.counts().iter().product::<usize>());
                 let region = IndexBox {
                     lo: [x, 12, 4],
                     hi: [x, 12, 4],
                 };
-                bricks.invalidate(region, reach, |b| dropped.push(b));
+                bricks.invalidate(region, reach);
                 let reads =
                     |v: usize, b: usize| 8 * b <= v + reach.before && v <= 8 * b + 8 + reach.after;
+                let [nx, ny, nz] = bricks.counts();
+                let mut dropped = 0;
                 for bz in 0..nz {
                     for by in 0..ny {
                         for bx in 0..nx {
                             let want = reads(x, bx) && reads(12, by) && reads(4, bz);
-                            assert_eq!(
-                                dropped.contains(&[bx, by, bz]),
-                                want,
-                                "{reach:?} voxel x = {x}, brick {:?}",
-                                [bx, by, bz]
-                            );
+                            dropped += usize::from(want);
+                            let p = bricks.place([8 * bx, 8 * by, 8 * bz]);
+                            let mut rebuilt = false;
+                            let got = bricks.get_or_build(&p, |b| {
+                                rebuilt = true;
+                                b
+                            });
+                            assert_eq!(got, Some(&[bx, by, bz]));
+                            assert_eq!(rebuilt, want, "{reach:?} x = {x}, brick {bx} {by} {bz}");
                         }
                     }
                 }
+                assert!(dropped > 0);
+                // The rebuilt bricks reused the freed places: the pool grew
+                // by none.
+                bricks.settle();
+                assert_eq!((bricks.used, bricks.free.len()), (all, 0));
             }
+        }
+    }
+
+    /// Past the capacity a brick is over budget (not built, `None`) until
+    /// a change of the volume reaches it; freed places are handed out
+    /// again.
+    #[test]
+    fn bricks_past_the_capacity_are_over_budget_until_invalidated() {
+        let mut bricks = LazyBricks::<u32, 4>::new([17, 5, 5], 2);
+        assert_eq!(bricks.counts(), [4, 1, 1]);
+        // Brick x along the row, built as `v` if it is not yet.
+        let get = |bricks: &LazyBricks<u32, 4>, x: usize, v: u32| {
+            bricks
+                .get_or_build(&bricks.place([4 * x, 0, 0]), |_| v)
+                .copied()
+        };
+        let voxel = |x: usize| IndexBox {
+            lo: [x, 0, 0],
+            hi: [x, 0, 0],
+        };
+        let no_reach = Reach {
+            before: 0,
+            after: 0,
+        };
+        assert_eq!(get(&bricks, 0, 10), Some(10));
+        assert_eq!(get(&bricks, 1, 11), Some(11));
+        assert_eq!(get(&bricks, 2, 12), None);
+        assert_eq!(get(&bricks, 2, 12), None, "stays over budget");
+        assert_eq!(bricks.built(), 2);
+        // Dropping brick 0 (voxel 1 is read by brick 0 alone) frees a place
+        // for brick 3, which was never asked for, but not for brick 2.
+        bricks.invalidate(voxel(1), no_reach);
+        assert_eq!(bricks.built(), 1);
+        assert_eq!(get(&bricks, 2, 12), None);
+        assert_eq!(get(&bricks, 3, 13), Some(13));
+        assert_eq!(get(&bricks, 0, 20), None, "the pool is full again");
+        assert_eq!(get(&bricks, 1, 21), Some(11));
+        // A change reaching brick 2 (voxel 9) lets it try again: the pool
+        // still holds bricks 1 and 3, so it is over budget once more.
+        bricks.invalidate(voxel(9), no_reach);
+        assert_eq!(get(&bricks, 2, 22), None);
+        // A change reaching brick 1 (voxel 5) rebuilds it into its place.
+        bricks.invalidate(voxel(5), no_reach);
+        assert_eq!(bricks.built(), 1);
+        assert_eq!(get(&bricks, 1, 31), Some(31));
+        assert_eq!(bricks.built(), 2);
+        // A change everywhere empties the pool.
+        bricks.invalidate(IndexBox::all([17, 5, 5]), no_reach);
+        assert_eq!(bricks.built(), 0);
+        assert_eq!(get(&bricks, 2, 42), Some(42));
+        assert_eq!(get(&bricks, 0, 40), Some(40));
+        assert_eq!(get(&bricks, 3, 43), None);
+    }
+
+    /// Threads asking for the same unbuilt bricks at once: each brick is
+    /// built once and every thread reads that one value.
+    #[test]
+    fn concurrent_requests_build_each_brick_once() {
+        let bricks = LazyBricks::<[u64; 16], 2>::new([9, 9, 9], usize::MAX);
+        let builds = AtomicUsize::new(0);
+        let seen: Vec<u64> = (0..20_000usize)
+            .into_par_iter()
+            .map(|k| {
+                let p = bricks.place([k % 8, k / 8 % 8, k / 64 % 8]);
+                bricks
+                    .get_or_build(&p, |b| {
+                        builds.fetch_add(1, Ordering::Relaxed);
+                        std::thread::yield_now();
+                        [(b[0] + 10 * b[1] + 100 * b[2]) as u64; 16]
+                    })
+                    .expect("within capacity")[15]
+            })
+            .collect();
+        assert_eq!(builds.load(Ordering::Relaxed), 64);
+        for (k, v) in seen.iter().enumerate() {
+            let b = [k % 8 / 2, k / 8 % 8 / 2, k / 64 % 8 / 2];
+            assert_eq!(*v, (b[0] + 10 * b[1] + 100 * b[2]) as u64);
         }
     }
 
     #[test]
     fn places_name_the_brick_and_the_cell_inside_it() {
-        let bricks = LazyBricks::<()>::new([20, 9, 1]);
+        let bricks = LazyBricks::<(), 8>::new([20, 9, 1], 0);
         assert_eq!(bricks.counts(), [3, 1, 1]);
         let p = bricks.place([17, 7, 0]);
         assert_eq!((p.slot, p.brick, p.local), (2, [2, 0, 0], [1, 7, 0]));
+        let fine = LazyBricks::<(), 4>::new([20, 9, 1], 0);
+        assert_eq!(fine.counts(), [5, 2, 1]);
+        let p = fine.place([17, 7, 0]);
+        assert_eq!((p.slot, p.brick, p.local), (4 + 5, [4, 1, 0], [1, 3, 0]));
     }
 }

@@ -122,6 +122,7 @@ pub mod filters;
 pub mod gpu;
 pub mod gradient_cache;
 pub mod lazy_bricks;
+pub mod leap;
 pub mod macrocell;
 pub mod maps;
 pub mod params;

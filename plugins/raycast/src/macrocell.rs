@@ -276,51 +276,10 @@ impl MacroCells {
     /// Chebyshev distance (in cells, capped at [`LEAP_CAP`]) to the nearest
     /// such cell. Every cell within `d − 1` cells of a cell at distance `d`
     /// is empty, so a ray can jump to the exit of that `(2d − 1)³` block at
-    /// once. Computed by three separable passes, identically by
-    /// `shaders/raycast/leap.wgsl`.
+    /// once. Computed by three separable passes ([`crate::leap`]), to the
+    /// same distances as `shaders/raycast/leap.wgsl`.
     pub fn leap_distances(&self, lut: &Lut) -> Vec<u8> {
-        let empty = self.empty_flags(lut);
-        let [cx, cy, _] = self.counts;
-        let strides = [1, cx, cx * cy];
-        let cap = LEAP_CAP as u32;
-        let mut a: Vec<u32> = vec![0; self.len()];
-        let mut b: Vec<u32> = vec![0; self.len()];
-        for axis in 0..3 {
-            let (src, dst) = if axis == 1 {
-                (&a, &mut b)
-            } else {
-                (&b, &mut a)
-            };
-            let n = self.counts[axis];
-            let st = strides[axis];
-            dst.par_chunks_mut(cx * cy)
-                .enumerate()
-                .for_each(|(z, plane)| {
-                    for (xy, out) in plane.iter_mut().enumerate() {
-                        let l = xy + z * cx * cy;
-                        let pos = [xy % cx, xy / cx, z][axis];
-                        let line = l - pos * st;
-                        let mut best = cap;
-                        for o in 0..cap.min(n as u32) {
-                            if o >= best {
-                                break;
-                            }
-                            for q in [pos.wrapping_sub(o as usize), pos + o as usize] {
-                                if q < n {
-                                    let v = if axis == 0 {
-                                        if empty[line + q * st] != 0 { cap } else { 0 }
-                                    } else {
-                                        src[line + q * st]
-                                    };
-                                    best = best.min(o.max(v));
-                                }
-                            }
-                        }
-                        *out = best;
-                    }
-                });
-        }
-        a.into_iter().map(|d| d as u8).collect()
+        crate::leap::chebyshev_distances(&self.empty_flags(lut), self.counts)
     }
 
     /// Smallest and largest value over all cells (`(0, 0)` if unbuilt).

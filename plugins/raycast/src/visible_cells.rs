@@ -46,6 +46,7 @@ type Bits = [u64; BRICK];
 /// (bit `bx + 4 (by + 4 bz)`, `b = local / 2`) and of 4³ cells (bit
 /// `bx + 2 (by + 2 bz)`, `b = local / 4`), and the box (local cell
 /// indices, inclusive) of the cells whose bit is set (`None`: none is).
+#[derive(Clone, Copy)]
 struct Brick {
     bits: Bits,
     blocks2: u64,
@@ -56,7 +57,7 @@ struct Brick {
 /// Which cells of a volume the current transfer function may show, per
 /// brick, built on first use.
 pub struct VisibleCells {
-    bricks: LazyBricks<Brick>,
+    bricks: LazyBricks<Brick, BRICK>,
     /// The table's [`Lut::show_window`], found with the first brick.
     window: OnceLock<(f32, f32)>,
 }
@@ -65,7 +66,8 @@ impl VisibleCells {
     /// Nothing built yet, for a volume of `dims` voxels.
     pub fn new(dims: [usize; 3]) -> Self {
         Self {
-            bricks: LazyBricks::new(dims),
+            // Room for every brick: none is ever left to the caller.
+            bricks: LazyBricks::new(dims, usize::MAX),
             window: OnceLock::new(),
         }
     }
@@ -77,7 +79,7 @@ impl VisibleCells {
 
     /// Drops every brick with a corner voxel in `region`.
     pub fn invalidate(&mut self, region: IndexBox) {
-        self.bricks.invalidate(region, REACH, drop);
+        self.bricks.invalidate(region, REACH);
     }
 
     /// False only when every trilinear value in the cell whose lower corner
@@ -137,7 +139,7 @@ impl VisibleCells {
 
     #[inline(always)]
     fn brick<T: Sample>(&self, values: &[T], lut: &Lut, place: &CellPlace) -> &Brick {
-        self.bricks.get_or_build(place, |b| {
+        let brick = self.bricks.get_or_build(place, |b| {
             let window = *self.window.get_or_init(|| lut.show_window());
             let bits = brick_bits(values, self.bricks.dims(), window, b);
             let (blocks2, blocks4) = blocks(&bits);
@@ -147,7 +149,8 @@ impl VisibleCells {
                 blocks2,
                 blocks4,
             }
-        })
+        });
+        brick.expect("the pool has room for every brick")
     }
 }
 
@@ -198,11 +201,11 @@ fn shown_box(bits: &Bits) -> Option<[[u8; 3]; 2]> {
 /// corners span a visible entry ([`Lut::entries_may_show`]): when one
 /// corner lies at or above the low threshold of the table's
 /// [`Lut::show_window`] (the `(t_lo, t_hi)` argument: the same answer in data
-/// values) and one at or below its high one. So each of the 9³ corner
-/// voxels gets those two flags, or-ed over x pairs, y and z (voxel indices
-/// clamped to the grid, so a 1-voxel axis reads its one voxel twice) —
-/// comparisons and ors the compiler vectorises, instead of a table
-/// position per voxel.
+/// values) and one at or below its high one. So each row of 9 corner voxels
+/// (indices clamped to the grid, so a 1-voxel axis reads its one voxel
+/// twice) becomes two 9-bit masks, and a cell's answer is the masks or-ed
+/// over its x pair, y pair and z pair: integer ors on 81 pairs of masks
+/// instead of two flags per voxel folded three times.
 #[cold]
 fn brick_bits<T: Sample>(
     values: &[T],
@@ -210,54 +213,44 @@ fn brick_bits<T: Sample>(
     (t_lo, t_hi): (f32, f32),
     b: [usize; 3],
 ) -> Bits {
-    const ABOVE: u8 = 1;
-    const BELOW: u8 = 2;
     let index = |a: usize, h: usize| (b[a] * BRICK + h).min(dims[a] - 1);
     let xs: [usize; SIDE] = std::array::from_fn(|h| index(0, h));
     // A brick clear of the grid's last x reads its rows as one run.
     let run = (xs[SIDE - 1] == xs[0] + BRICK).then_some(xs[0]);
-    let flag = |v: T| {
-        let v = v.to_f32();
-        ((v >= t_lo) as u8 * ABOVE) | ((v <= t_hi) as u8 * BELOW)
-    };
-    // Per corner voxel: ABOVE | BELOW; then or-ed over x pairs, y, z.
-    let mut flags = [0u8; SIDE * SIDE * SIDE];
+    // Per corner row (hy, hz): the voxels at or above t_lo, at or below
+    // t_hi, each or-ed with its x neighbour (bit x: cells x, x + 1).
+    let mut above = [[0u16; SIDE]; SIDE];
+    let mut below = [[0u16; SIDE]; SIDE];
     for hz in 0..SIDE {
         for hy in 0..SIDE {
             let row = &values[dims[0] * (index(1, hy) + dims[1] * index(2, hz))..];
-            let f: [u8; SIDE] = match run {
+            let v: [f32; SIDE] = match run {
                 Some(x0) => {
                     let r: &[T; SIDE] = row[x0..x0 + SIDE].try_into().expect("SIDE voxels");
-                    r.map(flag)
+                    r.map(T::to_f32)
                 }
-                None => std::array::from_fn(|x| flag(row[xs[x]])),
+                None => std::array::from_fn(|x| row[xs[x]].to_f32()),
             };
-            let out = SIDE * (hy + SIDE * hz);
-            for hx in 0..BRICK {
-                flags[out + hx] = f[hx] | f[hx + 1];
+            let (mut a, mut w) = (0u16, 0u16);
+            for (x, v) in v.into_iter().enumerate() {
+                a |= u16::from(v >= t_lo) << x;
+                w |= u16::from(v <= t_hi) << x;
             }
+            above[hz][hy] = a | a >> 1;
+            below[hz][hy] = w | w >> 1;
         }
     }
-    fold(&mut flags, SIDE);
-    fold(&mut flags, SIDE * SIDE);
     let mut bits = [0u64; BRICK];
     for (lz, word) in bits.iter_mut().enumerate() {
         for ly in 0..BRICK {
-            for lx in 0..BRICK {
-                let show = flags[lx + SIDE * (ly + SIDE * lz)] == ABOVE | BELOW;
-                *word |= (show as u64) << (lx + BRICK * ly);
-            }
+            let pair = |m: &[[u16; SIDE]; SIDE]| {
+                m[lz][ly] | m[lz][ly + 1] | m[lz + 1][ly] | m[lz + 1][ly + 1]
+            };
+            let show = pair(&above) & pair(&below) & 0xff;
+            *word |= u64::from(show) << (BRICK * ly);
         }
     }
     bits
-}
-
-/// Ors each element with the one `stride` above it: after strides 9 and
-/// 81, element `(x, y, z)` covers the cell `[x, x+1] × [y, y+1] × [z, z+1]`.
-fn fold(flags: &mut [u8], stride: usize) {
-    for at in 0..flags.len() - stride {
-        flags[at] |= flags[at + stride];
-    }
 }
 
 #[cfg(test)]
