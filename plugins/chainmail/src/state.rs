@@ -19,6 +19,7 @@
 //! safe code; relaxed loads and stores compile to plain moves.
 
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+use voxflex_core::fresh_memory::{advise_huge_pages, zeroed_atomic_u32};
 
 /// Bits of the arrival time.
 pub const TIME_BITS: u32 = 20;
@@ -82,33 +83,9 @@ pub struct State {
 /// elsewhere it is ignored), and a copy that is never written — the second
 /// copy, on the CPU's block path — costs no memory.
 fn zeros(n: usize) -> Vec<AtomicU32> {
-    let mut v = std::mem::ManuallyDrop::new(vec![0u32; n]);
+    let v = zeroed_atomic_u32(n);
     advise_huge_pages(v.as_ptr() as usize, n * 4);
-    // SAFETY: the allocation is `v`'s own, taken over whole (pointer,
-    // length, capacity); `AtomicU32` has the size, alignment and bit
-    // validity of `u32`, so the layout the allocator sees is unchanged.
-    unsafe { Vec::from_raw_parts(v.as_mut_ptr().cast::<AtomicU32>(), v.len(), v.capacity()) }
-}
-
-/// Asks for huge pages over the whole 2 MiB pages inside `[addr, addr +
-/// len)` (Linux; a no-op elsewhere or when the advice is refused).
-fn advise_huge_pages(addr: usize, len: usize) {
-    #[cfg(target_os = "linux")]
-    {
-        const HUGE: usize = 2 << 20;
-        let start = addr.next_multiple_of(HUGE);
-        let end = (addr + len) / HUGE * HUGE;
-        if end > start {
-            // SAFETY: the range lies inside an allocation this process owns
-            // (capacity reserved, not yet written); MADV_HUGEPAGE changes
-            // only how it is backed, never its contents or validity.
-            unsafe {
-                libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE);
-            }
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = (addr, len);
+    v
 }
 
 impl State {

@@ -35,6 +35,7 @@ pub mod cut_polygon;
 pub mod deformation;
 pub mod error;
 pub mod fast_div;
+pub mod fresh_memory;
 pub mod gpu;
 pub mod grid;
 pub mod interaction;
