@@ -27,11 +27,11 @@
 //! and on the 512 × 512 × 133 CT's `ct-bone` frame their page faults cost
 //! more than the filtering (4,770 bricks). So a corner keeps its three
 //! components only (12 bytes, read as four floats of which the fourth is
-//! the next corner's and is ignored): 42 MB of bricks instead of 56, the
-//! first frame ~6 ms faster and the later ones ~2 ms (the same cache
-//! holds more corners). Bricks of 4³ cells would cover the 417 k shaded
-//! cells with 2.71 M corners instead of 3.48 M, but made every frame 3–5 ms
-//! slower (docs/BENCHMARKS.md).
+//! the next corner's and is ignored): 42 MB of bricks instead of 56 (with
+//! the pool, the first frame ~5 ms faster, the later ones ~1.5 ms: the
+//! same cache holds more corners). Bricks of 4³ cells would cover the
+//! 417 k shaded cells with 2.71 M corners instead of 3.48 M, but made
+//! every frame slower (docs/BENCHMARKS.md).
 //!
 //! Units: gradients in value units per voxel step × 2 (a difference over
 //! two voxels, as `filters::sobel`); indices are voxel indices, x fastest.
