@@ -96,11 +96,11 @@ fn spread_row(src: &[u8], out: &mut [u8], len: usize, n: usize, i: usize) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// The definition, cell by cell.
-    fn brute(empty: &[u8], counts: [usize; 3]) -> Vec<u8> {
+    /// The definition, cell by cell (also the macro cells' reference).
+    pub(crate) fn brute(empty: &[u8], counts: [usize; 3]) -> Vec<u8> {
         let [cx, cy, cz] = counts;
         let full: Vec<[usize; 3]> = (0..empty.len())
             .filter(|&l| empty[l] == 0)
