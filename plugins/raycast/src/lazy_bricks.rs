@@ -104,10 +104,7 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
             dims,
             counts,
             slots: zeroed_atomic_u32(n).into_boxed_slice(),
-            // Uninitialised: no byte of it is written (or faulted in) here.
-            pool: (0..capacity.min(n))
-                .map(|_| UnsafeCell::new(MaybeUninit::uninit()))
-                .collect(),
+            pool: uninit_pool(capacity.min(n)),
             free: Vec::new(),
             used: 0,
             taken: AtomicUsize::new(0),
@@ -178,6 +175,7 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
         if s == UNBUILT {
             match slot.compare_exchange(UNBUILT, BUILDING, Ordering::Acquire, Ordering::Acquire) {
                 Ok(_) => {
+                    let unwinding = ResetOnUnwind(slot);
                     let published = match self.take_place() {
                         Some(place) => {
                             // SAFETY: `take_place` handed `place` to this
@@ -187,6 +185,7 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
                         }
                         None => OVER_BUDGET,
                     };
+                    std::mem::forget(unwinding);
                     slot.store(published, Ordering::Release);
                     s = published;
                 }
@@ -279,6 +278,28 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
         self.free.drain(..from_free);
         self.used = (self.used + (taken - from_free)).min(self.pool.len());
     }
+}
+
+/// Puts a slot back to [`UNBUILT`] when its builder unwinds (a panic in
+/// `build`), so that no other thread waits for that brick forever; the
+/// place it took stays unused until the next `invalidate`.
+struct ResetOnUnwind<'a>(&'a AtomicU32);
+
+impl Drop for ResetOnUnwind<'_> {
+    fn drop(&mut self) {
+        self.0.store(UNBUILT, Ordering::Release);
+    }
+}
+
+/// `n` uninitialised places: allocated, not one byte written (or faulted
+/// in) — in a debug build too, where building it element by element would
+/// write every page.
+fn uninit_pool<T>(n: usize) -> Box<[UnsafeCell<MaybeUninit<T>>]> {
+    let mut pool = Vec::with_capacity(n);
+    // SAFETY: `UnsafeCell<MaybeUninit<T>>` is valid uninitialised, and the
+    // capacity holds `n` of them.
+    unsafe { pool.set_len(n) };
+    pool.into_boxed_slice()
 }
 
 #[cfg(test)]
@@ -435,6 +456,24 @@ mod tests {
             let b = [k % 8 / 2, k / 8 % 8 / 2, k / 64 % 8 / 2];
             assert_eq!(*v, (b[0] + 10 * b[1] + 100 * b[2]) as u64);
         }
+    }
+
+    /// A build that panics leaves its brick unbuilt, not "being built":
+    /// the next request builds it.
+    #[test]
+    fn a_panicking_build_leaves_the_brick_to_the_next_request() {
+        let bricks = LazyBricks::<u32, 8>::new([33, 9, 9], usize::MAX);
+        let p = bricks.place([0, 0, 0]);
+        let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            bricks.get_or_build(&p, |_| panic!("build failed"));
+        }));
+        assert!(panicked.is_err());
+        let again = std::thread::scope(|s| {
+            s.spawn(|| bricks.get_or_build(&p, |_| 7).copied())
+                .join()
+                .unwrap()
+        });
+        assert_eq!(again, Some(7));
     }
 
     #[test]
