@@ -5,8 +5,8 @@
 //! lower corner voxel `i`, `0 ≤ i ≤ max(n, 2) − 2` per axis), so brick `b`
 //! holds the cells `EDGE·b ..= EDGE·b + EDGE − 1`. What a brick stores is
 //! up to its user — the Sobel gradients of its corners
-//! ([`crate::gradient_cache`], 4³ cells), which of its cells the transfer
-//! function may show ([`crate::visible_cells`], 8³ cells) — and so is how
+//! ([`crate::gradient_cache`]), which of its cells the transfer function
+//! may show ([`crate::visible_cells`]), both with `EDGE` 8 — and so is how
 //! far beyond its cells it reads (its *reach*, which decides what a change
 //! of the volume drops). Indices are voxel indices, x fastest.
 //!
@@ -18,9 +18,10 @@
 //! cost nothing), and the built bricks sit packed in one pool, handed out
 //! in order (a page holds whole bricks, not one malloc'd brick and its
 //! neighbour's header), whose pages are mapped one chunk ahead of the
-//! bricks written into them (`populate_ahead`). The pool's capacity is the user's budget; a brick
-//! past it is marked over budget and its cells are left to the caller.
-//! Places freed by [`LazyBricks::invalidate`] are handed out again first.
+//! bricks written into them (`populate_ahead`). The pool's capacity is the
+//! user's budget; a brick past it is marked over budget and its cells are
+//! left to the caller. Places freed by [`LazyBricks::invalidate`] are
+//! handed out again first.
 
 use crate::macrocell::IndexBox;
 use std::cell::UnsafeCell;
@@ -104,7 +105,8 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
             dims,
             counts,
             slots: zeroed_atomic_u32(n).into_boxed_slice(),
-            pool: uninit_pool(capacity.min(n)),
+            // Every place must be nameable by a slot value.
+            pool: uninit_pool(capacity.min(n).min((OVER_BUDGET - FIRST_PLACE) as usize)),
             free: Vec::new(),
             used: 0,
             taken: AtomicUsize::new(0),
