@@ -296,10 +296,16 @@ impl Drop for ResetOnUnwind<'_> {
 /// `n` uninitialised places: allocated, not one byte written (or faulted
 /// in) — in a debug build too, where building it element by element would
 /// write every page.
+/// Where the system refuses that much address space (a budget of gigabytes
+/// on a small machine), fewer: the bricks past them are over budget.
 fn uninit_pool<T>(n: usize) -> Box<[UnsafeCell<MaybeUninit<T>>]> {
-    let mut pool = Vec::with_capacity(n);
+    let mut pool = Vec::new();
+    let mut n = n;
+    while n > 0 && pool.try_reserve_exact(n).is_err() {
+        n /= 2;
+    }
     // SAFETY: `UnsafeCell<MaybeUninit<T>>` is valid uninitialised, and the
-    // capacity holds `n` of them.
+    // capacity holds at least `n` of them.
     unsafe { pool.set_len(n) };
     pool.into_boxed_slice()
 }

@@ -74,7 +74,7 @@ fn main() {
             let t = Instant::now();
             let a = auto_map(input, params).unwrap();
             whole.push(t.elapsed());
-            assert_eq!(a.lambda, lambda);
+            assert_eq!(a.search.lambda, lambda);
             let t = Instant::now();
             let m = map_at(input, params, lambda).unwrap();
             again.push(t.elapsed());

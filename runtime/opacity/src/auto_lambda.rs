@@ -97,18 +97,26 @@ pub struct Trial {
     pub aborted: bool,
 }
 
-/// What the search found.
+/// What the search found: the λ and the trials behind it, without the
+/// map ([`crate::roi::RoiOutcome`] keeps it beside the map it returns).
 #[derive(Clone, Debug)]
-pub struct AutoLambda {
+pub struct AutoSearch {
     /// The λ chosen.
     pub lambda: f32,
     /// Every candidate tried, in order.
     pub trials: Vec<Trial>,
+    /// True when the map was written from the scan, not grown.
+    pub from_scan: bool,
+}
+
+/// What the search found, and the map at the λ it chose.
+#[derive(Clone, Debug)]
+pub struct AutoLambda {
+    /// The λ, the trials and how the map was made.
+    pub search: AutoSearch,
     /// The map at the chosen λ: the scan's ([`auto_map`]), or a growth
     /// capped at a number of steps.
     pub grown: Grown,
-    /// True when `grown` was written from the scan, not grown.
-    pub from_scan: bool,
 }
 
 /// The λ the rule picks from the trials (in increasing λ; the last may
@@ -181,10 +189,12 @@ pub fn auto_lambda(
     let room = scan.reached_box(lambda);
     let grown = runner.grow_within(GrowthParams { lambda, ..params }, Some(steps), room)?;
     Ok(AutoLambda {
-        lambda,
-        trials,
+        search: AutoSearch {
+            lambda,
+            trials,
+            from_scan: false,
+        },
         grown,
-        from_scan: false,
     })
 }
 
@@ -194,10 +204,12 @@ pub fn auto_lambda(
 pub fn auto_map(input: ScanInput<'_>, params: GrowthParams) -> Result<AutoLambda, OpacityError> {
     let (scan, lambda, trials) = search(input, params)?;
     Ok(AutoLambda {
-        lambda,
-        trials,
+        search: AutoSearch {
+            lambda,
+            trials,
+            from_scan: true,
+        },
         grown: scan.into_map(lambda)?,
-        from_scan: true,
     })
 }
 

@@ -152,7 +152,7 @@ mod scan_map_tests;
 #[cfg(test)]
 mod tests;
 
-pub use auto_lambda::AutoLambda;
+pub use auto_lambda::{AutoLambda, AutoSearch};
 pub use bounds::VoxelBounds;
 pub use cpu::CpuGrowth;
 pub use error::OpacityError;

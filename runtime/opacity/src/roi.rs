@@ -2,7 +2,7 @@
 //! λ fixed or chosen automatically, the growth run on the CPU or the GPU,
 //! and what stopped it ([`RoiOutcome::stop`], [`RoiOutcome::warnings`]).
 
-use super::auto_lambda::{AutoLambda, auto_lambda};
+use super::auto_lambda::{AutoSearch, auto_lambda};
 use super::gpu::GpuOpacityVolume;
 use super::limits::{GrowthLimits, LimitHits};
 use super::params::GrowthParams;
@@ -57,7 +57,7 @@ pub struct RoiOutcome {
     /// The λ used.
     pub lambda: f32,
     /// The automatic search, when λ was `auto`.
-    pub auto: Option<AutoLambda>,
+    pub auto: Option<AutoSearch>,
     /// Where the bounds stopped the growth.
     pub hits: LimitHits,
     /// Voxels at opacity ≥ 0.5.
@@ -143,7 +143,7 @@ pub fn grow_roi(
     let bounded = req.limits.apply(volume, seed_voxel)?;
     let values = bounded.as_ref().map_or(volume, |b| b.view());
     let run =
-        |runner: &mut dyn GrowRunner| -> Result<(Grown, f32, Option<AutoLambda>), OpacityError> {
+        |runner: &mut dyn GrowRunner| -> Result<(Grown, f32, Option<AutoSearch>), OpacityError> {
             match req.lambda {
                 LambdaChoice::Fixed(lambda) => {
                     let p = GrowthParams {
@@ -160,7 +160,7 @@ pub fn grow_roi(
                         seed: req.seed,
                     };
                     let a = auto_lambda(input, runner, req.params, req.steps)?;
-                    Ok((a.grown.clone(), a.lambda, Some(a)))
+                    Ok((a.grown, a.search.lambda, Some(a.search)))
                 }
             }
         };

@@ -203,19 +203,24 @@ fn the_search_grows_a_map_only_when_capped() {
     let input = scan_input(&r.0);
     let a = auto_lambda::auto_lambda(input, &mut r, GrowthParams::default(), None).unwrap();
     assert_eq!(r.1, 0, "no growth to convergence");
-    assert!(a.from_scan);
-    assert!(a.trials.len() > 2, "{:?}", a.trials);
-    let chosen = a.trials.iter().find(|t| t.lambda == a.lambda).unwrap();
+    assert!(a.search.from_scan);
+    assert!(a.search.trials.len() > 2, "{:?}", a.search.trials);
+    let chosen = a
+        .search
+        .trials
+        .iter()
+        .find(|t| t.lambda == a.search.lambda)
+        .unwrap();
     assert_eq!(chosen.voxels, runner::voxels_above_half(&a.grown.map));
     let capped = auto_lambda::auto_lambda(input, &mut r, GrowthParams::default(), Some(5)).unwrap();
     assert_eq!(r.1, 1, "one growth, at the chosen λ");
-    assert!(!capped.from_scan);
-    assert_eq!(capped.lambda, a.lambda);
+    assert!(!capped.search.from_scan);
+    assert_eq!(capped.search.lambda, a.search.lambda);
     assert!(!capped.grown.report.converged && capped.grown.report.steps == 5);
     let again =
         r.0.grow(
             GrowthParams {
-                lambda: a.lambda,
+                lambda: a.search.lambda,
                 ..GrowthParams::default()
             },
             Some(5),

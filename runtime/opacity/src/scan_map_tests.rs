@@ -120,7 +120,10 @@ fn mirrored_volumes_give_mirrored_maps() {
         let mut s = seed;
         s[axis] = dims[axis] - 1 - s[axis];
         let got = auto_map(input(&m, s), params).unwrap();
-        assert_eq!(got.lambda, want.lambda, "mirrored along {axis}");
+        assert_eq!(
+            got.search.lambda, want.search.lambda,
+            "mirrored along {axis}"
+        );
         let got_map = got.grown.map.dense(dims);
         for (l, &q) in want_map.iter().enumerate() {
             let mut p = [
@@ -166,7 +169,7 @@ mod random_volumes {
         fn written_maps_hold_on_random_volumes((v, seed, params) in random::case(18)) {
             check_every_phase(&v, seed, params);
             let a = auto_map(input(&v, seed), params).unwrap();
-            let chosen = a.trials.iter().find(|t| t.lambda == a.lambda).unwrap();
+            let chosen = a.search.trials.iter().find(|t| t.lambda == a.search.lambda).unwrap();
             prop_assert_eq!(voxels_above_half(&a.grown.map), chosen.voxels);
         }
     }

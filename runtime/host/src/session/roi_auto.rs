@@ -49,7 +49,7 @@ impl Session {
         let auto = auto_map(input, params).map_err(roi_err)?;
         let roi = &mut rois[i];
         roi.params = GrowthParams {
-            lambda: auto.lambda,
+            lambda: auto.search.lambda,
             ..params
         };
         roi.lambda_auto = true;
@@ -59,8 +59,8 @@ impl Session {
             .stage("roi")
             .record_run(t.elapsed(), report.visits);
         Ok(AutoLambdaReport {
-            lambda: auto.lambda,
-            trials: auto.trials,
+            lambda: auto.search.lambda,
+            trials: auto.search.trials,
             report,
         })
     }
