@@ -18,16 +18,16 @@
 //! cost nothing), and the built bricks sit packed in one pool, handed out
 //! in order (a page holds whole bricks, not one malloc'd brick and its
 //! neighbour's header), whose pages are mapped one chunk ahead of the
-//! bricks written into them (`populate_ahead`). The pool's capacity is the
-//! user's budget; a brick past it is marked over budget and its cells are
-//! left to the caller. Places freed by [`LazyBricks::invalidate`] are
-//! handed out again first.
+//! bricks written into them (`fresh_memory::populate_ahead`). The pool's
+//! capacity is the user's budget; a brick past it is marked over budget
+//! and its cells are left to the caller. Places freed by
+//! [`LazyBricks::invalidate`] are handed out again first.
 
 use crate::macrocell::IndexBox;
 use std::cell::UnsafeCell;
 use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
-use voxflex_core::fresh_memory::{populate_for_write, zeroed_atomic_u32};
+use voxflex_core::fresh_memory::{populate_ahead, zeroed_atomic_u32};
 
 /// Cells per brick edge of the visible cells (and of the macro cells they
 /// narrow).
@@ -42,9 +42,6 @@ const BUILDING: u32 = 1;
 const OVER_BUDGET: u32 = u32::MAX;
 /// Slot values from here on are `FIRST_PLACE + place in the pool`.
 const FIRST_PLACE: u32 = 2;
-/// Bytes of the pool mapped per call, one chunk ahead of the bricks being
-/// written (about 30 Sobel bricks).
-const POPULATE_CHUNK: usize = 256 << 10;
 
 /// Voxels a brick reads beyond its cells' corners: `before` below voxel
 /// `EDGE·b` and `after` above voxel `EDGE·b + EDGE`, on every axis.
@@ -161,7 +158,7 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
     ) -> Option<&T> {
         let slot = &self.slots[place.slot];
         match slot.load(Ordering::Acquire) {
-            s if s >= FIRST_PLACE && s != OVER_BUDGET => Some(self.read(s)),
+            s if names_place(s) => Some(self.read(s)),
             s => self.build_slow(slot, s, place.brick, build),
         }
     }
@@ -226,25 +223,13 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
             None => {
                 let p = self.used + (k - self.free.len());
                 (p < self.pool.len()).then(|| {
-                    self.populate_ahead(p);
+                    // Fresh places are handed out in order.
+                    let size = std::mem::size_of::<T>();
+                    let pool = self.pool.as_ptr() as usize;
+                    populate_ahead(pool, self.pool.len() * size, p * size, (p + 1) * size);
                     p
                 })
             }
-        }
-    }
-
-    /// Fresh places are handed out in order, so when place `p` is the first
-    /// to reach into a new [`POPULATE_CHUNK`] of the pool, the next chunk is
-    /// mapped in one call ([`populate_for_write`]) before any brick lands
-    /// there: ~35 % less time than faulting its pages one by one.
-    fn populate_ahead(&self, p: usize) {
-        let size = std::mem::size_of::<T>();
-        let (start, end) = (p * size, (p + 1) * size);
-        if p == 0 || start / POPULATE_CHUNK != end / POPULATE_CHUNK {
-            let pool = self.pool.as_ptr() as usize;
-            let next = (end / POPULATE_CHUNK + 1) * POPULATE_CHUNK;
-            let len = POPULATE_CHUNK.min((self.pool.len() * size).saturating_sub(next));
-            populate_for_write(pool + next, len);
         }
     }
 
@@ -264,7 +249,7 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
             for by in range(1) {
                 for bx in range(0) {
                     let slot = self.slots[self.slot_of([bx, by, bz])].get_mut();
-                    if *slot >= FIRST_PLACE && *slot != OVER_BUDGET {
+                    if names_place(*slot) {
                         self.free.push(*slot - FIRST_PLACE);
                     }
                     *slot = UNBUILT;
@@ -282,6 +267,12 @@ impl<T: Copy + Send + Sync, const EDGE: usize> LazyBricks<T, EDGE> {
     }
 }
 
+/// Whether slot value `s` names a built brick's place in the pool.
+#[inline(always)]
+fn names_place(s: u32) -> bool {
+    (FIRST_PLACE..OVER_BUDGET).contains(&s)
+}
+
 /// Puts a slot back to [`UNBUILT`] when its builder unwinds (a panic in
 /// `build`), so that no other thread waits for that brick forever; the
 /// place it took stays unused until the next `invalidate`.
@@ -296,6 +287,7 @@ impl Drop for ResetOnUnwind<'_> {
 /// `n` uninitialised places: allocated, not one byte written (or faulted
 /// in) — in a debug build too, where building it element by element would
 /// write every page.
+///
 /// Where the system refuses that much address space (a budget of gigabytes
 /// on a small machine), fewer: the bricks past them are over budget.
 fn uninit_pool<T>(n: usize) -> Box<[UnsafeCell<MaybeUninit<T>>]> {

@@ -83,11 +83,7 @@ use super::params::GrowthParams;
 use super::seed::{Seed, SeedStats, seed_stats};
 use crate::volume::{Sample, VolumeView};
 use crate::with_voxels;
-use voxflex_core::fresh_memory::populate_for_write;
-
-/// Bytes of the cell pool mapped per call, one chunk ahead of the bricks
-/// being filled (64 bricks).
-const POPULATE_CHUNK: usize = 256 << 10;
+use voxflex_core::fresh_memory::populate_ahead;
 
 mod scan_map;
 
@@ -467,7 +463,16 @@ impl<'a> PathCostScan<'a> {
         let base = self.costs.pool.len();
         self.costs.table[b] = (base / BRICK3) as u32;
         self.costs.origin.push(brick.map(|c| c as u32));
-        self.costs.populate_ahead(base);
+        // Bricks are filled at the end of the pool, in order (one page each).
+        let size = std::mem::size_of::<Cell>();
+        let pool = &self.costs.pool;
+        let (start, bytes) = (base * size, BRICK3 * size);
+        populate_ahead(
+            pool.as_ptr() as usize,
+            pool.capacity() * size,
+            start,
+            start + bytes,
+        );
         let lo = brick.map(|c| c * BRICK);
         self.costs.pool.resize(
             base + BRICK3,
@@ -635,22 +640,6 @@ impl Bricks {
             table: vec![Self::NONE; n],
             origin: Vec::new(),
             pool,
-        }
-    }
-
-    /// Bricks are filled at the end of the pool, in order: when the one at
-    /// `base` (cells) starts a new [`POPULATE_CHUNK`], the next chunk's
-    /// pages are mapped in one call ([`populate_for_write`]) instead of a
-    /// fault per brick (a brick is one page).
-    fn populate_ahead(&self, base: usize) {
-        let size = std::mem::size_of::<Cell>();
-        let start = base * size;
-        if start.is_multiple_of(POPULATE_CHUNK) {
-            let next = start + POPULATE_CHUNK;
-            let end = (self.pool.capacity() * size).min(next + POPULATE_CHUNK);
-            if end > next {
-                populate_for_write(self.pool.as_ptr() as usize + next, end - next);
-            }
         }
     }
 
