@@ -84,6 +84,7 @@ use super::seed::{Seed, SeedStats, seed_stats};
 use crate::volume::{Sample, VolumeView};
 use crate::with_voxels;
 use voxflex_core::fresh_memory::populate_ahead;
+use voxflex_core::prefetch::prefetch_read;
 
 mod scan_map;
 
@@ -95,6 +96,10 @@ const BUCKETS_PER_UNIT: f32 = 16.0;
 
 /// Slots of [`PathCostScan`]'s thresholds: the candidates, padded.
 const THRESHOLD_SLOTS: usize = CANDIDATES.len().next_multiple_of(8);
+
+/// How far down a bucket's stack the cell to prefetch lies (the pop
+/// after next few; 4, 8 and 16 measured alike).
+const PREFETCH_AHEAD: usize = 8;
 
 /// Voxels processed between two checks of a phase's bound.
 const CHECK_EVERY: u64 = 4096;
@@ -335,6 +340,13 @@ impl<'a> PathCostScan<'a> {
             let Some(u) = self.buckets[b].pop() else {
                 continue;
             };
+            // The cell a few pops from now, and its neighbours: the loads
+            // of a cell and its neighbours missed the cache in half of the
+            // search's profile samples (docs/BENCHMARKS.md).
+            let q = &self.buckets[b];
+            if let Some(&later) = q.len().checked_sub(PREFETCH_AHEAD).and_then(|i| q.get(i)) {
+                self.costs.prefetch_around(later as usize);
+            }
             let d = self.costs.pool[u as usize].cost;
             if self.bucket_of(d) != b {
                 continue; // queued again at a lower cost since
@@ -640,6 +652,19 @@ impl Bricks {
             table: vec![Self::NONE; n],
             origin: Vec::new(),
             pool,
+        }
+    }
+
+    /// Asks the cache for cell `c`'s line and the lines of its ±y and ±z
+    /// neighbours within its brick (a brick's row of 8 cells is one
+    /// 64-byte line, so these hold every in-brick neighbour).
+    #[inline(always)]
+    fn prefetch_around(&self, c: usize) {
+        let at = self.pool.as_ptr().wrapping_add(c);
+        let row = (BRICK * std::mem::size_of::<Cell>()) as isize;
+        let plane = BRICK as isize * row;
+        for offset in [0, row, -row, plane, -plane] {
+            prefetch_read(at, offset);
         }
     }
 

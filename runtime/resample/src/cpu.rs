@@ -44,6 +44,7 @@ use super::{
 };
 use crate::volume::{Sample, VoxelSlice};
 use rayon::prelude::*;
+use voxflex_core::prefetch::prefetch_read;
 use wide::{f32x8, i32x8};
 
 /// The CPU half of a resampling call.
@@ -582,27 +583,19 @@ fn prefetch_layer(
     hi: [usize; 3],
     k: usize,
 ) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        if k >= dims[2] {
-            return;
-        }
-        for j in lo[1]..=hi[1] {
-            let start = lo[0] + dims[0] * (j + dims[1] * k);
-            let end = hi[0] + dims[0] * (j + dims[1] * k);
-            for d in [disp.x, disp.y, disp.z] {
-                let row = &d[start..=end];
-                for i in (0..row.len()).step_by(16).chain([row.len() - 1]) {
-                    // SAFETY: prefetching has no effect on memory; the
-                    // address is inside `row`.
-                    unsafe { _mm_prefetch::<_MM_HINT_T0>(row.as_ptr().add(i).cast()) };
-                }
+    if k >= dims[2] {
+        return;
+    }
+    for j in lo[1]..=hi[1] {
+        let start = lo[0] + dims[0] * (j + dims[1] * k);
+        let end = hi[0] + dims[0] * (j + dims[1] * k);
+        for d in [disp.x, disp.y, disp.z] {
+            let row = &d[start..=end];
+            for i in (0..row.len()).step_by(16).chain([row.len() - 1]) {
+                prefetch_read(row.as_ptr(), (i * std::mem::size_of::<f32>()) as isize);
             }
         }
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (disp, dims, lo, hi, k);
 }
 
 /// The cells `(x0 .. x0 + min(count, 16), j, k)` of one row: the even
