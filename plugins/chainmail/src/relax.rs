@@ -36,7 +36,7 @@
 use crate::blocks::{Blocks, CHANGED, FaceMask};
 use crate::lattice::{ABSENT, ElementLattice, FIXED, HELD};
 use crate::state::State;
-use rayon::prelude::*;
+use voxflex_core::ordered_reduce::ordered_reduce;
 
 /// What one relaxation sweep did.
 #[derive(Clone, Debug, Default)]
@@ -157,29 +157,32 @@ pub(crate) fn relax_one(
     mv
 }
 
+/// Elements per partial sum of [`energy`].
+const ENERGY_CHUNK: usize = 1 << 14;
+
 /// The relaxation energy `Σ_links w_l |u_n − u_e|²` of the current state
-/// (each link once).
+/// (each link once), the same bits on any thread count
+/// ([`voxflex_core::ordered_reduce`]).
 pub fn energy(lat: &ElementLattice, state: &State) -> f64 {
     let cur = state.cur;
-    (0..lat.len())
-        .into_par_iter()
-        .filter(|&n| lat.present(n))
-        .map(|n| {
-            let c = lat.coords(n);
-            let un = state.get(cur, n);
-            // +x, +y, +z links only.
-            [0, 2, 4]
-                .into_iter()
-                .filter_map(|l| lat.neighbour(n, c, l))
-                .filter(|&e| lat.present(e))
-                .map(|e| {
-                    let ue = state.get(cur, e);
-                    let d2: f64 = (0..3).map(|a| ((un[a] - ue[a]) as f64).powi(2)).sum();
-                    lat.link(n, e).weight as f64 * d2
-                })
-                .sum::<f64>()
-        })
-        .sum()
+    let element = |n: usize| -> f64 {
+        let c = lat.coords(n);
+        let un = state.get(cur, n);
+        // +x, +y, +z links only.
+        [0, 2, 4]
+            .into_iter()
+            .filter_map(|l| lat.neighbour(n, c, l))
+            .filter(|&e| lat.present(e))
+            .map(|e| {
+                let ue = state.get(cur, e);
+                let d2: f64 = (0..3).map(|a| ((un[a] - ue[a]) as f64).powi(2)).sum();
+                lat.link(n, e).weight as f64 * d2
+            })
+            .sum::<f64>()
+    };
+    let part =
+        |r: std::ops::Range<usize>| -> f64 { r.filter(|&n| lat.present(n)).map(element).sum() };
+    ordered_reduce(lat.len(), ENERGY_CHUNK, true, part, 0.0, |a, b| a + b)
 }
 
 #[cfg(test)]

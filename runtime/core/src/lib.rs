@@ -43,6 +43,7 @@ pub mod keyframes;
 pub mod non_finite;
 pub mod on_worker;
 pub mod opacity_map;
+pub mod ordered_reduce;
 pub mod prefetch;
 pub mod render;
 pub mod shared_volume;

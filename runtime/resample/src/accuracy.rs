@@ -14,7 +14,10 @@ use crate::fields::{Field, affine, bend_zx, twist_z};
 use crate::grid::Grid;
 use crate::volume::Volume;
 use glam::DVec3;
-use rayon::prelude::*;
+use voxflex_core::ordered_reduce::ordered_reduce;
+
+/// Output voxels per partial sum of [`errors`].
+const ERROR_CHUNK: usize = 1 << 14;
 
 /// Compared voxels lie this many source voxels inside the source box.
 pub const INTERIOR_MARGIN: f64 = 1.0;
@@ -137,32 +140,36 @@ pub fn errors(
         g.dims[1] as f64 - 1.0,
         g.dims[2] as f64 - 1.0,
     ) - INTERIOR_MARGIN;
-    let (compared, sum, max, non_finite) = out
-        .values
-        .par_iter()
-        .enumerate()
-        .fold(
-            || (0usize, 0f64, 0f64, 0usize),
-            |(n, s, m, bad), (l, &v)| {
-                let [i, j, k] = out.grid.unlinear(l);
-                let w = out
-                    .grid
-                    .index_to_world(DVec3::new(i as f64, j as f64, k as f64));
-                let r = g.world_to_index(inverse(w));
-                if r.cmplt(DVec3::splat(INTERIOR_MARGIN)).any() || r.cmpgt(hi).any() {
-                    return (n, s, m, bad);
-                }
-                if !v.is_finite() {
-                    return (n + 1, s, m, bad + 1);
-                }
-                let e = (v as f64 - trilinear_f64(source, r)).abs();
-                (n + 1, s + e, m.max(e), bad)
-            },
-        )
-        .reduce(
-            || (0, 0.0, 0.0, 0),
-            |a, b| (a.0 + b.0, a.1 + b.1, a.2.max(b.2), a.3 + b.3),
-        );
+    // One voxel's share: (compared, |error|, |error|, non-finite).
+    let voxel = |l: usize| -> (usize, f64, f64, usize) {
+        let [i, j, k] = out.grid.unlinear(l);
+        let w = out
+            .grid
+            .index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+        let r = g.world_to_index(inverse(w));
+        if r.cmplt(DVec3::splat(INTERIOR_MARGIN)).any() || r.cmpgt(hi).any() {
+            return (0, 0.0, 0.0, 0);
+        }
+        let v = out.values[l];
+        if !v.is_finite() {
+            return (1, 0.0, 0.0, 1);
+        }
+        let e = (v as f64 - trilinear_f64(source, r)).abs();
+        (1, e, e, 0)
+    };
+    let add = |a: (usize, f64, f64, usize), b: (usize, f64, f64, usize)| {
+        (a.0 + b.0, a.1 + b.1, a.2.max(b.2), a.3 + b.3)
+    };
+    // Summed in a fixed order (`ordered_reduce`), so the mean error is the
+    // same bits on any thread count.
+    let (compared, sum, max, non_finite) = ordered_reduce(
+        out.values.len(),
+        ERROR_CHUNK,
+        true,
+        |r| r.map(voxel).fold((0, 0.0, 0.0, 0), add),
+        (0, 0.0, 0.0, 0),
+        add,
+    );
     ErrorStats {
         compared,
         mean_abs: sum / compared.saturating_sub(non_finite).max(1) as f64,

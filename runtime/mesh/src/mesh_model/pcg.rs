@@ -21,7 +21,7 @@ use super::block_matrix::{BlockMatrix, PARALLEL_ROWS};
 use super::boundary::Boundary;
 use super::ichol::IncompleteCholesky;
 use glam::{DMat3, DVec3};
-use rayon::prelude::*;
+use voxflex_core::ordered_reduce::ordered_reduce;
 
 /// When to stop.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,13 +124,29 @@ pub fn warn_unconverged(
     false
 }
 
-/// `Σ aᵢ · bᵢ`.
+/// Entries per partial sum of [`dot`].
+const DOT_CHUNK: usize = 2048;
+
+/// `Σ aᵢ · bᵢ`, rounded the same way whatever the thread count and
+/// however the threads share the work
+/// ([`voxflex_core::ordered_reduce`]: partial sums of fixed chunks of
+/// [`DOT_CHUNK`] entries, in parallel for long vectors, added in chunk
+/// order). Rayon's own parallel `sum` splits where a thread steals work,
+/// so its rounding — and through it the CG iteration counts and the last
+/// bits of a solve — changed from run to run of the same scene.
 pub fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
-    if a.len() < PARALLEL_ROWS {
-        a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
-    } else {
-        a.par_iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
-    }
+    let partial = |r: std::ops::Range<usize>| -> f64 {
+        a[r.clone()].iter().zip(&b[r]).map(|(p, q)| p.dot(*q)).sum()
+    };
+    let parallel = a.len() >= PARALLEL_ROWS;
+    ordered_reduce(
+        a.len().min(b.len()),
+        DOT_CHUNK,
+        parallel,
+        partial,
+        0.0,
+        |s, p| s + p,
+    )
 }
 
 /// Solves `A x = b` for the free nodes (`free[i]`), from the given `x`,
@@ -370,6 +386,39 @@ mod tests {
             }
             assert_eq!(x[0], DVec3::ZERO);
             assert_eq!(x[5], DVec3::new(1.0, 0.0, 0.0));
+        }
+    }
+
+    /// The dot product is the same float, bit for bit, on 1, 2, 3 and 8
+    /// threads: the partial sums of fixed chunks added in chunk order
+    /// (written out here), for a vector below and one above the parallel
+    /// threshold.
+    #[test]
+    fn dot_rounds_alike_on_any_thread_count() {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            // Magnitudes spread over six decades, so the order of additions
+            // shows in the last bits.
+            ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10f64.powi((s % 6) as i32)
+        };
+        for n in [PARALLEL_ROWS / 2 + 17, 25 * DOT_CHUNK + 999] {
+            let a: Vec<DVec3> = (0..n).map(|_| DVec3::new(next(), next(), next())).collect();
+            let b: Vec<DVec3> = (0..n).map(|_| DVec3::new(next(), next(), next())).collect();
+            let mut want = 0.0f64;
+            for (x, y) in a.chunks(DOT_CHUNK).zip(b.chunks(DOT_CHUNK)) {
+                want += x.iter().zip(y).map(|(p, q)| p.dot(*q)).sum::<f64>();
+            }
+            for threads in [1, 2, 3, 8] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for _ in 0..3 {
+                    let got = pool.install(|| dot(&a, &b));
+                    assert_eq!(got.to_bits(), want.to_bits(), "n {n}, {threads} threads");
+                }
+            }
         }
     }
 
