@@ -3,7 +3,10 @@
 //
 // Writes one displacement (mm, world axes) per point into three
 // structure-of-arrays buffers. Points are either every voxel centre of a
-// lattice (mode 0) or an explicit list (mode 1).
+// lattice (mode 0) or an explicit list (mode 1). A dispatch covers the
+// slab of points `slab.x .. slab.x + slab.y`; the point and displacement
+// arrays are bound from point `slab.x` on (windows, so that a volume's
+// arrays larger than one storage binding are written slab by slab).
 
 struct Uniforms {
     header: vec4<u32>,      // kind (0 affine, 1 twist, 2 bend), axis, towards, mode
@@ -15,6 +18,7 @@ struct Uniforms {
     origin: vec4<f32>,      // lattice origin (mm)
     spacing: vec4<f32>,     // lattice spacing (mm)
     counts: vec4<u32>,      // nx, ny, nz, points
+    slab: vec4<u32>,        // first point, points of this dispatch
 }
 
 @group(0) @binding(0) var<storage, read> u: Uniforms;
@@ -86,17 +90,19 @@ fn displacement(p: vec3<f32>) -> vec3<f32> {
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>,
         @builtin(num_workgroups) nwg: vec3<u32>) {
+    // n: the point within the slab (and the bound windows); g: in all.
     let n = gid.x + gid.y * (nwg.x * WG) + gid.z * (nwg.x * WG * nwg.y);
-    if (n >= u.counts.w) {
+    if (n >= u.slab.y) {
         return;
     }
+    let g = u.slab.x + n;
     var p: vec3<f32>;
     if (u.header.w == 0u) {
         let nx = u.counts.x;
         let ny = u.counts.y;
-        let i = n % nx;
-        let j = (n / nx) % ny;
-        let k = n / (nx * ny);
+        let i = g % nx;
+        let j = (g / nx) % ny;
+        let k = g / (nx * ny);
         p = u.origin.xyz + vec3<f32>(f32(i), f32(j), f32(k)) * u.spacing.xyz;
     } else {
         p = vec3<f32>(px[n], py[n], pz[n]);

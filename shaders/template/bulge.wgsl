@@ -3,9 +3,11 @@
 // constants, same f32 formula; the parity test compares the two.
 //
 // Writes one displacement (mm, world axes) per point into three
-// structure-of-arrays f32 buffers (the resampler's inputs: 32-bit scalars
-// only, so each fits one storage binding). The points are every node of a
-// lattice (mode 0) or an explicit list (mode 1).
+// structure-of-arrays f32 buffers (the resampler's inputs). The points are
+// every node of a lattice (mode 0) or an explicit list (mode 1). One
+// dispatch covers the slab of points `mode.y .. mode.y + mode.z`, with every
+// per-point array bound from point `mode.y` on: arrays larger than one
+// storage binding are written slab by slab.
 
 struct Uniforms {
     centre_radius: vec4<f32>, // ball centre (mm), radius (mm)
@@ -13,7 +15,7 @@ struct Uniforms {
     origin: vec4<f32>,        // lattice origin (mm)
     spacing: vec4<f32>,       // lattice spacing (mm)
     counts: vec4<u32>,        // nx, ny, nz, points
-    mode: vec4<u32>,          // x: 0 lattice, 1 list
+    mode: vec4<u32>,          // x: 0 lattice, 1 list; y: first point; z: points
 }
 
 @group(0) @binding(0) var<storage, read> u: Uniforms;
@@ -41,17 +43,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>,
         @builtin(num_workgroups) nwg: vec3<u32>) {
     // Large point counts are dispatched as a 3-D grid of workgroups
     // (at most 65535 per dimension): fold it back into one index.
+    // n: the point within the slab (and the bound windows); g: in all.
     let n = gid.x + gid.y * (nwg.x * WG) + gid.z * (nwg.x * WG * nwg.y);
-    if (n >= u.counts.w) {
+    if (n >= u.mode.z) {
         return;
     }
+    let g = u.mode.y + n;
     var p: vec3<f32>;
     if (u.mode.x == 0u) {
         let nx = u.counts.x;
         let ny = u.counts.y;
-        let i = n % nx;
-        let j = (n / nx) % ny;
-        let k = n / (nx * ny);
+        let i = g % nx;
+        let j = (g / nx) % ny;
+        let k = g / (nx * ny);
         p = u.origin.xyz + vec3<f32>(f32(i), f32(j), f32(k)) * u.spacing.xyz;
     } else {
         p = vec3<f32>(px[n], py[n], pz[n]);

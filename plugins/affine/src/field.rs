@@ -25,6 +25,10 @@ pub struct FieldUniforms {
     pub spacing: [f32; 4],
     /// Lattice dims nx, ny, nz and point count (u32).
     pub counts: [u32; 4],
+    /// The dispatch's slab of points: its first point and its point count
+    /// (u32; the point arrays are bound from that first point on, see
+    /// [`FieldUniforms::for_slab`]), unused z, w.
+    pub slab: [u32; 4],
 }
 
 /// Bytes of [`FieldUniforms`].
@@ -95,6 +99,15 @@ impl FieldUniforms {
             g.dims[2] as u32,
             g.len() as u32,
         ];
+        self
+    }
+
+    /// These constants for the dispatch over points `first .. first +
+    /// count`, whose point and displacement arrays are bound from point
+    /// `first` on (a window of each array, so that none exceeds the
+    /// device's storage binding limit).
+    pub fn for_slab(mut self, first: usize, count: usize) -> Self {
+        self.slab = [first as u32, count as u32, 0, 0];
         self
     }
 

@@ -17,6 +17,11 @@
 //! angle_deg = 40       # over the volume's extent along `axis`
 //! ramp_frames = 10
 //! ```
+//!
+//! The GPU path (`shaders/affine/field.wgsl`) writes the displacement
+//! arrays in slabs of points where they exceed one storage binding (a
+//! 512³ lattice's arrays are 512 MiB each), one dispatch per slab over a
+//! window of every per-point array ([`voxflex_core::point_slabs`]).
 
 #![warn(missing_docs)]
 
@@ -37,6 +42,7 @@ use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DVec3, Vec3};
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt};
 use voxflex_core::grid::Grid;
+use voxflex_core::point_slabs::{alignment_unit, point_slabs};
 use voxflex_core::volume::VolumeView;
 
 /// The WGSL twin of [`field::FieldUniforms::displacement`].
@@ -187,27 +193,38 @@ impl AffineField {
                 "{n} points exceed the GPU path's u32 index range"
             )));
         }
-        let limit = gpu.limits().max_storage_buffer_binding_size;
-        if (n as u64) * 4 > limit {
-            return Err(ModelError(format!(
-                "{n} points need {} bytes per displacement array, above this GPU's {limit}-byte binding limit; use backend = \"cpu\"",
-                n * 4
-            )));
+        for (axis, &buffer) in ["x", "y", "z"].iter().zip(&out) {
+            let bytes = gpu.buffer_size(buffer)?;
+            if bytes < n as u64 * 4 {
+                return Err(ModelError(format!(
+                    "the {axis} displacement buffer holds {} values but the binding has {n} points",
+                    bytes / 4
+                )));
+            }
         }
+        // Arrays longer than one storage binding are written slab by slab,
+        // each dispatch binding a window of every per-point array.
+        let limits = gpu.limits();
+        let slabs = point_slabs(n, 4, alignment_unit(&limits, 4), &limits).ok_or_else(|| {
+            ModelError(format!(
+                "this GPU binds at most {} bytes per storage array, less than one aligned run of \
+                 points; use backend = \"cpu\"",
+                limits.max_storage_buffer_binding_size
+            ))
+        })?;
         let uniforms = match self.uniforms {
             Some(b) => b,
             None => *self
                 .uniforms
                 .insert(gpu.create_buffer(UNIFORM_BYTES as u64, "affine uniforms")?),
         };
-        gpu.write_buffer(uniforms, 0, bytemuck::bytes_of(&u))?;
         let dummy = match self.dummy {
             Some(b) => b,
             None => *self.dummy.insert(gpu.create_buffer(4, "affine dummy")?),
         };
-        let pts = match &mut self.bindings[idx] {
-            Binding::Lattice(_) => [dummy; 3],
-            Binding::List { points, gpu: slot } => match slot {
+        let list = match &mut self.bindings[idx] {
+            Binding::Lattice(_) => None,
+            Binding::List { points, gpu: slot } => Some(match slot {
                 Some(ids) => *ids,
                 None => {
                     let cols: [Vec<f32>; 3] =
@@ -219,23 +236,39 @@ impl AffineField {
                     ];
                     *slot.insert(ids)
                 }
-            },
+            }),
         };
         let pipeline = gpu.compile(FIELD_WGSL, "main")?;
-        let bindings = [
-            BufferBinding::whole(bind::U, uniforms),
-            BufferBinding::whole(bind::PX, pts[0]),
-            BufferBinding::whole(bind::PY, pts[1]),
-            BufferBinding::whole(bind::PZ, pts[2]),
-            BufferBinding::whole(bind::UX, out[0]),
-            BufferBinding::whole(bind::UY, out[1]),
-            BufferBinding::whole(bind::UZ, out[2]),
-        ];
-        gpu.dispatch(
-            pipeline,
-            &bindings,
-            gpu.workgroups_for(n as u64, WORKGROUP)?,
-        )?;
+        for slab in slabs {
+            // Calls are ordered (`GpuService`): each dispatch sees its own
+            // slab's constants.
+            let u = u.for_slab(slab.start, slab.len());
+            gpu.write_buffer(uniforms, 0, bytemuck::bytes_of(&u))?;
+            let window = |binding: u32, buffer: BufferId| BufferBinding {
+                binding,
+                buffer,
+                offset: slab.start as u64 * 4,
+                size: slab.len() as u64 * 4,
+            };
+            let pts = |a: usize, binding: u32| match list {
+                Some(ids) => window(binding, ids[a]),
+                None => BufferBinding::whole(binding, dummy),
+            };
+            let bindings = [
+                BufferBinding::whole(bind::U, uniforms),
+                pts(0, bind::PX),
+                pts(1, bind::PY),
+                pts(2, bind::PZ),
+                window(bind::UX, out[0]),
+                window(bind::UY, out[1]),
+                window(bind::UZ, out[2]),
+            ];
+            gpu.dispatch(
+                pipeline,
+                &bindings,
+                gpu.workgroups_for(slab.len() as u64, WORKGROUP)?,
+            )?;
+        }
         Ok(())
     }
 }

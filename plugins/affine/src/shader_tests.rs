@@ -34,6 +34,7 @@ fn the_field_kernel_validates_and_shares_the_rust_layout() {
         ("origin", offset_of!(FieldUniforms, origin)),
         ("spacing", offset_of!(FieldUniforms, spacing)),
         ("counts", offset_of!(FieldUniforms, counts)),
+        ("slab", offset_of!(FieldUniforms, slab)),
     ];
     let wgsl: Vec<(&str, usize)> = l
         .members

@@ -27,7 +27,9 @@ pub struct FieldUniforms {
     /// Lattice dims nx, ny, nz (lattice bindings) and the point count.
     pub counts: [u32; 4],
     /// x: 0 = the points are every node of the lattice, 1 = an explicit
-    /// list (the kernel reads them from its point buffers); y, z, w unused.
+    /// list (the kernel reads them from its point buffers); y, z: the
+    /// dispatch's slab of points, its first point and its point count
+    /// ([`FieldUniforms::for_slab`]); w unused.
     pub mode: [u32; 4],
 }
 
@@ -65,6 +67,16 @@ impl FieldUniforms {
             g.dims[2] as u32,
             g.len() as u32,
         ];
+        self
+    }
+
+    /// The same constants for the dispatch over points `first .. first +
+    /// count`, whose point and displacement arrays are bound from point
+    /// `first` on: windows of each array, so that none exceeds the device's
+    /// storage binding limit (`voxflex_core::point_slabs`).
+    pub fn for_slab(mut self, first: usize, count: usize) -> Self {
+        self.mode[1] = first as u32;
+        self.mode[2] = count as u32;
         self
     }
 

@@ -19,6 +19,7 @@ use voxflex_core::glam::{DVec3, Vec3};
 use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt};
 use voxflex_core::grid::Grid;
 use voxflex_core::interaction::InteractionSpec;
+use voxflex_core::point_slabs::{alignment_unit, point_slabs};
 use voxflex_core::volume::VolumeView;
 
 /// The WGSL twin of [`FieldUniforms::displacement`] (STEP 5).
@@ -147,30 +148,44 @@ impl TemplateField {
             Binding::Lattice(g) => (self.uniforms().with_lattice(g), g.len()),
             Binding::List { points, .. } => (self.uniforms().with_list(points.len()), points.len()),
         };
-        // Every array must fit one storage binding and the kernel's u32
-        // index: refuse clearly instead of writing past a buffer.
-        let limit = gpu.limits().max_storage_buffer_binding_size;
-        if n > u32::MAX as usize || (n as u64) * 4 > limit {
+        if n > u32::MAX as usize {
             return Err(ModelError(format!(
-                "{n} points need {} bytes per displacement array, above this GPU's {limit}-byte \
-                 binding limit; use backend = \"cpu\"",
-                n as u64 * 4
+                "{n} points exceed the kernel's u32 point index; use backend = \"cpu\""
             )));
         }
+        for (axis, &buffer) in ["x", "y", "z"].iter().zip(&out) {
+            let bytes = gpu.buffer_size(buffer)?;
+            if bytes < n as u64 * 4 {
+                return Err(ModelError(format!(
+                    "the {axis} displacement buffer holds {} values but the binding has {n} points",
+                    bytes / 4
+                )));
+            }
+        }
+        // Arrays longer than one storage binding (a 512³ lattice's are 512
+        // MiB each) are written slab by slab, each dispatch binding a
+        // window of every per-point array at an aligned offset.
+        let limits = gpu.limits();
+        let slabs = point_slabs(n, 4, alignment_unit(&limits, 4), &limits).ok_or_else(|| {
+            ModelError(format!(
+                "this GPU binds at most {} bytes per storage array, less than one aligned run of \
+                 points; use backend = \"cpu\"",
+                limits.max_storage_buffer_binding_size
+            ))
+        })?;
         let uniforms = match self.uniforms {
             Some(b) => b,
             None => *self
                 .uniforms
                 .insert(gpu.create_buffer(UNIFORM_BYTES as u64, "template uniforms")?),
         };
-        gpu.write_buffer(uniforms, 0, bytemuck::bytes_of(&u))?;
         let dummy = match self.dummy {
             Some(b) => b,
             None => *self.dummy.insert(gpu.create_buffer(4, "template dummy")?),
         };
-        let points = match &mut self.bindings[id.0 as usize] {
-            Binding::Lattice(_) => [dummy; 3],
-            Binding::List { points, gpu: slot } => match slot {
+        let list = match &mut self.bindings[id.0 as usize] {
+            Binding::Lattice(_) => None,
+            Binding::List { points, gpu: slot } => Some(match slot {
                 Some(ids) => *ids,
                 None => {
                     let column = |a: usize| points.iter().map(|p| p[a]).collect::<Vec<f32>>();
@@ -180,24 +195,40 @@ impl TemplateField {
                         gpu.upload(&column(2), "template points z")?,
                     ])
                 }
-            },
+            }),
         };
         // Compiled once: the host caches pipelines by the shader's hash.
         let pipeline = gpu.compile(FIELD_WGSL, "main")?;
-        let bindings = [
-            BufferBinding::whole(bind::U, uniforms),
-            BufferBinding::whole(bind::PX, points[0]),
-            BufferBinding::whole(bind::PY, points[1]),
-            BufferBinding::whole(bind::PZ, points[2]),
-            BufferBinding::whole(bind::UX, out[0]),
-            BufferBinding::whole(bind::UY, out[1]),
-            BufferBinding::whole(bind::UZ, out[2]),
-        ];
-        gpu.dispatch(
-            pipeline,
-            &bindings,
-            gpu.workgroups_for(n as u64, WORKGROUP)?,
-        )?;
+        for slab in slabs {
+            // GPU calls are ordered: each dispatch sees its own slab's
+            // constants.
+            let u = u.for_slab(slab.start, slab.len());
+            gpu.write_buffer(uniforms, 0, bytemuck::bytes_of(&u))?;
+            let window = |binding: u32, buffer: BufferId| BufferBinding {
+                binding,
+                buffer,
+                offset: slab.start as u64 * 4,
+                size: slab.len() as u64 * 4,
+            };
+            let point = |a: usize, binding: u32| match list {
+                Some(ids) => window(binding, ids[a]),
+                None => BufferBinding::whole(binding, dummy),
+            };
+            let bindings = [
+                BufferBinding::whole(bind::U, uniforms),
+                point(0, bind::PX),
+                point(1, bind::PY),
+                point(2, bind::PZ),
+                window(bind::UX, out[0]),
+                window(bind::UY, out[1]),
+                window(bind::UZ, out[2]),
+            ];
+            gpu.dispatch(
+                pipeline,
+                &bindings,
+                gpu.workgroups_for(slab.len() as u64, WORKGROUP)?,
+            )?;
+        }
         Ok(())
     }
 }

@@ -44,6 +44,7 @@ pub mod non_finite;
 pub mod on_worker;
 pub mod opacity_map;
 pub mod ordered_reduce;
+pub mod point_slabs;
 pub mod prefetch;
 pub mod render;
 pub mod shared_volume;

@@ -11,6 +11,7 @@ use super::BarycentricBinding;
 use crate::error::GpuError;
 use crate::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt};
 use crate::tet_mesh::TetMesh;
+use voxflex_core::point_slabs::{alignment_unit, point_slabs};
 
 /// The map kernel.
 pub const MAP_WGSL: &str = include_str!("../../../../shaders/barycentric/map.wgsl");
@@ -89,17 +90,19 @@ impl GpuBinding {
         out: [BufferId; 3],
     ) -> Result<(), GpuError> {
         let limits = gpu.limits();
-        let align = (limits.min_storage_buffer_offset_alignment as u64).max(4);
         // A slab's first point must start every per-point binding on the
-        // offset alignment: 4-byte arrays need multiples of align / 4
+        // offset alignment: the 4-byte arrays need multiples of align / 4
         // points, the two-points-per-word array multiples of align / 2.
-        let unit = (align / 2).max(2) as usize;
-        let per_slab =
-            ((limits.max_storage_buffer_binding_size / 4) as usize / unit * unit).max(unit);
+        let unit = alignment_unit(&limits, 2).max(2);
+        let slabs = point_slabs(self.points, 4, unit, &limits).ok_or_else(|| {
+            GpuError(format!(
+                "this GPU binds at most {} bytes per storage array, less than {unit} points",
+                limits.max_storage_buffer_binding_size
+            ))
+        })?;
         let pipeline = gpu.compile(MAP_WGSL, "main")?;
-        let mut first = 0;
-        while first < self.points {
-            let count = per_slab.min(self.points - first);
+        for points in slabs {
+            let (first, count) = (points.start, points.len());
             gpu.write_buffer(
                 self.params,
                 0,
@@ -132,7 +135,6 @@ impl GpuBinding {
                 &bindings,
                 gpu.workgroups_for(count as u64, WORKGROUP)?,
             )?;
-            first += count;
         }
         Ok(())
     }
