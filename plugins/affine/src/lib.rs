@@ -21,7 +21,7 @@
 //! The GPU path (`shaders/affine/field.wgsl`) writes the displacement
 //! arrays in slabs of points where they exceed one storage binding (a
 //! 512³ lattice's arrays are 512 MiB each), one dispatch per slab over a
-//! window of every per-point array ([`voxflex_core::point_slabs`]).
+//! window of every per-point array ([`PointFieldDispatch`]).
 
 #![warn(missing_docs)]
 
@@ -40,9 +40,9 @@ use voxflex_core::deformation::{
 };
 use voxflex_core::error::ModelError;
 use voxflex_core::glam::{DVec3, Vec3};
-use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt};
+use voxflex_core::gpu::{BufferId, GpuService, GpuServiceExt};
 use voxflex_core::grid::Grid;
-use voxflex_core::point_slabs::{alignment_unit, point_slabs};
+use voxflex_core::point_slabs::PointFieldDispatch;
 use voxflex_core::volume::VolumeView;
 
 /// The WGSL twin of [`field::FieldUniforms::displacement`].
@@ -193,25 +193,6 @@ impl AffineField {
                 "{n} points exceed the GPU path's u32 index range"
             )));
         }
-        for (axis, &buffer) in ["x", "y", "z"].iter().zip(&out) {
-            let bytes = gpu.buffer_size(buffer)?;
-            if bytes < n as u64 * 4 {
-                return Err(ModelError(format!(
-                    "the {axis} displacement buffer holds {} values but the binding has {n} points",
-                    bytes / 4
-                )));
-            }
-        }
-        // Arrays longer than one storage binding are written slab by slab,
-        // each dispatch binding a window of every per-point array.
-        let limits = gpu.limits();
-        let slabs = point_slabs(n, 4, alignment_unit(&limits, 4), &limits).ok_or_else(|| {
-            ModelError(format!(
-                "this GPU binds at most {} bytes per storage array, less than one aligned run of \
-                 points; use backend = \"cpu\"",
-                limits.max_storage_buffer_binding_size
-            ))
-        })?;
         let uniforms = match self.uniforms {
             Some(b) => b,
             None => *self
@@ -238,37 +219,21 @@ impl AffineField {
                 }
             }),
         };
-        let pipeline = gpu.compile(FIELD_WGSL, "main")?;
-        for slab in slabs {
-            // Calls are ordered (`GpuService`): each dispatch sees its own
-            // slab's constants.
-            let u = u.for_slab(slab.start, slab.len());
-            gpu.write_buffer(uniforms, 0, bytemuck::bytes_of(&u))?;
-            let window = |binding: u32, buffer: BufferId| BufferBinding {
-                binding,
-                buffer,
-                offset: slab.start as u64 * 4,
-                size: slab.len() as u64 * 4,
-            };
-            let pts = |a: usize, binding: u32| match list {
-                Some(ids) => window(binding, ids[a]),
-                None => BufferBinding::whole(binding, dummy),
-            };
-            let bindings = [
-                BufferBinding::whole(bind::U, uniforms),
-                pts(0, bind::PX),
-                pts(1, bind::PY),
-                pts(2, bind::PZ),
-                window(bind::UX, out[0]),
-                window(bind::UY, out[1]),
-                window(bind::UZ, out[2]),
-            ];
-            gpu.dispatch(
-                pipeline,
-                &bindings,
-                gpu.workgroups_for(slab.len() as u64, WORKGROUP)?,
-            )?;
-        }
+        // Compiled once: the host caches pipelines by the shader's hash.
+        // Arrays longer than one storage binding (a 512³ lattice's are 512
+        // MiB each) are written slab by slab, each dispatch binding a window
+        // of every per-point array.
+        let kernel = PointFieldDispatch {
+            pipeline: gpu.compile(FIELD_WGSL, "main")?,
+            workgroup: WORKGROUP,
+            constants: (bind::U, uniforms),
+            points: ([bind::PX, bind::PY, bind::PZ], list),
+            spare: dummy,
+            out: ([bind::UX, bind::UY, bind::UZ], out),
+        };
+        kernel.run(gpu.as_ref(), n, |slab| {
+            bytemuck::bytes_of(&u.for_slab(slab.start, slab.len())).to_vec()
+        })?;
         Ok(())
     }
 }
