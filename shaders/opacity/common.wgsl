@@ -10,7 +10,7 @@
 struct Params {
     vdim: vec4<u32>,  // volume dims x, y, z; w = the device's largest workgroup count per dimension
     blo: vec4<u32>,   // working box lower corner (volume voxel index); w = box voxels
-    bdim: vec4<u32>,  // working box dims; w unused
+    bdim: vec4<u32>,  // working box dims; w = the volume-linear index of values[0] (the bound window's first value)
     ext: vec4<f32>,   // d_s, sigma_s, K = 65535 / (lambda sigma_s), cap = (lambda + 2) sigma_s
     q: vec4<u32>,     // q_min, q_max; z = 1: face neighbours only (connectivity 6); w unused
 }
@@ -30,7 +30,9 @@ const MARK_CANDIDATE: u32 = 1u;  // frontier.rs
 const MARK_DONE: u32 = 2u;
 
 @group(0) @binding(0) var<storage, read> P: Params;
-@group(0) @binding(1) var<storage, read> values: array<f32>;            // sanitised voxel values
+// Sanitised voxel values: the x-y planes the working box spans, from the
+// volume-linear index P.bdim.w on (gpu.rs: values_window).
+@group(0) @binding(1) var<storage, read> values: array<f32>;
 @group(0) @binding(2) var<storage, read_write> field: array<atomic<u32>>;
 // Two marks per box voxel, 16 voxels per word: bit 2i candidate, bit 2i+1 done.
 @group(0) @binding(3) var<storage, read_write> marks: array<atomic<u32>>;
@@ -89,6 +91,11 @@ fn box_linear(c: vec3<u32>) -> u32 {
 fn vol_linear(c: vec3<u32>) -> u32 {
     let p = P.blo.xyz + c;
     return p.x + P.vdim.x * (p.y + P.vdim.y * p.z);
+}
+
+// The value of the voxel at box coordinates c (inside the working box).
+fn value_at(c: vec3<u32>) -> f32 {
+    return values[vol_linear(c) - P.bdim.w];
 }
 
 // True when box coordinates p lie inside the working box.

@@ -32,7 +32,7 @@ fn enumerate(
                         continue;
                     }
                     let q = field_get(v);
-                    let e = extinction(values[vol_linear(pc)]);
+                    let e = extinction(value_at(pc));
                     if (rise(qu, e) <= q) {
                         continue;
                     }
@@ -99,7 +99,7 @@ fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     let old = field_get(v);
-    let e = extinction(values[vol_linear(cu)]);
+    let e = extinction(value_at(cu));
     let new_q = max(rise(m, e), old);
     newval[i] = new_q;
     // Clear the candidate mark; set the done mark at the ceiling.
@@ -181,7 +181,7 @@ fn pump(@builtin(global_invocation_id) gid: vec3<u32>) {
     let v = next[i];
     let q = field_get(v);
     let cu = box_coords(v);
-    let e = extinction(values[vol_linear(cu)]);
+    let e = extinction(value_at(cu));
     if (!(e < 0 && q < P.q.y)) {
         return;
     }
@@ -195,7 +195,7 @@ fn pump(@builtin(global_invocation_id) gid: vec3<u32>) {
                     continue;
                 }
                 let pc = vec3<u32>(p);
-                let en = extinction(values[vol_linear(pc)]);
+                let en = extinction(value_at(pc));
                 let qn = field_get(box_linear(pc));
                 if (e + en < 0 && (qn > P.q.x || rise(q, en) > P.q.x)) {
                     pumps = true;

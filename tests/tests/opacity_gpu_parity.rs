@@ -39,6 +39,13 @@ fn oversized_and_mismatched_volumes_are_refused() {
     run(parity::check_refusals);
 }
 
+/// A volume above one storage binding: the growth binds only its working
+/// box's planes of the values.
+#[test]
+fn a_volume_above_one_binding_grows_in_its_window() {
+    run(parity::check_values_window_matches_cpu);
+}
+
 #[test]
 fn bounded_and_auto_lambda_maps_are_identical() {
     run(parity::check_limits_match_cpu);

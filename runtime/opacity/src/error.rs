@@ -139,10 +139,23 @@ pub enum OpacityError {
         /// Phases the scan ran.
         scanned: usize,
     },
+    /// A GPU buffer would exceed the device's largest buffer.
+    #[error(
+        "{what} needs {bytes} bytes in one GPU buffer but the GPU allows {limit}; use the CPU \
+         path or crop the volume"
+    )]
+    BufferTooLarge {
+        /// The buffer at fault.
+        what: &'static str,
+        /// Bytes needed.
+        bytes: u64,
+        /// The device limit, bytes.
+        limit: u64,
+    },
     /// A GPU buffer would exceed the device's storage-binding limit.
     #[error(
         "{what} needs {bytes} bytes in one storage binding but the GPU allows {limit}; use the \
-         CPU path or crop the volume"
+         CPU path, bound the region (`intensity`, `max_distance_mm`) or crop the volume"
     )]
     BindingTooLarge {
         /// The buffer at fault.

@@ -36,15 +36,21 @@
 //! most a step can produce (26 per frontier entry, at most the working
 //! box).
 //!
-//! **Memory** (all 32-bit storage, one binding each): the volume's values
-//! as f32 (4 bytes per volume voxel, shared by every growth of a
+//! **Memory** (all 32-bit storage): the volume's values as f32 (4 bytes
+//! per volume voxel, one buffer shared by every growth of a
 //! [`GpuOpacityVolume`]); per growth, the field as packed u16 (2 bytes per
-//! working-box voxel), the marks (2 bits per working-box voxel),
-//! and four lists of u32 (frontier, next frontier, candidates, new values),
-//! grown geometrically with the largest step (at most 4 bytes per
-//! working-box voxel each). The volume's values must fit one storage
-//! binding (128 MiB on lavapipe: 32 Mi voxels), else
-//! [`OpacityError::BindingTooLarge`]; everything else is then smaller.
+//! working-box voxel), the marks (2 bits per working-box voxel), and four
+//! lists of u32 (frontier, next frontier, candidates, new values), grown
+//! geometrically with the largest step (at most 4 bytes per working-box
+//! voxel each). The kernels bind only the x-y planes of the values that
+//! the working box spans (a window from the box's first plane, its start
+//! aligned down to the device's offset alignment; `Params.bdim.w` holds
+//! its first value's volume index), so the volume may be larger than one
+//! storage binding (a 512 × 512 × 133 CT is 133 MiB of f32): only a
+//! working box whose planes exceed one binding is refused, with
+//! [`OpacityError::BindingTooLarge`] — and that window bounds every other
+//! per-growth buffer. The volume must fit one buffer
+//! ([`OpacityError::BufferTooLarge`]).
 //!
 //! Buffers are not freed on drop (the growth holds no GPU handle): call
 //! [`GpuGrowth::release`] and [`GpuOpacityVolume::release`].
@@ -138,14 +144,20 @@ pub struct GpuOpacityVolume {
 
 impl GpuOpacityVolume {
     /// Converts a volume to sanitised f32 and uploads it; fails when it does
-    /// not fit one storage binding.
+    /// not fit one buffer. (A growth binds only the z-planes its working box
+    /// spans, [`GpuGrowth::step`], so the volume may exceed one storage
+    /// binding.)
     pub fn upload(gpu: &dyn GpuService, volume: VolumeView<'_>) -> Result<Self, OpacityError> {
         check_volume(&volume)?;
-        check_binding(
-            gpu,
-            "the volume's values (f32)",
-            volume.grid.len() as u64 * 4,
-        )?;
+        let bytes = volume.grid.len() as u64 * 4;
+        let limit = gpu.limits().max_buffer_size;
+        if bytes > limit {
+            return Err(OpacityError::BufferTooLarge {
+                what: "the volume's values (f32)",
+                bytes,
+                limit,
+            });
+        }
         let values: Vec<f32> = volume.data.to_f32_vec().into_iter().map(sanitize).collect();
         let id = gpu.upload(&values, "voxflex.opacity.values")?;
         Ok(Self {
@@ -353,7 +365,7 @@ impl GpuGrowth {
             });
         }
         let mut rep = GrowthReport::default();
-        let result = (|| -> Result<(), GpuError> {
+        let result = (|| -> Result<(), OpacityError> {
             for _ in 0..n {
                 if self.n_front == 0 {
                     break;
@@ -364,6 +376,15 @@ impl GpuGrowth {
                     self.regrow(gpu, nb)?;
                     rep.regrows += 1;
                 }
+                // The values are bound over the z-planes the working box
+                // spans; that window is at least as large as every other
+                // per-box buffer (at most 4 bytes per box voxel).
+                let (_, bytes) = self.values_window(gpu);
+                check_binding(
+                    gpu,
+                    "the working box's planes of the volume's values (f32)",
+                    bytes,
+                )?;
                 let (visits, useful) = self.one_step(gpu, values)?;
                 rep.steps += 1;
                 rep.visits += visits;
@@ -448,6 +469,20 @@ impl GpuGrowth {
         ]
     }
 
+    /// The window of the values buffer the kernels bind: every voxel of
+    /// the x-y planes the working box spans, from its first plane's first
+    /// voxel aligned down to the device's storage offset alignment. Returns
+    /// (first value, volume-linear index; bytes). The kernels read a value
+    /// at `vol_linear − first` (`Params.bdim.w`).
+    fn values_window(&self, gpu: &dyn GpuService) -> (u64, u64) {
+        let plane = (self.state.dims[0] * self.state.dims[1]) as u64;
+        let start = self.state.work.lo[2] as u64 * plane;
+        let end = (self.state.work.hi[2] as u64 + 1) * plane;
+        let align = (u64::from(gpu.limits().min_storage_buffer_offset_alignment) / 4).max(1);
+        let first = start / align * align;
+        (first, (end - first) * 4)
+    }
+
     fn write_params(&self, gpu: &dyn GpuService) -> Result<(), GpuError> {
         let d = self.state.work.dims();
         let p = Params {
@@ -463,7 +498,12 @@ impl GpuGrowth {
                 self.state.work.lo[2] as u32,
                 self.state.work.len() as u32,
             ],
-            bdim: [d[0] as u32, d[1] as u32, d[2] as u32, 0],
+            bdim: [
+                d[0] as u32,
+                d[1] as u32,
+                d[2] as u32,
+                self.values_window(gpu).0 as u32,
+            ],
             ext: [
                 self.state.ext.mean,
                 self.state.ext.sigma,
@@ -487,6 +527,13 @@ impl GpuGrowth {
         values: &GpuOpacityVolume,
     ) -> Result<(u64, u64), GpuError> {
         let b = |binding, o: &Owned| BufferBinding::whole(binding, o.id);
+        let (first, bytes) = self.values_window(gpu);
+        let values = BufferBinding {
+            binding: bind::VALUES,
+            buffer: values.values,
+            offset: first * 4,
+            size: bytes,
+        };
         let box_len = self.state.work.len() as u64;
         let bound = (26 * self.n_front as u64).min(box_len);
         self.cand
@@ -502,7 +549,7 @@ impl GpuGrowth {
             self.pipes.enumerate,
             &[
                 b(bind::PARAMS, &self.params_buf),
-                BufferBinding::whole(bind::VALUES, values.values),
+                values,
                 b(bind::FIELD, &self.field),
                 b(bind::MARKS, &self.marks),
                 b(bind::FRONT, &self.front),
@@ -527,7 +574,7 @@ impl GpuGrowth {
             self.pipes.evaluate,
             &[
                 b(bind::PARAMS, &self.params_buf),
-                BufferBinding::whole(bind::VALUES, values.values),
+                values,
                 b(bind::FIELD, &self.field),
                 b(bind::MARKS, &self.marks),
                 b(bind::CAND, &self.cand),
@@ -550,7 +597,7 @@ impl GpuGrowth {
             self.pipes.pump,
             &[
                 b(bind::PARAMS, &self.params_buf),
-                BufferBinding::whole(bind::VALUES, values.values),
+                values,
                 b(bind::FIELD, &self.field),
                 b(bind::MARKS, &self.marks),
                 b(bind::NEXT, &self.next),

@@ -338,6 +338,49 @@ pub fn check_converged_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
     )
 }
 
+/// A volume four times larger than one storage binding, grown from a seed
+/// whose working box spans a quarter of its planes: the GPU binds only
+/// those planes of the values (an aligned window, rebound as the box
+/// grows) and its converged map and counts equal the CPU's.
+pub fn check_values_window_matches_cpu(gpu: &dyn GpuService) -> Result<(), String> {
+    // A noisy ball of radius 4 in the middle of a tall volume.
+    let dims = [24, 24, 96];
+    let grid = Grid::new(dims, DVec3::ONE, DVec3::ZERO);
+    let ball = Sphere {
+        centre: [12.0, 12.0, 48.0],
+        radius: 4.0,
+        value: 100.0,
+    };
+    let mut rng = XorShift::new(9);
+    let values = (0..grid.len())
+        .map(|l| {
+            let base = if ball.contains(grid.unlinear(l)) {
+                ball.value
+            } else {
+                0.0
+            };
+            (base as f64 + 4.0 * rng.normal()).round() as i16
+        })
+        .collect();
+    let volume = Volume {
+        grid,
+        data: VoxelData::I16(values),
+    };
+    let plane = (dims[0] * dims[1] * 4) as u64;
+    let limit = 26 * plane;
+    if (volume.grid.len() as u64) * 4 <= 3 * limit {
+        return Err("the volume must exceed the binding several times".into());
+    }
+    let small = LimitedDevice::binding(gpu, limit);
+    converged_case(
+        &small,
+        &volume,
+        Seed::Voxel([12, 12, 48]),
+        GrowthParams::default(),
+        "values bound as a window of planes",
+    )
+}
+
 /// Step by step (1, 1, …, then 5, then to convergence) on the phantom with
 /// B at 110 (the pump shortcut fires), with 26 and with 6 neighbours: the
 /// GPU map equals the CPU map after every call.
@@ -437,17 +480,33 @@ pub fn check_several_maps(gpu: &dyn GpuService) -> Result<(), String> {
     res
 }
 
-/// A volume larger than the storage-binding limit is refused with
+/// A volume larger than the storage-binding limit uploads (a growth binds
+/// only the planes its working box spans), but a growth whose box spans
+/// more planes than one binding holds is refused with
 /// [`OpacityError::BindingTooLarge`]; a GPU volume of other dims with
 /// [`OpacityError::GpuVolumeMismatch`]; nothing panics.
 pub fn check_refusals(gpu: &dyn GpuService) -> Result<(), String> {
     let p = three_spheres(24, 3.0, 24);
     let small = LimitedDevice::binding(gpu, 4096);
-    match GpuOpacityVolume::upload(&small, p.volume.view()) {
-        Err(OpacityError::BindingTooLarge { bytes, limit, .. })
-            if bytes == 24 * 24 * 24 * 4 && limit == 4096 => {}
-        other => return Err(format!("expected BindingTooLarge, got {other:?}")),
-    }
+    // 24 × 24 voxels of 4 bytes per plane: one plane fits 4 KiB, two do not.
+    let gv = GpuOpacityVolume::upload(&small, p.volume.view()).map_err(e)?;
+    let refused = (|| {
+        let seed = Seed::Voxel(p.a.centre_voxel());
+        let mut g = GpuGrowth::new(&small, &gv, p.volume.view(), &seed, GrowthParams::default())
+            .map_err(e)?;
+        let r = g.run(&small, &gv);
+        g.release(gpu);
+        match r {
+            Err(OpacityError::BindingTooLarge { bytes, limit, .. })
+                if bytes > limit && limit == 4096 =>
+            {
+                Ok(())
+            }
+            other => Err(format!("expected BindingTooLarge, got {other:?}")),
+        }
+    })();
+    gv.release(gpu);
+    refused?;
     let q = three_spheres(16, 3.0, 24);
     let gv = GpuOpacityVolume::upload(gpu, q.volume.view()).map_err(e)?;
     let r = GpuGrowth::new(
