@@ -49,7 +49,10 @@
 //! storage binding (a 512 × 512 × 133 CT is 133 MiB of f32): only a
 //! working box whose planes exceed one binding is refused, with
 //! [`OpacityError::BindingTooLarge`] — and that window bounds every other
-//! per-growth buffer. The volume must fit one buffer
+//! per-growth buffer. Where the box the growth would take (the region and
+//! a geometric margin) spans more planes than a binding holds, it is cut
+//! to those planes around the region (`fit_to_binding`): the field then
+//! moves more often, the map is the same. The volume must fit one buffer
 //! ([`OpacityError::BufferTooLarge`]).
 //!
 //! Buffers are not freed on drop (the growth holds no GPU handle): call
@@ -66,7 +69,9 @@ use crate::grid::Grid;
 use crate::opacity_map::OpacityMap;
 use crate::volume::VolumeView;
 use voxflex_core::error::GpuError;
-use voxflex_core::gpu::{BufferBinding, BufferId, GpuService, GpuServiceExt, PipelineId};
+use voxflex_core::gpu::{
+    BufferBinding, BufferId, GpuLimits, GpuService, GpuServiceExt, PipelineId,
+};
 
 const COMMON: &str = include_str!("../../../shaders/opacity/common.wgsl");
 const STEP: &str = include_str!("../../../shaders/opacity/step.wgsl");
@@ -169,6 +174,39 @@ impl GpuOpacityVolume {
     /// Frees the values buffer.
     pub fn release(self, gpu: &dyn GpuService) {
         gpu.destroy_buffer(self.values);
+    }
+}
+
+/// `wanted`, a working box holding `needed` (voxel indices, a volume of
+/// `dims` voxels), cut along z to the planes of the values one storage
+/// binding of `limits` holds, still holding `needed`: the kernels bind the
+/// values of the box's planes ([`GpuGrowth::values_window`]), and a box cut
+/// this way only moves its field more often (the map does not depend on
+/// the box). Unchanged when it fits, or when `needed` alone does not (the
+/// step then refuses it with [`OpacityError::BindingTooLarge`]).
+fn fit_to_binding(
+    wanted: VoxelBounds,
+    needed: &VoxelBounds,
+    dims: [usize; 3],
+    limits: &GpuLimits,
+) -> VoxelBounds {
+    let plane = (dims[0] * dims[1]) as u64 * 4;
+    // The window starts up to one alignment before the box's first plane.
+    let slack = u64::from(limits.min_storage_buffer_offset_alignment);
+    let most =
+        (limits.max_storage_buffer_binding_size.saturating_sub(slack) / plane.max(1)) as usize;
+    let span = |b: &VoxelBounds| b.hi[2] + 1 - b.lo[2];
+    if span(&wanted) <= most || span(needed) > most {
+        return wanted;
+    }
+    // Keep `needed` and share the planes left over between its two sides.
+    let spare = most - span(needed);
+    let lo = needed.lo[2].saturating_sub(spare / 2).max(wanted.lo[2]);
+    let hi = (lo + most - 1).min(wanted.hi[2]);
+    let lo = (hi + 1 - most).max(wanted.lo[2]);
+    VoxelBounds {
+        lo: [wanted.lo[0], wanted.lo[1], lo],
+        hi: [wanted.hi[0], wanted.hi[1], hi],
     }
 }
 
@@ -289,7 +327,11 @@ impl GpuGrowth {
                 actual: values.grid.dims,
             });
         }
-        let (state, s) = GrowthState::seed(volume, seed, params, room)?;
+        let (mut state, _) = GrowthState::seed(volume, seed, params, room)?;
+        // The region is the seed voxel; the first steps read 2 around it.
+        let needed = state.region.dilate([2; 3], state.dims);
+        state.work = fit_to_binding(state.work, &needed, state.dims, &gpu.limits());
+        let s = state.work.local_linear(state.region.lo);
         let (ext, work) = (state.ext, state.work);
         let pipes = Pipelines::compile(gpu)?;
 
@@ -373,6 +415,8 @@ impl GpuGrowth {
                 if let Some(nb) =
                     grown_working_box(&self.state.work, &self.state.region, self.state.dims)
                 {
+                    let needed = self.state.region.dilate([2; 3], self.state.dims);
+                    let nb = fit_to_binding(nb, &needed, self.state.dims, &gpu.limits());
                     self.regrow(gpu, nb)?;
                     rep.regrows += 1;
                 }
@@ -720,3 +764,44 @@ impl Growth for GpuGrowth {
 #[cfg(test)]
 #[path = "shader_tests.rs"]
 mod shader_tests;
+
+#[cfg(test)]
+mod fit_tests {
+    use super::*;
+
+    /// Over boxes at every z position of a 10 × 10 × 60 volume and
+    /// bindings of 3 to 70 planes: the cut box holds what is needed, lies
+    /// in the box wanted, and spans at most the planes a binding holds —
+    /// or is the box wanted, when it fits or when what is needed does not.
+    #[test]
+    fn a_cut_box_holds_what_is_needed_within_one_binding() {
+        let dims = [10, 10, 60];
+        let plane = 10 * 10 * 4;
+        for planes in 3..70u64 {
+            let limits = GpuLimits {
+                max_storage_buffer_binding_size: planes * plane + 256,
+                max_buffer_size: u64::MAX,
+                max_compute_workgroups_per_dimension: 65_535,
+                min_storage_buffer_offset_alignment: 256,
+            };
+            for z in 0..60usize {
+                for r in [0, 2, 5, 20] {
+                    let lo = [2, 3, z.saturating_sub(r)];
+                    let hi = [7, 8, (z + r).min(59)];
+                    let needed = VoxelBounds { lo, hi };
+                    let wanted = needed.dilate([3, 3, 17], dims);
+                    let got = fit_to_binding(wanted, &needed, dims, &limits);
+                    let span = |b: &VoxelBounds| (b.hi[2] + 1 - b.lo[2]) as u64;
+                    assert!(wanted.contains(&got) && got.contains(&needed), "{got:?}");
+                    if span(&needed) <= planes {
+                        assert!(span(&got) <= planes, "{planes} planes: {got:?}");
+                        assert_eq!(got.lo[..2], wanted.lo[..2]);
+                        assert_eq!(got.hi[..2], wanted.hi[..2]);
+                    } else {
+                        assert_eq!(got, wanted);
+                    }
+                }
+            }
+        }
+    }
+}
