@@ -714,16 +714,23 @@ pub fn render(scene: &Scene<'_>) -> (Vec<[f32; 4]>, RenderStats) {
 
 /// [`render`] with the scene's voxels as `T`s (one copy of the kernel per
 /// scalar type, so a sample reads its type and converts in registers).
+///
+/// Each tile writes its pixels straight into the image, which starts as
+/// zeroed memory the system maps as the tiles first write it — in
+/// parallel, and without a second copy of the image (a first frame used to
+/// fault in both per-tile buffers and the image, and copy one into the
+/// other on one thread).
 fn render_typed<T: Sample>(scene: &Scene<'_>, values: &[T]) -> (Vec<[f32; 4]>, RenderStats) {
     let k = Kernel::new(scene, values);
     let (w, h) = (scene.u.image[0], scene.u.image[1]);
     let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
-    let tiles: Vec<(Vec<[f32; 4]>, RenderStats)> = (0..tx * ty)
+    let mut image = vec![[0f32; 4]; w as usize * h as usize];
+    let out = ImagePtr(image.as_mut_ptr());
+    let stats = (0..tx * ty)
         .into_par_iter()
         .map(|t| {
             let (x0, y0) = ((t % tx) * TILE, (t / tx) * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-            let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
             let mut stats = RenderStats::default();
             for y in y0..y1 {
                 for x in x0..x1 {
@@ -731,27 +738,35 @@ fn render_typed<T: Sample>(scene: &Scene<'_>, values: &[T]) -> (Vec<[f32; 4]>, R
                     stats.rays += 1;
                     stats.samples += r.samples as u64;
                     stats.terminated_early += r.terminated as u64;
-                    px.push(r.rgba);
+                    out.write(y as usize * w as usize + x as usize, r.rgba);
                 }
             }
-            (px, stats)
+            stats
         })
-        .collect();
-    let mut image = vec![[0f32; 4]; w as usize * h as usize];
-    let mut stats = RenderStats::default();
-    for (t, (px, s)) in tiles.into_iter().enumerate() {
-        let t = t as u32;
-        let (x0, y0) = ((t % tx) * TILE, (t / tx) * TILE);
-        let tw = ((x0 + TILE).min(w) - x0) as usize;
-        for (r, row) in px.chunks(tw).enumerate() {
-            let start = (y0 as usize + r) * w as usize + x0 as usize;
-            image[start..start + tw].copy_from_slice(row);
-        }
-        stats.rays += s.rays;
-        stats.samples += s.samples;
-        stats.terminated_early += s.terminated_early;
-    }
+        .reduce(RenderStats::default, |a, b| RenderStats {
+            rays: a.rays + b.rays,
+            samples: a.samples + b.samples,
+            terminated_early: a.terminated_early + b.terminated_early,
+        });
     (image, stats)
+}
+
+/// The image's pixels, written by the tiles in parallel.
+struct ImagePtr(*mut [f32; 4]);
+
+// SAFETY: each pixel lies in exactly one tile and is written once, by the
+// task rendering that tile; the image outlives the parallel loop, and
+// nothing reads it until the loop has finished.
+unsafe impl Sync for ImagePtr {}
+
+impl ImagePtr {
+    /// Writes pixel `i` (row-major index, inside the image).
+    #[inline]
+    fn write(&self, i: usize, rgba: [f32; 4]) {
+        // SAFETY: see the `Sync` impl; `i` is a pixel of the image (the
+        // caller's tile lies inside it).
+        unsafe { self.0.add(i).write(rgba) }
+    }
 }
 
 #[cfg(test)]
