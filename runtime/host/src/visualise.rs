@@ -383,15 +383,26 @@ impl RgbaImage {
     }
 }
 
-/// Writes an RGBA8 image as a PNG, atomically.
+/// Writes an RGBA8 image as a PNG, atomically: encoded straight from the
+/// pixels into the temporary file (no copy of the image, no buffer of the
+/// encoded file).
 pub fn write_rgba_png(path: &Path, image: &RgbaImage) -> Result<(), RunError> {
-    let img = image::RgbaImage::from_raw(image.width, image.height, image.pixels.clone())
-        .ok_or_else(|| RunError::Other(format!("{}: image size mismatch", path.display())))?;
+    use image::ImageEncoder;
+    if image.pixels.len() != image.width as usize * image.height as usize * 4 {
+        return Err(RunError::Other(format!(
+            "{}: image size mismatch",
+            path.display()
+        )));
+    }
     write_atomically(path, |w| {
-        let mut buf = std::io::Cursor::new(Vec::new());
-        img.write_to(&mut buf, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)?;
-        w.write_all(buf.get_ref())
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(
+                &image.pixels,
+                image.width,
+                image.height,
+                image::ExtendedColorType::Rgba8,
+            )
+            .map_err(std::io::Error::other)
     })?;
     Ok(())
 }
