@@ -219,3 +219,21 @@ pub fn output_values(dir: &Path, points: &[[f64; 3]]) -> Vec<f32> {
         })
         .collect()
 }
+
+/// A session on `volume` with the built plugins `plugins` on its search
+/// path, computing on `backend` — on `gpu` when given (a device such as
+/// the viewer's, or a test view of one with a smaller binding limit).
+pub fn session_on(
+    volume: voxflex_core::volume::Volume,
+    backend: voxflex_runtime::backend::BackendChoice,
+    gpu: Option<std::sync::Arc<voxflex_runtime::gpu_context::WgpuService>>,
+    plugins: &[&str],
+) -> voxflex_runtime::session::Session {
+    let defaults = voxflex_runtime::session::SessionDefaults {
+        backend,
+        plugin_dirs: vec![plugin_dir(plugins)],
+        gpu,
+        ..Default::default()
+    };
+    voxflex_runtime::session::Session::from_volume(volume, defaults).expect("a session")
+}

@@ -6,7 +6,7 @@
 //! adapter (fails under CI=true, as every GPU test).
 
 use voxflex_core::gpu::GpuService;
-use voxflex_integration_tests::plugin_dir;
+use voxflex_integration_tests::{plugin_dir, session_on};
 use voxflex_phantom::phantom;
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::gpu_context::testing::test_gpu;
@@ -20,13 +20,8 @@ fn session(
     backend: BackendChoice,
     gpu: Option<std::sync::Arc<voxflex_runtime::gpu_context::WgpuService>>,
 ) -> Session {
-    let defaults = SessionDefaults {
-        backend,
-        plugin_dirs: vec![plugin_dir(&["chainmail", "raycast"])],
-        gpu,
-        ..SessionDefaults::default()
-    };
-    Session::from_volume(phantom("cube", [20, 20, 20]).unwrap(), defaults).unwrap()
+    let cube = phantom("cube", [20, 20, 20]).unwrap();
+    session_on(cube, backend, gpu, &["chainmail", "raycast"])
 }
 
 fn max_diff(a: &[u8], b: &[u8]) -> u8 {

@@ -10,12 +10,12 @@
 //! CPU session's within its CPU/GPU tolerance. Skips without an adapter
 //! (fails under CI=true, as every GPU test).
 
-use voxflex_integration_tests::plugin_dir;
+use voxflex_integration_tests::session_on;
 use voxflex_opacity::{GrowthParams, Seed};
 use voxflex_phantom::phantom;
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::gpu_context::testing::test_gpu_with_binding_limit;
-use voxflex_runtime::session::{RenderParams, Session, SessionDefaults};
+use voxflex_runtime::session::{RenderParams, Session};
 
 /// The head phantom's size: small planes, many of them, so that every
 /// stage's slab (the ray caster's is 11 planes of the deformed volume)
@@ -29,18 +29,12 @@ fn session(
     backend: BackendChoice,
     gpu: Option<std::sync::Arc<voxflex_runtime::gpu_context::WgpuService>>,
 ) -> Session {
-    let defaults = SessionDefaults {
-        backend,
-        plugin_dirs: vec![plugin_dir(&["affine", "raycast"])],
-        gpu,
-        ..SessionDefaults::default()
-    };
     let volume = phantom("head", DIMS).unwrap();
     assert!(
         volume.grid.len() as u64 * 4 > 2 * BINDING,
         "the volume must exceed one binding"
     );
-    Session::from_volume(volume, defaults).unwrap()
+    session_on(volume, backend, gpu, &["affine", "raycast"])
 }
 
 #[test]
