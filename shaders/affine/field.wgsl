@@ -17,7 +17,7 @@ struct Uniforms {
     region: vec4<f32>,      // centre (mm), radius (mm; 0 = unconfined)
     origin: vec4<f32>,      // lattice origin (mm)
     spacing: vec4<f32>,     // lattice spacing (mm)
-    counts: vec4<u32>,      // nx, ny, nz, points
+    counts: vec4<u32>,      // nx, ny, nz (lattice); w unused
     slab: vec4<u32>,        // first point, points of this dispatch
 }
 

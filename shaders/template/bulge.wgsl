@@ -14,7 +14,7 @@ struct Uniforms {
     amplitude: vec4<f32>,     // x: ramped amplitude (mm)
     origin: vec4<f32>,        // lattice origin (mm)
     spacing: vec4<f32>,       // lattice spacing (mm)
-    counts: vec4<u32>,        // nx, ny, nz, points
+    counts: vec4<u32>,        // nx, ny, nz (lattice); w unused
     mode: vec4<u32>,          // x: 0 lattice, 1 list; y: first point; z: points
 }
 

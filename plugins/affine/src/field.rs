@@ -23,7 +23,8 @@ pub struct FieldUniforms {
     pub origin: [f32; 4],
     /// Lattice spacing (mm), unused w.
     pub spacing: [f32; 4],
-    /// Lattice dims nx, ny, nz and point count (u32).
+    /// Lattice dims nx, ny, nz (u32; lattice bindings), w unused (the
+    /// points of a dispatch are its `slab`'s).
     pub counts: [u32; 4],
     /// The dispatch's slab of points: its first point and its point count
     /// (u32; the point arrays are bound from that first point on, see
@@ -93,12 +94,7 @@ impl FieldUniforms {
             g.spacing.z as f32,
             0.0,
         ];
-        self.counts = [
-            g.dims[0] as u32,
-            g.dims[1] as u32,
-            g.dims[2] as u32,
-            g.len() as u32,
-        ];
+        self.counts = [g.dims[0] as u32, g.dims[1] as u32, g.dims[2] as u32, 0];
         self
     }
 
@@ -111,10 +107,10 @@ impl FieldUniforms {
         self
     }
 
-    /// Sets an explicit point list of `n` points (mode 1).
-    pub fn with_list(mut self, n: usize) -> Self {
+    /// Sets an explicit point list (mode 1).
+    pub fn with_list(mut self) -> Self {
         self.header[3] = 1;
-        self.counts = [0, 0, 0, n as u32];
+        self.counts = [0; 4];
         self
     }
 

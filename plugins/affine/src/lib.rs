@@ -127,7 +127,7 @@ impl AffineField {
         let binding = self.binding(id)?;
         let (u, n) = match binding {
             Binding::Lattice(g) => (self.uniforms().with_lattice(g), g.len()),
-            Binding::List { points, .. } => (self.uniforms().with_list(points.len()), points.len()),
+            Binding::List { points, .. } => (self.uniforms().with_list(), points.len()),
         };
         if x.len() != n || y.len() != n || z.len() != n {
             return Err(ModelError(format!(
@@ -184,7 +184,7 @@ impl AffineField {
                 g.len()
             }
             Binding::List { points, .. } => {
-                u = u.with_list(points.len());
+                u = u.with_list();
                 points.len()
             }
         };

@@ -24,7 +24,8 @@ pub struct FieldUniforms {
     pub origin: [f32; 4],
     /// Lattice spacing (mm), w unused (lattice bindings only).
     pub spacing: [f32; 4],
-    /// Lattice dims nx, ny, nz (lattice bindings) and the point count.
+    /// Lattice dims nx, ny, nz (lattice bindings), w unused (the points of
+    /// a dispatch are its slab's, in `mode`).
     pub counts: [u32; 4],
     /// x: 0 = the points are every node of the lattice, 1 = an explicit
     /// list (the kernel reads them from its point buffers); y, z: the
@@ -61,12 +62,7 @@ impl FieldUniforms {
             g.spacing.z as f32,
             0.0,
         ];
-        self.counts = [
-            g.dims[0] as u32,
-            g.dims[1] as u32,
-            g.dims[2] as u32,
-            g.len() as u32,
-        ];
+        self.counts = [g.dims[0] as u32, g.dims[1] as u32, g.dims[2] as u32, 0];
         self
     }
 
@@ -80,10 +76,10 @@ impl FieldUniforms {
         self
     }
 
-    /// The same constants, for an explicit list of `n` points (mode 1).
-    pub fn with_list(mut self, n: usize) -> Self {
+    /// The same constants, for an explicit list of points (mode 1).
+    pub fn with_list(mut self) -> Self {
         self.mode[0] = 1;
-        self.counts = [0, 0, 0, n as u32];
+        self.counts = [0; 4];
         self
     }
 

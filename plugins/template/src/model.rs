@@ -111,7 +111,7 @@ impl TemplateField {
         let binding = self.binding(id)?;
         let (u, n) = match binding {
             Binding::Lattice(g) => (self.uniforms().with_lattice(g), g.len()),
-            Binding::List { points, .. } => (self.uniforms().with_list(points.len()), points.len()),
+            Binding::List { points, .. } => (self.uniforms().with_list(), points.len()),
         };
         if x.len() != n || y.len() != n || z.len() != n {
             return Err(ModelError(format!(
@@ -146,7 +146,7 @@ impl TemplateField {
             .ok_or_else(|| ModelError::new("map to GPU buffers, but the host gave no GPU"))?;
         let (u, n) = match self.binding(id)? {
             Binding::Lattice(g) => (self.uniforms().with_lattice(g), g.len()),
-            Binding::List { points, .. } => (self.uniforms().with_list(points.len()), points.len()),
+            Binding::List { points, .. } => (self.uniforms().with_list(), points.len()),
         };
         if n > u32::MAX as usize {
             return Err(ModelError(format!(
