@@ -423,13 +423,19 @@ impl GpuGrowth {
                 // The values are bound over the z-planes the working box
                 // spans; that window is at least as large as every other
                 // per-box buffer (at most 4 bytes per box voxel).
-                let (_, bytes) = self.values_window(gpu);
+                let (first, bytes) = self.values_window(gpu);
                 check_binding(
                     gpu,
                     "the working box's planes of the volume's values (f32)",
                     bytes,
                 )?;
-                let (visits, useful) = self.one_step(gpu, values)?;
+                let window = BufferBinding {
+                    binding: bind::VALUES,
+                    buffer: values.values,
+                    offset: first * 4,
+                    size: bytes,
+                };
+                let (visits, useful) = self.one_step(gpu, window)?;
                 rep.steps += 1;
                 rep.visits += visits;
                 rep.useful += useful;
@@ -564,20 +570,14 @@ impl GpuGrowth {
         gpu.write_buffer(self.params_buf.id, 0, bytemuck::bytes_of(&p))
     }
 
-    /// One step; returns (visits, useful).
+    /// One step, the values bound as `values` (the window the caller
+    /// checked, [`Self::values_window`]); returns (visits, useful).
     fn one_step(
         &mut self,
         gpu: &dyn GpuService,
-        values: &GpuOpacityVolume,
+        values: BufferBinding,
     ) -> Result<(u64, u64), GpuError> {
         let b = |binding, o: &Owned| BufferBinding::whole(binding, o.id);
-        let (first, bytes) = self.values_window(gpu);
-        let values = BufferBinding {
-            binding: bind::VALUES,
-            buffer: values.values,
-            offset: first * 4,
-            size: bytes,
-        };
         let box_len = self.state.work.len() as u64;
         let bound = (26 * self.n_front as u64).min(box_len);
         self.cand
