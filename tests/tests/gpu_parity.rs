@@ -11,50 +11,34 @@ use voxflex_core::grid::Grid;
 use voxflex_integration_tests::*;
 use voxflex_runtime::gpu_context::testing::test_gpu;
 
+/// Every field, on the device as it is and on one that binds at most
+/// 4 KiB per storage array (1,024 f32), where the 11,220-point lattice and
+/// its 2,244-point list are written in windows (11 and 3 dispatches; the
+/// wrapper refuses any larger or misaligned binding) — as a 512³ volume's
+/// 512 MiB displacement arrays are on a device with 128 MiB bindings.
 #[test]
 fn affine_plugin_wgsl_field_matches_its_rayon_field() {
     let Some(gpu) = test_gpu() else { return };
     let gpu: Arc<dyn GpuService> = gpu;
+    let small: Arc<dyn GpuService> = Arc::new(LimitedDevice::binding(gpu.clone(), 4096));
     let grid = Grid::centred([33, 20, 17], DVec3::new(0.9, 1.1, 2.5));
-    for params in [
-        "field = \"twist\"\naxis = \"z\"\nangle_deg = 75",
-        "field = \"bend\"\naxis = \"y\"\ntowards = \"x\"\nangle_deg = 40",
-        "field = \"affine\"\nmatrix = [[1.1, 0.2, 0, 3], [0, 0.9, 0.1, -2], [0.05, 0, 1, 1]]",
-        "field = \"twist\"\nangle_deg = 90\nregion = { centre = [2, 1, 0], radius = 9 }",
-    ] {
-        let mut m = field_plugin_on_gpu(gpu.clone(), "affine", params, grid);
-        for r in field_parity(&mut m, gpu.as_ref(), grid, 5) {
-            assert!(r.largest > 0.1, "{params}: the field must move something");
-            assert!(
-                r.worst <= 1e-4,
-                "{params}: GPU and CPU fields differ by {} mm",
-                r.worst
-            );
+    for device in [gpu, small] {
+        for params in [
+            "field = \"twist\"\naxis = \"z\"\nangle_deg = 75",
+            "field = \"bend\"\naxis = \"y\"\ntowards = \"x\"\nangle_deg = 40",
+            "field = \"affine\"\nmatrix = [[1.1, 0.2, 0, 3], [0, 0.9, 0.1, -2], [0.05, 0, 1, 1]]",
+            "field = \"twist\"\nangle_deg = 90\nregion = { centre = [2, 1, 0], radius = 9 }",
+        ] {
+            let mut m = field_plugin_on_gpu(device.clone(), "affine", params, grid);
+            for r in field_parity(&mut m, device.as_ref(), grid, 5) {
+                assert!(r.largest > 0.1, "{params}: the field must move something");
+                assert!(
+                    r.worst <= 1e-4,
+                    "{params}: GPU and CPU fields differ by {} mm",
+                    r.worst
+                );
+            }
         }
-    }
-}
-
-/// On a device that binds at most 4 KiB per storage array (1,024 f32),
-/// the 11,220-point lattice and its 3,740-point list are written in
-/// windows (11 and 4 dispatches; the wrapper refuses any larger or
-/// misaligned binding), and still equal the rayon field — as a 512³
-/// volume's 512 MiB displacement arrays are on a device with 128 MiB
-/// bindings.
-#[test]
-fn affine_plugin_writes_arrays_above_one_binding_in_slabs() {
-    let Some(gpu) = test_gpu() else { return };
-    let inner: Arc<dyn GpuService> = gpu;
-    let small: Arc<dyn GpuService> = Arc::new(LimitedDevice::binding(inner, 4096));
-    let grid = Grid::centred([33, 20, 17], DVec3::new(0.9, 1.1, 2.5));
-    let params = "field = \"twist\"\naxis = \"z\"\nangle_deg = 75";
-    let mut m = field_plugin_on_gpu(small.clone(), "affine", params, grid);
-    for r in field_parity(&mut m, small.as_ref(), grid, 3) {
-        assert!(r.largest > 0.1, "the field must move something");
-        assert!(
-            r.worst <= 1e-4,
-            "slabbed GPU and CPU fields differ by {} mm",
-            r.worst
-        );
     }
 }
 
