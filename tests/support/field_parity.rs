@@ -95,3 +95,30 @@ pub fn field_parity(
     }
     out
 }
+
+/// For each device of `devices` and each parameter table of `params`:
+/// plugin `name` on `grid`, its lattice and every `stride`-th point
+/// ([`field_parity`]); asserts that the field moves something (more than
+/// 0.1 mm) and that GPU and CPU agree within `tolerance_mm`.
+pub fn assert_field_parity(
+    devices: &[Arc<dyn GpuService>],
+    name: &str,
+    params: &[&str],
+    grid: Grid,
+    stride: usize,
+    tolerance_mm: f32,
+) {
+    for device in devices {
+        for p in params {
+            let mut m = field_plugin_on_gpu(device.clone(), name, p, grid);
+            for r in field_parity(&mut m, device.as_ref(), grid, stride) {
+                assert!(r.largest > 0.1, "{p}: the field must move something");
+                assert!(
+                    r.worst <= tolerance_mm,
+                    "{p}: GPU and CPU fields differ by {} mm",
+                    r.worst
+                );
+            }
+        }
+    }
+}

@@ -9,7 +9,7 @@
 #![warn(missing_docs)]
 
 mod field_parity;
-pub use field_parity::{FieldParity, field_parity, field_plugin_on_gpu};
+pub use field_parity::{FieldParity, assert_field_parity, field_parity, field_plugin_on_gpu};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
