@@ -17,6 +17,7 @@ use crate::filters;
 use crate::gradient_cache::GradientCache;
 use crate::macrocell::MacroCells;
 use crate::ray_bounds::RayBounds;
+use crate::step_opacity::StepOpacity;
 use crate::transfer::Lut;
 use crate::uniforms::{
     FLAG_BACKGROUND, FLAG_EARLY_TERMINATION, FLAG_ESS, FLAG_JITTER, FLAG_MAP_NEAREST, FLAG_SHADING,
@@ -45,6 +46,9 @@ pub struct Scene<'a> {
     pub values: VoxelSlice<'a>,
     /// The transfer function table.
     pub lut: &'a Lut,
+    /// `lut`'s opacity over one step (made for `u.step[0]` mm, the full
+    /// steps; a sample of another length computes its own).
+    pub step_opacity: &'a StepOpacity,
     /// The macro-cells (min/max).
     pub cells: &'a MacroCells,
     /// Per-cell leap distances under `lut` ([`MacroCells::leap_distances`]).
@@ -123,6 +127,11 @@ struct Kernel<'a, T> {
     visible: Option<&'a VisibleCells>,
     /// The frame's [`RayBounds`] (composite mode, skipping on).
     bounds: Option<&'a RayBounds>,
+    /// The step (mm) of the scene's [`StepOpacity`]: samples of that
+    /// length read their opacity from it.
+    table_step: f32,
+    /// The scene's [`StepOpacity`] (held here: one load less per sample).
+    step_opacity: &'a StepOpacity,
 }
 
 #[inline(always)]
@@ -166,6 +175,8 @@ impl<'a, T: Sample> Kernel<'a, T> {
             bounds: s
                 .bounds
                 .filter(|_| u.flags() & FLAG_ESS != 0 && u.image[3] == 0),
+            table_step: s.step_opacity.step_mm(),
+            step_opacity: s.step_opacity,
         }
     }
 
@@ -558,13 +569,17 @@ impl<'a, T: Sample> Kernel<'a, T> {
             }
             let v = self.sample_at(p, &fp);
             samples += 1;
-            let Some([r, g, b, kappa]) = lut.lookup_visible(v) else {
+            let Some(([r, g, b, kappa], place)) = lut.lookup_visible_placed(v) else {
                 continue;
             };
             if kappa <= 0.0 {
                 continue;
             }
-            let mut alpha = 1.0 - (-kappa * len).exp();
+            let mut alpha = if len == self.table_step {
+                self.step_opacity.at(place)
+            } else {
+                1.0 - (-kappa * len).exp()
+            };
             if let Some(m) = map {
                 alpha *= self.map_factor(m, &fp, p);
             }

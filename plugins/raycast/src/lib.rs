@@ -128,6 +128,7 @@ pub mod maps;
 pub mod params;
 pub mod ray_bounds;
 pub(crate) mod slabs;
+pub mod step_opacity;
 pub mod transfer;
 pub mod uniforms;
 pub mod views;
@@ -143,6 +144,7 @@ use macrocell::{IndexBox, MacroCells, dirty_voxels};
 use ray_bounds::{RayBounds, ShownCells};
 use rayon::prelude::*;
 use std::sync::Arc;
+use step_opacity::StepOpacity;
 use transfer::{Lut, TransferFunction, ValueUnits};
 use uniforms::RayUniforms;
 use visible_cells::VisibleCells;
@@ -167,6 +169,8 @@ struct LutCache {
     range: (f32, f32),
     lut: Lut,
     generation: u64,
+    /// CPU backend: `lut`'s opacity over the last frame's full step.
+    step_opacity: Option<StepOpacity>,
 }
 
 /// The ray-casting renderer (the `raycast` plugin's [`Renderer`]).
@@ -349,6 +353,7 @@ impl RaycastRenderer {
             unit,
             range,
             generation: self.lut_generation,
+            step_opacity: None,
         });
         Ok(self.lut_generation)
     }
@@ -424,7 +429,17 @@ impl RaycastRenderer {
         let u = self.frame(camera)?;
         let clock = std::time::Instant::now();
         self.ensure_cpu_acceleration();
-        let lut = &self.lut.as_ref().expect("made by frame").lut;
+        let cache = self.lut.as_mut().expect("made by frame");
+        if cache
+            .step_opacity
+            .as_ref()
+            .is_none_or(|t| t.step_mm() != u.step[0])
+        {
+            cache.step_opacity = Some(StepOpacity::new(&cache.lut, u.step[0]));
+        }
+        let cache = self.lut.as_ref().expect("made by frame");
+        let lut = &cache.lut;
+        let step_opacity = cache.step_opacity.as_ref().expect("made above");
         let leap = &self.leap.as_ref().expect("made above").2;
         // Visible cells hold for trilinear footprints only; they narrow the
         // ray bounds where a macro cell is one brick (the default edge).
@@ -448,6 +463,7 @@ impl RaycastRenderer {
             u: &u,
             values: self.values.as_slice(),
             lut,
+            step_opacity,
             cells: &self.cells,
             leap,
             map: self.combined.as_ref().and_then(|m| m.as_ref()),

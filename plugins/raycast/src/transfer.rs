@@ -255,6 +255,16 @@ fn first_passing(pass: impl Fn(f32) -> bool) -> Option<f32> {
     Some(from_order_key(hi))
 }
 
+/// Where a data value falls in a [`LUT_SIZE`]-entry table: between entry
+/// `entry` (≤ `LUT_SIZE − 2`) and the next, `frac` ∈ [0, 1] of the way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TablePlace {
+    /// The entry below the value.
+    pub entry: usize,
+    /// The fraction of the way to the next entry.
+    pub frac: f32,
+}
+
 /// The precomputed transfer function both paths sample identically:
 /// [`LUT_SIZE`] entries of **linear** RGB and extinction κ (per mm), linearly
 /// interpolated, clamped at the ends.
@@ -289,9 +299,16 @@ impl Lut {
     /// of the `ct-bone` head lie in soft tissue next to bone).
     #[inline(always)]
     pub fn lookup_visible(&self, v: f32) -> Option<[f32; 4]> {
+        self.lookup_visible_placed(v).map(|(x, _)| x)
+    }
+
+    /// [`Lut::lookup_visible`], with where `v` fell in the table (for
+    /// tables indexed like this one: [`crate::step_opacity::StepOpacity`]).
+    #[inline(always)]
+    pub fn lookup_visible_placed(&self, v: f32) -> Option<([f32; 4], TablePlace)> {
         let (e0, f) = self.position(v);
         let (first, last) = self.visible;
-        (e0 + 1 >= first && e0 <= last).then(|| self.at(e0, f))
+        (e0 + 1 >= first && e0 <= last).then(|| (self.at(e0, f), TablePlace { entry: e0, frac: f }))
     }
 
     /// The table entry below `v` (the one [`Lut::lookup`] interpolates
