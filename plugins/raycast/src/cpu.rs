@@ -108,8 +108,9 @@ struct Kernel<'a, T> {
     /// The scene's voxels, typed.
     values: &'a [T],
     dims: [usize; 3],
-    /// Largest lower-corner index per axis (`max(n, 2) − 2`).
-    max0: [usize; 3],
+    /// Largest lower-corner index per axis (`max(n, 2) − 2`; the grid's
+    /// axes are at most [`crate::MAX_AXIS`] voxels).
+    max0: [i32; 3],
     /// Offset to the upper corner per axis (0 on a 1-voxel axis).
     off: [usize; 3],
     /// Voxel-index upper bound `n − 1` per axis.
@@ -148,7 +149,7 @@ impl<'a, T: Sample> Kernel<'a, T> {
             s,
             values,
             dims,
-            max0: dims.map(|n| n.max(2) - 2),
+            max0: dims.map(|n| (n.clamp(2, crate::MAX_AXIS) - 2) as i32),
             off: std::array::from_fn(|a| if dims[a] > 1 { strides[a] } else { 0 }),
             upper: Vec3::new(
                 dims[0].max(1) as f32 - 1.0,
@@ -229,14 +230,15 @@ impl<'a, T: Sample> Kernel<'a, T> {
     #[inline(always)]
     fn footprint(&self, p: Vec3) -> Footprint {
         let p = p.clamp(Vec3::ZERO, self.upper);
-        let i = [
-            (p.x as usize).min(self.max0[0]),
-            (p.y as usize).min(self.max0[1]),
-            (p.z as usize).min(self.max0[2]),
+        let c = [
+            whole(p.x).min(self.max0[0]),
+            whole(p.y).min(self.max0[1]),
+            whole(p.z).min(self.max0[2]),
         ];
+        let i = c.map(|c| c as usize);
         Footprint {
             i,
-            f: p - Vec3::new(i[0] as f32, i[1] as f32, i[2] as f32),
+            f: p - Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32),
             base: i[0] + self.dims[0] * (i[1] + self.dims[1] * i[2]),
         }
     }
@@ -685,6 +687,19 @@ fn block_exit(c: [usize; 3], d: u32, size: f32, oi: Vec3, di: Vec3, inv_di: Vec3
     t
 }
 
+/// The whole part of `x`, a coordinate already clamped to `[0, n − 1]` of
+/// a grid axis: one truncating conversion, without the range fix-ups of
+/// `as usize` (3–4 % of a steady frame, docs/BENCHMARKS.md).
+#[inline(always)]
+fn whole(x: f32) -> i32 {
+    debug_assert!((0.0..=crate::MAX_AXIS as f32).contains(&x), "{x}");
+    // SAFETY: the caller clamps `x` to `[0, n − 1]` with glam's `clamp`
+    // (which maps NaN to the lower bound), and the renderer refuses axes
+    // longer than `MAX_AXIS` = 2³⁰ voxels (`check_grid`), so `x` is finite
+    // and in [0, 2³⁰] — truncation to `i32` is defined there.
+    unsafe { x.to_int_unchecked::<i32>() }
+}
+
 /// `x^n` by squaring, inlined: the multiplications of the runtime's
 /// `__powisf2`, which `f32::powi` calls for an exponent known only at run
 /// time (the call was 1.2 % of a shaded frame), in the same order, so the
@@ -786,7 +801,32 @@ impl ImagePtr {
 
 #[cfg(test)]
 mod tests {
-    use super::powi;
+    use super::{powi, whole};
+    use voxflex_core::glam::Vec3;
+
+    /// `whole`'s safety rests on glam's `clamp` turning every f32 —
+    /// NaN and the infinities included — into a finite value inside the
+    /// bounds; and on its truncation matching `as` there.
+    #[test]
+    fn clamped_coordinates_are_finite_and_truncate_like_as() {
+        let upper = Vec3::new(511.0, 1.0, crate::MAX_AXIS as f32 - 1.0);
+        for x in [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.0,
+            -3.5,
+            0.49,
+            7.99,
+            1e12,
+        ] {
+            let p = Vec3::splat(x).clamp(Vec3::ZERO, upper);
+            for (c, hi) in p.to_array().into_iter().zip(upper.to_array()) {
+                assert!((0.0..=hi).contains(&c), "{x} → {c}");
+                assert_eq!(whole(c) as i64, c as i64, "{x} → {c}");
+            }
+        }
+    }
 
     /// The inlined power is `f32::powi`, bit for bit, for every whole
     /// shininess the renderer uses it for and bases across [0, 1].

@@ -159,6 +159,11 @@ use voxflex_core::render::{ImageTarget, RenderStats, RenderVolume, Renderer};
 use voxflex_core::volume::{ScalarType, VolumeView};
 use voxflex_core::with_voxels;
 
+/// Most voxels along one axis of a volume (2³⁰: the CPU path's coordinates
+/// truncate to `i32` without range checks, and `2³⁰ − 1` is still below
+/// 2³¹ once rounded to f32).
+pub const MAX_AXIS: usize = 1 << 30;
+
 /// Largest image, pixels (keeps every index in u32 on both paths).
 pub const MAX_PIXELS: u64 = 1 << 28;
 
@@ -656,10 +661,12 @@ fn check_grid(grid: &Grid) -> Result<(), ModelError> {
             grid.dims
         )));
     }
-    if grid.dims.iter().any(|&n| n > u32::MAX as usize) || grid.len() > u32::MAX as usize {
+    if grid.dims.iter().any(|&n| n > MAX_AXIS) || grid.len() > u32::MAX as usize {
         return Err(ModelError(format!(
-            "volume dims {:?} exceed the renderer's u32 voxel indices",
-            grid.dims
+            "volume dims {:?} exceed the renderer's voxel indices (at most {MAX_AXIS} voxels \
+             per axis and {} in all); crop or downsample the volume",
+            grid.dims,
+            u32::MAX
         )));
     }
     if !(grid.spacing.is_finite() && grid.spacing.min_element() > 0.0 && grid.origin.is_finite()) {

@@ -973,3 +973,23 @@ fn gpu_renders_512_cubed_on_128_mib_bindings() {
         assert!(got.chunks(4).any(|p| p[3] > 0));
     }
 }
+
+/// Grids the renderer's indices cannot hold are refused with the limit
+/// named; the largest accepted axis is `MAX_AXIS` (the CPU path's unchecked
+/// coordinate truncation relies on it), on every axis.
+#[test]
+fn grids_beyond_the_voxel_indices_are_refused() {
+    for axis in 0..3 {
+        let mut dims = [1, 1, 1];
+        dims[axis] = MAX_AXIS;
+        assert!(check_grid(&Grid::new(dims, DVec3::ONE, DVec3::ZERO)).is_ok());
+        dims[axis] = MAX_AXIS + 1;
+        let err = check_grid(&Grid::new(dims, DVec3::ONE, DVec3::ZERO)).unwrap_err();
+        assert!(
+            err.0.contains("per axis") && err.0.contains(&MAX_AXIS.to_string()),
+            "{err}"
+        );
+    }
+    let err = check_grid(&Grid::new([1 << 16, 1 << 16, 2], DVec3::ONE, DVec3::ZERO)).unwrap_err();
+    assert!(err.0.contains("in all"), "{err}");
+}
