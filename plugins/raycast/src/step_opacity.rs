@@ -76,16 +76,21 @@ mod tests {
     use super::*;
     use crate::transfer::{PRESETS, TransferFunction};
 
+    /// Every preset's table over a CT's value range.
+    fn preset_luts() -> impl Iterator<Item = (&'static str, Lut)> {
+        PRESETS.into_iter().map(|name| {
+            let tf = TransferFunction::preset(name).unwrap();
+            (name, tf.lut((-1024.0, 3071.0), 1.0))
+        })
+    }
+
     /// Every preset, steps from 0.05 to 4 mm, every entry and fractions
     /// across it: the interpolated opacity is within the analytic bound
     /// (plus the f32 rounding of both sides) of `1 − exp(−κ Δt)` with κ
     /// interpolated as the colours are, and exact at the entries.
     #[test]
     fn interpolated_opacity_is_within_the_concavity_bound() {
-        for name in PRESETS {
-            let lut = TransferFunction::preset(name)
-                .unwrap()
-                .lut((-1024.0, 3071.0), 1.0);
+        for (name, lut) in preset_luts() {
             for step in [0.05f32, 0.35, 1.0, 4.0] {
                 let table = StepOpacity::new(&lut, step);
                 assert_eq!(table.step_mm(), step);
@@ -119,10 +124,7 @@ mod tests {
     /// the table changes an image by less than an f32 `exp`'s rounding.
     #[test]
     fn the_bound_is_below_f32_rounding_at_the_default_step() {
-        for name in PRESETS {
-            let lut = TransferFunction::preset(name)
-                .unwrap()
-                .lut((-1024.0, 3071.0), 1.0);
+        for (name, lut) in preset_luts() {
             // 0.5 voxel of a 0.7 mm CT.
             let table = StepOpacity::new(&lut, 0.35);
             let worst = (0..LUT_SIZE - 1)
