@@ -993,3 +993,42 @@ fn grids_beyond_the_voxel_indices_are_refused() {
     let err = check_grid(&Grid::new([1 << 16, 1 << 16, 2], DVec3::ONE, DVec3::ZERO)).unwrap_err();
     assert!(err.0.contains("in all"), "{err}");
 }
+
+/// The CPU path's step opacity table follows every change that moves it —
+/// a new transfer function or opacity unit at the same step, a new sample
+/// distance, a new voxel spacing — so a renderer that changed renders
+/// what a fresh one with the new settings renders, byte for byte.
+#[test]
+fn a_changed_table_or_step_renders_as_a_fresh_renderer() {
+    let vol = head(32);
+    let cam = fit_camera(&vol.grid, 40, 40, 30.0, 15.0, None);
+    let mut r = with_volume(cpu(""), &vol);
+    let (first, _) = rgba8(&mut r, &cam);
+    for settings in [
+        "opacity_unit_distance = 2.5",
+        "transfer_function = { preset = \"ct-soft-tissue\" }",
+        "sample_distance = 0.8",
+    ] {
+        r.configure(settings).unwrap();
+        let (changed, _) = rgba8(&mut r, &cam);
+        let (fresh, _) = rgba8(&mut with_volume(like(&r), &vol), &cam);
+        assert_eq!(changed, fresh, "after `{settings}`");
+        assert_ne!(changed, first, "`{settings}` changed nothing");
+    }
+    // The same voxels at another spacing: the step in mm changes.
+    let mut stretched = vol.clone();
+    stretched.grid.spacing *= 1.5;
+    r.set_volume(RenderVolume::Cpu(stretched.view()), DirtyRegion::All)
+        .unwrap();
+    let cam = fit_camera(&stretched.grid, 40, 40, 30.0, 15.0, None);
+    let (changed, _) = rgba8(&mut r, &cam);
+    let (fresh, _) = rgba8(&mut with_volume(like(&r), &stretched), &cam);
+    assert_eq!(changed, fresh, "after a new spacing");
+}
+
+/// A fresh CPU renderer with `r`'s parameters.
+fn like(r: &RaycastRenderer) -> RaycastRenderer {
+    let mut fresh = RaycastRenderer::with_params(r.params().clone(), None).unwrap();
+    fresh.init(ExecutionBackend::Cpu).unwrap();
+    fresh
+}
