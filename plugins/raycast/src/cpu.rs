@@ -128,9 +128,6 @@ struct Kernel<'a, T> {
     visible: Option<&'a VisibleCells>,
     /// The frame's [`RayBounds`] (composite mode, skipping on).
     bounds: Option<&'a RayBounds>,
-    /// The step (mm) of the scene's [`StepOpacity`]: samples of that
-    /// length read their opacity from it.
-    table_step: f32,
     /// The scene's [`StepOpacity`] (held here: one load less per sample).
     step_opacity: &'a StepOpacity,
 }
@@ -176,7 +173,6 @@ impl<'a, T: Sample> Kernel<'a, T> {
             bounds: s
                 .bounds
                 .filter(|_| u.flags() & FLAG_ESS != 0 && u.image[3] == 0),
-            table_step: s.step_opacity.step_mm(),
             step_opacity: s.step_opacity,
         }
     }
@@ -577,7 +573,7 @@ impl<'a, T: Sample> Kernel<'a, T> {
             if kappa <= 0.0 {
                 continue;
             }
-            let mut alpha = if len == self.table_step {
+            let mut alpha = if len == self.step_opacity.step_mm() {
                 self.step_opacity.at(place)
             } else {
                 1.0 - (-kappa * len).exp()
