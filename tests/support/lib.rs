@@ -237,3 +237,34 @@ pub fn session_on(
     };
     voxflex_runtime::session::Session::from_volume(volume, defaults).expect("a session")
 }
+
+/// A linear function of LPS position (mm): what an oblique file's voxels
+/// hold in the oblique-header tests, reproduced exactly by trilinear
+/// interpolation wherever it is resampled.
+pub fn oblique_ramp(p: [f64; 3]) -> f64 {
+    p[0] + 2.0 * p[1] + 3.0 * p[2] + 50.0
+}
+
+/// A 6 × 5 × 4 float NRRD whose i and j axes are turned by 30° about z
+/// (1 mm voxels, origin (10, 20, 30) mm, LPS), holding [`oblique_ramp`].
+pub fn write_oblique_nrrd(dir: &std::path::Path) {
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let mut values = Vec::new();
+    for k in 0..4 {
+        for j in 0..5 {
+            for i in 0..6 {
+                let (i, j, k) = (i as f64, j as f64, k as f64);
+                let p = [10.0 + c * i - s * j, 20.0 + s * i + c * j, 30.0 + k];
+                values.push(format!("{}", oblique_ramp(p) as f32));
+            }
+        }
+    }
+    let nrrd = format!(
+        "NRRD0004\ntype: float\ndimension: 3\nspace: left-posterior-superior\n\
+         sizes: 6 5 4\nspace directions: ({c},{s},0) ({},{c},0) (0,0,1)\n\
+         space origin: (10,20,30)\nencoding: ascii\n\n{}\n",
+        -s,
+        values.join(" ")
+    );
+    std::fs::write(dir.join("oblique.nrrd"), nrrd).unwrap();
+}

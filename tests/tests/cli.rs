@@ -442,6 +442,83 @@ fn info_applies_header_orientation() {
     assert!(out.contains("i→+z, j→−x, k→+y"), "{out}");
 }
 
+/// An oblique header is placed along its closest axes by default, with a
+/// warning that names the angle and the option; with `--oblique linear`
+/// (CLI) or `[volume] oblique = "linear"` (scene) it is resampled onto the
+/// axis-aligned grid that holds it, every voxel where the header puts it.
+#[test]
+fn oblique_headers_are_resampled_where_the_header_puts_them_on_request() {
+    plugin_dir(&[]);
+    let tmp = tempfile::tempdir().unwrap();
+    write_oblique_nrrd(tmp.path());
+    let o = voxflex(&["info", "oblique.nrrd"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let out = text(&o);
+    assert!(out.contains("6 × 5 × 4 voxels"), "{out}");
+    assert!(
+        out.contains("oblique by 30.00°") && out.contains("--oblique linear"),
+        "{out}"
+    );
+    // The corners span 5 cos 30° + 4 sin 30° = 6.33 mm along x and
+    // 5 sin 30° + 4 cos 30° = 5.96 mm along y: 8 × 7 voxel centres.
+    let o = voxflex(&["info", "oblique.nrrd", "--oblique", "linear"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let out = text(&o);
+    assert!(
+        out.contains("8 × 7 × 4 voxels") && !out.contains("WARN"),
+        "{out}"
+    );
+    let o = voxflex(&["info", "oblique.nrrd", "--oblique", "cubic"], tmp.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("closest-axes"), "{}", text(&o));
+
+    let out_dir = tmp.path().join("out");
+    std::fs::write(
+        tmp.path().join("s.toml"),
+        format!(
+            "[scene]\nname = \"oblique\"\nbackend = \"cpu\"\n\n[volume]\n\
+             source = \"oblique.nrrd\"\noblique = \"linear\"\n\n[output]\ndir = \"{}\"\n\
+             nifti = \"copy.nii.gz\"\n",
+            out_dir.display()
+        ),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "s.toml"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let v = voxflex_io::read_volume(&out_dir.join("copy.nii.gz"), &Default::default()).unwrap();
+    assert_eq!(v.grid.dims, [8, 7, 4]);
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let values = v.data.as_slice().to_f32_vec();
+    let mut inside = 0;
+    for (l, value) in values.into_iter().enumerate() {
+        let p = v.grid.index_to_world(voxflex_core::glam::DVec3::from_array(
+            v.grid.unlinear(l).map(|x| x as f64),
+        ));
+        // The header's inverse: world → file index.
+        let (dx, dy) = (p.x - 10.0, p.y - 20.0);
+        let (i, j, k) = (c * dx + s * dy, -s * dx + c * dy, p.z - 30.0);
+        if i > 1e-6 && i < 5.0 - 1e-6 && j > 1e-6 && j < 4.0 - 1e-6 && (0.0..=3.0).contains(&k) {
+            inside += 1;
+            let want = oblique_ramp(p.to_array());
+            assert!((value as f64 - want).abs() < 1e-3, "{p}: {value} vs {want}");
+        }
+    }
+    assert!(inside >= 60, "{inside} voxels inside");
+    assert_eq!(metrics(&out_dir)["warnings"].as_array().unwrap().len(), 0);
+
+    // The default placement's warning reaches metrics.json too.
+    let scene = std::fs::read_to_string(tmp.path().join("s.toml")).unwrap();
+    std::fs::write(
+        tmp.path().join("s.toml"),
+        scene.replace("oblique = \"linear\"\n", ""),
+    )
+    .unwrap();
+    let o = voxflex(&["run", "s.toml", "--force"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let warnings = metrics(&out_dir)["warnings"].to_string();
+    assert!(warnings.contains("oblique by 30.00°"), "{warnings}");
+}
+
 #[test]
 fn a_cpu_only_plugin_runs_on_the_cpu_under_auto_and_is_refused_under_gpu() {
     plugin_dir(&["ripple"]);

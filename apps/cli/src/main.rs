@@ -79,9 +79,8 @@ enum Command {
     Info {
         /// A volume file (.nii, .nii.gz, .mhd, .nrrd) or `phantom:<name>`.
         volume: String,
-        /// Phantom resolution (x,y,z), phantoms only.
-        #[arg(long, value_delimiter = ',')]
-        dims: Option<Vec<usize>>,
+        #[command(flatten)]
+        load: LoadArgs,
     },
     /// Grow a spatial opacity map (ROI) from a seed and write it as NIfTI (u16, 65535 = opacity 1).
     Roi {
@@ -95,9 +94,8 @@ enum Command {
         out: PathBuf,
         #[command(flatten)]
         growth: RoiArgs,
-        /// Phantom resolution (x,y,z), phantoms only.
-        #[arg(long, value_delimiter = ',')]
-        dims: Option<Vec<usize>>,
+        #[command(flatten)]
+        load: LoadArgs,
     },
     /// Render a volume with the `raycast` plugin into a PNG (one image or a turntable).
     Render {
@@ -130,9 +128,8 @@ enum Command {
         /// Backend: cpu, gpu or auto.
         #[arg(long, default_value = "auto")]
         backend: voxflex_runtime::backend::BackendChoice,
-        /// Phantom resolution (x,y,z), phantoms only.
-        #[arg(long, value_delimiter = ',')]
-        dims: Option<Vec<usize>>,
+        #[command(flatten)]
+        load: LoadArgs,
         /// Ray step in voxels (`sample_distance`; default 0.5).
         #[arg(long)]
         step: Option<f64>,
@@ -289,14 +286,14 @@ fn dispatch(command: Command) -> Result<()> {
             params: Some(name),
         } => plugin_params(&name, dirs),
         Command::Plugins { dirs, params: None } => plugins(dirs),
-        Command::Info { volume, dims } => info(volume, dims),
+        Command::Info { volume, load } => info(volume, load),
         Command::Roi {
             volume,
             seed,
             out,
             growth,
-            dims,
-        } => roi(volume, dims, seed, out, growth),
+            load,
+        } => roi(volume, load, seed, out, growth),
         Command::Render {
             volume,
             out,
@@ -308,7 +305,7 @@ fn dispatch(command: Command) -> Result<()> {
             perspective,
             turntable,
             backend,
-            dims,
+            load,
             step,
             sampling,
             gradient,
@@ -336,7 +333,7 @@ fn dispatch(command: Command) -> Result<()> {
             );
             params.push_str(&filter_keys(step, sampling, gradient, jitter));
             render(
-                volume, dims, out, params, width, height, camera, turntable, backend, repeat,
+                volume, load, out, params, width, height, camera, turntable, backend, repeat,
             )
         }
         Command::Phantom {
@@ -507,11 +504,23 @@ fn plugins(dirs: Vec<PathBuf>) -> Result<()> {
     Ok(())
 }
 
-pub(crate) fn load_volume(
-    source: &str,
-    dims: Option<Vec<usize>>,
-) -> Result<voxflex_core::volume::Volume> {
+/// How a command that reads a volume directly loads it.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub(crate) struct LoadArgs {
+    /// Phantom resolution (x,y,z), phantoms only.
+    #[arg(long, value_delimiter = ',')]
+    pub dims: Option<Vec<usize>>,
+    /// A file whose header is oblique (axes rotated by other than multiples
+    /// of 90°): closest-axes (voxels kept, placed along the closest axes,
+    /// with a warning), linear or nearest (resampled where the header puts
+    /// it; nearest for label maps).
+    #[arg(long, default_value = "closest-axes")]
+    pub oblique: voxflex_io::ObliquePlacement,
+}
+
+pub(crate) fn load_volume(source: &str, load: LoadArgs) -> Result<voxflex_core::volume::Volume> {
     use voxflex_phantom::{VolumeSource, parse_source, phantom};
+    let LoadArgs { dims, oblique } = load;
     Ok(match parse_source(source) {
         VolumeSource::Phantom(name) => {
             let d = match dims.as_deref() {
@@ -525,13 +534,17 @@ pub(crate) fn load_volume(
             if dims.is_some() {
                 bail!("--dims applies to phantoms only");
             }
-            voxflex_io::read_volume(&p, &voxflex_io::ReadOptions::default())?
+            let opts = voxflex_io::ReadOptions {
+                oblique,
+                ..Default::default()
+            };
+            voxflex_io::read_volume(&p, &opts)?
         }
     })
 }
 
-fn info(source: String, dims: Option<Vec<usize>>) -> Result<()> {
-    let volume = load_volume(&source, dims)?;
+fn info(source: String, load: LoadArgs) -> Result<()> {
+    let volume = load_volume(&source, load)?;
     println!("{source}");
     println!(
         "{}",
@@ -572,13 +585,7 @@ struct RoiArgs {
     steps: Option<usize>,
 }
 
-fn roi(
-    source: String,
-    dims: Option<Vec<usize>>,
-    seed: Vec<f64>,
-    out: PathBuf,
-    a: RoiArgs,
-) -> Result<()> {
+fn roi(source: String, load: LoadArgs, seed: Vec<f64>, out: PathBuf, a: RoiArgs) -> Result<()> {
     use voxflex_opacity::{GrowthLimits, GrowthParams, LambdaChoice, RoiRequest, Seed, grow_roi};
     let [x, y, z] = seed[..] else {
         bail!("--seed needs three millimetre coordinates: x,y,z");
@@ -599,7 +606,7 @@ fn roi(
         Some(&[lo, hi]) => Some([lo, hi]),
         Some(_) => bail!("--intensity needs two values: lo,hi"),
     };
-    let volume = load_volume(&source, dims)?;
+    let volume = load_volume(&source, load)?;
     let req = RoiRequest {
         seed: Seed::World(voxflex_core::glam::DVec3::new(x, y, z)),
         params: GrowthParams {
@@ -672,7 +679,7 @@ fn filter_keys(
 #[allow(clippy::too_many_arguments)]
 fn render(
     source: String,
-    dims: Option<Vec<usize>>,
+    load: LoadArgs,
     out: PathBuf,
     params_toml: String,
     width: u32,
@@ -699,7 +706,7 @@ fn render(
     }
     // Shared with the renderer, not copied: it never changes here.
     let volume = voxflex_core::shared_volume::SharedVolume::new(std::sync::Arc::new(load_volume(
-        &source, dims,
+        &source, load,
     )?));
     let grid = volume.view().grid;
     let resolved = voxflex_runtime::backend::resolve(backend)?;

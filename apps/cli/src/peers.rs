@@ -123,7 +123,11 @@ pub fn resample(a: ResampleArgs) -> Result<String> {
         );
     }
     let t = Instant::now();
-    let volume = crate::load_volume(&a.volume, a.dims.clone())?;
+    let load = crate::LoadArgs {
+        dims: a.dims.clone(),
+        ..Default::default()
+    };
+    let volume = crate::load_volume(&a.volume, load)?;
     let load = t.elapsed();
     let (map, inverse) = analytic(a.field, a.angle_deg, &volume.grid);
     let field = Field::from_map(&volume.grid, &map);

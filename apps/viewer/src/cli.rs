@@ -32,6 +32,12 @@ pub struct Args {
     /// Backend the session computes on: cpu, gpu or auto.
     #[arg(long, default_value = "cpu")]
     pub backend: String,
+    /// A volume file whose header is oblique (axes rotated by other than
+    /// multiples of 90°): closest-axes (voxels kept, placed along the
+    /// closest axes, with a warning), linear or nearest (resampled where
+    /// the header puts it). A scene says this in `[volume] oblique`.
+    #[arg(long, default_value = "closest-axes")]
+    pub oblique: voxflex_io::ObliquePlacement,
     /// Run a performance benchmark headless (no window) through the real
     /// viewer (its update loop, worker and session), write its tables
     /// (JSON and Markdown) into `--out` and exit: `drag` (UI-thread frame

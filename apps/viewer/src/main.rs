@@ -41,6 +41,7 @@ fn main() -> anyhow::Result<()> {
         backend,
         plugin_dirs: vec![],
         gpu: None,
+        oblique: args.oblique,
     };
     let screenshot = Screenshot::new(args.screenshot.clone(), args.exit_after_frames);
     let outcome = screenshot.outcome();

@@ -5,6 +5,7 @@ use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use voxflex_core::camera::Camera;
+use voxflex_io::ObliquePlacement;
 use voxflex_runtime::backend::BackendChoice;
 use voxflex_runtime::gpu_context::WgpuService;
 use voxflex_runtime::param_schema::ParamSchema;
@@ -30,6 +31,9 @@ pub struct OpenRequest {
     /// The UI's wgpu device as a GPU service, for the session to compute
     /// on (see [`crate::gpu_image`]); `None`: it opens its own.
     pub gpu: Option<Arc<WgpuService>>,
+    /// What an oblique volume file becomes (a scene's own `[volume]
+    /// oblique` applies to scenes).
+    pub oblique: ObliquePlacement,
 }
 
 /// A session and the scene that gives the plugins their parameters.
@@ -90,6 +94,10 @@ pub fn open(req: &OpenRequest) -> anyhow::Result<OpenedSession> {
                 plugin_dirs: req.plugin_dirs.clone(),
                 background: None,
                 gpu: req.gpu.clone(),
+                read: voxflex_io::ReadOptions {
+                    oblique: req.oblique,
+                    ..Default::default()
+                },
                 ..SessionDefaults::default()
             };
             let session = Session::from_volume(SessionSource::File(path.clone()), defaults)
@@ -183,6 +191,29 @@ pub fn deformation_schemas(session: &Session) -> Vec<(String, ParamSchema)> {
 mod tests {
     use super::*;
 
+    /// A volume file opened directly takes the viewer's `--oblique`: an
+    /// oblique header stays on its own voxels by default and is resampled
+    /// onto the grid that holds it with `linear`.
+    #[test]
+    fn an_oblique_file_opens_as_the_oblique_option_says() {
+        let tmp = tempfile::tempdir().unwrap();
+        voxflex_integration_tests::write_oblique_nrrd(tmp.path());
+        for (oblique, dims) in [
+            (ObliquePlacement::ClosestAxes, [6, 5, 4]),
+            (ObliquePlacement::Linear, [8, 7, 4]),
+        ] {
+            let req = OpenRequest {
+                input: Some(tmp.path().join("oblique.nrrd")),
+                backend: BackendChoice::Cpu,
+                plugin_dirs: vec![],
+                gpu: None,
+                oblique,
+            };
+            let opened = open(&req).unwrap();
+            assert_eq!(opened.session.source().grid.dims, dims, "{oblique}");
+        }
+    }
+
     /// The built-in head scene holds its skull still (a frame-0 `fix` on
     /// bone) and pulls the scalp (a scripted grab): the viewer applies
     /// the first, leaves the second to the user.
@@ -193,6 +224,7 @@ mod tests {
             backend: BackendChoice::Cpu,
             plugin_dirs: vec![voxflex_integration_tests::plugin_dir(&["chainmail"])],
             gpu: None,
+            oblique: Default::default(),
         };
         let opened = open(&req).unwrap();
         let applied = opened.session.interactions_so_far();

@@ -148,6 +148,7 @@ fn switching_to_gpu_draws_the_sessions_texture_equal_to_the_cpu_render() {
             "raycast",
         ])],
         gpu: None,
+        oblique: Default::default(),
     };
     let gpu = GpuImage::share(Some(&state), &mut req);
     assert!(gpu.is_some() && req.gpu.is_some(), "the device is shared");

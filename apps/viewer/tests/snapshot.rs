@@ -33,6 +33,7 @@ fn the_main_layout_matches_its_snapshot() {
         backend: BackendChoice::Cpu,
         plugin_dirs: vec![plugins],
         gpu: None,
+        oblique: Default::default(),
     };
     let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
         .expect("start the viewer");

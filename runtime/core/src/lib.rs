@@ -41,6 +41,7 @@ pub mod grid;
 pub mod interaction;
 pub mod keyframes;
 pub mod non_finite;
+pub mod oblique;
 pub mod on_worker;
 pub mod opacity_map;
 pub mod ordered_reduce;

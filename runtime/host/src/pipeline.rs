@@ -123,6 +123,7 @@ pub fn load_source(scene: &Scene) -> Result<Volume, RunError> {
                 &path,
                 &ReadOptions {
                     max_voxels: v.max_voxels,
+                    oblique: v.oblique,
                 },
                 v.non_finite,
                 background,

@@ -39,6 +39,7 @@ use crate::backend::BackendChoice;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use voxflex_core::non_finite::NonFinitePolicy;
+use voxflex_core::oblique::ObliquePlacement;
 use voxflex_resample::{Interpolation, ResampleParams};
 
 /// Largest scene file read (1 MiB): scene files are a few kilobytes.
@@ -133,6 +134,13 @@ pub struct VolumeSettings {
     /// `"refuse"`. See [`voxflex_core::non_finite`].
     #[serde(default)]
     pub non_finite: NonFinitePolicy,
+    /// A file whose header is oblique (voxel axes rotated against the
+    /// world axes by other than multiples of 90°): `"closest-axes"`
+    /// (default; voxels kept, placed along the closest axes with a
+    /// warning), `"linear"` or `"nearest"` (resampled where the header puts
+    /// it). See [`voxflex_core::oblique`].
+    #[serde(default)]
+    pub oblique: ObliquePlacement,
 }
 
 fn default_max_voxels() -> usize {
@@ -1285,6 +1293,29 @@ kind = "release"
             .unwrap_err()
             .to_string();
         assert!(e.contains("ignore") && e.contains("refuse"), "{e}");
+    }
+
+    #[test]
+    fn oblique_placement_defaults_to_closest_axes_and_names_the_choices() {
+        let s = Scene::parse(GOOD, Path::new("t.toml")).unwrap();
+        assert_eq!(s.volume.oblique, ObliquePlacement::ClosestAxes);
+        for (name, want) in [
+            ("linear", ObliquePlacement::Linear),
+            ("nearest", ObliquePlacement::Nearest),
+            ("closest-axes", ObliquePlacement::ClosestAxes),
+        ] {
+            let text = GOOD.replace(
+                "dims = [8, 8, 8]",
+                &format!("dims = [8, 8, 8]\noblique = \"{name}\""),
+            );
+            let s = Scene::parse(&text, Path::new("t.toml")).unwrap();
+            assert_eq!(s.volume.oblique, want);
+        }
+        let text = GOOD.replace("dims = [8, 8, 8]", "dims = [8, 8, 8]\noblique = \"cubic\"");
+        let e = Scene::parse(&text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cubic") && e.contains("nearest"), "{e}");
     }
 
     #[test]

@@ -51,6 +51,7 @@ pub mod metaimage;
 pub mod msh;
 pub mod nifti;
 pub mod nrrd;
+mod oblique_resample;
 pub mod off;
 pub mod orientation;
 pub mod png;
@@ -70,6 +71,7 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+pub use voxflex_core::oblique::ObliquePlacement;
 
 /// Limits applied while reading untrusted files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,6 +80,11 @@ pub struct ReadOptions {
     /// A header that asks for more is refused before any data is allocated.
     /// Default: 1024³ (1 GiB of u8, 4 GiB of f32).
     pub max_voxels: usize,
+    /// What an oblique header (voxel axes rotated against the world axes
+    /// by other than multiples of 90°) becomes: reordered onto the closest
+    /// axes (default) or resampled where the header puts it; see
+    /// [`voxflex_core::oblique`].
+    pub oblique: ObliquePlacement,
 }
 
 impl ReadOptions {
@@ -89,6 +96,7 @@ impl Default for ReadOptions {
     fn default() -> Self {
         Self {
             max_voxels: Self::DEFAULT_MAX_VOXELS,
+            oblique: ObliquePlacement::ClosestAxes,
         }
     }
 }
@@ -915,7 +923,13 @@ mod tests {
                 let dir = tempfile::tempdir().unwrap();
                 let p = dir.path().join(name);
                 std::fs::write(&p, &bytes).unwrap();
-                let _ = read_volume(&p, &ReadOptions { max_voxels: 1 << 16 });
+                let _ = read_volume(
+                    &p,
+                    &ReadOptions {
+                        max_voxels: 1 << 16,
+                        ..Default::default()
+                    },
+                );
             }
         }
     }

@@ -503,7 +503,7 @@ pub fn read_metaimage(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError
         ..needed_probe
     };
     let data = read_voxels(&mut reader, &spec)?;
-    place(path, dims, data, geometry)
+    place(path, dims, data, geometry, opts)
 }
 
 #[cfg(test)]
@@ -717,7 +717,13 @@ mod tests {
         // Dims: cap, zero, negative, count.
         let p = d.write("ok.mhd", HDR.as_bytes());
         expect_err(
-            read_metaimage(&p, &ReadOptions { max_voxels: 11 }),
+            read_metaimage(
+                &p,
+                &ReadOptions {
+                    max_voxels: 11,
+                    ..Default::default()
+                },
+            ),
             &p,
             &["`DimSize`", "12 voxels", "max_voxels"],
         );

@@ -396,7 +396,7 @@ pub fn read_nifti(path: &Path, opts: &super::ReadOptions) -> Result<Volume, IoEr
         }
         data = scale_to_f32(&data, slope, inter);
     }
-    place(path, dims, data, geometry)
+    place(path, dims, data, geometry, opts)
 }
 
 /// How far `quatern_b² + quatern_c² + quatern_d²` may exceed 1 (f32
@@ -721,7 +721,13 @@ mod tests {
         let b = valid_bytes();
         let p = c.write("cap.nii", &b);
         expect_err(
-            read_nifti(&p, &ReadOptions { max_voxels: 59 }),
+            read_nifti(
+                &p,
+                &ReadOptions {
+                    max_voxels: 59,
+                    ..Default::default()
+                },
+            ),
             &p,
             &["`dim`", "60 voxels", "limit of 59", "max_voxels"],
         );

@@ -589,7 +589,7 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<Volume, IoError> {
         },
         None => HeaderGeometry::aligned(spacing, origin, frame, "spacings"),
     };
-    place(path, dims, data, geometry)
+    place(path, dims, data, geometry, opts)
 }
 
 /// Reads whitespace-separated ASCII values.
@@ -867,7 +867,13 @@ mod tests {
         // Dims.
         let p = d.write("ok.nrrd", &attached(HDR, &data));
         expect_err(
-            read_nrrd(&p, &ReadOptions { max_voxels: 5 }),
+            read_nrrd(
+                &p,
+                &ReadOptions {
+                    max_voxels: 5,
+                    ..Default::default()
+                },
+            ),
             &p,
             &["`sizes`", "12 voxels", "max_voxels"],
         );

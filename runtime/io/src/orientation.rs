@@ -14,17 +14,22 @@
 //! coordinates are anatomical whatever the file's storage order.
 //!
 //! A header whose axes are rotated by other than multiples of 90°
-//! (oblique) cannot be represented exactly on an axis-aligned grid: it is
-//! placed along the closest axes, anchored at its centre, and a warning
-//! gives the angle and how far its corners move.
+//! (oblique) cannot be represented exactly on an axis-aligned grid. By
+//! default ([`ObliquePlacement::ClosestAxes`]) it is placed along the
+//! closest axes, anchored at its centre, and a warning gives the angle and
+//! how far its corners move; `oblique = "linear"` or `"nearest"` resamples
+//! it where the header puts it instead (`crate::oblique_resample`).
 
 use super::header_err;
+use crate::ReadOptions;
 use crate::error::IoError;
 use crate::grid::Grid;
+use crate::oblique_resample::{ObliqueHeader, resample_oblique};
 use crate::volume::{Volume, VoxelData};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::path::Path;
+use voxflex_core::oblique::ObliquePlacement;
 
 /// The world frame a header's directions and origin are written in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -151,13 +156,16 @@ const OBLIQUE_DEG: f64 = 1e-3;
 /// that `geometry` places, as an axis-aligned grid in LPS millimetres:
 /// voxel axes permuted and reversed onto the closest world axes, the
 /// spacing along each the length of its direction, and every voxel where
-/// the header puts it (an oblique header: the volume's centre). `path` names
-/// the file in errors and warnings.
+/// the header puts it. An oblique header is placed as `opts.oblique` says:
+/// along the closest axes anchored at the volume's centre (with a warning),
+/// or resampled where the header puts it (within `opts.max_voxels`).
+/// `path` names the file in errors and warnings.
 pub(crate) fn place(
     path: &Path,
     dims: [usize; 3],
     data: VoxelData,
     geometry: HeaderGeometry,
+    opts: &ReadOptions,
 ) -> Result<Volume, IoError> {
     let to_lps = geometry.frame.to_lps();
     let mut directions = geometry.directions.map(|d| d * to_lps);
@@ -217,6 +225,32 @@ pub(crate) fn place(
         // axis, where the header puts it.
         let first = [0, 1, 2].map(|a| if o.reversed[a] { last[a] } else { 0.0 });
         Grid::new(out_dims, spacing, header_at(first))
+    } else if opts.oblique != ObliquePlacement::ClosestAxes {
+        let header = ObliqueHeader {
+            directions,
+            origin,
+            dims,
+        };
+        let v = resample_oblique(
+            path,
+            geometry.field,
+            header,
+            data,
+            spacing,
+            opts.oblique,
+            opts.max_voxels,
+        )?;
+        tracing::info!(
+            file = %path.display(),
+            "header field `{}` is oblique by {:.2}°: resampled ({}) where the header puts it, \
+             onto an axis-aligned grid of {:?} voxels; voxels outside the acquisition take the \
+             smallest value",
+            geometry.field,
+            o.residual_deg,
+            opts.oblique,
+            v.grid.dims
+        );
+        return Ok(v);
     } else {
         let extent = DVec3::from_array(out_dims.map(|n| (n.max(1) - 1) as f64)) * spacing;
         let grid = Grid::new(
@@ -236,7 +270,8 @@ pub(crate) fn place(
             file = %path.display(),
             "header field `{}` is oblique by {:.2}°; voxflex grids are axis-aligned, so the \
              volume is placed along the closest axes, anchored at its centre: its corners move \
-             by up to {worst:.2} mm",
+             by up to {worst:.2} mm (set `[volume] oblique = \"linear\"`, or `--oblique linear`, \
+             to resample it where the header puts it)",
             geometry.field,
             o.residual_deg
         );
@@ -337,7 +372,7 @@ mod tests {
     fn check_exact(dims: [usize; 3], g: HeaderGeometry) {
         let n = dims.iter().product::<usize>();
         let data = VoxelData::F32((0..n).map(|i| i as f32).collect());
-        let v = place(Path::new("t.nii"), dims, data, g).unwrap();
+        let v = place(Path::new("t.nii"), dims, data, g, &ReadOptions::default()).unwrap();
         assert!(v.grid.spacing.min_element() > 0.0);
         let VoxelData::F32(values) = &v.data else {
             panic!("type kept")
@@ -389,6 +424,7 @@ mod tests {
             [2, 2, 2],
             VoxelData::U8((0..8).collect()),
             g,
+            &ReadOptions::default(),
         )
         .unwrap();
         // x and y reversed: the file's last voxel along them comes first.
@@ -405,7 +441,14 @@ mod tests {
             frame: HeaderFrame::Ras,
             field: "space directions",
         };
-        let v = place(Path::new("t.nrrd"), [3, 2, 1], VoxelData::U8(vec![0; 6]), g).unwrap();
+        let v = place(
+            Path::new("t.nrrd"),
+            [3, 2, 1],
+            VoxelData::U8(vec![0; 6]),
+            g,
+            &ReadOptions::default(),
+        )
+        .unwrap();
         assert_eq!(v.grid.dims, [2, 3, 1]);
         assert_eq!(v.grid.spacing, DVec3::new(1.0, 2.0, 1.0));
     }
@@ -423,6 +466,7 @@ mod tests {
             [2, 2, 2],
             VoxelData::U8(vec![0; 8]),
             g,
+            &ReadOptions::default(),
         )
         .unwrap_err()
         .to_string();
@@ -450,6 +494,7 @@ mod tests {
             [5, 5, 5],
             VoxelData::U8(vec![0; 125]),
             g,
+            &ReadOptions::default(),
         )
         .unwrap();
         let header_centre = voxel_world([5, 5, 5], &g, [2, 2, 2]);

@@ -665,6 +665,7 @@ fn check(
 ) -> Result<(), TestCaseError> {
     let opts = ReadOptions {
         max_voxels: MAX_VOXELS,
+        ..Default::default()
     };
     match target {
         Target::Nifti | Target::Nrrd | Target::MetaImage => {

@@ -47,6 +47,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Report> {
         backend: BackendChoice::Cpu,
         plugin_dirs: opts.plugin_dirs.clone(),
         gpu: None,
+        oblique: Default::default(),
     })?;
     let mut m = Milestones::default();
     h.wait_for("the first 3D image", PATIENCE, |a| {

@@ -63,6 +63,7 @@ pub fn open_head(
         backend: BackendChoice::Cpu,
         plugin_dirs,
         gpu: None,
+        oblique: Default::default(),
     })?;
     h.wait_for("the session to open", PATIENCE, |a| a.opened().is_some())?;
     h.app.set_render_size(render_px);

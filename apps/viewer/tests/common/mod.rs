@@ -28,6 +28,7 @@ pub fn phantom_viewer(names: &[&str], store: Option<PathBuf>) -> Harness<'static
         backend: BackendChoice::Cpu,
         plugin_dirs: vec![plugin_dir(names)],
         gpu: None,
+        oblique: Default::default(),
     };
     let app = ViewerApp::new(&egui::Context::default(), req, Screenshot::new(None, None))
         .expect("start the viewer")

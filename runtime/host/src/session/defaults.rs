@@ -5,6 +5,7 @@ use crate::backend::BackendChoice;
 use crate::gpu_context::WgpuService;
 use std::path::PathBuf;
 use std::sync::Arc;
+use voxflex_io::ReadOptions;
 use voxflex_resample::ResampleParams;
 
 /// Settings of [`super::Session::from_volume`]; a scene file's `[scene]`
@@ -39,6 +40,9 @@ pub struct SessionDefaults {
     /// draws. `gpu` takes it, `auto` takes it when it is a hardware adapter
     /// ([`crate::backend::resolve_on`]); also after [`super::Session::set_backend`].
     pub gpu: Option<Arc<WgpuService>>,
+    /// How a volume file is read (a scene's `[volume] max_voxels` and
+    /// `oblique`): the voxel limit and what an oblique header becomes.
+    pub read: ReadOptions,
 }
 
 impl Default for SessionDefaults {
@@ -54,6 +58,7 @@ impl Default for SessionDefaults {
             background: None,
             wait_for_gpu: false,
             gpu: None,
+            read: ReadOptions::default(),
         }
     }
 }

@@ -424,9 +424,7 @@ impl Session {
         let t = Instant::now();
         let source = match source.into() {
             SessionSource::Volume(v) => v,
-            SessionSource::File(path) => {
-                voxflex_io::read_volume(&path, &voxflex_io::ReadOptions::default())?
-            }
+            SessionSource::File(path) => voxflex_io::read_volume(&path, &defaults.read)?,
             SessionSource::Phantom { name, dims } => phantom(&name, dims)
                 .map_err(|e| RunError::Other(format!("session: phantom `{name}`: {e}")))?,
         };
