@@ -425,6 +425,45 @@ fn a_cut_separates_the_proxy_and_opens_in_the_sampling_mesh_with(element: Elemen
     assert!(x[grid.linear(0, 1, 1)].abs() < 1e-6);
 }
 
+/// A cut through the inside of proxy cells is voxel-sharp: every voxel
+/// centre of a cut cell follows the piece of its own side of the plane,
+/// not the side of the tetrahedron that carried it (bound anew, note
+/// `cut_voxels_rebound`; none left across), for planes at three places in
+/// the cells, either side of a node plane.
+#[test]
+fn a_cut_inside_proxy_cells_moves_every_voxel_centre_with_its_own_side() {
+    use voxflex_core::deformation::RestPoints;
+    for plane in [5.15, 5.35, 4.85] {
+        let mut m = cantilever(2, 0.0, static_params(1e-10));
+        // Voxel centres 0.1 mm apart in the proxy's 0.5 mm cells.
+        let grid = Grid::new([101, 11, 11], DVec3::splat(0.1), DVec3::ZERO);
+        let id = m.bind(RestPoints::Lattice(grid)).unwrap();
+        m.interact(&format!(
+            "kind = \"cut\"\npolygon = [[{plane}, -1, -1], [{plane}, 2, -1], [{plane}, 2, 2], \
+             [{plane}, -1, 2]]"
+        ))
+        .unwrap();
+        m.interact("kind = \"grab\"\npoint = [10, 0.5, 0.5]\nby = [2, 0, 0]")
+            .unwrap();
+        m.step(frame(0.0)).unwrap();
+        let notes = m.notes().unwrap();
+        assert!(notes["cut_voxels_rebound"] > 0.0, "{plane}: {notes:?}");
+        assert_eq!(notes["cut_voxels_across"], 0.0, "{plane}");
+        let [x, _, _] = map_on_cpu(&mut m, id, grid.len());
+        for (l, ux) in x.iter().enumerate() {
+            let px = grid.unlinear(l)[0] as f64 * 0.1;
+            if px < plane {
+                assert!(ux.abs() < 1e-5, "{plane}: the point at x = {px} moved {ux}");
+            } else {
+                assert!(
+                    (ux - 2.0).abs() < 0.1,
+                    "{plane}: the point at x = {px} moved {ux}, not with the free half"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh() {
     a_carve_removes_tissue_rebinds_its_points_and_opens_in_the_sampling_mesh_with(ElementKind::P1);

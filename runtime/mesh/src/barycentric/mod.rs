@@ -114,6 +114,15 @@ impl BarycentricBinding {
         }
     }
 
+    /// Binds point `i` (rest position `p`, mm) to tetrahedron `t` of `mesh`
+    /// by its clamped weights: a point outside `t` follows the point of `t`
+    /// its weights clamp to (a cut moves a point carried across it to a
+    /// tetrahedron of its own side, which it may lie just outside).
+    pub fn bind_to(&mut self, mesh: &TetMesh, i: usize, t: u32, p: DVec3) {
+        self.tet[i] = t;
+        self.weights[i] = quantised(clamped(weights(mesh.corners(t as usize), p)));
+    }
+
     /// Follows a removal of tetrahedra from the mesh the points were
     /// bound to (a carve): `new_index[t]` is old tetrahedron `t`'s index in
     /// `mesh` (the mesh after the removal) or `u32::MAX` where it is gone,

@@ -8,7 +8,7 @@ use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
 use super::pieces::unanchored_pieces;
 use super::{MeshSolver, NodeState, SolveReport};
-use crate::barycentric::unpack;
+use crate::barycentric::{self, unpack};
 use crate::barycentric::{BarycentricBinding, GpuBinding};
 use crate::cut_polygon::CutPolygon;
 use crate::deformation::{
@@ -74,6 +74,9 @@ pub struct MeshModel<S: MeshSolver> {
     /// Lattice points (voxel centres) that the cuts so far left carried
     /// by a proxy tetrahedron on the other side of the cut.
     cut_voxels_across: usize,
+    /// Lattice points (voxel centres) that cuts found across from their
+    /// carrying tetrahedron and bound to one of their own side.
+    cut_voxels_rebound: usize,
     /// Inverted tetrahedra after each frame.
     inversions: InversionWatch,
     /// Grabs whose point lay beyond one element from the proxy.
@@ -184,6 +187,7 @@ impl<S: MeshSolver> MeshModel<S> {
             device: None,
             labelled_voxels_lost: 0,
             cut_voxels_across: 0,
+            cut_voxels_rebound: 0,
             inversions: InversionWatch::default(),
             far_grabs: FarGrabs::default(),
         }
@@ -622,16 +626,19 @@ impl<S: MeshSolver> MeshModel<S> {
         let b = built_mut(&mut self.built)?;
         let x: Vec<DVec3> = b.positions();
         // The lattice bindings' removed tetrahedra, and the points the cut
-        // leaves on the wrong piece, from the positions before the cut
-        // (both sides still coincide there).
-        let mut across = 0;
+        // leaves across from their carrying tetrahedron (bound anew on their
+        // own side), from the positions before the cut (both sides still
+        // coincide there). Tetrahedron indices survive `cut_mesh`.
+        let (mut rebound, mut across) = (0, 0);
         // A point carried across lies in its tetrahedron, which the cut
         // crosses: within the largest tetrahedron's extent of the polygon.
         let reach = DVec3::splat(largest_extent(&b.mesh, &x));
+        let mut star = None;
         for bound in &mut self.bindings {
-            if let Some(wide) = lattice_near(bound, b, (cut.lo - reach, cut.hi + reach)) {
-                across += carried_across(bound, &wide, &b.mesh, &x, cut);
-            }
+            let near = points_near(bound, b, (cut.lo - reach, cut.hi + reach));
+            let (r, left) = rebind_across(bound, &near, &b.mesh, &x, cut, &mut star);
+            rebound += r;
+            across += left;
             let Some(near) = lattice_near(bound, b, (cut.lo, cut.hi)) else {
                 continue;
             };
@@ -660,13 +667,20 @@ impl<S: MeshSolver> MeshModel<S> {
             load.forces.resize(nodes, DVec3::ZERO);
         }
         self.topology_changed("cut")?;
+        self.cut_voxels_rebound += rebound;
+        if rebound > 0 {
+            tracing::info!(
+                "{name} cut: {rebound} voxel centres across the cut from the proxy tetrahedron \
+                 that carried them now follow a tetrahedron of their own side"
+            );
+        }
         if across > 0 {
             self.cut_voxels_across += across;
             tracing::warn!(
                 "{name} cut: {across} voxel centres lie across the cut from the proxy \
-                 tetrahedron that carries them and move with the other piece: the cut is \
-                 only as sharp as the proxy's cells; a finer `proxy` or the chainmail \
-                 plugin cuts voxel-sharp (note `cut_voxels_across`)"
+                 tetrahedron that carries them, with no tetrahedron of their own side around \
+                 it, and move with the other piece; a finer `proxy` or the chainmail plugin \
+                 cuts voxel-sharp (note `cut_voxels_across`)"
             );
         }
         tracing::info!(
@@ -1003,28 +1017,113 @@ impl LatticeBox {
     }
 }
 
-/// How many points of `near` (a lattice binding's box, current positions)
-/// lie across `cut` from the centroid of the proxy tetrahedron that
-/// carries them (`x`: node positions, mm): the cut separates along the
-/// proxy's faces, so such a point will move with the other piece.
-fn carried_across(
+/// A bound point: its index in the binding, its rest and its current
+/// position (mm).
+type NearPoint = (usize, DVec3, DVec3);
+
+/// The points of `bound` whose current positions may lie in the world box
+/// `(lo, hi)` (mm): a lattice's through [`lattice_near`], a point list's
+/// (tracked points, usually few) by their positions.
+fn points_near<S: MeshSolver>(
     bound: &Bound,
-    near: &LatticeBox,
+    b: &Built<S>,
+    (lo, hi): (DVec3, DVec3),
+) -> Vec<NearPoint> {
+    if let Some(g) = bound.lattice {
+        let Some(near) = lattice_near(bound, b, (lo, hi)) else {
+            return Vec::new();
+        };
+        return near
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                let [a, b, c] = near.point(i);
+                let rest = g.index_to_world(DVec3::new(a as f64, b as f64, c as f64));
+                (g.linear(a, b, c), rest, p)
+            })
+            .collect();
+    }
+    bound
+        .points
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &rest)| {
+            let w = unpack(bound.binding.weights[i]);
+            let tet = b.mesh.tets[bound.binding.tet[i] as usize];
+            let u: DVec3 = (0..4)
+                .map(|c| w[c] as f64 * b.state.u[tet[c] as usize])
+                .sum();
+            let p = rest + u;
+            (p.cmpge(lo).all() && p.cmple(hi).all()).then_some((i, rest, p))
+        })
+        .collect()
+}
+
+/// Binds anew the points of `near` that a cut leaves across from the
+/// tetrahedron carrying them (the segment from the point to the
+/// tetrahedron's centroid, current positions, crosses `cut`), so the
+/// embedding is cut voxel-sharp and not only along the proxy's faces: of
+/// the tetrahedra sharing a node with the old one and whose centroid lies
+/// on the point's side, the one whose smallest weight at the point's rest
+/// position is largest (the one holding it best; the point may lie just
+/// outside it and follows the point its clamped weights give). `star`
+/// (node → tetrahedra) is built by the first point carried across. Returns
+/// the points bound anew and those left across (no such tetrahedron).
+fn rebind_across(
+    bound: &mut Bound,
+    near: &[NearPoint],
     mesh: &TetMesh,
     x: &[DVec3],
     cut: &CutPolygon,
-) -> usize {
-    let Some(g) = bound.lattice else { return 0 };
-    near.positions
-        .iter()
-        .enumerate()
-        .filter(|&(i, p)| {
-            let [a, b, c] = near.point(i);
-            let tet = mesh.tets[bound.binding.tet[g.linear(a, b, c)] as usize];
-            let centroid = tet.iter().map(|&n| x[n as usize]).sum::<DVec3>() / 4.0;
-            cut.crosses(*p, centroid)
-        })
-        .count()
+    star: &mut Option<Vec<Vec<u32>>>,
+) -> (usize, usize) {
+    let centroid = |t: u32| {
+        mesh.tets[t as usize]
+            .iter()
+            .map(|&n| x[n as usize])
+            .sum::<DVec3>()
+            / 4.0
+    };
+    let (mut rebound, mut left) = (0, 0);
+    for &(at, rest, p) in near {
+        let old = bound.binding.tet[at];
+        if !cut.crosses(p, centroid(old)) {
+            continue;
+        }
+        let star = star.get_or_insert_with(|| node_star(mesh));
+        let smallest_weight = |t: u32| {
+            barycentric::weights(mesh.corners(t as usize), rest)
+                .into_iter()
+                .fold(f64::INFINITY, f64::min)
+        };
+        let best = mesh.tets[old as usize]
+            .iter()
+            .flat_map(|&n| &star[n as usize])
+            .copied()
+            .filter(|&t| t != old && !cut.crosses(p, centroid(t)))
+            .map(|t| (t, smallest_weight(t)))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        match best {
+            Some((t, _)) => {
+                bound.binding.bind_to(mesh, at, t, rest);
+                rebound += 1;
+            }
+            None => left += 1,
+        }
+    }
+    (rebound, left)
+}
+
+/// The tetrahedra of each node of `mesh`, ascending.
+fn node_star(mesh: &TetMesh) -> Vec<Vec<u32>> {
+    let mut star = vec![Vec::new(); mesh.nodes.len()];
+    for (t, tet) in mesh.tets.iter().enumerate() {
+        for &n in tet {
+            star[n as usize].push(t as u32);
+        }
+    }
+    star
 }
 
 /// The largest extent along any axis of a tetrahedron of `mesh` at node
@@ -1177,9 +1276,10 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
     /// `labelled_voxels_lost` (labelled voxels in proxy cells of another
     /// material), `inverted_tetrahedra` (after the last frame) and
     /// `inverted_tetrahedra_max` (over the run), `bound_points_outside_proxy` (bound to the nearest tetrahedron with
-    /// clamped weights), `cut_voxels_across` (voxel centres the cuts left
-    /// carried by a tetrahedron across the cut: they move with the other
-    /// piece), `steps`, `substeps` and `solver_iterations` summed
+    /// clamped weights), `cut_voxels_rebound` (voxel centres the cuts found
+    /// carried by a tetrahedron across the cut and bound to one of their own
+    /// side), `cut_voxels_across` (those left across, with no tetrahedron of
+    /// their side at hand: they move with the other piece), `steps`, `substeps` and `solver_iterations` summed
     /// over the run, and `last_residual` (relative, of the last linear
     /// solve; 0 for explicit steps), `worst_residual` (the largest relative
     /// residual of any linear solve of the run, each held to its own
@@ -1202,6 +1302,7 @@ impl<S: MeshSolver> DeformationModel for MeshModel<S> {
         );
         notes.insert("bound_points_outside_proxy".into(), outside as f64);
         notes.insert("cut_voxels_across".into(), self.cut_voxels_across as f64);
+        notes.insert("cut_voxels_rebound".into(), self.cut_voxels_rebound as f64);
         notes.insert("steps".into(), self.totals.steps as f64);
         notes.insert("inverted_tetrahedra".into(), self.inversions.current as f64);
         notes.insert("inverted_tetrahedra_max".into(), self.inversions.max as f64);
