@@ -283,3 +283,45 @@ fn bounded_and_auto_lambda_maps_on_the_gpu_equal_the_cpus() {
     assert_eq!(a, b);
     assert_same_maps(&cpu, &gpu, &[RoiId(0)], "auto λ, bounded");
 }
+
+/// A switch the model cannot make (ChainMail's sequential algorithm runs
+/// on the CPU only) fails naming the backend the session stays on, and
+/// leaves it there whole: its model steps, and its ROI maps hold what they
+/// had grown and grow on as on a session that never tried.
+#[test]
+fn a_failed_set_backend_leaves_the_session_whole_on_its_backend() {
+    if voxflex_runtime::gpu_context::testing::test_gpu().is_none() {
+        return;
+    }
+    let params = GrowthParams::default();
+    let sequential = format!("{CHAINMAIL}algorithm = \"sequential\"\n");
+    let mut tried = session(BackendChoice::Cpu);
+    let mut stayed = session(BackendChoice::Cpu);
+    let mut ids = vec![];
+    for s in [&mut tried, &mut stayed] {
+        s.swap_model("chainmail", &sequential).unwrap();
+        let id = s.add_roi(seed(), params).unwrap();
+        s.roi_step(id, 3).unwrap();
+        ids = vec![id];
+    }
+    let e = tried
+        .set_backend(BackendChoice::Gpu)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("CPU only") && e.contains("stays on `cpu`"),
+        "{e}"
+    );
+    assert_eq!(tried.adapter_name(), "cpu");
+    assert_eq!(tried.metrics().unwrap().backend, "cpu");
+    assert_same_maps(&tried, &stayed, &ids, "after the failed switch");
+    for s in [&mut tried, &mut stayed] {
+        s.step().unwrap();
+        s.roi_step(ids[0], 2).unwrap();
+    }
+    assert_same_maps(&tried, &stayed, &ids, "stepped on");
+    assert!(
+        tried.metrics().unwrap().plugin.is_some(),
+        "the model is kept"
+    );
+}

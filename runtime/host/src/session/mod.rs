@@ -832,11 +832,30 @@ impl Session {
     /// parameters (a plugin's state cannot move between backends); the
     /// resampled volume is kept, the ROI maps are re-grown on the new
     /// backend as far as they had grown, and the next step maps and
-    /// resamples in full.
+    /// resamples in full. When a stage cannot be built on the new backend
+    /// (a model the device cannot hold, a CPU-only setting), every stage
+    /// is built again on the backend the session ran on and the error says
+    /// so: a failed switch leaves the session as a successful switch back
+    /// would (model at rest, ROI maps as far as they had grown).
     pub fn set_backend(&mut self, choice: BackendChoice) -> Result<String, RunError> {
         let model = self.model.as_ref().map(|m| m.plugin.clone());
         let resolved_choice = choice_for(&self.context, choice, model.as_ref())?;
-        self.rebuild_backend(resolved_choice)?;
+        // Keep the current output: the new resampler has none yet.
+        self.ensure_volume()?;
+        let resolved = backend::resolve_on(resolved_choice, self.offered_gpu.as_ref())?;
+        let previous = self.resolved.clone();
+        let stages = self.stage_specs();
+        if let Err(e) = self.move_to(resolved, &stages) {
+            let was = backend_name(previous.backend);
+            return Err(match self.move_to(previous, &stages) {
+                Ok(()) => RunError::Other(format!(
+                    "moving to backend `{choice}`: {e}; the session stays on `{was}`"
+                )),
+                Err(back) => RunError::Other(format!(
+                    "moving to backend `{choice}`: {e}; moving back to `{was}` failed too: {back}"
+                )),
+            });
+        }
         self.choice = choice;
         Ok(self.adapter_name())
     }
@@ -849,18 +868,36 @@ impl Session {
         }
     }
 
+    /// Moves every stage to `choice` (see [`Self::set_backend`]), without
+    /// a way back: for a switch that cannot fail to resolve (the CPU).
     fn rebuild_backend(&mut self, choice: BackendChoice) -> Result<(), RunError> {
-        // Keep the current output: the new resampler has none yet.
         self.ensure_volume()?;
         let resolved = backend::resolve_on(choice, self.offered_gpu.as_ref())?;
-        let model = self
-            .model
-            .take()
-            .map(|m| (m.plugin.clone(), m.params_toml.clone()));
-        let renderer = self
-            .renderer
-            .take()
-            .map(|r| (r.plugin.clone(), r.params_toml.clone()));
+        let stages = self.stage_specs();
+        self.move_to(resolved, &stages)
+    }
+
+    /// The plugin and parameters of the model and the renderer, to build
+    /// them again.
+    fn stage_specs(&self) -> StageSpecs {
+        StageSpecs {
+            model: self
+                .model
+                .as_ref()
+                .map(|m| (m.plugin.clone(), m.params_toml.clone())),
+            renderer: self
+                .renderer
+                .as_ref()
+                .map(|r| (r.plugin.clone(), r.params_toml.clone())),
+        }
+    }
+
+    /// Drops every stage's state on the current backend and builds
+    /// `stages` on `resolved`; the ROI maps follow.
+    fn move_to(&mut self, resolved: ResolvedBackend, stages: &StageSpecs) -> Result<(), RunError> {
+        // Their buffers live in the old context: dropped before it.
+        self.model = None;
+        self.renderer = None;
         self.release_gpu();
         self.displacements = None;
         self.resample = None;
@@ -869,15 +906,14 @@ impl Session {
         self.metrics.backend = backend_name(resolved.backend);
         self.metrics.backend_reason = resolved.reason.clone();
         self.resolved = resolved;
-        if let Some((p, params)) = model {
-            self.build_model(&p, &params)?;
+        if let Some((p, params)) = &stages.model {
+            self.build_model(p, params)?;
         }
-        if let Some((p, params)) = renderer {
-            self.build_renderer(&p, &params)?;
+        if let Some((p, params)) = &stages.renderer {
+            self.build_renderer(p, params)?;
         }
         // The ROI maps re-grown on the new backend as far as before.
-        self.follow_rois()?;
-        Ok(())
+        self.follow_rois()
     }
 
     /// Re-grows on the session's backend, as far as before, every ROI map
@@ -1332,3 +1368,10 @@ fn roi_err(e: impl std::fmt::Display) -> RunError {
 
 #[cfg(test)]
 mod tests;
+
+/// What [`Session::move_to`] builds: the model's and the renderer's plugin
+/// and parameters (TOML), where the session has them.
+struct StageSpecs {
+    model: Option<(LoadedPlugin, String)>,
+    renderer: Option<(LoadedPlugin, String)>,
+}
