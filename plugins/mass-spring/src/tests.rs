@@ -381,3 +381,104 @@ fn a_block_squashed_through_itself_recovers_only_with_volume_springs() {
         );
     }
 }
+
+/// The connected pieces of `mesh` (tetrahedra joined through shared
+/// nodes): each node's piece, numbered by its smallest node.
+fn pieces(mesh: &TetMesh) -> Vec<usize> {
+    let mut parent: Vec<usize> = (0..mesh.nodes.len()).collect();
+    fn root(p: &mut [usize], mut i: usize) -> usize {
+        while p[i] != i {
+            p[i] = p[p[i]];
+            i = p[i];
+        }
+        i
+    }
+    for t in &mesh.tets {
+        for &n in &t[1..] {
+            let (a, b) = (
+                root(&mut parent, t[0] as usize),
+                root(&mut parent, n as usize),
+            );
+            parent[a.max(b)] = a.min(b);
+        }
+    }
+    (0..parent.len()).map(|n| root(&mut parent, n)).collect()
+}
+
+/// Cut inside the proxy's cells, at three places and with the polygon
+/// wound both ways: the bar falls in two pieces, and once the right piece
+/// is moved every voxel centre (a lattice binding) and every tracked point
+/// (a point binding) moves with the piece of its own side of the plane,
+/// none with the tetrahedron that carried it across.
+#[test]
+fn a_cut_inside_cells_moves_voxels_and_tracked_points_with_their_own_side() {
+    use voxflex_core::deformation::{DisplacementTarget, RestPoints};
+    let map = |m: &mut Springs, id, n: usize| {
+        let (mut x, mut y, mut z) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        let target = DisplacementTarget::Cpu {
+            x: &mut x,
+            y: &mut y,
+            z: &mut z,
+        };
+        m.map(id, target).unwrap();
+        x
+    };
+    for plane in [1.85, 2.15, 2.35] {
+        for wound in [false, true] {
+            let (mesh, materials) = bar(1.0);
+            let mut m =
+                Springs::with_mesh(mesh, materials, DVec3::ZERO, SpringParams::default()).unwrap();
+            let grid = Grid::new([41, 11, 11], DVec3::splat(0.1), DVec3::ZERO);
+            let lattice = m.bind(RestPoints::Lattice(grid)).unwrap();
+            let tracked: Vec<[f32; 3]> = (0..40)
+                .map(|i| [0.05 + 0.1 * i as f32, 0.37, 0.61])
+                .collect();
+            let points = m.bind(RestPoints::Points(&tracked)).unwrap();
+            let mut corners = [
+                [plane, -1.0, -1.0],
+                [plane, 2.0, -1.0],
+                [plane, 2.0, 2.0],
+                [plane, -1.0, 2.0],
+            ];
+            if wound {
+                corners.reverse();
+            }
+            m.interact(&format!("kind = \"cut\"\npolygon = {corners:?}"))
+                .unwrap();
+            let mesh = m.mesh().unwrap().clone();
+            let piece = pieces(&mesh);
+            let right = piece[(0..mesh.nodes.len())
+                .max_by(|&a, &b| mesh.nodes[a].x.total_cmp(&mesh.nodes[b].x))
+                .unwrap()];
+            assert_ne!(piece[0], right, "{plane}: the cut separates the bar");
+            let u: Vec<DVec3> = piece
+                .iter()
+                .map(|&p| if p == right { DVec3::X } else { DVec3::ZERO })
+                .collect();
+            m.set_displacements(&u).unwrap();
+            let notes = m.notes().unwrap();
+            assert!(
+                notes["cut_voxels_rebound"] > 0.0,
+                "{plane} {wound}: {notes:?}"
+            );
+            assert_eq!(notes["cut_voxels_across"], 0.0, "{plane} {wound}");
+            let ux = map(&mut m, lattice, grid.len());
+            for (l, ux) in ux.iter().enumerate() {
+                let x = grid.unlinear(l)[0] as f64 * 0.1;
+                let want = if x > plane { 1.0 } else { 0.0 };
+                assert!(
+                    (ux - want).abs() < 1e-4,
+                    "{plane} {wound}: voxel at x = {x} moved {ux}"
+                );
+            }
+            let ux = map(&mut m, points, tracked.len());
+            for (p, ux) in tracked.iter().zip(ux) {
+                let want = if f64::from(p[0]) > plane { 1.0 } else { 0.0 };
+                assert!(
+                    (ux - want).abs() < 1e-4,
+                    "{plane} {wound}: point {p:?} moved {ux}"
+                );
+            }
+        }
+    }
+}
