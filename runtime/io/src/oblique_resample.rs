@@ -564,6 +564,41 @@ mod tests {
         );
     }
 
+    /// A NaN in an oblique f32 file spreads to the output voxels that
+    /// interpolate it and is then counted by the non-finite policy like any
+    /// other: refused under `refuse` (naming the file), replaced under the
+    /// default, so nothing downstream sees one.
+    #[test]
+    fn a_nan_in_an_oblique_file_meets_the_non_finite_policy() {
+        use crate::non_finite::NonFinitePolicy;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("nan.nrrd");
+        let (s, c) = 25f64.to_radians().sin_cos();
+        let mut bytes = format!(
+            "NRRD0004\ntype: float\ndimension: 3\nspace: left-posterior-superior\n\
+             sizes: 5 5 3\nspace directions: ({c},{s},0) ({},{c},0) (0,0,1)\n\
+             space origin: (0,0,0)\nendian: little\nencoding: raw\n\n",
+            -s
+        )
+        .into_bytes();
+        for l in 0..75 {
+            let v = if l == 37 { f32::NAN } else { l as f32 };
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        std::fs::write(&path, bytes).unwrap();
+        let opts = opts(ObliquePlacement::Linear);
+        let e = crate::read_volume_with(&path, &opts, NonFinitePolicy::Refuse, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nan.nrrd") && e.contains("NaN"), "{e}");
+        let v = crate::read_volume_with(&path, &opts, NonFinitePolicy::Replace, None).unwrap();
+        let VoxelData::F32(out) = &v.data else {
+            panic!("type kept")
+        };
+        assert!(out.iter().all(|x| x.is_finite()));
+        assert_eq!(v.grid.dims[2], 3);
+    }
+
     /// A header that is axis-aligned up to rounding is placed exactly,
     /// whatever the option: no resampling, the voxels unchanged.
     #[test]
