@@ -18,7 +18,7 @@
 use crate::error::IoError;
 use crate::grid::Grid;
 use crate::header_err;
-use crate::volume::{Sample, Volume, VoxelData};
+use crate::volume::{Sample, Volume, VoxelData, finite_range};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use std::path::Path;
@@ -43,7 +43,7 @@ const EDGE_TOLERANCE: f64 = 1e-6;
 impl ObliqueHeader {
     /// The axis-aligned grid (LPS mm) that encloses every voxel centre of
     /// the file, with `spacing` (mm) per world axis.
-    pub fn enclosing_grid(&self, spacing: DVec3) -> ([usize; 3], Grid) {
+    pub fn enclosing_grid(&self, spacing: DVec3) -> Grid {
         let last = self.dims.map(|n| (n.max(1) - 1) as f64);
         let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
         for corner in 0..8 {
@@ -56,8 +56,7 @@ impl ObliqueHeader {
         let steps = ((hi - lo) / spacing - EDGE_TOLERANCE)
             .ceil()
             .max(DVec3::ZERO);
-        let dims = steps.to_array().map(|s| s as usize + 1);
-        (dims, Grid::new(dims, spacing, lo))
+        Grid::new(steps.to_array().map(|s| s as usize + 1), spacing, lo)
     }
 
     /// World position (mm, LPS) of a fractional file voxel index.
@@ -103,12 +102,13 @@ pub(crate) fn resample_oblique(
     mode: ObliquePlacement,
     max_voxels: usize,
 ) -> Result<Volume, IoError> {
-    let (dims, grid) = header.enclosing_grid(spacing);
-    let total = dims[0]
+    let grid = header.enclosing_grid(spacing);
+    let dims = grid.dims;
+    let fits = dims[0]
         .checked_mul(dims[1])
         .and_then(|v| v.checked_mul(dims[2]))
-        .filter(|&n| n <= max_voxels);
-    let Some(total) = total else {
+        .is_some_and(|n| n <= max_voxels);
+    if !fits {
         return Err(header_err(
             path,
             field,
@@ -119,13 +119,16 @@ pub(crate) fn resample_oblique(
                 dims[0], dims[1], dims[2]
             ),
         ));
-    };
+    }
     let sampler = Sampler::new(header, grid);
+    // The smallest finite value (exact in every voxel type); 0 when there
+    // is none: the non-finite policy refuses such a volume afterwards.
+    let background = finite_range(data.as_slice()).map_or(0.0, |(lo, _)| lo);
     let data = match data {
-        VoxelData::U8(v) => VoxelData::U8(sampler.fill(&v, total, mode)),
-        VoxelData::I16(v) => VoxelData::I16(sampler.fill(&v, total, mode)),
-        VoxelData::U16(v) => VoxelData::U16(sampler.fill(&v, total, mode)),
-        VoxelData::F32(v) => VoxelData::F32(sampler.fill(&v, total, mode)),
+        VoxelData::U8(v) => VoxelData::U8(sampler.fill(&v, background, mode)),
+        VoxelData::I16(v) => VoxelData::I16(sampler.fill(&v, background, mode)),
+        VoxelData::U16(v) => VoxelData::U16(sampler.fill(&v, background, mode)),
+        VoxelData::F32(v) => VoxelData::F32(sampler.fill(&v, background, mode)),
     };
     Volume::new(grid, data).map_err(|e| header_err(path, field, e.to_string()))
 }
@@ -207,11 +210,11 @@ impl Sampler {
         from.ceil() as usize..(to.floor() as usize + 1).min(nx)
     }
 
-    /// Every output voxel's value, x fastest.
-    fn fill<T: Sample>(&self, src: &[T], total: usize, mode: ObliquePlacement) -> Vec<T> {
-        let background = smallest_finite(src);
-        let [nx, ny, _] = self.grid.dims;
-        let mut out = vec![background; total];
+    /// Every output voxel's value, x fastest; `background` (volume units)
+    /// outside the acquired box.
+    fn fill<T: Sample>(&self, src: &[T], background: f32, mode: ObliquePlacement) -> Vec<T> {
+        let [nx, ny, nz] = self.grid.dims;
+        let mut out = vec![T::from_f32(background); nx * ny * nz];
         out.par_chunks_mut(nx).enumerate().for_each(|(row, line)| {
             let (y, z) = ((row % ny) as f64, (row / ny) as f64);
             let base = self.start + self.step[1] * y + self.step[2] * z;
@@ -296,16 +299,6 @@ fn to_fixed(x: f64) -> i64 {
 #[inline(always)]
 fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a + (b - a) * t
-}
-
-/// The smallest finite value of `src` (the type's default when there is
-/// none: the non-finite policy refuses such a volume afterwards).
-fn smallest_finite<T: Sample>(src: &[T]) -> T {
-    src.par_iter()
-        .copied()
-        .filter(|v| v.to_f32().is_finite())
-        .min_by(|a, b| a.to_f32().total_cmp(&b.to_f32()))
-        .unwrap_or_else(|| T::from_f32(0.0))
 }
 
 #[cfg(test)]
@@ -503,7 +496,7 @@ mod tests {
                 origin: g.origin,
                 dims,
             };
-            let (_, grid) = header.enclosing_grid(DVec3::new(0.5, 0.6, 0.7));
+            let grid = header.enclosing_grid(DVec3::new(0.5, 0.6, 0.7));
             let s = Sampler::new(header, grid);
             let [nx, ny, nz] = grid.dims;
             let mut held = 0;

@@ -114,6 +114,15 @@ impl BarycentricBinding {
         }
     }
 
+    /// Point `i`'s displacement (mm) under the nodes' displacements `u`
+    /// (mm, f64): one point of [`Self::map`], for the few a cut or a box
+    /// query looks at.
+    pub fn displacement_of(&self, mesh: &TetMesh, i: usize, u: &[DVec3]) -> DVec3 {
+        let w = unpack(self.weights[i]);
+        let tet = mesh.tets[self.tet[i] as usize];
+        (0..4).map(|c| w[c] as f64 * u[tet[c] as usize]).sum()
+    }
+
     /// Binds point `i` (rest position `p`, mm) to tetrahedron `t` of `mesh`
     /// by its clamped weights: a point outside `t` follows the point of `t`
     /// its weights clamp to (a cut moves a point carried across it to a

@@ -8,7 +8,7 @@ use super::material::{ElasticMaterial, lumped_masses};
 use super::params::{MeshModelParams, ProxySpec, solver_params, split};
 use super::pieces::unanchored_pieces;
 use super::{MeshSolver, NodeState, SolveReport};
-use crate::barycentric::{self, unpack};
+use crate::barycentric;
 use crate::barycentric::{BarycentricBinding, GpuBinding};
 use crate::cut_polygon::CutPolygon;
 use crate::deformation::{
@@ -71,11 +71,11 @@ pub struct MeshModel<S: MeshSolver> {
     /// Labelled voxels no proxy cell of their material covers (proxies
     /// built from the volume; `proxy::unrepresented_voxels`).
     labelled_voxels_lost: usize,
-    /// Lattice points (voxel centres) that the cuts so far left carried
-    /// by a proxy tetrahedron on the other side of the cut.
+    /// Bound points (voxel centres, tracked points) that the cuts so far
+    /// left carried by a proxy tetrahedron on the other side of the cut.
     cut_voxels_across: usize,
-    /// Lattice points (voxel centres) that cuts found across from their
-    /// carrying tetrahedron and bound to one of their own side.
+    /// Bound points (voxel centres, tracked points) that cuts found across
+    /// from their carrying tetrahedron and bound to one of their own side.
     cut_voxels_rebound: usize,
     /// Inverted tetrahedra after each frame.
     inversions: InversionWatch,
@@ -1049,12 +1049,7 @@ fn points_near<S: MeshSolver>(
         .iter()
         .enumerate()
         .filter_map(|(i, &rest)| {
-            let w = unpack(bound.binding.weights[i]);
-            let tet = b.mesh.tets[bound.binding.tet[i] as usize];
-            let u: DVec3 = (0..4)
-                .map(|c| w[c] as f64 * b.state.u[tet[c] as usize])
-                .sum();
-            let p = rest + u;
+            let p = rest + bound.binding.displacement_of(&b.mesh, i, &b.state.u);
             (p.cmpge(lo).all() && p.cmple(hi).all()).then_some((i, rest, p))
         })
         .collect()
@@ -1170,11 +1165,7 @@ fn lattice_near<S: MeshSolver>(
         for j in first[1]..=end[1] {
             for i in first[0]..=end[0] {
                 let p = g.linear(i, j, k);
-                let w = unpack(bound.binding.weights[p]);
-                let tet = b.mesh.tets[bound.binding.tet[p] as usize];
-                let u: DVec3 = (0..4)
-                    .map(|c| w[c] as f64 * b.state.u[tet[c] as usize])
-                    .sum();
+                let u = bound.binding.displacement_of(&b.mesh, p, &b.state.u);
                 let rest = g.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
                 positions.push(rest + u);
             }
